@@ -1,0 +1,319 @@
+//! The geometric ℓ1 line segment matcher of Gomez-Ojeda & Gonzalez-Jimenez (IROS 2018):
+//! segments are matched by direction, epipolar consistency, overlap and length alone, so
+//! matching keeps working when illumination changes defeat appearance descriptors.
+//!
+//! For each query segment `i` of the first image the matcher
+//! 1. gates the second image's segments with cheap tests ([`Gates`]: angle, overlap,
+//!    length ratio, disparity range or displacement, near-horizontal, polarity);
+//! 2. builds the 4 × n matrix `A_i` of the survivors' weighted term vectors
+//!    β_ij = [θ, θ^epip, ρ, μ] (see `linetrack-geometry`) and solves the lasso
+//!    `min λ‖ω‖₁ + ½‖A_i ω − b‖²`, b = [0, 0, 1, 1], with the homotopy solver of
+//!    `linetrack-lasso`;
+//! 3. takes the candidate with the largest weight and accepts it only if its error
+//!    `e_ij = ‖β_ij − b‖` is at most `1 / error_ratio` of the second best's.
+//!
+//! Each candidate is then kept by at most one query (the one with the lower error), and a
+//! robust filter drops matches whose midpoint flow direction is more than 2σ from the
+//! others' ([`OutlierFilter`]). Both the stereo (left ↔ right) and the frame-to-frame
+//! (k ↔ k+1) cases are handled; they differ in the epipolar axis and overlap definition.
+//!
+//! Degenerate segments (zero length, NaN or infinite coordinates) are never matched and
+//! are counted in [`MatchStats`]; empty inputs give no matches. The matcher keeps its
+//! buffers between calls, so matching a stream of frames does not allocate once warm.
+#![warn(missing_docs)]
+
+mod config;
+mod outliers;
+
+pub use config::{ConfigError, Gates, MatcherConfig, OutlierFilter, SecondBest, TermWeights};
+pub use linetrack_geometry::{MatchCase, Segment};
+
+use linetrack_geometry::{IDEAL_TERMS, SegmentFeatures, Terms, cross};
+use linetrack_lasso::Homotopy;
+use serde::{Deserialize, Serialize};
+
+/// One accepted correspondence.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Match {
+    /// Index of the segment in the first set.
+    pub query: usize,
+    /// Index of the segment in the second set.
+    pub train: usize,
+    /// Weighted geometric error ‖W(β − b)‖ of the pair.
+    pub error: f64,
+    /// The pair's lasso weight divided by the ℓ1 norm of the query's weights, in (0, 1].
+    pub weight: f64,
+}
+
+/// What happened to the segments of one matching call.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct MatchStats {
+    /// First-set segments refused as degenerate (zero length or non-finite).
+    pub invalid_first: usize,
+    /// Second-set segments refused as degenerate.
+    pub invalid_second: usize,
+    /// Queries not matched because they are near-horizontal (stereo gate).
+    pub near_horizontal: usize,
+    /// (query, candidate) pairs that passed the gates and entered a lasso.
+    pub candidate_pairs: usize,
+    /// Valid queries with no candidate, or whose lasso gave every candidate zero weight.
+    pub unsupported: usize,
+    /// Queries whose best candidate failed the ratio test against the second best.
+    pub ambiguous: usize,
+    /// Queries whose lasso could not be solved (counted, never fatal).
+    pub solver_failures: usize,
+    /// Matches dropped because another query claimed the same candidate with lower error.
+    pub conflicts: usize,
+    /// Matches dropped by the flow-direction outlier filter.
+    pub outliers: usize,
+    /// Matches returned.
+    pub matches: usize,
+}
+
+/// A gated candidate of the current query.
+#[derive(Debug, Clone, Copy)]
+struct Candidate {
+    index: usize,
+    error: f64,
+}
+
+/// The ℓ1 geometric matcher; see the crate documentation.
+#[derive(Debug, Clone)]
+pub struct L1Matcher {
+    config: MatcherConfig,
+    limits: Limits,
+    solver: Homotopy<4>,
+    first: Vec<Option<SegmentFeatures>>,
+    second: Vec<Option<SegmentFeatures>>,
+    candidates: Vec<Candidate>,
+    columns: Vec<[f64; 4]>,
+    weights: Vec<f64>,
+    owner: Vec<Option<usize>>,
+    tentative: Vec<Match>,
+    filter: outliers::FlowFilter,
+}
+
+/// Gate thresholds turned into the quantities the pair loop compares directly.
+#[derive(Debug, Clone, Copy)]
+struct Limits {
+    angle_gate: bool,
+    sin_max_angle: f64,
+    cos_max_angle: f64,
+    sin_min_from_horizontal: f64,
+    weights: [f64; 4],
+    weighted_ideal: [f64; 4],
+}
+
+impl Limits {
+    fn new(config: &MatcherConfig) -> Self {
+        let g = &config.gates;
+        let weights = config.term_weights.to_array();
+        Self {
+            angle_gate: g.enabled && g.max_angle_deg < 90.0,
+            sin_max_angle: g.max_angle_deg.to_radians().sin(),
+            cos_max_angle: g.max_angle_deg.to_radians().cos(),
+            sin_min_from_horizontal: if g.enabled { g.min_angle_from_horizontal_deg.to_radians().sin() } else { 0.0 },
+            weights,
+            weighted_ideal: std::array::from_fn(|r| weights[r] * IDEAL_TERMS[r]),
+        }
+    }
+}
+
+impl L1Matcher {
+    /// A matcher for `config`, refused if a field is out of range.
+    pub fn new(config: MatcherConfig) -> Result<Self, ConfigError> {
+        config.validate()?;
+        Ok(Self {
+            limits: Limits::new(&config),
+            filter: outliers::FlowFilter::new(config.outlier_filter),
+            config,
+            solver: Homotopy::new(),
+            first: Vec::new(),
+            second: Vec::new(),
+            candidates: Vec::new(),
+            columns: Vec::new(),
+            weights: Vec::new(),
+            owner: Vec::new(),
+            tentative: Vec::new(),
+        })
+    }
+
+    /// The configuration in use.
+    pub fn config(&self) -> &MatcherConfig {
+        &self.config
+    }
+
+    /// Matches `first` against `second`, replacing the contents of `out` with the
+    /// accepted matches in increasing query order.
+    pub fn match_segments(
+        &mut self,
+        case: MatchCase,
+        first: &[Segment],
+        second: &[Segment],
+        out: &mut Vec<Match>,
+    ) -> MatchStats {
+        out.clear();
+        let mut stats = MatchStats::default();
+        let horizontal_gate = case == MatchCase::Stereo && self.limits.sin_min_from_horizontal > 0.0;
+        let min_sin = self.limits.sin_min_from_horizontal;
+        let usable = move |f: &SegmentFeatures| !horizontal_gate || f.dir.y.abs() >= min_sin;
+        stats.invalid_first = prepare(first, &mut self.first);
+        stats.invalid_second = prepare(second, &mut self.second);
+        self.owner.clear();
+        self.owner.resize(second.len(), None);
+        self.tentative.clear();
+
+        for i in 0..self.first.len() {
+            let Some(query) = self.first[i] else { continue };
+            let query = &query;
+            if !usable(query) {
+                stats.near_horizontal += 1;
+                continue;
+            }
+            self.candidates.clear();
+            self.columns.clear();
+            for (j, candidate) in self.second.iter().enumerate() {
+                let Some(candidate) = candidate else { continue };
+                if !usable(candidate) || !admits(&self.config.gates, &self.limits, case, query, candidate) {
+                    continue;
+                }
+                let terms = Terms::between(query, candidate, case);
+                if self.config.gates.enabled && terms.overlap < self.config.gates.min_overlap {
+                    continue;
+                }
+                let beta = terms.to_array();
+                let column: [f64; 4] = std::array::from_fn(|r| self.limits.weights[r] * beta[r]);
+                let error = column
+                    .iter()
+                    .zip(&self.limits.weighted_ideal)
+                    .map(|(c, b)| (c - b) * (c - b))
+                    .sum::<f64>()
+                    .sqrt();
+                self.candidates.push(Candidate { index: j, error });
+                self.columns.push(column);
+            }
+            stats.candidate_pairs += self.candidates.len();
+            match self.choose() {
+                Ok(Some(m)) => {
+                    let m = Match { query: i, ..m };
+                    match self.owner[m.train] {
+                        Some(k) if self.tentative[k].error <= m.error => stats.conflicts += 1,
+                        Some(k) => {
+                            stats.conflicts += 1;
+                            self.tentative[k] = m;
+                        }
+                        None => {
+                            self.owner[m.train] = Some(self.tentative.len());
+                            self.tentative.push(m);
+                        }
+                    }
+                }
+                Ok(None) if self.candidates.is_empty() => stats.unsupported += 1,
+                Ok(None) => stats.ambiguous += 1,
+                Err(Unsupported) => stats.unsupported += 1,
+                Err(SolverFailed) => stats.solver_failures += 1,
+            }
+        }
+
+        self.tentative.sort_unstable_by_key(|m| m.query);
+        stats.outliers = self.filter.retain(case, &mut self.tentative, &self.first, &self.second);
+        out.extend_from_slice(&self.tentative);
+        stats.matches = out.len();
+        stats
+    }
+
+    /// Solves the current query's lasso and applies the ratio test.
+    /// `Ok(None)`: no candidate or ambiguous.
+    fn choose(&mut self) -> Result<Option<Match>, Choice> {
+        if self.candidates.is_empty() {
+            return Ok(None);
+        }
+        self.weights.clear();
+        self.weights.resize(self.columns.len(), 0.0);
+        let ideal = self.limits.weighted_ideal;
+        if self.solver.solve(&self.columns, &ideal, self.config.lambda, &mut self.weights).is_err() {
+            return Err(SolverFailed);
+        }
+        let (mut best, mut runner_up) = (None::<usize>, None::<usize>);
+        for (k, &w) in self.weights.iter().enumerate() {
+            if w <= 0.0 {
+                continue;
+            }
+            if best.is_none_or(|b| w > self.weights[b]) {
+                runner_up = best;
+                best = Some(k);
+            } else if runner_up.is_none_or(|r| w > self.weights[r]) {
+                runner_up = Some(k);
+            }
+        }
+        let best = best.ok_or(Unsupported)?;
+        let best_error = self.candidates[best].error;
+        let second_error = match self.config.second_best {
+            SecondBest::LowestOtherError => self
+                .candidates
+                .iter()
+                .enumerate()
+                .filter(|(k, _)| *k != best)
+                .map(|(_, c)| c.error)
+                .fold(f64::INFINITY, f64::min),
+            SecondBest::SecondLassoWeight => runner_up.map_or(f64::INFINITY, |r| self.candidates[r].error),
+        };
+        // Two candidates with zero error are ambiguous, not a pass.
+        let distinct = second_error.is_infinite() || (second_error > 0.0 && best_error * self.config.error_ratio <= second_error);
+        if !distinct {
+            return Ok(None);
+        }
+        let l1: f64 = self.weights.iter().map(|w| w.abs()).sum();
+        Ok(Some(Match { query: 0, train: self.candidates[best].index, error: best_error, weight: self.weights[best] / l1 }))
+    }
+}
+
+/// Why a query got no match from its lasso.
+#[derive(Debug, Clone, Copy)]
+enum Choice {
+    Unsupported,
+    SolverFailed,
+}
+use Choice::{SolverFailed, Unsupported};
+
+/// Fills `features` with each segment's features (`None` if degenerate); returns how many
+/// were degenerate.
+fn prepare(segments: &[Segment], features: &mut Vec<Option<SegmentFeatures>>) -> usize {
+    features.clear();
+    features.extend(segments.iter().map(|s| SegmentFeatures::new(s).ok()));
+    features.iter().filter(|f| f.is_none()).count()
+}
+
+/// The cheap gates, ordered cheapest and most selective first.
+fn admits(gates: &Gates, limits: &Limits, case: MatchCase, a: &SegmentFeatures, b: &SegmentFeatures) -> bool {
+    if !gates.enabled {
+        return true;
+    }
+    match case {
+        MatchCase::Stereo => {
+            // Some point of b must lie within the disparity range of some point of a.
+            if b.x_max < a.x_min - gates.max_disparity_px || b.x_min > a.x_max - gates.min_disparity_px {
+                return false;
+            }
+        }
+        MatchCase::FrameToFrame => {
+            let flow = b.mid - a.mid;
+            if cross(&a.dir, &flow).abs() > gates.max_displacement_px
+                || flow.norm() > gates.max_displacement_px + 0.5 * a.length.max(b.length)
+            {
+                return false;
+            }
+        }
+    }
+    let dot = a.dir.dot(&b.dir);
+    if gates.same_polarity && dot <= 0.0 {
+        return false;
+    }
+    if limits.angle_gate && cross(&a.dir, &b.dir).abs() * limits.cos_max_angle > dot.abs() * limits.sin_max_angle {
+        return false;
+    }
+    a.length.max(b.length) <= gates.max_length_ratio * a.length.min(b.length)
+}
+
+#[cfg(test)]
+mod tests;
