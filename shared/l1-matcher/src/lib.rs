@@ -23,12 +23,14 @@
 #![warn(missing_docs)]
 
 mod config;
+mod gates;
 mod outliers;
 
 pub use config::{ConfigError, Gates, MatcherConfig, OutlierFilter, SecondBest, TermWeights};
 pub use linetrack_geometry::{MatchCase, Segment};
 
-use linetrack_geometry::{IDEAL_TERMS, SegmentFeatures, Terms, cross};
+use gates::{CandidateTable, GateLimits};
+use linetrack_geometry::{self as geometry, IDEAL_TERMS, SegmentFeatures};
 use linetrack_lasso::Homotopy;
 use serde::{Deserialize, Serialize};
 
@@ -82,6 +84,9 @@ struct Candidate {
 pub struct L1Matcher {
     config: MatcherConfig,
     limits: Limits,
+    gate_limits: GateLimits,
+    table: CandidateTable,
+    admitted: Vec<usize>,
     solver: Homotopy<4>,
     first: Vec<Option<SegmentFeatures>>,
     second: Vec<Option<SegmentFeatures>>,
@@ -93,29 +98,17 @@ pub struct L1Matcher {
     filter: outliers::FlowFilter,
 }
 
-/// Gate thresholds turned into the quantities the pair loop compares directly.
+/// Row weights and the weighted ideal b, fixed at construction.
 #[derive(Debug, Clone, Copy)]
 struct Limits {
-    angle_gate: bool,
-    sin_max_angle: f64,
-    cos_max_angle: f64,
-    sin_min_from_horizontal: f64,
     weights: [f64; 4],
     weighted_ideal: [f64; 4],
 }
 
 impl Limits {
     fn new(config: &MatcherConfig) -> Self {
-        let g = &config.gates;
         let weights = config.term_weights.to_array();
-        Self {
-            angle_gate: g.enabled && g.max_angle_deg < 90.0,
-            sin_max_angle: g.max_angle_deg.to_radians().sin(),
-            cos_max_angle: g.max_angle_deg.to_radians().cos(),
-            sin_min_from_horizontal: if g.enabled { g.min_angle_from_horizontal_deg.to_radians().sin() } else { 0.0 },
-            weights,
-            weighted_ideal: std::array::from_fn(|r| weights[r] * IDEAL_TERMS[r]),
-        }
+        Self { weights, weighted_ideal: std::array::from_fn(|r| weights[r] * IDEAL_TERMS[r]) }
     }
 }
 
@@ -125,6 +118,9 @@ impl L1Matcher {
         config.validate()?;
         Ok(Self {
             limits: Limits::new(&config),
+            gate_limits: GateLimits::new(&config.gates),
+            table: CandidateTable::default(),
+            admitted: Vec::new(),
             filter: outliers::FlowFilter::new(config.outlier_filter),
             config,
             solver: Homotopy::new(),
@@ -154,11 +150,9 @@ impl L1Matcher {
     ) -> MatchStats {
         out.clear();
         let mut stats = MatchStats::default();
-        let horizontal_gate = case == MatchCase::Stereo && self.limits.sin_min_from_horizontal > 0.0;
-        let min_sin = self.limits.sin_min_from_horizontal;
-        let usable = move |f: &SegmentFeatures| !horizontal_gate || f.dir.y.abs() >= min_sin;
         stats.invalid_first = prepare(first, &mut self.first);
         stats.invalid_second = prepare(second, &mut self.second);
+        self.table.fill(case, &self.gate_limits, &self.second);
         self.owner.clear();
         self.owner.resize(second.len(), None);
         self.tentative.clear();
@@ -166,22 +160,25 @@ impl L1Matcher {
         for i in 0..self.first.len() {
             let Some(query) = self.first[i] else { continue };
             let query = &query;
-            if !usable(query) {
+            if !self.gate_limits.usable(case, query) {
                 stats.near_horizontal += 1;
                 continue;
             }
             self.candidates.clear();
             self.columns.clear();
-            for (j, candidate) in self.second.iter().enumerate() {
-                let Some(candidate) = candidate else { continue };
-                if !usable(candidate) || !admits(&self.config.gates, &self.limits, case, query, candidate) {
+            self.admitted.clear();
+            self.table.admit(case, &self.gate_limits, query, &mut self.admitted);
+            for &j in &self.admitted {
+                let Some(candidate) = &self.second[j] else { continue };
+                let overlap = geometry::overlap(query, candidate, case);
+                if self.config.gates.enabled && overlap < self.config.gates.min_overlap {
                     continue;
                 }
-                let terms = Terms::between(query, candidate, case);
-                if self.config.gates.enabled && terms.overlap < self.config.gates.min_overlap {
-                    continue;
-                }
-                let beta = terms.to_array();
+                // The epipolar angle costs an atan2; skip it where its row weighs nothing.
+                let epipolar =
+                    if self.limits.weights[1] == 0.0 { 0.0 } else { geometry::epipolar_angle(query, candidate, case) };
+                let beta =
+                    [geometry::direction_angle(query, candidate), epipolar, overlap, geometry::length_ratio(query, candidate)];
                 let column: [f64; 4] = std::array::from_fn(|r| self.limits.weights[r] * beta[r]);
                 let error = column
                     .iter()
@@ -282,37 +279,6 @@ fn prepare(segments: &[Segment], features: &mut Vec<Option<SegmentFeatures>>) ->
     features.clear();
     features.extend(segments.iter().map(|s| SegmentFeatures::new(s).ok()));
     features.iter().filter(|f| f.is_none()).count()
-}
-
-/// The cheap gates, ordered cheapest and most selective first.
-fn admits(gates: &Gates, limits: &Limits, case: MatchCase, a: &SegmentFeatures, b: &SegmentFeatures) -> bool {
-    if !gates.enabled {
-        return true;
-    }
-    match case {
-        MatchCase::Stereo => {
-            // Some point of b must lie within the disparity range of some point of a.
-            if b.x_max < a.x_min - gates.max_disparity_px || b.x_min > a.x_max - gates.min_disparity_px {
-                return false;
-            }
-        }
-        MatchCase::FrameToFrame => {
-            let flow = b.mid - a.mid;
-            if cross(&a.dir, &flow).abs() > gates.max_displacement_px
-                || flow.norm() > gates.max_displacement_px + 0.5 * a.length.max(b.length)
-            {
-                return false;
-            }
-        }
-    }
-    let dot = a.dir.dot(&b.dir);
-    if gates.same_polarity && dot <= 0.0 {
-        return false;
-    }
-    if limits.angle_gate && cross(&a.dir, &b.dir).abs() * limits.cos_max_angle > dot.abs() * limits.sin_max_angle {
-        return false;
-    }
-    a.length.max(b.length) <= gates.max_length_ratio * a.length.min(b.length)
 }
 
 #[cfg(test)]
