@@ -3,6 +3,8 @@
 //! 300 × 300 segments, stereo and frame to frame, with the default and the paper's
 //! configuration.
 
+#![allow(clippy::expect_used)] // a bench on a fixed, valid configuration
+
 use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};
 use linetrack_l1_matcher::{L1Matcher, MatchCase, MatcherConfig};
 use linetrack_synthetic_segments::{SceneConfig, StereoRig, frame_pair, stereo_pair};

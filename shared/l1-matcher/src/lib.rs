@@ -149,9 +149,11 @@ impl L1Matcher {
         out: &mut Vec<Match>,
     ) -> MatchStats {
         out.clear();
-        let mut stats = MatchStats::default();
-        stats.invalid_first = prepare(first, &mut self.first);
-        stats.invalid_second = prepare(second, &mut self.second);
+        let mut stats = MatchStats {
+            invalid_first: prepare(first, &mut self.first),
+            invalid_second: prepare(second, &mut self.second),
+            ..MatchStats::default()
+        };
         self.table.fill(case, &self.gate_limits, &self.second);
         self.owner.clear();
         self.owner.resize(second.len(), None);

@@ -74,6 +74,8 @@ pub struct SolveStats {
 pub struct Homotopy<const R: usize> {
     /// Correlations `c_j = A_jᵀ (b − Aω)`, updated along the path.
     correlation: Vec<f64>,
+    /// `a_j = A_jᵀ A_S d`: how fast each correlation falls per unit of λ, this step.
+    rate: Vec<f64>,
     /// Columns found linearly dependent on the active set during this solve.
     dependent: Vec<usize>,
 }
@@ -118,7 +120,7 @@ enum Event {
 impl<const R: usize> Homotopy<R> {
     /// A solver with empty scratch buffers.
     pub fn new() -> Self {
-        Self { correlation: Vec::new(), dependent: Vec::new() }
+        Self { correlation: Vec::new(), rate: Vec::new(), dependent: Vec::new() }
     }
 
     /// Solves `min λ‖ω‖₁ + ½‖Aω − b‖²` for `A = [columns…]`, writing ω into `weights`
@@ -181,20 +183,19 @@ impl<const R: usize> Homotopy<R> {
                     }
                 }
             }
-            for (j, column) in columns.iter().enumerate() {
+            self.rate.clear();
+            self.rate.extend(columns.iter().map(|column| dot(column, &fit_rate)));
+            for (j, (&a, &c)) in self.rate.iter().zip(&self.correlation).enumerate() {
                 if active.contains(j) || just_left == Some(j) || self.dependent.contains(&j) {
                     continue;
                 }
-                let a = dot(column, &fit_rate);
-                let c = self.correlation[j];
                 // c_j − γ a_j = ±(level − γ); numerators are ≥ 0 because |c_j| ≤ level.
+                // `numerator / denominator < gamma`, compared without dividing: most columns
+                // are not the next to join, and a division costs more than a product.
                 for (numerator, denominator) in [(level - c, 1.0 - a), (level + c, 1.0 + a)] {
-                    if denominator > 0.0 {
-                        let hit = (numerator / denominator).max(0.0);
-                        if hit < gamma {
-                            gamma = hit;
-                            event = Event::Join(j);
-                        }
+                    if denominator > 0.0 && numerator.max(0.0) < gamma * denominator {
+                        gamma = numerator.max(0.0) / denominator;
+                        event = Event::Join(j);
                     }
                 }
             }
@@ -203,8 +204,8 @@ impl<const R: usize> Homotopy<R> {
             for slot in 0..active.len {
                 weights[active.index[slot]] += gamma * direction[slot];
             }
-            for (c, column) in self.correlation.iter_mut().zip(columns) {
-                *c -= gamma * dot(column, &fit_rate);
+            for (c, a) in self.correlation.iter_mut().zip(&self.rate) {
+                *c -= gamma * a;
             }
             level -= gamma;
             for slot in 0..active.len {
@@ -297,6 +298,7 @@ fn makes_singular<const R: usize>(columns: &[[f64; R]], active: &ActiveSet<R>, j
     !cholesky_in_place(&mut gram, grown.len)
 }
 
+#[allow(clippy::needless_range_loop)] // index-based triangular algebra reads clearer
 /// Lower Cholesky factor of the leading `n × n` block, in place. Returns false when a
 /// pivot is not clearly positive (the block is singular or nearly so).
 fn cholesky_in_place<const R: usize>(m: &mut [[f64; R]; R], n: usize) -> bool {

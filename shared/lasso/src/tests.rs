@@ -201,3 +201,4 @@ fn solver_is_reusable_across_problem_sizes() {
         assert!(kkt_violation(&columns, &b, 0.05, &w) <= KKT_TOL);
     }
 }
+

@@ -1,0 +1,85 @@
+//! Runs the real `linetrack-match-demo` binary as a user would and checks what it prints
+//! and writes, and how it fails on bad input.
+
+#![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failure here is a test failure
+use std::path::PathBuf;
+use std::process::{Command, Output};
+
+fn demo(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_linetrack-match-demo")).args(args).output().expect("the demo binary starts")
+}
+
+fn scratch_dir(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("linetrack-match-demo-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    dir
+}
+
+fn workspace_file(relative: &str) -> String {
+    concat!(env!("CARGO_MANIFEST_DIR"), "/../../").to_string() + relative
+}
+
+#[test]
+fn default_run_prints_both_cases_and_writes_pictures_and_json() {
+    let out = scratch_dir("default");
+    let result = demo(&["--output", out.to_str().unwrap()]);
+    let stdout = String::from_utf8_lossy(&result.stdout);
+    assert!(result.status.success(), "stderr: {}", String::from_utf8_lossy(&result.stderr));
+    for name in ["stereo", "frame-to-frame"] {
+        let line = stdout.lines().find(|l| l.trim_start().starts_with(&format!("{name}:"))).expect("a summary line per case");
+        let printed_matches: usize = line.split(':').nth(1).unwrap().split_whitespace().next().unwrap().parse().unwrap();
+        assert!(printed_matches > 20, "{line}");
+        let picture = image::open(out.join(format!("{name}.png"))).expect("a readable PNG");
+        assert_eq!((picture.width(), picture.height()), (2 * 752 + 8, 480));
+    }
+    let json: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(out.join("matches.json")).unwrap()).unwrap();
+    let cases = json.as_array().unwrap();
+    assert_eq!(cases.len(), 2);
+    for case in cases {
+        let matches = case["matches"].as_array().unwrap();
+        assert_eq!(case["score"]["accepted"].as_u64().unwrap() as usize, matches.len());
+        assert_eq!(case["stats"]["matches"].as_u64().unwrap() as usize, matches.len());
+    }
+    let _ = std::fs::remove_dir_all(out);
+}
+
+#[test]
+fn list_prints_one_line_per_match_and_the_paper_config_loads() {
+    let out = scratch_dir("list");
+    let config = workspace_file("configs/l1-matcher-paper.toml");
+    let result = demo(&["--case", "stereo", "--list", "--config", &config, "--seed", "3", "--output", out.to_str().unwrap()]);
+    assert!(result.status.success());
+    let stdout = String::from_utf8_lossy(&result.stdout);
+    let listed = stdout.lines().filter(|l| l.contains("→")).count();
+    let summary = stdout.lines().find(|l| l.trim_start().starts_with("stereo:")).unwrap();
+    let printed: usize = summary.split(':').nth(1).unwrap().split_whitespace().next().unwrap().parse().unwrap();
+    assert_eq!(listed, printed);
+    assert!(stdout.contains("l1-matcher-paper.toml"));
+    assert!(!out.join("frame-to-frame.png").exists());
+    let _ = std::fs::remove_dir_all(out);
+}
+
+#[test]
+fn missing_and_malformed_configs_fail_naming_the_culprit() {
+    let missing = demo(&["--config", "/nonexistent/matcher.toml", "--output", scratch_dir("missing").to_str().unwrap()]);
+    assert!(!missing.status.success());
+    assert!(String::from_utf8_lossy(&missing.stderr).contains("/nonexistent/matcher.toml"));
+
+    let dir = scratch_dir("malformed");
+    std::fs::create_dir_all(&dir).unwrap();
+    let bad = dir.join("bad.toml");
+    std::fs::write(&bad, "lambda = 0.1\n[gates]\nmax_angle_deg = 120\n").unwrap();
+    let result = demo(&["--config", bad.to_str().unwrap(), "--output", dir.to_str().unwrap()]);
+    assert!(!result.status.success());
+    let stderr = String::from_utf8_lossy(&result.stderr);
+    assert!(stderr.contains("gates.max_angle_deg"), "{stderr}");
+    let _ = std::fs::remove_dir_all(dir);
+}
+
+#[test]
+fn help_shows_examples() {
+    let result = demo(&["--help"]);
+    assert!(result.status.success());
+    let stdout = String::from_utf8_lossy(&result.stdout);
+    assert!(stdout.contains("EXAMPLES") && stdout.contains("--config"));
+}

@@ -1,0 +1,122 @@
+//! `cargo xtask <command>`: the project's user-facing commands, with setup included.
+//!
+//! - `cargo xtask demo [ARGS…]` — install system packages if missing, then run the demo
+//!   (ARGS go to it; `cargo xtask demo --help` lists them).
+//! - `cargo xtask test [ARGS…]` — install system packages if missing, then run the whole
+//!   test suite with cargo-nextest (or `cargo test` where nextest is not installed).
+//! - `cargo xtask setup` — only install the system packages.
+//!
+//! Every command can be run again: packages already installed are not touched.
+
+use anyhow::{Context, bail};
+use std::process::{Command, ExitCode};
+
+/// Debian packages the workspace builds against: OpenCV with its contrib modules
+/// (LSD, FLD, LBD, ORB) and libclang for the `opencv` crate's binding generator.
+const SYSTEM_PACKAGES: &[&str] = &["libopencv-dev", "libopencv-contrib-dev", "clang", "libclang-dev"];
+
+const USAGE: &str = "usage: cargo xtask <demo|test|setup> [ARGS…]
+  demo   run the demo (ARGS are passed on; try `cargo xtask demo --help`)
+  test   run the whole test suite (ARGS are passed to cargo nextest run / cargo test)
+  setup  install the system packages only";
+
+fn main() -> ExitCode {
+    match run() {
+        Ok(code) => code,
+        Err(error) => {
+            eprintln!("xtask: {error:#}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+fn run() -> anyhow::Result<ExitCode> {
+    let mut args = std::env::args().skip(1);
+    let command = args.next().unwrap_or_default();
+    let rest: Vec<String> = args.collect();
+    match command.as_str() {
+        "setup" => {
+            install_system_packages()?;
+            Ok(ExitCode::SUCCESS)
+        }
+        "demo" => {
+            install_system_packages()?;
+            cargo(&["run", "--release", "--quiet", "--package", "linetrack-match-demo", "--"], &rest)
+        }
+        "test" => {
+            install_system_packages()?;
+            if has_nextest() {
+                cargo(&["nextest", "run", "--workspace", "--cargo-profile", "test-release"], &rest)
+            } else {
+                eprintln!("xtask: cargo-nextest not found, running `cargo test` instead");
+                cargo(&["test", "--workspace", "--profile", "test-release"], &rest)
+            }
+        }
+        "-h" | "--help" | "help" => {
+            println!("{USAGE}");
+            Ok(ExitCode::SUCCESS)
+        }
+        other => bail!("unknown command {other:?}\n{USAGE}"),
+    }
+}
+
+/// Runs cargo with `fixed` then `extra` arguments; returns its exit code.
+fn cargo(fixed: &[&str], extra: &[String]) -> anyhow::Result<ExitCode> {
+    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".to_string());
+    let status = Command::new(&cargo).args(fixed).args(extra).status().with_context(|| format!("cannot start {cargo}"))?;
+    Ok(match status.code() {
+        Some(0) => ExitCode::SUCCESS,
+        Some(code) => ExitCode::from(u8::try_from(code).unwrap_or(1)),
+        None => ExitCode::FAILURE,
+    })
+}
+
+fn has_nextest() -> bool {
+    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".to_string());
+    Command::new(cargo).args(["nextest", "--version"]).output().is_ok_and(|o| o.status.success())
+}
+
+/// Installs the missing ones of [`SYSTEM_PACKAGES`] with apt-get (through sudo when not
+/// root). Does nothing when all are installed.
+fn install_system_packages() -> anyhow::Result<()> {
+    let missing: Vec<&str> = SYSTEM_PACKAGES.iter().copied().filter(|p| !is_installed(p)).collect();
+    if missing.is_empty() {
+        return Ok(());
+    }
+    eprintln!("xtask: installing system packages: {}", missing.join(" "));
+    if Command::new("apt-get").arg("--version").output().is_err() {
+        bail!("apt-get is not available; install these packages with your system's package manager: {}", missing.join(" "));
+    }
+    let as_root = Command::new("id").arg("-u").output().is_ok_and(|o| o.stdout.starts_with(b"0"));
+    let run_apt = |apt_args: &[&str]| -> anyhow::Result<()> {
+        let mut command = if as_root { Command::new("apt-get") } else { Command::new("sudo") };
+        if !as_root {
+            command.arg("apt-get");
+        }
+        let status = command
+            .args(apt_args)
+            .env("DEBIAN_FRONTEND", "noninteractive")
+            .status()
+            .context("cannot run apt-get")?;
+        if !status.success() {
+            bail!("apt-get {} failed ({status})", apt_args.join(" "));
+        }
+        Ok(())
+    };
+    run_apt(&["update", "-qq"])?;
+    let mut install = vec!["install", "-y", "-qq", "--no-install-recommends"];
+    install.extend(&missing);
+    run_apt(&install)?;
+    let still_missing: Vec<&str> = missing.into_iter().filter(|p| !is_installed(p)).collect();
+    if !still_missing.is_empty() {
+        bail!("apt-get finished but these packages are still not installed: {}", still_missing.join(" "));
+    }
+    Ok(())
+}
+
+fn is_installed(package: &str) -> bool {
+    Command::new("dpkg-query")
+        .args(["-W", "-f=${Status}", package])
+        .output()
+        .is_ok_and(|o| o.status.success() && String::from_utf8_lossy(&o.stdout).contains("install ok installed"))
+}
