@@ -186,13 +186,19 @@ impl<const R: usize> Homotopy<R> {
             self.rate.clear();
             self.rate.extend(columns.iter().map(|column| dot(column, &fit_rate)));
             for (j, (&a, &c)) in self.rate.iter().zip(&self.correlation).enumerate() {
-                if active.contains(j) || just_left == Some(j) || self.dependent.contains(&j) {
+                if active.contains(j) || self.dependent.contains(&j) {
                     continue;
                 }
                 // c_j − γ a_j = ±(level − γ); numerators are ≥ 0 because |c_j| ≤ level.
-                // `numerator / denominator < gamma`, compared without dividing: most columns
-                // are not the next to join, and a division costs more than a product.
-                for (numerator, denominator) in [(level - c, 1.0 - a), (level + c, 1.0 + a)] {
+                // A column that has just left sits on the boundary of its old sign: it may
+                // only come back through the opposite one (else it would rejoin at γ = 0).
+                let boundaries = [(level - c, 1.0 - a, 1.0), (level + c, 1.0 + a, -1.0)];
+                for (numerator, denominator, side) in boundaries {
+                    if just_left == Some(j) && side == c.signum() {
+                        continue;
+                    }
+                    // `numerator / denominator < gamma`, compared without dividing: most
+                    // columns are not the next to join, and a division costs more.
                     if denominator > 0.0 && numerator.max(0.0) < gamma * denominator {
                         gamma = numerator.max(0.0) / denominator;
                         event = Event::Join(j);
