@@ -1,0 +1,266 @@
+//! The front end's configuration: detector and matcher by name, each detector's and
+//! descriptor's options with OpenCV's defaults, and the gates of appearance matching.
+//! `configs/frontend.toml` documents the same fields for users.
+
+use crate::{DetectorKind, MatcherKind, VisionError};
+use linetrack_l1_matcher::MatcherConfig;
+use serde::{Deserialize, Serialize};
+use std::path::Path;
+
+/// Configuration of the whole front end.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct FrontendConfig {
+    /// Line detector: `lsd` or `fld`.
+    pub detector: DetectorKind,
+    /// Segment matcher: `lbd` (appearance) or `l1` (geometry).
+    pub matcher: MatcherKind,
+    /// Which detected segments are kept.
+    pub lines: LineOptions,
+    /// LSD parameters (OpenCV's defaults).
+    pub lsd: LsdOptions,
+    /// FLD parameters (OpenCV's defaults).
+    pub fld: FldOptions,
+    /// LBD matching.
+    pub lbd: LbdOptions,
+    /// ORB points and their matching.
+    pub orb: OrbOptions,
+    /// Where appearance matchers (LBD, ORB) look for a counterpart.
+    pub appearance_gates: AppearanceGates,
+    /// The ℓ1 matcher (fields as in `configs/l1-matcher.toml`).
+    pub l1: MatcherConfig,
+}
+
+impl Default for FrontendConfig {
+    fn default() -> Self {
+        Self {
+            detector: DetectorKind::Lsd,
+            matcher: MatcherKind::Lbd,
+            lines: LineOptions::default(),
+            lsd: LsdOptions::default(),
+            fld: FldOptions::default(),
+            lbd: LbdOptions::default(),
+            orb: OrbOptions::default(),
+            appearance_gates: AppearanceGates::default(),
+            l1: MatcherConfig::default(),
+        }
+    }
+}
+
+/// Selection of detected segments.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct LineOptions {
+    /// Keep at most this many segments per image, longest first (paper: 100).
+    pub max_segments: usize,
+    /// Drop segments shorter than this, pixels.
+    pub min_length_px: f64,
+}
+
+impl Default for LineOptions {
+    fn default() -> Self {
+        Self { max_segments: 100, min_length_px: 15.0 }
+    }
+}
+
+/// LSD's refinement mode.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum LsdRefine {
+    /// No refinement.
+    None,
+    /// Standard refinement (OpenCV's default).
+    Standard,
+    /// Advanced refinement.
+    Advanced,
+}
+
+/// Parameters of OpenCV's `createLineSegmentDetector`, with its defaults.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct LsdOptions {
+    /// Refinement of the detected lines.
+    pub refine: LsdRefine,
+    /// Image scale used before detection.
+    pub scale: f64,
+    /// Gaussian sigma is sigma_scale / scale.
+    pub sigma_scale: f64,
+    /// Bound on the gradient quantisation error.
+    pub quant: f64,
+    /// Gradient angle tolerance, degrees.
+    pub angle_tolerance_deg: f64,
+    /// Detection threshold on −log10(NFA) (advanced refinement only).
+    pub log_eps: f64,
+    /// Minimal density of aligned points in the enclosing rectangle.
+    pub density_threshold: f64,
+    /// Bins in the pseudo-ordering of gradient modulus.
+    pub bins: i32,
+}
+
+impl Default for LsdOptions {
+    fn default() -> Self {
+        Self {
+            refine: LsdRefine::Standard,
+            scale: 0.8,
+            sigma_scale: 0.6,
+            quant: 2.0,
+            angle_tolerance_deg: 22.5,
+            log_eps: 0.0,
+            density_threshold: 0.7,
+            bins: 1024,
+        }
+    }
+}
+
+/// Parameters of OpenCV's `ximgproc::createFastLineDetector`, with its defaults.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct FldOptions {
+    /// Segments shorter than this are discarded by FLD itself, pixels.
+    pub length_threshold_px: i32,
+    /// Points farther than this from the hypothesised line are outliers, pixels.
+    pub distance_threshold_px: f32,
+    /// Canny hysteresis, first threshold.
+    pub canny_low: f64,
+    /// Canny hysteresis, second threshold.
+    pub canny_high: f64,
+    /// Canny Sobel aperture.
+    pub canny_aperture: i32,
+    /// Merge collinear segments.
+    pub merge: bool,
+}
+
+impl Default for FldOptions {
+    fn default() -> Self {
+        Self {
+            length_threshold_px: 10,
+            distance_threshold_px: std::f32::consts::SQRT_2,
+            canny_low: 50.0,
+            canny_high: 50.0,
+            canny_aperture: 3,
+            merge: false,
+        }
+    }
+}
+
+/// LBD descriptor matching.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct LbdOptions {
+    /// Accept a mutual best match only if the second-best Hamming distance is at least
+    /// this many times the best.
+    pub min_distance_ratio: f64,
+}
+
+impl Default for LbdOptions {
+    fn default() -> Self {
+        Self { min_distance_ratio: 1.25 }
+    }
+}
+
+/// ORB points (OpenCV's `ORB::create` defaults but the count) and their matching.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct OrbOptions {
+    /// Points per image (paper: 600).
+    pub features: i32,
+    /// Pyramid decimation ratio.
+    pub scale_factor: f32,
+    /// Pyramid levels.
+    pub levels: i32,
+    /// Border where no point is detected, pixels.
+    pub edge_threshold: i32,
+    /// FAST threshold.
+    pub fast_threshold: i32,
+    /// Accept a mutual best match only if the second-best distance is at least this many
+    /// times the best (paper: 2).
+    pub min_distance_ratio: f64,
+}
+
+impl Default for OrbOptions {
+    fn default() -> Self {
+        Self { features: 600, scale_factor: 1.2, levels: 8, edge_threshold: 31, fast_threshold: 20, min_distance_ratio: 2.0 }
+    }
+}
+
+/// Where appearance matching looks for a counterpart.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct AppearanceGates {
+    /// Stereo: smallest disparity, pixels.
+    pub min_disparity_px: f64,
+    /// Stereo: largest disparity, pixels.
+    pub max_disparity_px: f64,
+    /// Stereo points: largest row difference, pixels (segments must share rows).
+    pub max_row_difference_px: f64,
+    /// Frame to frame: largest motion of a point or segment midpoint (beyond half the
+    /// longer segment), pixels.
+    pub max_displacement_px: f64,
+}
+
+impl Default for AppearanceGates {
+    fn default() -> Self {
+        Self { min_disparity_px: -2.0, max_disparity_px: 150.0, max_row_difference_px: 3.0, max_displacement_px: 40.0 }
+    }
+}
+
+impl FrontendConfig {
+    /// Parses and validates TOML text.
+    pub fn from_toml_str(text: &str) -> Result<Self, VisionError> {
+        Self::parse(text, "<string>")
+    }
+
+    /// Reads, parses and validates a TOML file.
+    pub fn from_file(path: &Path) -> Result<Self, VisionError> {
+        let origin = path.display().to_string();
+        let text = std::fs::read_to_string(path)
+            .map_err(|e| VisionError::Config { origin: origin.clone(), message: format!("cannot read: {e}") })?;
+        Self::parse(&text, &origin)
+    }
+
+    fn parse(text: &str, origin: &str) -> Result<Self, VisionError> {
+        let config: Self =
+            toml::from_str(text).map_err(|e| VisionError::Config { origin: origin.to_string(), message: e.to_string() })?;
+        config.validate().map_err(|message| VisionError::Config { origin: origin.to_string(), message })?;
+        Ok(config)
+    }
+
+    /// Checks the ranges; the message names the first bad field.
+    pub fn validate(&self) -> Result<(), String> {
+        let bad = |field: &str, value: String, expected: &str| Err(format!("field `{field}` = {value}: {expected}"));
+        if !(self.lines.min_length_px >= 0.0 && self.lines.min_length_px.is_finite()) {
+            return bad("lines.min_length_px", self.lines.min_length_px.to_string(), "a finite number >= 0");
+        }
+        if !(self.lsd.scale > 0.0 && self.lsd.scale <= 1.0) {
+            return bad("lsd.scale", self.lsd.scale.to_string(), "in (0, 1]");
+        }
+        if !(self.lsd.angle_tolerance_deg > 0.0 && self.lsd.angle_tolerance_deg < 180.0) {
+            return bad("lsd.angle_tolerance_deg", self.lsd.angle_tolerance_deg.to_string(), "in (0, 180)");
+        }
+        if self.lsd.bins < 1 {
+            return bad("lsd.bins", self.lsd.bins.to_string(), ">= 1");
+        }
+        if ![3, 5, 7].contains(&self.fld.canny_aperture) {
+            return bad("fld.canny_aperture", self.fld.canny_aperture.to_string(), "3, 5 or 7");
+        }
+        if self.fld.length_threshold_px < 0 {
+            return bad("fld.length_threshold_px", self.fld.length_threshold_px.to_string(), ">= 0");
+        }
+        for (field, ratio) in [("lbd.min_distance_ratio", self.lbd.min_distance_ratio), ("orb.min_distance_ratio", self.orb.min_distance_ratio)] {
+            if !(ratio >= 1.0 && ratio.is_finite()) {
+                return bad(field, ratio.to_string(), "a finite number >= 1");
+            }
+        }
+        if self.orb.features < 1 || self.orb.levels < 1 || !(self.orb.scale_factor > 1.0) {
+            return bad("orb", format!("{:?}", self.orb), "features >= 1, levels >= 1, scale_factor > 1");
+        }
+        let g = &self.appearance_gates;
+        if g.min_disparity_px.is_nan() || g.max_disparity_px.is_nan() || g.min_disparity_px > g.max_disparity_px {
+            return bad("appearance_gates.min_disparity_px", g.min_disparity_px.to_string(), "<= max_disparity_px");
+        }
+        if !(g.max_row_difference_px >= 0.0) || !(g.max_displacement_px >= 0.0) {
+            return bad("appearance_gates", format!("{g:?}"), "row difference and displacement >= 0");
+        }
+        self.l1.validate().map_err(|e| format!("[l1] {e}"))
+    }
+}

@@ -1,0 +1,167 @@
+//! Line segment detection: LSD and FLD behind one trait.
+
+use crate::{FldOptions, FrontendConfig, GrayImage, LineOptions, LsdOptions, LsdRefine, OpenCvContext, VisionError};
+use linetrack_geometry::Segment;
+use opencv::core::{Ptr, Vec4f, Vector};
+use opencv::imgproc::{self, LineSegmentDetector, LineSegmentDetectorTrait};
+use opencv::ximgproc::{self, FastLineDetector, FastLineDetectorTrait};
+use serde::{Deserialize, Serialize};
+use std::str::FromStr;
+
+/// A line segment detector.
+pub trait LineDetector: Send {
+    /// Short name: `lsd` or `fld`.
+    fn name(&self) -> &'static str;
+
+    /// Detects segments in `image`, replacing the contents of `out` with the kept ones
+    /// (at most `max_segments`, at least `min_length_px` long, longest first).
+    fn detect(&mut self, image: &GrayImage, out: &mut Vec<Segment>) -> Result<(), VisionError>;
+}
+
+/// The detectors that can be chosen by name.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum DetectorKind {
+    /// Line Segment Detector (von Gioi et al.), OpenCV imgproc.
+    Lsd,
+    /// Fast Line Detector (Lee et al.), OpenCV ximgproc.
+    Fld,
+}
+
+impl DetectorKind {
+    /// Every kind, in a fixed order.
+    pub const ALL: [DetectorKind; 2] = [DetectorKind::Lsd, DetectorKind::Fld];
+
+    /// The name used in configs and on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            DetectorKind::Lsd => "lsd",
+            DetectorKind::Fld => "fld",
+        }
+    }
+}
+
+impl FromStr for DetectorKind {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, String> {
+        Self::ALL
+            .into_iter()
+            .find(|k| k.name().eq_ignore_ascii_case(s))
+            .ok_or_else(|| format!("unknown detector {s:?}: expected one of lsd, fld"))
+    }
+}
+
+/// Builds the detector `kind` with its options from `config`.
+pub fn create_detector(kind: DetectorKind, config: &FrontendConfig) -> Result<Box<dyn LineDetector>, VisionError> {
+    Ok(match kind {
+        DetectorKind::Lsd => Box::new(LsdDetector::new(&config.lsd, config.lines)?),
+        DetectorKind::Fld => Box::new(FldDetector::new(&config.fld, config.lines)?),
+    })
+}
+
+/// LSD through OpenCV's imgproc.
+pub struct LsdDetector {
+    lsd: Ptr<LineSegmentDetector>,
+    lines: Vector<Vec4f>,
+    keep: LineOptions,
+}
+
+impl LsdDetector {
+    /// An LSD with `options`, keeping segments by `keep`.
+    pub fn new(options: &LsdOptions, keep: LineOptions) -> Result<Self, VisionError> {
+        let refine = match options.refine {
+            LsdRefine::None => imgproc::LSD_REFINE_NONE,
+            LsdRefine::Standard => imgproc::LSD_REFINE_STD,
+            LsdRefine::Advanced => imgproc::LSD_REFINE_ADV,
+        };
+        let lsd = imgproc::create_line_segment_detector(
+            refine,
+            options.scale,
+            options.sigma_scale,
+            options.quant,
+            options.angle_tolerance_deg,
+            options.log_eps,
+            options.density_threshold,
+            options.bins,
+        )
+        .context("creating the LSD detector")?;
+        Ok(Self { lsd, lines: Vector::new(), keep })
+    }
+}
+
+impl LineDetector for LsdDetector {
+    fn name(&self) -> &'static str {
+        "lsd"
+    }
+
+    fn detect(&mut self, image: &GrayImage, out: &mut Vec<Segment>) -> Result<(), VisionError> {
+        self.lines.clear();
+        let mut no_width = opencv::core::no_array();
+        let mut no_precision = opencv::core::no_array();
+        let mut no_nfa = opencv::core::no_array();
+        self.lsd
+            .detect(image.mat(), &mut self.lines, &mut no_width, &mut no_precision, &mut no_nfa)
+            .context("LSD detection")?;
+        keep_longest(&self.lines, self.keep, out);
+        Ok(())
+    }
+}
+
+/// FLD through OpenCV's ximgproc.
+pub struct FldDetector {
+    fld: Ptr<FastLineDetector>,
+    lines: Vector<Vec4f>,
+    keep: LineOptions,
+}
+
+impl FldDetector {
+    /// An FLD with `options`, keeping segments by `keep`.
+    pub fn new(options: &FldOptions, keep: LineOptions) -> Result<Self, VisionError> {
+        let fld = ximgproc::create_fast_line_detector(
+            options.length_threshold_px,
+            options.distance_threshold_px,
+            options.canny_low,
+            options.canny_high,
+            options.canny_aperture,
+            options.merge,
+        )
+        .context("creating the FLD detector")?;
+        Ok(Self { fld, lines: Vector::new(), keep })
+    }
+}
+
+impl LineDetector for FldDetector {
+    fn name(&self) -> &'static str {
+        "fld"
+    }
+
+    fn detect(&mut self, image: &GrayImage, out: &mut Vec<Segment>) -> Result<(), VisionError> {
+        self.lines.clear();
+        self.fld.detect(image.mat(), &mut self.lines).context("FLD detection")?;
+        keep_longest(&self.lines, self.keep, out);
+        Ok(())
+    }
+}
+
+/// Converts OpenCV's `(x0, y0, x1, y1)` lines into `out`: at least `min_length_px` long,
+/// finite, longest first, at most `max_segments`. Reuses `out`'s allocation.
+pub fn keep_longest(lines: &Vector<Vec4f>, keep: LineOptions, out: &mut Vec<Segment>) {
+    out.clear();
+    out.extend(
+        lines
+            .iter()
+            .map(|l| Segment::from_coords(f64::from(l[0]), f64::from(l[1]), f64::from(l[2]), f64::from(l[3])))
+            .filter(|s| s.is_finite() && s.length() >= keep.min_length_px),
+    );
+    let longest_first = |a: &Segment, b: &Segment| b.length().total_cmp(&a.length());
+    if out.len() > keep.max_segments {
+        if keep.max_segments == 0 {
+            out.clear();
+            return;
+        }
+        out.select_nth_unstable_by(keep.max_segments - 1, longest_first);
+        out.truncate(keep.max_segments);
+    }
+    out.sort_by(longest_first);
+}

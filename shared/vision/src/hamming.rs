@@ -1,0 +1,211 @@
+//! Binary descriptors and their matching: mutual best by Hamming distance, accepted only
+//! when the second-best distance is clearly larger. Shared by LBD (segments) and ORB
+//! (points); which pairs may match at all is decided by the caller's gate.
+
+use crate::{OpenCvContext, VisionError};
+use opencv::core::{Mat, MatTraitConst, MatTraitConstManual};
+use serde::{Deserialize, Serialize};
+
+/// One binary descriptor per feature, or none where the descriptor could not be computed.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct BinaryDescriptors {
+    bytes: Vec<u8>,
+    row_bytes: usize,
+    present: Vec<bool>,
+}
+
+impl BinaryDescriptors {
+    /// Makes room for `rows` descriptors of `row_bytes` bytes, all absent.
+    pub fn reset(&mut self, rows: usize, row_bytes: usize) {
+        self.row_bytes = row_bytes;
+        self.bytes.clear();
+        self.bytes.resize(rows * row_bytes, 0);
+        self.present.clear();
+        self.present.resize(rows, false);
+    }
+
+    /// Copies row `source_row` of an OpenCV CV_8U descriptor matrix into row `row`.
+    pub(crate) fn set_from_mat(&mut self, row: usize, mat: &Mat, source_row: i32) -> Result<(), VisionError> {
+        let data = mat.row(source_row).context("reading a descriptor row")?;
+        let bytes = data.data_bytes().context("reading descriptor bytes")?;
+        if bytes.len() != self.row_bytes || row >= self.present.len() {
+            return Ok(());
+        }
+        self.bytes[row * self.row_bytes..(row + 1) * self.row_bytes].copy_from_slice(bytes);
+        self.present[row] = true;
+        Ok(())
+    }
+
+    /// Number of features (with or without a descriptor).
+    pub fn len(&self) -> usize {
+        self.present.len()
+    }
+
+    /// Whether there are no features.
+    pub fn is_empty(&self) -> bool {
+        self.present.is_empty()
+    }
+
+    /// Descriptor of feature `k`, if it has one.
+    pub fn row(&self, k: usize) -> Option<&[u8]> {
+        self.present.get(k).copied().unwrap_or(false).then(|| &self.bytes[k * self.row_bytes..(k + 1) * self.row_bytes])
+    }
+
+    /// Features that have a descriptor.
+    pub fn count_present(&self) -> usize {
+        self.present.iter().filter(|p| **p).count()
+    }
+}
+
+/// One correspondence from an appearance or geometric matcher.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct FeatureMatch {
+    /// Index in the first set.
+    pub query: usize,
+    /// Index in the second set.
+    pub train: usize,
+    /// Hamming distance in bits (LBD, ORB) or geometric error (ℓ1).
+    pub distance: f64,
+}
+
+/// Hamming distance in bits between two equally long byte strings.
+pub(crate) fn hamming(a: &[u8], b: &[u8]) -> u32 {
+    let mut bits = 0;
+    let (a_words, a_tail) = a.split_at(a.len() - a.len() % 8);
+    let (b_words, b_tail) = b.split_at(b.len() - b.len() % 8);
+    for (x, y) in a_words.chunks_exact(8).zip(b_words.chunks_exact(8)) {
+        let word = |c: &[u8]| u64::from_le_bytes(c.try_into().unwrap_or([0; 8]));
+        bits += (word(x) ^ word(y)).count_ones();
+    }
+    for (x, y) in a_tail.iter().zip(b_tail) {
+        bits += (x ^ y).count_ones();
+    }
+    bits
+}
+
+/// Mutual-best Hamming matcher with a second-best ratio test; keeps its buffers.
+#[derive(Debug, Clone, Default)]
+pub struct HammingMatcher {
+    distances: Vec<u32>,
+    best_query_of_train: Vec<Option<usize>>,
+}
+
+const NO_PAIR: u32 = u32::MAX;
+
+impl HammingMatcher {
+    /// A matcher with empty buffers.
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// Replaces `out` with the pairs (i, j) such that, among the pairs `admit` allows,
+    /// j is i's nearest descriptor, i is j's nearest, and i's second-nearest is at least
+    /// `min_ratio` times farther than j.
+    pub fn match_mutual(
+        &mut self,
+        first: &BinaryDescriptors,
+        second: &BinaryDescriptors,
+        min_ratio: f64,
+        admit: impl Fn(usize, usize) -> bool,
+        out: &mut Vec<FeatureMatch>,
+    ) {
+        out.clear();
+        let (m, n) = (first.len(), second.len());
+        self.distances.clear();
+        self.distances.resize(m * n, NO_PAIR);
+        for i in 0..m {
+            let Some(a) = first.row(i) else { continue };
+            for j in 0..n {
+                if let Some(b) = second.row(j)
+                    && a.len() == b.len()
+                    && admit(i, j)
+                {
+                    self.distances[i * n + j] = hamming(a, b);
+                }
+            }
+        }
+        self.best_query_of_train.clear();
+        self.best_query_of_train.extend((0..n).map(|j| {
+            (0..m).filter(|&i| self.distances[i * n + j] != NO_PAIR).min_by_key(|&i| self.distances[i * n + j])
+        }));
+        for i in 0..m {
+            let row = &self.distances[i * n..(i + 1) * n];
+            let (mut best, mut best_d, mut second_d) = (None, NO_PAIR, NO_PAIR);
+            for (j, &d) in row.iter().enumerate() {
+                if d < best_d {
+                    second_d = best_d;
+                    best_d = d;
+                    best = Some(j);
+                } else if d < second_d {
+                    second_d = d;
+                }
+            }
+            let Some(j) = best else { continue };
+            let distinct = second_d == NO_PAIR || (second_d > best_d && f64::from(second_d) >= min_ratio * f64::from(best_d));
+            if distinct && self.best_query_of_train[j] == Some(i) {
+                out.push(FeatureMatch { query: i, train: j, distance: f64::from(best_d) });
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn descriptors(rows: &[[u8; 4]]) -> BinaryDescriptors {
+        let mut d = BinaryDescriptors::default();
+        d.reset(rows.len(), 4);
+        for (k, r) in rows.iter().enumerate() {
+            d.bytes[k * 4..k * 4 + 4].copy_from_slice(r);
+            d.present[k] = true;
+        }
+        d
+    }
+
+    #[test]
+    fn hamming_counts_differing_bits_across_words_and_tail() {
+        let a = [0xFFu8; 11];
+        let mut b = [0xFFu8; 11];
+        b[0] = 0x0F;
+        b[10] = 0xFE;
+        assert_eq!(hamming(&a, &b), 5);
+        assert_eq!(hamming(&a, &a), 0);
+    }
+
+    #[test]
+    fn mutual_best_with_ratio() {
+        let first = descriptors(&[[0, 0, 0, 0], [0xFF, 0xFF, 0, 0]]);
+        let second = descriptors(&[[0xFF, 0xFF, 0, 1], [0, 0, 0, 1], [0xFF, 0xFF, 0xFF, 0xFF]]);
+        let mut out = Vec::new();
+        HammingMatcher::new().match_mutual(&first, &second, 2.0, |_, _| true, &mut out);
+        let pairs: Vec<(usize, usize)> = out.iter().map(|m| (m.query, m.train)).collect();
+        assert_eq!(pairs, vec![(0, 1), (1, 0)]);
+    }
+
+    #[test]
+    fn close_second_best_and_gates_reject() {
+        let first = descriptors(&[[0, 0, 0, 0]]);
+        let second = descriptors(&[[1, 0, 0, 0], [3, 0, 0, 0]]);
+        let mut out = Vec::new();
+        let mut matcher = HammingMatcher::new();
+        // Distances 1 and 2: ratio 2 passes, 2.5 does not.
+        matcher.match_mutual(&first, &second, 2.0, |_, _| true, &mut out);
+        assert_eq!(out.len(), 1);
+        matcher.match_mutual(&first, &second, 2.5, |_, _| true, &mut out);
+        assert!(out.is_empty());
+        // Gating the best away leaves the other, unique candidate.
+        matcher.match_mutual(&first, &second, 2.5, |_, j| j == 1, &mut out);
+        assert_eq!(out.first().map(|m| m.train), Some(1));
+    }
+
+    #[test]
+    fn missing_descriptors_never_match() {
+        let mut first = descriptors(&[[0, 0, 0, 0]]);
+        first.present[0] = false;
+        let second = descriptors(&[[0, 0, 0, 0]]);
+        let mut out = Vec::new();
+        HammingMatcher::new().match_mutual(&first, &second, 1.0, |_, _| true, &mut out);
+        assert!(out.is_empty());
+    }
+}

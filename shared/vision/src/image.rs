@@ -1,0 +1,120 @@
+//! Checked 8-bit grayscale images and the photometric perturbation.
+
+use crate::{OpenCvContext, VisionError};
+use opencv::core::{self, Mat, MatTraitConst, MatTraitConstManual, Vector};
+use opencv::imgcodecs;
+use std::path::Path;
+
+/// An 8-bit, single-channel, non-empty image, with where it came from for error messages.
+#[derive(Debug)]
+pub struct GrayImage {
+    mat: Mat,
+    origin: String,
+}
+
+impl Clone for GrayImage {
+    fn clone(&self) -> Self {
+        Self { mat: self.mat.clone(), origin: self.origin.clone() }
+    }
+}
+
+impl GrayImage {
+    /// Reads and decodes an image file; every error names the file.
+    pub fn load(path: &Path) -> Result<Self, VisionError> {
+        let bytes = std::fs::read(path).map_err(|source| VisionError::Read { path: path.to_path_buf(), source })?;
+        Self::decode(&bytes, &path.display().to_string())
+    }
+
+    /// Decodes an encoded image (PNG, JPEG, …) held in memory.
+    pub fn decode(bytes: &[u8], origin: &str) -> Result<Self, VisionError> {
+        if bytes.is_empty() {
+            return Err(VisionError::Empty { origin: origin.to_string() });
+        }
+        let buffer = Vector::<u8>::from_slice(bytes);
+        // OpenCV reports some corrupt inputs as exceptions and others as an empty Mat.
+        let mat = imgcodecs::imdecode(&buffer, imgcodecs::IMREAD_UNCHANGED)
+            .map_err(|_| VisionError::Decode { origin: origin.to_string() })?;
+        if mat.empty() {
+            return Err(VisionError::Decode { origin: origin.to_string() });
+        }
+        Self::from_mat(mat, origin)
+    }
+
+    /// Wraps a Mat after checking it is 8-bit, single-channel and not empty.
+    pub fn from_mat(mat: Mat, origin: &str) -> Result<Self, VisionError> {
+        if mat.empty() || mat.rows() == 0 || mat.cols() == 0 {
+            return Err(VisionError::Empty { origin: origin.to_string() });
+        }
+        if mat.channels() != 1 || mat.depth() != core::CV_8U {
+            let depth = core::depth_to_string(mat.depth()).ok().unwrap_or_else(|| "unknown depth".to_string());
+            return Err(VisionError::Format { origin: origin.to_string(), channels: mat.channels(), depth });
+        }
+        Ok(Self { mat, origin: origin.to_string() })
+    }
+
+    /// An image from row-major 8-bit pixels.
+    pub fn from_pixels(width: usize, height: usize, pixels: &[u8], origin: &str) -> Result<Self, VisionError> {
+        if width == 0 || height == 0 || pixels.len() != width * height {
+            return Err(VisionError::RawSize { origin: origin.to_string(), len: pixels.len(), width, height });
+        }
+        let flat = Mat::from_slice(pixels).context("wrapping pixels")?;
+        let rows = i32::try_from(height).map_err(|_| VisionError::RawSize { origin: origin.to_string(), len: pixels.len(), width, height })?;
+        let shaped = flat.reshape(1, rows).context("shaping pixels")?;
+        let mut owned = Mat::default();
+        shaped.copy_to(&mut owned).context("copying pixels")?;
+        Self::from_mat(owned, origin)
+    }
+
+    /// The underlying OpenCV matrix (CV_8UC1).
+    pub fn mat(&self) -> &Mat {
+        &self.mat
+    }
+
+    /// Where the image came from (file path or a description).
+    pub fn origin(&self) -> &str {
+        &self.origin
+    }
+
+    /// Width in pixels.
+    pub fn width(&self) -> i32 {
+        self.mat.cols()
+    }
+
+    /// Height in pixels.
+    pub fn height(&self) -> i32 {
+        self.mat.rows()
+    }
+
+    /// The pixels, row-major, when the matrix is continuous (it is for decoded images).
+    pub fn pixels(&self) -> Option<&[u8]> {
+        self.mat.data_bytes().ok()
+    }
+
+    /// Errs unless `other` has the same size, naming both images.
+    pub fn ensure_same_size(&self, other: &GrayImage) -> Result<(), VisionError> {
+        if (self.width(), self.height()) == (other.width(), other.height()) {
+            return Ok(());
+        }
+        Err(VisionError::SizeMismatch {
+            first: self.origin.clone(),
+            first_size: (self.width(), self.height()),
+            second: other.origin.clone(),
+            second_size: (other.width(), other.height()),
+        })
+    }
+}
+
+/// The photometric perturbation of the paper's evaluation: `I' = clamp(gain·I + bias)` to
+/// [0, 255], rounding to the nearest level.
+pub fn perturb(image: &GrayImage, gain: f64, bias: f64) -> Result<GrayImage, VisionError> {
+    if !(gain.is_finite() && gain >= 0.0) {
+        return Err(VisionError::Perturbation(format!("gain must be finite and >= 0, got {gain}")));
+    }
+    if !bias.is_finite() {
+        return Err(VisionError::Perturbation(format!("bias must be finite, got {bias}")));
+    }
+    let mut out = Mat::default();
+    // convert_to with the same depth saturates, which is the clamp.
+    image.mat.convert_to(&mut out, -1, gain, bias).context("applying gain and bias")?;
+    Ok(GrayImage { mat: out, origin: format!("{} (gain {gain}, bias {bias})", image.origin) })
+}

@@ -1,0 +1,122 @@
+//! The OpenCV front end of linetrack: everything that looks at pixels.
+//!
+//! - [`GrayImage`]: an 8-bit single-channel image that has been checked (decodable, not
+//!   empty, one channel, 8 bits); loading names the file in every error.
+//! - [`perturb`]: the paper's photometric perturbation `I' = clamp(α·I + β)`.
+//! - [`LineDetector`]: LSD (imgproc) and FLD (ximgproc) behind one trait, chosen by name
+//!   at runtime ([`DetectorKind`]); both keep the N longest segments above a length.
+//! - [`SegmentMatcher`]: the appearance baseline LBD (line_descriptor descriptors, mutual
+//!   best + ratio test) and the geometric ℓ1 matcher behind one trait ([`MatcherKind`]).
+//! - [`OrbExtractor`] and [`HammingMatcher`]: ORB points matched mutual-best with a
+//!   second-best distance ratio, stereo and frame to frame.
+//!
+//! The algorithms of `linetrack-l1-matcher` stay free of OpenCV; this crate is where the
+//! two meet. Images are not rectified here (the datasets crate does that).
+#![warn(missing_docs)]
+
+mod config;
+mod detect;
+mod hamming;
+mod image;
+mod lbd;
+mod matchers;
+mod orb;
+
+pub use config::{AppearanceGates, FldOptions, FrontendConfig, LbdOptions, LineOptions, LsdOptions, LsdRefine, OrbOptions};
+pub use detect::{DetectorKind, FldDetector, LineDetector, LsdDetector, create_detector, keep_longest};
+pub use hamming::{BinaryDescriptors, FeatureMatch, HammingMatcher};
+pub use image::{GrayImage, perturb};
+pub use lbd::LbdExtractor;
+pub use matchers::{L1SegmentMatcher, LbdSegmentMatcher, LineFeatures, MatcherKind, SegmentMatcher, create_segment_matcher};
+pub use orb::{OrbExtractor, PointFeatures, match_points};
+
+use std::path::PathBuf;
+
+/// Everything that can go wrong in the front end, each naming its culprit.
+#[derive(Debug, thiserror::Error)]
+pub enum VisionError {
+    /// The image file cannot be read.
+    #[error("{path}: cannot read image file: {source}")]
+    Read {
+        /// The file.
+        path: PathBuf,
+        /// The operating system's reason.
+        source: std::io::Error,
+    },
+    /// The bytes are not an image OpenCV can decode.
+    #[error("{origin}: not a decodable image (corrupt, truncated or unsupported format)")]
+    Decode {
+        /// The file or other origin of the bytes.
+        origin: String,
+    },
+    /// The image has no pixels.
+    #[error("{origin}: image is empty (0 pixels)")]
+    Empty {
+        /// The file or other origin.
+        origin: String,
+    },
+    /// Not an 8-bit single-channel image.
+    #[error("{origin}: expected an 8-bit single-channel (grayscale) image, found {channels} channel(s) of {depth}")]
+    Format {
+        /// The file or other origin.
+        origin: String,
+        /// Channels found.
+        channels: i32,
+        /// Pixel depth found, as OpenCV names it.
+        depth: String,
+    },
+    /// Two images that must have the same size do not.
+    #[error("{first} is {first_size:?} (w×h) but {second} is {second_size:?}: the two images must have the same size")]
+    SizeMismatch {
+        /// The first image.
+        first: String,
+        /// Its width and height.
+        first_size: (i32, i32),
+        /// The second image.
+        second: String,
+        /// Its width and height.
+        second_size: (i32, i32),
+    },
+    /// Raw pixel data does not fit the stated size.
+    #[error("{origin}: {len} bytes of pixels for a {width}×{height} image")]
+    RawSize {
+        /// Origin of the data.
+        origin: String,
+        /// Bytes given.
+        len: usize,
+        /// Stated width.
+        width: usize,
+        /// Stated height.
+        height: usize,
+    },
+    /// A gain or bias that is not a finite, usable number.
+    #[error("photometric perturbation: {0}")]
+    Perturbation(String),
+    /// A configuration value or file is unusable.
+    #[error("front-end config {origin}: {message}")]
+    Config {
+        /// The file or "<string>".
+        origin: String,
+        /// What is wrong, naming the field.
+        message: String,
+    },
+    /// An OpenCV call failed.
+    #[error("OpenCV {context}: {source}")]
+    OpenCv {
+        /// What was being done.
+        context: &'static str,
+        /// OpenCV's error.
+        source: opencv::Error,
+    },
+}
+
+/// Attaches a context to OpenCV errors.
+pub(crate) trait OpenCvContext<T> {
+    fn context(self, context: &'static str) -> Result<T, VisionError>;
+}
+
+impl<T> OpenCvContext<T> for opencv::Result<T> {
+    fn context(self, context: &'static str) -> Result<T, VisionError> {
+        self.map_err(|source| VisionError::OpenCv { context, source })
+    }
+}

@@ -1,0 +1,155 @@
+//! Segment matchers behind one trait: LBD (appearance) and ℓ1 (geometry).
+
+use crate::{AppearanceGates, BinaryDescriptors, FeatureMatch, FrontendConfig, GrayImage, HammingMatcher, LbdExtractor, LbdOptions, VisionError};
+use linetrack_geometry::{self as geometry, MatchCase, Segment, SegmentFeatures};
+use linetrack_l1_matcher::{L1Matcher, Match};
+use serde::{Deserialize, Serialize};
+use std::str::FromStr;
+
+/// Segments of one image and whatever a matcher computed on them.
+#[derive(Debug, Clone, Default)]
+pub struct LineFeatures {
+    /// The detected segments.
+    pub segments: Vec<Segment>,
+    /// Appearance descriptors (LBD); empty for the geometric matcher.
+    pub descriptors: BinaryDescriptors,
+}
+
+/// A segment matcher.
+pub trait SegmentMatcher: Send {
+    /// Short name: `lbd` or `l1`.
+    fn name(&self) -> &'static str;
+
+    /// Computes what matching needs from the image (LBD descriptors; nothing for ℓ1).
+    fn describe(&mut self, image: &GrayImage, features: &mut LineFeatures) -> Result<(), VisionError>;
+
+    /// Replaces `out` with the matches between the two images' segments.
+    fn match_lines(&mut self, case: MatchCase, first: &LineFeatures, second: &LineFeatures, out: &mut Vec<FeatureMatch>);
+}
+
+/// The segment matchers that can be chosen by name.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum MatcherKind {
+    /// LBD descriptors, mutual best + ratio test.
+    Lbd,
+    /// The geometric ℓ1 matcher.
+    L1,
+}
+
+impl MatcherKind {
+    /// Every kind, in a fixed order.
+    pub const ALL: [MatcherKind; 2] = [MatcherKind::Lbd, MatcherKind::L1];
+
+    /// The name used in configs and on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            MatcherKind::Lbd => "lbd",
+            MatcherKind::L1 => "l1",
+        }
+    }
+}
+
+impl FromStr for MatcherKind {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, String> {
+        Self::ALL
+            .into_iter()
+            .find(|k| k.name().eq_ignore_ascii_case(s))
+            .ok_or_else(|| format!("unknown matcher {s:?}: expected one of lbd, l1"))
+    }
+}
+
+/// Builds the matcher `kind` from `config`.
+pub fn create_segment_matcher(kind: MatcherKind, config: &FrontendConfig) -> Result<Box<dyn SegmentMatcher>, VisionError> {
+    Ok(match kind {
+        MatcherKind::Lbd => Box::new(LbdSegmentMatcher::new(config.lbd, config.appearance_gates)?),
+        MatcherKind::L1 => Box::new(L1SegmentMatcher::new(config)?),
+    })
+}
+
+/// LBD descriptors matched mutual-best with a ratio test, gated by the epipolar geometry
+/// (stereo: shared rows, disparity range) or by the displacement (frame to frame).
+pub struct LbdSegmentMatcher {
+    extractor: LbdExtractor,
+    hamming: HammingMatcher,
+    options: LbdOptions,
+    gates: AppearanceGates,
+    first: Vec<Option<SegmentFeatures>>,
+    second: Vec<Option<SegmentFeatures>>,
+}
+
+impl LbdSegmentMatcher {
+    /// An LBD matcher.
+    pub fn new(options: LbdOptions, gates: AppearanceGates) -> Result<Self, VisionError> {
+        Ok(Self { extractor: LbdExtractor::new()?, hamming: HammingMatcher::new(), options, gates, first: Vec::new(), second: Vec::new() })
+    }
+}
+
+impl SegmentMatcher for LbdSegmentMatcher {
+    fn name(&self) -> &'static str {
+        "lbd"
+    }
+
+    fn describe(&mut self, image: &GrayImage, features: &mut LineFeatures) -> Result<(), VisionError> {
+        self.extractor.compute(image, &features.segments, &mut features.descriptors)
+    }
+
+    fn match_lines(&mut self, case: MatchCase, first: &LineFeatures, second: &LineFeatures, out: &mut Vec<FeatureMatch>) {
+        let features = |set: &LineFeatures, into: &mut Vec<Option<SegmentFeatures>>| {
+            into.clear();
+            into.extend(set.segments.iter().map(|s| SegmentFeatures::new(s).ok()));
+        };
+        features(first, &mut self.first);
+        features(second, &mut self.second);
+        let gates = self.gates;
+        let (a_all, b_all) = (&self.first, &self.second);
+        let admit = |i: usize, j: usize| {
+            let (Some(a), Some(b)) = (&a_all[i], &b_all[j]) else { return false };
+            match case {
+                MatchCase::Stereo => {
+                    geometry::overlap(a, b, MatchCase::Stereo) > 0.0
+                        && b.x_max >= a.x_min - gates.max_disparity_px
+                        && b.x_min <= a.x_max - gates.min_disparity_px
+                }
+                MatchCase::FrameToFrame => {
+                    (a.mid - b.mid).norm() <= gates.max_displacement_px + 0.5 * a.length.max(b.length)
+                }
+            }
+        };
+        self.hamming.match_mutual(&first.descriptors, &second.descriptors, self.options.min_distance_ratio, admit, out);
+    }
+}
+
+/// The geometric ℓ1 matcher behind the common trait.
+pub struct L1SegmentMatcher {
+    matcher: L1Matcher,
+    scratch: Vec<Match>,
+}
+
+impl L1SegmentMatcher {
+    /// An ℓ1 matcher with `config.l1`.
+    pub fn new(config: &FrontendConfig) -> Result<Self, VisionError> {
+        let matcher = L1Matcher::new(config.l1.clone())
+            .map_err(|e| VisionError::Config { origin: "[l1]".to_string(), message: e.to_string() })?;
+        Ok(Self { matcher, scratch: Vec::new() })
+    }
+}
+
+impl SegmentMatcher for L1SegmentMatcher {
+    fn name(&self) -> &'static str {
+        "l1"
+    }
+
+    fn describe(&mut self, _image: &GrayImage, features: &mut LineFeatures) -> Result<(), VisionError> {
+        features.descriptors.reset(0, 0);
+        Ok(())
+    }
+
+    fn match_lines(&mut self, case: MatchCase, first: &LineFeatures, second: &LineFeatures, out: &mut Vec<FeatureMatch>) {
+        self.matcher.match_segments(case, &first.segments, &second.segments, &mut self.scratch);
+        out.clear();
+        out.extend(self.scratch.iter().map(|m| FeatureMatch { query: m.query, train: m.train, distance: m.error }));
+    }
+}
