@@ -81,6 +81,24 @@ impl Segment {
         Self::new(self.end, self.start)
     }
 
+    /// The part of the segment inside the rectangle [0, width] × [0, height]
+    /// (Liang–Barsky clipping), or `None` when no part of it is inside.
+    pub fn clipped_to(&self, width: f64, height: f64) -> Option<Segment> {
+        let (p, d) = (self.start, self.end - self.start);
+        let (mut t0, mut t1) = (0.0f64, 1.0f64);
+        for (denominator, numerator) in [(-d.x, p.x), (d.x, width - p.x), (-d.y, p.y), (d.y, height - p.y)] {
+            if denominator == 0.0 {
+                if numerator < 0.0 {
+                    return None;
+                }
+            } else {
+                let t = numerator / denominator;
+                if denominator < 0.0 { t0 = t0.max(t) } else { t1 = t1.min(t) }
+            }
+        }
+        (t0 < t1).then(|| Segment::new(p + d * t0, p + d * t1))
+    }
+
     /// Whether all four coordinates are finite.
     pub fn is_finite(&self) -> bool {
         self.start.iter().chain(self.end.iter()).all(|c| c.is_finite())

@@ -110,6 +110,18 @@ fn degenerate_segments_are_refused_with_the_reason() {
     assert!(matches!(SegmentFeatures::new(&huge), Err(GeometryError::ZeroLength { .. })));
 }
 
+#[test]
+fn clipping_keeps_the_inside_part_and_drops_outside_segments() {
+    let crossing = Segment::from_coords(-10.0, 5.0, 30.0, 5.0).clipped_to(20.0, 10.0).unwrap();
+    assert_eq!(crossing, Segment::from_coords(0.0, 5.0, 20.0, 5.0));
+    let diagonal = Segment::from_coords(-5.0, -5.0, 25.0, 25.0).clipped_to(20.0, 10.0).unwrap();
+    assert!(close(diagonal.start.x, 0.0) && close(diagonal.end.x, 10.0) && close(diagonal.end.y, 10.0));
+    let inside = Segment::from_coords(1.0, 2.0, 3.0, 4.0);
+    assert_eq!(inside.clipped_to(20.0, 10.0), Some(inside));
+    assert_eq!(Segment::from_coords(30.0, 0.0, 40.0, 5.0).clipped_to(20.0, 10.0), None);
+    assert_eq!(Segment::from_coords(5.0, -3.0, 8.0, -3.0).clipped_to(20.0, 10.0), None);
+}
+
 fn coord() -> impl Strategy<Value = f64> {
     -1000.0..1000.0f64
 }

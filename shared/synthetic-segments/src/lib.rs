@@ -356,24 +356,7 @@ fn project_clipped(a: &Point3<f64>, b: &Point3<f64>, rig: &StereoRig) -> Option<
         if a.z < NEAR_PLANE_M { a = cut } else { b = cut }
     }
     let project = |p: &Point3<f64>| Point::new(rig.focal_px * p.x / p.z + rig.cx_px, rig.focal_px * p.y / p.z + rig.cy_px);
-    clip_to_rect(project(&a), project(&b), rig.width_px as f64, rig.height_px as f64)
-}
-
-/// Liang–Barsky clipping of segment p→q to [0, w] × [0, h].
-fn clip_to_rect(p: Point, q: Point, w: f64, h: f64) -> Option<Segment> {
-    let d = q - p;
-    let (mut t0, mut t1) = (0.0f64, 1.0f64);
-    for (denominator, numerator) in [(-d.x, p.x), (d.x, w - p.x), (-d.y, p.y), (d.y, h - p.y)] {
-        if denominator == 0.0 {
-            if numerator < 0.0 {
-                return None;
-            }
-        } else {
-            let t = numerator / denominator;
-            if denominator < 0.0 { t0 = t0.max(t) } else { t1 = t1.min(t) }
-        }
-    }
-    (t0 < t1).then(|| Segment::new(p + d * t0, p + d * t1))
+    Segment::new(project(&a), project(&b)).clipped_to(rig.width_px as f64, rig.height_px as f64)
 }
 
 #[cfg(test)]

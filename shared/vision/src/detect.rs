@@ -8,13 +8,18 @@ use opencv::ximgproc::{self, FastLineDetector, FastLineDetectorTrait};
 use serde::{Deserialize, Serialize};
 use std::str::FromStr;
 
+/// Images narrower or lower than this (pixels) have no segments worth detecting; the
+/// detectors return none instead of asking OpenCV (FLD asserts on tiny images).
+pub const MIN_IMAGE_SIDE_PX: i32 = 8;
+
 /// A line segment detector.
 pub trait LineDetector: Send {
     /// Short name: `lsd` or `fld`.
     fn name(&self) -> &'static str;
 
-    /// Detects segments in `image`, replacing the contents of `out` with the kept ones
-    /// (at most `max_segments`, at least `min_length_px` long, longest first).
+    /// Detects segments in `image`, replacing the contents of `out` with the kept ones:
+    /// clipped to the image, at least `min_length_px` long, at most `max_segments`,
+    /// longest first. Images smaller than [`MIN_IMAGE_SIDE_PX`] give none.
     fn detect(&mut self, image: &GrayImage, out: &mut Vec<Segment>) -> Result<(), VisionError>;
 }
 
@@ -97,13 +102,17 @@ impl LineDetector for LsdDetector {
 
     fn detect(&mut self, image: &GrayImage, out: &mut Vec<Segment>) -> Result<(), VisionError> {
         self.lines.clear();
+        out.clear();
+        if too_small(image) {
+            return Ok(());
+        }
         let mut no_width = opencv::core::no_array();
         let mut no_precision = opencv::core::no_array();
         let mut no_nfa = opencv::core::no_array();
         self.lsd
             .detect(image.mat(), &mut self.lines, &mut no_width, &mut no_precision, &mut no_nfa)
             .context("LSD detection")?;
-        keep_longest(&self.lines, self.keep, out);
+        keep_longest(&self.lines, self.keep, image_bounds(image), out);
         Ok(())
     }
 }
@@ -138,20 +147,35 @@ impl LineDetector for FldDetector {
 
     fn detect(&mut self, image: &GrayImage, out: &mut Vec<Segment>) -> Result<(), VisionError> {
         self.lines.clear();
+        out.clear();
+        if too_small(image) {
+            return Ok(());
+        }
         self.fld.detect(image.mat(), &mut self.lines).context("FLD detection")?;
-        keep_longest(&self.lines, self.keep, out);
+        keep_longest(&self.lines, self.keep, image_bounds(image), out);
         Ok(())
     }
 }
 
-/// Converts OpenCV's `(x0, y0, x1, y1)` lines into `out`: at least `min_length_px` long,
-/// finite, longest first, at most `max_segments`. Reuses `out`'s allocation.
-pub fn keep_longest(lines: &Vector<Vec4f>, keep: LineOptions, out: &mut Vec<Segment>) {
+fn too_small(image: &GrayImage) -> bool {
+    image.width() < MIN_IMAGE_SIDE_PX || image.height() < MIN_IMAGE_SIDE_PX
+}
+
+/// The largest coordinates a pixel centre can have: (width − 1, height − 1).
+fn image_bounds(image: &GrayImage) -> (f64, f64) {
+    (f64::from(image.width() - 1), f64::from(image.height() - 1))
+}
+
+/// Converts OpenCV's `(x0, y0, x1, y1)` lines into `out`: clipped to [0, max_x] × [0, max_y],
+/// at least `min_length_px` long, longest first, at most `max_segments`. Reuses `out`'s
+/// allocation.
+pub fn keep_longest(lines: &Vector<Vec4f>, keep: LineOptions, (max_x, max_y): (f64, f64), out: &mut Vec<Segment>) {
     out.clear();
     out.extend(
         lines
             .iter()
             .map(|l| Segment::from_coords(f64::from(l[0]), f64::from(l[1]), f64::from(l[2]), f64::from(l[3])))
+            .filter_map(|s| s.clipped_to(max_x, max_y))
             .filter(|s| s.is_finite() && s.length() >= keep.min_length_px),
     );
     let longest_first = |a: &Segment, b: &Segment| b.length().total_cmp(&a.length());

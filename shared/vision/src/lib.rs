@@ -23,7 +23,7 @@ mod matchers;
 mod orb;
 
 pub use config::{AppearanceGates, FldOptions, FrontendConfig, LbdOptions, LineOptions, LsdOptions, LsdRefine, OrbOptions};
-pub use detect::{DetectorKind, FldDetector, LineDetector, LsdDetector, create_detector, keep_longest};
+pub use detect::{DetectorKind, FldDetector, LineDetector, LsdDetector, MIN_IMAGE_SIDE_PX, create_detector, keep_longest};
 pub use hamming::{BinaryDescriptors, FeatureMatch, HammingMatcher};
 pub use image::{GrayImage, perturb};
 pub use lbd::LbdExtractor;

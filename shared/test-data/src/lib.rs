@@ -1,0 +1,118 @@
+//! Where tests and benches find real data, and small images with known content.
+//!
+//! The EuRoC excerpt (95 stereo frames of V1_01_easy, ASL layout) is found through the
+//! environment variable [`EUROC_ENV`], else at `../shared/data/euroc/V1_01_easy_micro`
+//! beside the workspace (where CI has it). A test that needs it and cannot find it fails
+//! with a message saying where it looked; `cargo xtask test` leaves such tests out, and
+//! says so, on machines without the folder.
+#![warn(missing_docs)]
+
+use std::path::{Path, PathBuf};
+
+/// Environment variable naming the EuRoC excerpt's sequence folder (the one holding `mav0/`).
+pub const EUROC_ENV: &str = "LINETRACK_EUROC_DIR";
+
+/// Name fragment shared by every test that needs the real data, so a runner can select or
+/// leave them out (`cargo nextest run -E 'test(/real_data/)'`).
+pub const REAL_DATA_TAG: &str = "real_data";
+
+/// The default location, relative to this crate: `<workspace>/../shared/data/euroc/…`.
+fn default_euroc_dir() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data/euroc/V1_01_easy_micro")
+}
+
+/// The EuRoC excerpt folder, or a message naming where it was looked for.
+pub fn euroc_dir() -> Result<PathBuf, String> {
+    let (dir, how) = match std::env::var_os(EUROC_ENV) {
+        Some(value) => (PathBuf::from(value), format!("${EUROC_ENV}")),
+        None => (default_euroc_dir(), format!("the default location (set ${EUROC_ENV} to override)")),
+    };
+    if dir.join("mav0/cam0/data.csv").is_file() {
+        Ok(dir)
+    } else {
+        Err(format!("EuRoC excerpt not found at {} ({how}): no mav0/cam0/data.csv there", dir.display()))
+    }
+}
+
+/// Left and right image files of the `index`-th frame listed in `cam0/data.csv`.
+pub fn euroc_stereo_pair(index: usize) -> Result<(PathBuf, PathBuf), String> {
+    let dir = euroc_dir()?;
+    let csv_path = dir.join("mav0/cam0/data.csv");
+    let csv = std::fs::read_to_string(&csv_path).map_err(|e| format!("{}: {e}", csv_path.display()))?;
+    let name = csv
+        .lines()
+        .filter(|l| !l.starts_with('#') && !l.trim().is_empty())
+        .nth(index)
+        .and_then(|l| l.split(',').nth(1))
+        .map(str::trim)
+        .ok_or_else(|| format!("{}: no frame {index}", csv_path.display()))?;
+    Ok((dir.join("mav0/cam0/data").join(name), dir.join("mav0/cam1/data").join(name)))
+}
+
+/// A generated grayscale test card, row-major: a dark background with bright and mid-grey
+/// axis-aligned and slanted quadrilaterals whose edges are long straight lines at known
+/// places ([`test_card_edges`]), plus mild deterministic texture.
+pub fn test_card(width: usize, height: usize) -> Vec<u8> {
+    let mut pixels = vec![0u8; width * height];
+    let shapes = test_card_shapes(width, height);
+    for y in 0..height {
+        for x in 0..width {
+            // Faint texture so descriptors have something to see besides the edges.
+            let texture = ((x * 7 + y * 13) % 17) as u8;
+            let inside = shapes.iter().rev().find(|(shape, _)| contains(shape, x as f64 + 0.5, y as f64 + 0.5));
+            pixels[y * width + x] = match inside {
+                Some((_, level)) => level.saturating_add(texture),
+                None => 30 + texture,
+            };
+        }
+    }
+    pixels
+}
+
+/// The straight edges of [`test_card`], as `(x0, y0, x1, y1)`.
+pub fn test_card_edges(width: usize, height: usize) -> Vec<[f64; 4]> {
+    let mut edges = Vec::new();
+    for (shape, _) in test_card_shapes(width, height) {
+        for k in 0..4 {
+            let (a, b) = (shape[k], shape[(k + 1) % 4]);
+            edges.push([a.0, a.1, b.0, b.1]);
+        }
+    }
+    edges
+}
+
+type Quad = [(f64, f64); 4];
+
+/// Convex quadrilaterals (corners clockwise in image coordinates) and their grey level.
+fn test_card_shapes(width: usize, height: usize) -> Vec<(Quad, u8)> {
+    let (w, h) = (width as f64, height as f64);
+    let rect = |x0: f64, y0: f64, x1: f64, y1: f64| [(x0 * w, y0 * h), (x1 * w, y0 * h), (x1 * w, y1 * h), (x0 * w, y1 * h)];
+    vec![
+        (rect(0.08, 0.10, 0.30, 0.80), 200),
+        (rect(0.40, 0.15, 0.55, 0.45), 140),
+        (rect(0.62, 0.55, 0.92, 0.90), 220),
+        (rect(0.36, 0.60, 0.52, 0.92), 110),
+        // A slanted parallelogram.
+        ([(0.62 * w, 0.08 * h), (0.80 * w, 0.08 * h), (0.90 * w, 0.45 * h), (0.72 * w, 0.45 * h)], 170),
+    ]
+}
+
+/// Whether (x, y) is inside the convex quadrilateral (corners clockwise in image axes).
+fn contains(q: &Quad, x: f64, y: f64) -> bool {
+    (0..4).all(|k| {
+        let (a, b) = (q[k], q[(k + 1) % 4]);
+        (b.0 - a.0) * (y - a.1) - (b.1 - a.1) * (x - a.0) >= 0.0
+    })
+}
+
+/// `pixels` shifted left by `shift` columns (the view of a camera `shift` px of
+/// disparity to the right), the uncovered right border filled with the background level.
+pub fn shift_left(pixels: &[u8], width: usize, shift: usize) -> Vec<u8> {
+    let mut out = vec![30u8; pixels.len()];
+    for (row_in, row_out) in pixels.chunks_exact(width).zip(out.chunks_exact_mut(width)) {
+        if shift < width {
+            row_out[..width - shift].copy_from_slice(&row_in[shift..]);
+        }
+    }
+    out
+}
