@@ -187,20 +187,20 @@ pub enum ConfigError {
         expected: &'static str,
     },
     /// The TOML text does not parse or has unknown/mistyped fields.
-    #[error("matcher config {origin}: {source}")]
+    #[error("matcher config {origin}: {reason}")]
     Toml {
         /// The file (or "<string>").
         origin: String,
         /// The parser's message, with line and column.
-        source: toml::de::Error,
+        reason: toml::de::Error,
     },
     /// The file cannot be read.
-    #[error("matcher config {path}: {source}")]
+    #[error("matcher config {path}: {reason}")]
     Io {
         /// The file.
         path: String,
         /// Why it cannot be read.
-        source: std::io::Error,
+        reason: std::io::Error,
     },
 }
 
@@ -219,13 +219,13 @@ impl MatcherConfig {
     /// Reads, parses and validates a TOML file.
     pub fn from_file(path: &Path) -> Result<Self, ConfigError> {
         let shown = path.display().to_string();
-        let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Io { path: shown.clone(), source })?;
+        let text = std::fs::read_to_string(path).map_err(|reason| ConfigError::Io { path: shown.clone(), reason })?;
         Self::parse(&text, &shown)
     }
 
     fn parse(text: &str, origin: &str) -> Result<Self, ConfigError> {
         let config: Self =
-            toml::from_str(text).map_err(|source| ConfigError::Toml { origin: origin.to_string(), source })?;
+            toml::from_str(text).map_err(|reason| ConfigError::Toml { origin: origin.to_string(), reason })?;
         config.validate()?;
         Ok(config)
     }

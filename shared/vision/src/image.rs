@@ -21,7 +21,7 @@ impl Clone for GrayImage {
 impl GrayImage {
     /// Reads and decodes an image file; every error names the file.
     pub fn load(path: &Path) -> Result<Self, VisionError> {
-        let bytes = std::fs::read(path).map_err(|source| VisionError::Read { path: path.to_path_buf(), source })?;
+        let bytes = std::fs::read(path).map_err(|reason| VisionError::Read { path: path.to_path_buf(), reason })?;
         Self::decode(&bytes, &path.display().to_string())
     }
 

@@ -36,12 +36,12 @@ use std::path::PathBuf;
 #[derive(Debug, thiserror::Error)]
 pub enum VisionError {
     /// The image file cannot be read.
-    #[error("{path}: cannot read image file: {source}")]
+    #[error("{path}: cannot read image file: {reason}")]
     Read {
         /// The file.
         path: PathBuf,
         /// The operating system's reason.
-        source: std::io::Error,
+        reason: std::io::Error,
     },
     /// The bytes are not an image OpenCV can decode.
     #[error("{origin}: not a decodable image (corrupt, truncated or unsupported format)")]
@@ -101,12 +101,12 @@ pub enum VisionError {
         message: String,
     },
     /// An OpenCV call failed.
-    #[error("OpenCV {context}: {source}")]
+    #[error("OpenCV {context}: {reason}")]
     OpenCv {
         /// What was being done.
         context: &'static str,
         /// OpenCV's error.
-        source: opencv::Error,
+        reason: opencv::Error,
     },
 }
 
@@ -117,6 +117,6 @@ pub(crate) trait OpenCvContext<T> {
 
 impl<T> OpenCvContext<T> for opencv::Result<T> {
     fn context(self, context: &'static str) -> Result<T, VisionError> {
-        self.map_err(|source| VisionError::OpenCv { context, source })
+        self.map_err(|reason| VisionError::OpenCv { context, reason })
     }
 }

@@ -2,6 +2,8 @@
 //! matching, perturbation, and bad input. Tests named `real_data_*` need the EuRoC excerpt
 //! (see `linetrack-test-data`) and fail, saying where they looked, when it is missing.
 
+#![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failure here is a test failure
+
 use linetrack_geometry::{MatchCase, Segment, SegmentFeatures, direction_angle};
 use linetrack_test_data::{euroc_stereo_pair, shift_left, test_card, test_card_edges};
 use linetrack_vision::*;
