@@ -1,0 +1,77 @@
+//! Per-frame cost of every front-end step on the same real 752×480 EuRoC stereo pair
+//! (frame 0, left and right; frame 1 for frame to frame), so the paper's Table III
+//! (detector × matcher, monocular and stereo) can be rebuilt from one run:
+//!
+//! - `detect/{lsd,fld}`: one image;
+//! - `lbd/describe`: LBD descriptors of one image's 100 segments;
+//! - `match/{lbd,l1}/{stereo,frame-to-frame}`: matching two images' segments;
+//! - `orb/extract`: 600 ORB points of one image, `orb/match/stereo`.
+//!
+//! Monocular tracking of a frame = detect + describe + frame-to-frame match; stereo =
+//! 2 × (detect + describe) + stereo match + frame-to-frame match. The data is located as in
+//! the tests (`LINETRACK_EUROC_DIR`, else ../shared/data beside the workspace).
+
+#![allow(clippy::expect_used)] // a bench on fixed inputs: failing loudly is right
+
+use criterion::{Criterion, criterion_group, criterion_main};
+use linetrack_geometry::MatchCase;
+use linetrack_vision::{
+    DetectorKind, FrontendConfig, GrayImage, HammingMatcher, LineFeatures, MatcherKind, OrbExtractor, PointFeatures, create_detector,
+    create_segment_matcher, match_points,
+};
+use std::hint::black_box;
+
+fn load(index: usize) -> (GrayImage, GrayImage) {
+    let (l, r) = linetrack_test_data::euroc_stereo_pair(index).expect("EuRoC excerpt (set LINETRACK_EUROC_DIR)");
+    (GrayImage::load(&l).expect("left image"), GrayImage::load(&r).expect("right image"))
+}
+
+fn bench_frontend(c: &mut Criterion) {
+    let config = FrontendConfig::default();
+    let (left, right) = load(0);
+    let (next, _) = load(1);
+
+    let mut group = c.benchmark_group("frontend");
+    for kind in DetectorKind::ALL {
+        let mut detector = create_detector(kind, &config).expect("detector");
+        let mut out = Vec::new();
+        group.bench_function(format!("detect/{}", kind.name()), |b| b.iter(|| detector.detect(black_box(&left), &mut out)));
+    }
+
+    // Segments of the three images, detected once with LSD (the matchers' input).
+    let mut detector = create_detector(DetectorKind::Lsd, &config).expect("detector");
+    let mut features = |image: &GrayImage| {
+        let mut f = LineFeatures::default();
+        detector.detect(image, &mut f.segments).expect("detection");
+        f
+    };
+    let (mut l0, mut r0, mut l1) = (features(&left), features(&right), features(&next));
+
+    let mut lbd = create_segment_matcher(MatcherKind::Lbd, &config).expect("lbd");
+    group.bench_function("lbd/describe", |b| b.iter(|| lbd.describe(black_box(&left), &mut l0)));
+    lbd.describe(&left, &mut l0).expect("lbd");
+    lbd.describe(&right, &mut r0).expect("lbd");
+    lbd.describe(&next, &mut l1).expect("lbd");
+    let mut out = Vec::new();
+    for (case, name, second) in [(MatchCase::Stereo, "stereo", &r0), (MatchCase::FrameToFrame, "frame-to-frame", &l1)] {
+        group.bench_function(format!("match/lbd/{name}"), |b| b.iter(|| lbd.match_lines(case, black_box(&l0), black_box(second), &mut out)));
+    }
+    let mut l1_matcher = create_segment_matcher(MatcherKind::L1, &config).expect("l1");
+    for (case, name, second) in [(MatchCase::Stereo, "stereo", &r0), (MatchCase::FrameToFrame, "frame-to-frame", &l1)] {
+        group.bench_function(format!("match/l1/{name}"), |b| b.iter(|| l1_matcher.match_lines(case, black_box(&l0), black_box(second), &mut out)));
+    }
+
+    let mut orb = OrbExtractor::new(&config.orb).expect("orb");
+    let (mut p_left, mut p_right) = (PointFeatures::default(), PointFeatures::default());
+    group.bench_function("orb/extract", |b| b.iter(|| orb.extract(black_box(&left), &mut p_left)));
+    orb.extract(&left, &mut p_left).expect("orb");
+    orb.extract(&right, &mut p_right).expect("orb");
+    let mut hamming = HammingMatcher::new();
+    group.bench_function("orb/match/stereo", |b| {
+        b.iter(|| match_points(&mut hamming, MatchCase::Stereo, &p_left, &p_right, &config.appearance_gates, config.orb.min_distance_ratio, &mut out))
+    });
+    group.finish();
+}
+
+criterion_group!(benches, bench_frontend);
+criterion_main!(benches);
