@@ -119,6 +119,45 @@ pub enum GeometryError {
     },
 }
 
+/// A rectified pinhole stereo rig (what the rest of the system sees after rectification):
+/// square pixels, both cameras with the same intrinsics, the right camera `baseline_m`
+/// along +x of the left.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct StereoRig {
+    /// Focal length in pixels (square pixels).
+    pub focal_px: f64,
+    /// Principal point x, pixels.
+    pub cx_px: f64,
+    /// Principal point y, pixels.
+    pub cy_px: f64,
+    /// Distance between the two optical centres, metres.
+    pub baseline_m: f64,
+    /// Image width, pixels.
+    pub width_px: u32,
+    /// Image height, pixels.
+    pub height_px: u32,
+}
+
+impl Default for StereoRig {
+    /// Roughly the rectified EuRoC MAV rig: 752×480, f ≈ 458 px, 11 cm baseline.
+    fn default() -> Self {
+        Self { focal_px: 458.0, cx_px: 376.0, cy_px: 240.0, baseline_m: 0.11, width_px: 752, height_px: 480 }
+    }
+}
+
+impl StereoRig {
+    /// Projects a point in the left camera's frame (x right, y down, z forward) to left
+    /// image pixels; `None` behind the camera.
+    pub fn project_left(&self, p: &nalgebra::Point3<f64>) -> Option<Point> {
+        (p.z > 0.0).then(|| Point::new(self.focal_px * p.x / p.z + self.cx_px, self.focal_px * p.y / p.z + self.cy_px))
+    }
+
+    /// Disparity in pixels of a point at depth `depth_m`.
+    pub fn disparity_px(&self, depth_m: f64) -> f64 {
+        self.focal_px * self.baseline_m / depth_m
+    }
+}
+
 /// Which pair of images two segment sets come from; decides the epipolar axis and the
 /// overlap definition.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]

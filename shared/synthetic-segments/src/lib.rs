@@ -15,35 +15,12 @@
 //! detector (LSD) would give; [`SceneConfig::random_endpoint_order`] scrambles it.
 #![warn(missing_docs)]
 
+pub use linetrack_geometry::StereoRig;
 use linetrack_geometry::{Point, Segment};
 use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
-
-/// A rectified pinhole stereo rig; the right camera sits `baseline_m` along +x of the left.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-pub struct StereoRig {
-    /// Focal length in pixels (square pixels).
-    pub focal_px: f64,
-    /// Principal point x, pixels.
-    pub cx_px: f64,
-    /// Principal point y, pixels.
-    pub cy_px: f64,
-    /// Distance between the two optical centres, metres.
-    pub baseline_m: f64,
-    /// Image width, pixels.
-    pub width_px: u32,
-    /// Image height, pixels.
-    pub height_px: u32,
-}
-
-impl Default for StereoRig {
-    /// Roughly the rectified EuRoC MAV rig: 752×480, f ≈ 458 px, 11 cm baseline.
-    fn default() -> Self {
-        Self { focal_px: 458.0, cx_px: 376.0, cy_px: 240.0, baseline_m: 0.11, width_px: 752, height_px: 480 }
-    }
-}
 
 /// How a scene is drawn and how detection is damaged.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

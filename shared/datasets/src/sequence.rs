@@ -1,0 +1,198 @@
+//! A stereo sequence (frames, rig, rectification) and its read-ahead stream.
+
+use crate::{DatasetError, Rectifier};
+use crossbeam_channel::{Receiver, bounded};
+use linetrack_geometry::StereoRig;
+use linetrack_vision::GrayImage;
+use nalgebra::Isometry3;
+use std::path::{Path, PathBuf};
+use std::thread::JoinHandle;
+
+/// One frame as listed by the dataset (nothing loaded yet).
+#[derive(Debug, Clone, PartialEq)]
+pub struct FrameEntry {
+    /// Position in the sequence, from 0.
+    pub index: usize,
+    /// Capture time, nanoseconds.
+    pub timestamp_ns: u64,
+    /// Left image file.
+    pub left: PathBuf,
+    /// Right image file.
+    pub right: PathBuf,
+    /// Ground-truth pose of the rectified left camera in the dataset's world, if known.
+    pub pose: Option<Isometry3<f64>>,
+}
+
+/// One loaded, rectified stereo frame.
+#[derive(Debug, Clone)]
+pub struct StereoFrame {
+    /// Position in the sequence.
+    pub index: usize,
+    /// Capture time, nanoseconds.
+    pub timestamp_ns: u64,
+    /// Rectified left image.
+    pub left: GrayImage,
+    /// Rectified right image.
+    pub right: GrayImage,
+    /// Ground-truth pose of the rectified left camera, if known.
+    pub pose: Option<Isometry3<f64>>,
+}
+
+/// A frame that could not be loaded: the stream reports it and goes on.
+#[derive(Debug)]
+pub struct FrameError {
+    /// Position in the sequence.
+    pub index: usize,
+    /// Capture time, nanoseconds.
+    pub timestamp_ns: u64,
+    /// Why.
+    pub error: DatasetError,
+}
+
+impl std::fmt::Display for FrameError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "frame {} (t = {} ns) skipped: {}", self.index, self.timestamp_ns, self.error)
+    }
+}
+
+/// A stereo sequence from any supported dataset.
+#[derive(Debug)]
+pub struct StereoSequence {
+    /// The sequence's folder name.
+    pub name: String,
+    /// The frames, in time order.
+    pub frames: Vec<FrameEntry>,
+    /// The rectified rig.
+    pub rig: StereoRig,
+    /// Nominal frame rate, Hz.
+    pub rate_hz: f64,
+    rectifier: Option<Rectifier>,
+}
+
+impl StereoSequence {
+    pub(crate) fn new(name: String, frames: Vec<FrameEntry>, rig: StereoRig, rectifier: Option<Rectifier>, rate_hz: f64) -> Self {
+        Self { name, frames, rig, rate_hz, rectifier }
+    }
+
+    /// Opens `dir` as EuRoC when it holds `mav0/`, else as KITTI when it holds `calib.txt`.
+    pub fn open(dir: &Path) -> Result<Self, DatasetError> {
+        if dir.join("mav0").is_dir() {
+            Self::open_euroc(dir)
+        } else if dir.join("calib.txt").is_file() {
+            Self::open_kitti(dir, None)
+        } else {
+            Err(DatasetError::Io {
+                path: dir.to_path_buf(),
+                reason: std::io::Error::new(
+                    std::io::ErrorKind::NotFound,
+                    "not a dataset folder: expected mav0/ (EuRoC) or calib.txt (KITTI odometry sequence)",
+                ),
+            })
+        }
+    }
+
+    /// Whether images are remapped on load.
+    pub fn is_rectified_on_load(&self) -> bool {
+        self.rectifier.is_some()
+    }
+
+    /// Loads, checks and rectifies frame `index`.
+    pub fn load_frame(&self, index: usize) -> Result<StereoFrame, FrameError> {
+        let Some(entry) = self.frames.get(index) else {
+            return Err(FrameError {
+                index,
+                timestamp_ns: 0,
+                error: DatasetError::Calibration(format!("frame {index} out of range (sequence has {})", self.frames.len())),
+            });
+        };
+        self.load_entry(entry).map_err(|error| FrameError { index, timestamp_ns: entry.timestamp_ns, error })
+    }
+
+    fn load_entry(&self, entry: &FrameEntry) -> Result<StereoFrame, DatasetError> {
+        let left = GrayImage::load(&entry.left)?;
+        let right = GrayImage::load(&entry.right)?;
+        left.ensure_same_size(&right)?;
+        let (w, h) = (self.rig.width_px as i32, self.rig.height_px as i32);
+        if (left.width(), left.height()) != (w, h) {
+            return Err(DatasetError::Calibration(format!(
+                "{} is {}×{} but the sequence's images are {w}×{h}",
+                entry.left.display(),
+                left.width(),
+                left.height()
+            )));
+        }
+        let (left, right) = match &self.rectifier {
+            Some(r) => (r.rectify(&left, false)?, r.rectify(&right, true)?),
+            None => (left, right),
+        };
+        Ok(StereoFrame { index: entry.index, timestamp_ns: entry.timestamp_ns, left, right, pose: entry.pose })
+    }
+
+    /// Streams the frames from `start`, loading up to `read_ahead` ahead on a thread.
+    pub fn into_stream(self, start: usize, read_ahead: usize) -> StereoStream {
+        let (sender, receiver) = bounded(read_ahead.max(1));
+        let rig = self.rig;
+        let total = self.frames.len();
+        let worker = std::thread::Builder::new()
+            .name("frame-reader".to_string())
+            .spawn(move || {
+                for index in start..self.frames.len() {
+                    // A closed receiver ends the reading.
+                    if sender.send(self.load_frame(index)).is_err() {
+                        break;
+                    }
+                }
+            })
+            .ok();
+        StereoStream { receiver, worker, rig, total, skipped: 0 }
+    }
+}
+
+/// Frames of a sequence, loaded ahead on a thread. Yields `Err` for a frame that could not
+/// be loaded (counted in [`StereoStream::skipped`]) and goes on with the next.
+pub struct StereoStream {
+    receiver: Receiver<Result<StereoFrame, FrameError>>,
+    worker: Option<JoinHandle<()>>,
+    rig: StereoRig,
+    total: usize,
+    skipped: usize,
+}
+
+impl StereoStream {
+    /// The rectified rig of the frames.
+    pub fn rig(&self) -> StereoRig {
+        self.rig
+    }
+
+    /// Frames in the sequence.
+    pub fn len(&self) -> usize {
+        self.total
+    }
+
+    /// Whether the sequence has no frames.
+    pub fn is_empty(&self) -> bool {
+        self.total == 0
+    }
+
+    /// Frames skipped so far.
+    pub fn skipped(&self) -> usize {
+        self.skipped
+    }
+}
+
+impl Iterator for StereoStream {
+    type Item = Result<StereoFrame, FrameError>;
+
+    fn next(&mut self) -> Option<Self::Item> {
+        let item = self.receiver.recv().ok();
+        if matches!(item, Some(Err(_))) {
+            self.skipped += 1;
+        }
+        if item.is_none()
+            && let Some(worker) = self.worker.take()
+        {
+            let _ = worker.join();
+        }
+        item
+    }
+}

@@ -1,0 +1,302 @@
+//! Loading the real EuRoC excerpt (`real_data_*`), rectification, the read-ahead stream,
+//! and small hand-made EuRoC, KITTI and TUM fixtures, good and malformed.
+
+#![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failure here is a test failure
+
+use linetrack_datasets::{DatasetError, StereoSequence, tum};
+use linetrack_geometry::MatchCase;
+use linetrack_vision::{AppearanceGates, GrayImage, HammingMatcher, OrbExtractor, OrbOptions, PointFeatures, match_points};
+use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
+use std::path::{Path, PathBuf};
+
+fn euroc() -> StereoSequence {
+    let dir = linetrack_test_data::euroc_dir().unwrap_or_else(|e| panic!("{e}"));
+    StereoSequence::open_euroc(&dir).unwrap()
+}
+
+// ---------------------------------------------------------------- the real excerpt
+
+#[test]
+fn real_data_euroc_excerpt_loads_with_rig_and_ground_truth() {
+    let seq = euroc();
+    assert_eq!(seq.frames.len(), 95);
+    assert_eq!(seq.rate_hz, 20.0);
+    assert!(seq.is_rectified_on_load());
+    // The rectified EuRoC rig: one focal length near the raw ones, an 11 cm baseline.
+    let rig = seq.rig;
+    assert_eq!((rig.width_px, rig.height_px), (752, 480));
+    assert!((400.0..470.0).contains(&rig.focal_px), "{rig:?}");
+    assert!((rig.baseline_m - 0.110).abs() < 0.002, "{rig:?}");
+    assert!(seq.frames.windows(2).all(|w| w[1].timestamp_ns > w[0].timestamp_ns && w[1].timestamp_ns - w[0].timestamp_ns < 60_000_000));
+    // Ground truth for every frame; the vehicle is almost still (README of the excerpt).
+    let poses: Vec<Isometry3<f64>> = seq.frames.iter().map(|f| f.pose.expect("ground truth")).collect();
+    let path: f64 = poses.windows(2).map(|w| (w[1].translation.vector - w[0].translation.vector).norm()).sum();
+    assert!(path < 0.05, "path {path} m");
+}
+
+/// |row difference| of ORB stereo matches (rows gated loosely at 20 px so that it is
+/// measured, not imposed), sorted.
+fn row_differences(left: &GrayImage, right: &GrayImage) -> Vec<f64> {
+    let mut orb = OrbExtractor::new(&OrbOptions::default()).unwrap();
+    let (mut a, mut b) = (PointFeatures::default(), PointFeatures::default());
+    orb.extract(left, &mut a).unwrap();
+    orb.extract(right, &mut b).unwrap();
+    let gates = AppearanceGates { max_row_difference_px: 20.0, ..Default::default() };
+    let mut out = Vec::new();
+    match_points(&mut HammingMatcher::new(), MatchCase::Stereo, &a, &b, &gates, 2.0, &mut out);
+    let mut dy: Vec<f64> = out.iter().map(|m| (a.points[m.query].y - b.points[m.train].y).abs()).collect();
+    dy.sort_by(f64::total_cmp);
+    dy
+}
+
+#[test]
+fn real_data_rectified_matches_lie_on_the_same_row() {
+    // Measured on frame 0: raw images 85 ORB matches, median |Δrow| 11.9 px; rectified
+    // 122 matches, median 0.00 px (the rest are mostly wrong matches the loose gate admits).
+    let seq = euroc();
+    let frame = seq.load_frame(0).unwrap();
+    let rectified = row_differences(&frame.left, &frame.right);
+    let raw = row_differences(&GrayImage::load(&seq.frames[0].left).unwrap(), &GrayImage::load(&seq.frames[0].right).unwrap());
+    let median = |v: &[f64]| v[v.len() / 2];
+    let within_1px = rectified.iter().filter(|d| **d <= 1.0).count() as f64 / rectified.len() as f64;
+    eprintln!("raw: {} matches, median {:.2}; rectified: {} matches, median {:.2}, {:.0}% within 1 px", raw.len(), median(&raw), rectified.len(), median(&rectified), 100.0 * within_1px);
+    assert!(median(&raw) > 5.0, "the raw pair should be visibly off-row");
+    assert!(rectified.len() > raw.len());
+    assert!(median(&rectified) <= 0.5);
+    assert!(within_1px >= 0.7, "{within_1px}");
+}
+
+#[test]
+fn real_data_stream_yields_every_frame_in_order_with_read_ahead() {
+    let seq = euroc();
+    let expected: Vec<u64> = seq.frames.iter().map(|f| f.timestamp_ns).collect();
+    let mut stream = seq.into_stream(0, 4);
+    assert_eq!(stream.len(), 95);
+    let mut seen = Vec::new();
+    for frame in stream.by_ref() {
+        let frame = frame.unwrap();
+        assert_eq!((frame.left.width(), frame.right.height()), (752, 480));
+        seen.push(frame.timestamp_ns);
+    }
+    assert_eq!(seen, expected);
+    assert_eq!(stream.skipped(), 0);
+}
+
+// ---------------------------------------------------------------- hand-made EuRoC fixture
+
+const W: usize = 64;
+const H: usize = 48;
+
+fn scratch(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("linetrack-datasets-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+fn write(path: &Path, text: &str) {
+    std::fs::create_dir_all(path.parent().unwrap()).unwrap();
+    std::fs::write(path, text).unwrap();
+}
+
+fn png(path: &Path, seed: u8) {
+    std::fs::create_dir_all(path.parent().unwrap()).unwrap();
+    let pixels: Vec<u8> = (0..W * H).map(|k| ((k % W) as u8).wrapping_mul(3).wrapping_add(seed)).collect();
+    image::GrayImage::from_raw(W as u32, H as u32, pixels).unwrap().save(path).unwrap();
+}
+
+fn sensor_yaml(x_m: f64) -> String {
+    format!(
+        "%YAML:1.0\nsensor_type: camera\nT_BS:\n  cols: 4\n  rows: 4\n  data: [1.0, 0.0, 0.0, {x_m},\n         0.0, 1.0, 0.0, 0.0,\n         0.0, 0.0, 1.0, 0.0,\n         0.0, 0.0, 0.0, 1.0]\nrate_hz: 20\nresolution: [{W}, {H}]\ncamera_model: pinhole\nintrinsics: [50.0, 50.0, 32.0, 24.0] #fu, fv, cu, cv\ndistortion_model: radial-tangential\ndistortion_coefficients: [0.0, 0.0, 0.0, 0.0]\n"
+    )
+}
+
+/// A three-frame EuRoC sequence: 10 cm baseline, identity ground truth moving along x.
+fn euroc_fixture(name: &str) -> PathBuf {
+    let dir = scratch(name);
+    let mav0 = dir.join("mav0");
+    let stamps = [1_000_000_000u64, 1_050_000_000, 1_100_000_000];
+    for (cam, x) in [("cam0", 0.0), ("cam1", 0.1)] {
+        write(&mav0.join(cam).join("sensor.yaml"), &sensor_yaml(x));
+        let mut csv = String::from("#timestamp [ns],filename\n");
+        for (k, t) in stamps.iter().enumerate() {
+            csv.push_str(&format!("{t},{t}.png\n"));
+            png(&mav0.join(cam).join("data").join(format!("{t}.png")), k as u8);
+        }
+        write(&mav0.join(cam).join("data.csv"), &csv);
+    }
+    let mut gt = String::from("#timestamp,p_x,p_y,p_z,q_w,q_x,q_y,q_z\n");
+    for (k, t) in stamps.iter().enumerate() {
+        gt.push_str(&format!("{t},{},0,0,1,0,0,0\n", 0.01 * k as f64));
+    }
+    write(&mav0.join("state_groundtruth_estimate0/data.csv"), &gt);
+    dir
+}
+
+fn open_error(dir: &Path) -> String {
+    StereoSequence::open(dir).expect_err("malformed dataset must be refused").to_string()
+}
+
+#[test]
+fn euroc_fixture_opens_with_its_calibration_and_ground_truth() {
+    let dir = euroc_fixture("good");
+    let seq = StereoSequence::open(&dir).unwrap();
+    assert_eq!(seq.frames.len(), 3);
+    assert!((seq.rig.baseline_m - 0.1).abs() < 1e-9, "{:?}", seq.rig);
+    assert!((seq.rig.focal_px - 50.0).abs() < 1.0, "{:?}", seq.rig);
+    let p = seq.frames[2].pose.unwrap();
+    assert!((p.translation.vector - Vector3::new(0.02, 0.0, 0.0)).norm() < 1e-9);
+    let frame = seq.load_frame(1).unwrap();
+    assert_eq!((frame.left.width(), frame.left.height()), (W as i32, H as i32));
+    let _ = std::fs::remove_dir_all(dir);
+}
+
+#[test]
+fn malformed_image_lists_name_file_and_line() {
+    let cases = [
+        ("columns", "#timestamp [ns],filename\n1000000000\n", "data.csv:2", "2 columns"),
+        ("number", "#timestamp [ns],filename\n1000000000,a.png\n10x0,b.png\n", "data.csv:3", "not a whole number"),
+        ("order", "#timestamp [ns],filename\n1100000000,a.png\n1000000000,b.png\n", "data.csv:3", "does not increase"),
+        ("empty", "#timestamp [ns],filename\n", "data.csv", "lists no images"),
+    ];
+    for (name, csv, place, what) in cases {
+        let dir = euroc_fixture(name);
+        write(&dir.join("mav0/cam0/data.csv"), csv);
+        let text = open_error(&dir);
+        assert!(text.contains(place) && text.contains(what), "{name}: {text}");
+        let _ = std::fs::remove_dir_all(dir);
+    }
+}
+
+#[test]
+fn malformed_calibration_and_ground_truth_are_refused() {
+    let cases: [(&str, &str, String, &str); 5] = [
+        ("no-intrinsics", "mav0/cam1/sensor.yaml", sensor_yaml(0.1).replace("intrinsics", "intrinsix"), "missing key `intrinsics`"),
+        ("bad-number", "mav0/cam1/sensor.yaml", sensor_yaml(0.1).replace("50.0, 50.0", "50.0, fifty"), "sensor.yaml:13"),
+        ("not-rigid", "mav0/cam0/sensor.yaml", sensor_yaml(0.0).replace("data: [1.0", "data: [2.0"), "T_BS is not a rigid transform"),
+        ("same-place", "mav0/cam1/sensor.yaml", sensor_yaml(0.0), "no baseline"),
+        ("gt-quaternion", "mav0/state_groundtruth_estimate0/data.csv", "1000000000,0,0,0,2,0,0,0\n".to_string(), "data.csv:1: quaternion norm"),
+    ];
+    for (name, file, text, what) in cases {
+        let dir = euroc_fixture(name);
+        write(&dir.join(file), &text);
+        let message = open_error(&dir);
+        assert!(message.contains(what), "{name}: {message}");
+        let _ = std::fs::remove_dir_all(dir);
+    }
+    let missing = scratch("not-a-dataset");
+    assert!(open_error(&missing).contains("expected mav0/"));
+}
+
+#[test]
+fn missing_and_corrupt_frames_are_skipped_counted_and_named() {
+    let dir = euroc_fixture("bad-frames");
+    std::fs::remove_file(dir.join("mav0/cam1/data/1000000000.png")).unwrap();
+    std::fs::write(dir.join("mav0/cam0/data/1100000000.png"), b"not a png").unwrap();
+    let seq = StereoSequence::open(&dir).unwrap();
+    let mut stream = seq.into_stream(0, 2);
+    let results: Vec<_> = stream.by_ref().collect();
+    assert_eq!(results.len(), 3);
+    let first = results[0].as_ref().unwrap_err().to_string();
+    assert!(first.contains("frame 0") && first.contains("cam1/data/1000000000.png"), "{first}");
+    assert_eq!(results[1].as_ref().unwrap().index, 1);
+    let third = results[2].as_ref().unwrap_err().to_string();
+    assert!(third.contains("cam0/data/1100000000.png") && third.contains("not a decodable image"), "{third}");
+    assert_eq!(stream.skipped(), 2);
+    let _ = std::fs::remove_dir_all(dir);
+}
+
+#[test]
+fn a_wrongly_sized_frame_is_skipped_naming_it() {
+    let dir = euroc_fixture("wrong-size");
+    let path = dir.join("mav0/cam0/data/1050000000.png");
+    image::GrayImage::new(32, 24).save(&path).unwrap();
+    let seq = StereoSequence::open(&dir).unwrap();
+    let error = seq.load_frame(1).unwrap_err().to_string();
+    assert!(error.contains("1050000000.png") && error.contains("same size"), "{error}");
+    assert!(seq.load_frame(0).is_ok() && seq.load_frame(2).is_ok());
+    let _ = std::fs::remove_dir_all(dir);
+}
+
+// ---------------------------------------------------------------- KITTI fixture
+
+fn kitti_fixture(name: &str) -> PathBuf {
+    let root = scratch(name);
+    let dir = root.join("sequences/07");
+    let p0 = "P0: 700 0 600 0 0 700 180 0 0 0 1 0\n";
+    let p1 = "P1: 700 0 600 -378 0 700 180 0 0 0 1 0\n";
+    write(&dir.join("calib.txt"), &format!("{p0}{p1}"));
+    write(&dir.join("times.txt"), "0.0\n0.1\n0.2\n");
+    for k in 0..3 {
+        png(&dir.join(format!("image_0/{k:06}.png")), k as u8);
+        png(&dir.join(format!("image_1/{k:06}.png")), k as u8);
+    }
+    write(&root.join("poses/07.txt"), "1 0 0 0 0 1 0 0 0 0 1 0\n1 0 0 0 0 1 0 0 0 0 1 0.5\n1 0 0 0 0 1 0 0 0 0 1 1.0\n");
+    root
+}
+
+#[test]
+fn kitti_fixture_opens_with_rig_times_and_poses() {
+    let root = kitti_fixture("kitti");
+    let seq = StereoSequence::open(&root.join("sequences/07")).unwrap();
+    assert_eq!(seq.name, "07");
+    assert!(!seq.is_rectified_on_load());
+    assert_eq!(seq.frames.len(), 3);
+    assert!((seq.rig.baseline_m - 0.54).abs() < 1e-12 && seq.rig.focal_px == 700.0 && seq.rig.cy_px == 180.0);
+    assert_eq!(seq.frames[1].timestamp_ns, 100_000_000);
+    assert!((seq.frames[2].pose.unwrap().translation.z - 1.0).abs() < 1e-12);
+    assert!((seq.rate_hz - 10.0).abs() < 1e-9);
+    let _ = std::fs::remove_dir_all(root);
+}
+
+#[test]
+fn malformed_kitti_files_are_refused_naming_them() {
+    let cases = [
+        ("sequences/07/calib.txt", "P0: 700 0 600 0 0 700 180 0 0 0 1 0\n", "missing P1"),
+        ("sequences/07/calib.txt", "P0: 700 0 600 0 0 700 180 0 0 0 1\nP1: 1 2\n", "calib.txt:1: P0 has 11 values"),
+        ("sequences/07/times.txt", "0.0\n0.2\n0.1\n", "times.txt:3: time 0.1 does not increase"),
+        ("poses/07.txt", "1 0 0 0 0 1 0 0 0 0 1 0\n", "1 poses for 3 frames"),
+    ];
+    for (k, (file, text, what)) in cases.into_iter().enumerate() {
+        let root = kitti_fixture(&format!("kitti-bad-{k}"));
+        write(&root.join(file), text);
+        let message = open_error(&root.join("sequences/07"));
+        assert!(message.contains(what), "{file}: {message}");
+        let _ = std::fs::remove_dir_all(root);
+    }
+}
+
+// ---------------------------------------------------------------- TUM trajectories
+
+#[test]
+fn tum_round_trip_and_malformed_lines() {
+    let dir = scratch("tum");
+    let path = dir.join("trajectory.txt");
+    let poses = [
+        tum::StampedPose { timestamp_s: 0.5, pose: Isometry3::identity() },
+        tum::StampedPose {
+            timestamp_s: 0.55,
+            pose: Isometry3::from_parts(Translation3::new(1.0, -2.0, 0.25), UnitQuaternion::from_euler_angles(0.1, -0.2, 0.3)),
+        },
+    ];
+    tum::write(&path, &poses).unwrap();
+    let back = tum::read(&path).unwrap();
+    assert_eq!(back.len(), 2);
+    for (a, b) in poses.iter().zip(&back) {
+        assert!((a.timestamp_s - b.timestamp_s).abs() < 1e-9);
+        assert!((a.pose.translation.vector - b.pose.translation.vector).norm() < 1e-8);
+        assert!(a.pose.rotation.angle_to(&b.pose.rotation) < 1e-8);
+    }
+    for (text, what) in [
+        ("0 1 2 3 0 0 0\n", "trajectory.txt:1: expected 8 values"),
+        ("# c\n0 1 2 3 0 0 0 x\n", "trajectory.txt:2: not a number"),
+        ("0 0 0 0 0 0 0 3\n", "quaternion norm"),
+        ("1 0 0 0 0 0 0 1\n0.5 0 0 0 0 0 0 1\n", "trajectory.txt:2: timestamp 0.5 does not increase"),
+    ] {
+        std::fs::write(&path, text).unwrap();
+        let message = tum::read(&path).unwrap_err().to_string();
+        assert!(message.contains(what), "{message}");
+    }
+    assert!(matches!(tum::read(&dir.join("absent.txt")), Err(DatasetError::Io { .. })));
+    let _ = std::fs::remove_dir_all(dir);
+}
