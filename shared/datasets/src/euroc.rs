@@ -13,6 +13,7 @@
 //! with a small reader of `key: value` and `key: [a, b, …]` (lists may span lines).
 
 use crate::{DatasetError, FrameEntry, PinholeCamera, Rectifier, StereoSequence, parse_error, read_text};
+use linetrack_geometry::StereoRig;
 use nalgebra::{Isometry3, Matrix3, Quaternion, Rotation3, Translation3, UnitQuaternion, Vector3};
 use std::path::{Path, PathBuf};
 
@@ -207,6 +208,11 @@ impl StereoSequence {
         let right = read_euroc_camera(&mav0.join("cam1/sensor.yaml"))?;
         let rate_hz = yaml_scalar(&read_text(&mav0.join("cam0/sensor.yaml"))?, "rate_hz").and_then(|v| v.parse().ok()).unwrap_or(20.0);
         let rectifier = Rectifier::new(&left, &right)?;
+        // An ideal rig (generated data) needs no remapping: keep its exact geometry.
+        let (rig, rectifier) = match ideal_rig(&left, &right) {
+            Some(rig) => (rig, None),
+            None => (rectifier.rig(), Some(rectifier)),
+        };
         let left_list = read_image_list(&mav0.join("cam0/data.csv"))?;
         let right_list = read_image_list(&mav0.join("cam1/data.csv"))?;
         let gt_path = mav0.join("state_groundtruth_estimate0/data.csv");
@@ -217,8 +223,10 @@ impl StereoSequence {
         for (stamp, name, _) in &left_list {
             while right_rows.next_if(|(r, _, _)| r < stamp).is_some() {}
             let Some((_, right_name, _)) = right_rows.next_if(|(r, _, _)| r == stamp) else { continue };
-            let pose = interpolate(&ground_truth, *stamp)
-                .map(|world_from_body| rectifier.rectified_left_pose(&(world_from_body * left.body_from_camera)));
+            let pose = interpolate(&ground_truth, *stamp).map(|world_from_body| {
+                let raw_left = world_from_body * left.body_from_camera;
+                rectifier.as_ref().map_or(raw_left, |r| r.rectified_left_pose(&raw_left))
+            });
             frames.push(FrameEntry {
                 index: frames.len(),
                 timestamp_ns: *stamp,
@@ -230,8 +238,31 @@ impl StereoSequence {
         if frames.is_empty() {
             return Err(parse_error(&mav0.join("cam1/data.csv"), 0, "no timestamp in common with cam0/data.csv"));
         }
-        Ok(StereoSequence::new(sequence_name(dir), frames, rectifier.rig(), Some(rectifier), rate_hz))
+        Ok(StereoSequence::new(sequence_name(dir), frames, rig, rectifier, rate_hz))
     }
+}
+
+/// The rig itself when the pair is already rectified: no distortion, equal intrinsics with
+/// square pixels, no relative rotation, and the right camera straight along +x.
+fn ideal_rig(left: &PinholeCamera, right: &PinholeCamera) -> Option<StereoRig> {
+    let right_from_left = right.body_from_camera.inverse() * left.body_from_camera;
+    let t = right_from_left.translation.vector;
+    let ideal = left.distortion == [0.0; 4]
+        && right.distortion == [0.0; 4]
+        && left.intrinsics == right.intrinsics
+        && left.intrinsics[0] == left.intrinsics[1]
+        && right_from_left.rotation.angle() < 1e-9
+        && t.y.abs() < 1e-9
+        && t.z.abs() < 1e-9
+        && t.x < 0.0;
+    ideal.then(|| StereoRig {
+        focal_px: left.intrinsics[0],
+        cx_px: left.intrinsics[2],
+        cy_px: left.intrinsics[3],
+        baseline_m: -t.x,
+        width_px: left.width,
+        height_px: left.height,
+    })
 }
 
 pub(crate) fn sequence_name(dir: &Path) -> String {

@@ -17,14 +17,17 @@
 #![warn(missing_docs)]
 
 mod calib;
+pub mod depth;
 mod euroc;
 mod kitti;
 mod sequence;
 pub mod tum;
+mod writer;
 
 pub use calib::{PinholeCamera, Rectifier};
 pub use euroc::read_euroc_camera;
 pub use sequence::{FrameEntry, FrameError, StereoFrame, StereoSequence, StereoStream};
+pub use writer::EurocWriter;
 
 use std::path::PathBuf;
 

@@ -142,12 +142,26 @@ fn euroc_fixture_opens_with_its_calibration_and_ground_truth() {
     let dir = euroc_fixture("good");
     let seq = StereoSequence::open(&dir).unwrap();
     assert_eq!(seq.frames.len(), 3);
-    assert!((seq.rig.baseline_m - 0.1).abs() < 1e-9, "{:?}", seq.rig);
-    assert!((seq.rig.focal_px - 50.0).abs() < 1.0, "{:?}", seq.rig);
+    // An ideal rig (no distortion, equal intrinsics, pure x baseline) is used as is.
+    assert!(!seq.is_rectified_on_load());
+    assert_eq!((seq.rig.focal_px, seq.rig.cx_px, seq.rig.cy_px), (50.0, 32.0, 24.0));
+    assert!((seq.rig.baseline_m - 0.1).abs() < 1e-12, "{:?}", seq.rig);
     let p = seq.frames[2].pose.unwrap();
     assert!((p.translation.vector - Vector3::new(0.02, 0.0, 0.0)).norm() < 1e-9);
     let frame = seq.load_frame(1).unwrap();
     assert_eq!((frame.left.width(), frame.left.height()), (W as i32, H as i32));
+    let _ = std::fs::remove_dir_all(dir);
+}
+
+#[test]
+fn a_distorted_fixture_is_rectified_on_load() {
+    let dir = euroc_fixture("distorted");
+    write(&dir.join("mav0/cam1/sensor.yaml"), &sensor_yaml(0.1).replace("[0.0, 0.0, 0.0, 0.0]", "[-0.05, 0.01, 0.0, 0.0]"));
+    let seq = StereoSequence::open(&dir).unwrap();
+    assert!(seq.is_rectified_on_load());
+    assert!((seq.rig.baseline_m - 0.1).abs() < 1e-6 && (seq.rig.focal_px - 50.0).abs() < 5.0, "{:?}", seq.rig);
+    let frame = seq.load_frame(0).unwrap();
+    assert!(frame.left.origin().contains("rectified") && frame.right.origin().contains("rectified"));
     let _ = std::fs::remove_dir_all(dir);
 }
 
