@@ -104,6 +104,32 @@ impl SideBySide {
     }
 }
 
+/// Two grayscale images with their segments (grey) and the matched pairs `(first index,
+/// second index)` in one colour per match.
+pub fn segment_matches(
+    (width, height): (u32, u32),
+    pixels: [Option<&[u8]>; 2],
+    segments: [&[Segment]; 2],
+    matches: impl IntoIterator<Item = (usize, usize)>,
+) -> SideBySide {
+    let mut picture = match pixels {
+        [Some(a), Some(b)] => SideBySide::from_gray(width, height, a, b),
+        _ => SideBySide::blank(width, height),
+    };
+    for (side, set) in [(Side::First, segments[0]), (Side::Second, segments[1])] {
+        for s in set {
+            picture.segment(side, s, UNMATCHED, 1);
+        }
+    }
+    for (k, (i, j)) in matches.into_iter().enumerate() {
+        if let (Some(a), Some(b)) = (segments[0].get(i), segments[1].get(j)) {
+            picture.segment(Side::First, a, palette(k), 2);
+            picture.segment(Side::Second, b, palette(k), 2);
+        }
+    }
+    picture
+}
+
 /// A bright colour per index, spread by the golden angle over the hues from orange to
 /// magenta (red is kept for [`WRONG`]).
 pub fn palette(k: usize) -> Rgb<u8> {

@@ -21,6 +21,7 @@ mod image;
 mod lbd;
 mod matchers;
 mod orb;
+mod pair;
 
 pub use config::{AppearanceGates, FldOptions, FrontendConfig, LbdOptions, LineOptions, LsdOptions, LsdRefine, OrbOptions};
 pub use detect::{DetectorKind, FldDetector, LineDetector, LsdDetector, MIN_IMAGE_SIDE_PX, create_detector, keep_longest};
@@ -29,6 +30,7 @@ pub use image::{GrayImage, perturb};
 pub use lbd::LbdExtractor;
 pub use matchers::{L1SegmentMatcher, LbdSegmentMatcher, LineFeatures, MatcherKind, SegmentMatcher, create_segment_matcher};
 pub use orb::{OrbExtractor, PointFeatures, match_points};
+pub use pair::{LinePairMatcher, PairResult, PairTimings};
 
 use std::path::PathBuf;
 

@@ -23,17 +23,8 @@ fn detect_all(kind: DetectorKind, image: &GrayImage) -> Vec<Segment> {
 
 /// Detects, describes and matches two images with `detector` + `matcher`.
 fn match_images(detector: DetectorKind, matcher: MatcherKind, case: MatchCase, a: &GrayImage, b: &GrayImage) -> (LineFeatures, LineFeatures, Vec<FeatureMatch>) {
-    let config = FrontendConfig::default();
-    let mut det = create_detector(detector, &config).unwrap();
-    let mut m = create_segment_matcher(matcher, &config).unwrap();
-    let (mut fa, mut fb) = (LineFeatures::default(), LineFeatures::default());
-    det.detect(a, &mut fa.segments).unwrap();
-    det.detect(b, &mut fb.segments).unwrap();
-    m.describe(a, &mut fa).unwrap();
-    m.describe(b, &mut fb).unwrap();
-    let mut out = Vec::new();
-    m.match_lines(case, &fa, &fb, &mut out);
-    (fa, fb, out)
+    let result = LinePairMatcher::new(detector, matcher, &FrontendConfig::default()).unwrap().run(case, a, b).unwrap();
+    (result.first, result.second, result.matches)
 }
 
 fn features(s: &Segment) -> SegmentFeatures {

@@ -2,11 +2,16 @@
 //! segments stereo (left ↔ right) and frame to frame (frame k ↔ k+1) with the ℓ1
 //! geometric matcher, prints how many matches were right, and draws them side by side.
 //!
-//! This is the README's first command until the full pipeline exists; it needs no
-//! dataset and no OpenCV.
+//! It then runs the real front end (LSD or FLD, LBD against ℓ1) on a stereo pair and a
+//! pair of consecutive frames of a dataset (EuRoC or KITTI), or of a small generated
+//! sequence made on first use. This is the README's first command until the full
+//! pipeline exists.
 #![warn(missing_docs)]
 
 mod draw;
+mod images;
+
+pub use images::DEFAULT_SEQUENCE;
 
 use anyhow::Context;
 use clap::{Parser, ValueEnum};
@@ -23,12 +28,13 @@ use std::time::Instant;
 #[command(
     name = "linetrack-match-demo",
     version,
-    about = "Match line segments by geometry alone on a generated stereo scene, and draw the matches.",
+    about = "Match line segments by geometry alone: on a generated segment scene scored against ground truth, then LBD against l1 on stereo images.",
     after_help = "EXAMPLES:
     linetrack-match-demo                          # default scene, both cases, PNGs in out/match-demo
     linetrack-match-demo --seed 7 --case stereo   # another scene, stereo only
     linetrack-match-demo --config configs/l1-matcher-paper.toml   # the method as published
     linetrack-match-demo --segments 300 --noise-px 1.5 --list     # harder scene, list every match
+    linetrack-match-demo --dataset ../shared/data/euroc/V1_01_easy_micro --detector fld   # real EuRoC images
 
 In the pictures, each correct match has one colour in both images; wrong matches are red,
 unmatched segments grey."
@@ -55,6 +61,20 @@ pub struct Args {
     /// Print every match, not only the summary.
     #[arg(long)]
     pub list: bool,
+    /// A dataset folder for the image part: EuRoC (holding mav0/) or a KITTI odometry
+    /// sequence. Default: a small generated sequence in out/sequences/default, made on
+    /// first use.
+    #[arg(long)]
+    pub dataset: Option<PathBuf>,
+    /// Frame of the dataset to match (stereo), and the next one (frame to frame).
+    #[arg(long, default_value_t = 0)]
+    pub frame: usize,
+    /// Line detector for the image part.
+    #[arg(long, default_value = "lsd")]
+    pub detector: linetrack_vision::DetectorKind,
+    /// Skip the image part (segments only; needs no OpenCV work).
+    #[arg(long)]
+    pub no_images: bool,
 }
 
 /// The image pairs to match.
@@ -165,6 +185,9 @@ pub fn run(args: &Args) -> anyhow::Result<String> {
         .with_context(|| format!("cannot write {}", json_path.display()))?;
     let shown: Vec<String> = pictures.iter().chain([&json_path]).map(|p| p.display().to_string()).collect();
     writeln!(text, "wrote {}", shown.join(", "))?;
+    if !args.no_images {
+        text.push_str(&images::run(args.dataset.as_deref(), args.frame, args.detector, &args.output)?);
+    }
     Ok(text)
 }
 

@@ -22,7 +22,7 @@ fn workspace_file(relative: &str) -> String {
 #[test]
 fn default_run_prints_both_cases_and_writes_pictures_and_json() {
     let out = scratch_dir("default");
-    let result = demo(&["--output", out.to_str().unwrap()]);
+    let result = demo(&["--no-images", "--output", out.to_str().unwrap()]);
     let stdout = String::from_utf8_lossy(&result.stdout);
     assert!(result.status.success(), "stderr: {}", String::from_utf8_lossy(&result.stderr));
     for name in ["stereo", "frame-to-frame"] {
@@ -47,7 +47,7 @@ fn default_run_prints_both_cases_and_writes_pictures_and_json() {
 fn list_prints_one_line_per_match_and_the_paper_config_loads() {
     let out = scratch_dir("list");
     let config = workspace_file("configs/l1-matcher-paper.toml");
-    let result = demo(&["--case", "stereo", "--list", "--config", &config, "--seed", "3", "--output", out.to_str().unwrap()]);
+    let result = demo(&["--no-images", "--case", "stereo", "--list", "--config", &config, "--seed", "3", "--output", out.to_str().unwrap()]);
     assert!(result.status.success());
     let stdout = String::from_utf8_lossy(&result.stdout);
     let listed = stdout.lines().filter(|l| l.contains("→")).count();
@@ -73,6 +73,62 @@ fn missing_and_malformed_configs_fail_naming_the_culprit() {
     assert!(!result.status.success());
     let stderr = String::from_utf8_lossy(&result.stderr);
     assert!(stderr.contains("gates.max_angle_deg"), "{stderr}");
+    let _ = std::fs::remove_dir_all(dir);
+}
+
+/// The count of matches on the image-part line of `case` and `pair` (e.g. "lsd+l1").
+fn image_matches(stdout: &str, case: &str, pair: &str) -> usize {
+    let line = stdout
+        .lines()
+        .find(|l| l.trim_start().starts_with(&format!("{case}:")) && l.contains(pair) && l.contains("segments;"))
+        .unwrap_or_else(|| panic!("no {case} {pair} line in:\n{stdout}"));
+    line.split(pair).nth(1).unwrap().split_whitespace().next().unwrap().parse().unwrap()
+}
+
+#[test]
+fn image_part_runs_lbd_and_l1_on_a_generated_sequence() {
+    let dir = scratch_dir("images");
+    let sequence = dir.join("sequence");
+    linetrack_synth::generate(linetrack_scene_render::Preset::Normal, 2, 3, &sequence).unwrap();
+    let out = dir.join("out");
+    let result = demo(&["--dataset", sequence.to_str().unwrap(), "--frame", "1", "--output", out.to_str().unwrap()]);
+    let stdout = String::from_utf8_lossy(&result.stdout);
+    assert!(result.status.success(), "stderr: {}", String::from_utf8_lossy(&result.stderr));
+    assert!(stdout.contains("images: sequence") && stdout.contains("frame 1, 752×480"), "{stdout}");
+    for case in ["stereo", "frame-to-frame"] {
+        for pair in ["lsd+lbd", "lsd+l1"] {
+            assert!(image_matches(&stdout, case, pair) >= 10, "{case} {pair}: {stdout}");
+            let picture = image::open(out.join(format!("images-{case}-{}.png", pair.replace('+', "-")))).unwrap();
+            assert_eq!(picture.width(), 2 * 752 + 8);
+        }
+    }
+    // The last frame has no next one.
+    let last = demo(&["--dataset", sequence.to_str().unwrap(), "--frame", "2", "--output", out.to_str().unwrap()]);
+    assert!(!last.status.success() && String::from_utf8_lossy(&last.stderr).contains("the sequence has 3 frames"));
+    let _ = std::fs::remove_dir_all(dir);
+}
+
+#[test]
+fn real_data_image_part_on_the_euroc_excerpt() {
+    let euroc = linetrack_test_data::euroc_dir().unwrap_or_else(|e| panic!("{e}"));
+    let out = scratch_dir("euroc");
+    let result = demo(&["--dataset", euroc.to_str().unwrap(), "--detector", "fld", "--output", out.to_str().unwrap()]);
+    let stdout = String::from_utf8_lossy(&result.stdout);
+    assert!(result.status.success(), "stderr: {}", String::from_utf8_lossy(&result.stderr));
+    assert!(stdout.contains("rectified on load"), "{stdout}");
+    // Measured: fld+lbd 70 stereo / 86 frame to frame, fld+l1 48 / 77.
+    assert!(image_matches(&stdout, "stereo", "fld+l1") >= 30 && image_matches(&stdout, "frame-to-frame", "fld+l1") >= 50, "{stdout}");
+    let _ = std::fs::remove_dir_all(out);
+}
+
+#[test]
+fn a_folder_that_is_not_a_dataset_is_named() {
+    let dir = scratch_dir("not-a-dataset");
+    std::fs::create_dir_all(&dir).unwrap();
+    let result = demo(&["--dataset", dir.to_str().unwrap(), "--output", dir.join("out").to_str().unwrap()]);
+    assert!(!result.status.success());
+    let stderr = String::from_utf8_lossy(&result.stderr);
+    assert!(stderr.contains(dir.to_str().unwrap()) && stderr.contains("not a dataset folder"), "{stderr}");
     let _ = std::fs::remove_dir_all(dir);
 }
 

@@ -6,11 +6,11 @@
 
 use anyhow::Context;
 use clap::{Parser, ValueEnum};
-use linetrack_draw::{Side, SideBySide, UNMATCHED, palette};
+use linetrack_draw::{Side, SideBySide, palette, segment_matches};
 use linetrack_geometry::{MatchCase, Point, Segment};
 use linetrack_vision::{
-    DetectorKind, FeatureMatch, FrontendConfig, GrayImage, HammingMatcher, LineFeatures, MatcherKind, OrbExtractor, PointFeatures,
-    create_detector, create_segment_matcher, match_points, perturb,
+    DetectorKind, FeatureMatch, FrontendConfig, GrayImage, HammingMatcher, LineFeatures, LinePairMatcher, MatcherKind, OrbExtractor,
+    PairTimings, PointFeatures, match_points, perturb,
 };
 use serde::Serialize;
 use std::fmt::Write as _;
@@ -101,11 +101,7 @@ impl Mode {
 struct Timings {
     load: f64,
     perturb: f64,
-    detect_first: f64,
-    detect_second: f64,
-    describe_first: f64,
-    describe_second: f64,
-    match_lines: f64,
+    lines: PairTimings,
     points: Option<f64>,
 }
 
@@ -161,23 +157,10 @@ pub fn run(args: &Args) -> anyhow::Result<String> {
         second
     };
 
-    let mut detector = create_detector(detector_kind, &config)?;
-    let mut matcher = create_segment_matcher(matcher_kind, &config)?;
-    let (mut lines_a, mut lines_b) = (LineFeatures::default(), LineFeatures::default());
-    let step = |time: &mut f64, f: &mut dyn FnMut() -> Result<(), linetrack_vision::VisionError>| {
-        let started = Instant::now();
-        let result = f();
-        *time = ms_since(started);
-        result
-    };
-    step(&mut timings.detect_first, &mut || detector.detect(&first, &mut lines_a.segments))?;
-    step(&mut timings.detect_second, &mut || detector.detect(&second, &mut lines_b.segments))?;
-    step(&mut timings.describe_first, &mut || matcher.describe(&first, &mut lines_a))?;
-    step(&mut timings.describe_second, &mut || matcher.describe(&second, &mut lines_b))?;
-    let mut matches = Vec::new();
-    let started = Instant::now();
-    matcher.match_lines(args.mode.case(), &lines_a, &lines_b, &mut matches);
-    timings.match_lines = ms_since(started);
+    let mut pair = LinePairMatcher::new(detector_kind, matcher_kind, &config)?;
+    let result = pair.run(args.mode.case(), &first, &second)?;
+    let (lines_a, lines_b, matches) = (&result.first, &result.second, &result.matches);
+    timings.lines = result.timings;
 
     let mut point_sets = None;
     let mut point_matches = Vec::new();
@@ -195,7 +178,7 @@ pub fn run(args: &Args) -> anyhow::Result<String> {
 
     std::fs::create_dir_all(&args.output).with_context(|| format!("cannot create output folder {}", args.output.display()))?;
     let picture_path = args.output.join("matches.png");
-    draw(&first, &second, &lines_a, &lines_b, &matches, point_sets.as_ref(), &point_matches)
+    draw(&first, &second, lines_a, lines_b, matches, point_sets.as_ref(), &point_matches)
         .save(&picture_path)
         .with_context(|| format!("cannot write {}", picture_path.display()))?;
     let report = Report {
@@ -208,12 +191,12 @@ pub fn run(args: &Args) -> anyhow::Result<String> {
         bias,
         first_segments: &lines_a.segments,
         second_segments: &lines_b.segments,
-        matches: &matches,
+        matches,
         points: point_sets.as_ref().map(|(a, b)| PointsReport { first: &a.points, second: &b.points, matches: &point_matches }),
         milliseconds: &timings,
     };
     write_file(&args.output.join("matches.json"), &serde_json::to_string_pretty(&report)?)?;
-    write_file(&args.output.join("matches.csv"), &matches_csv(&lines_a.segments, &lines_b.segments, &matches))?;
+    write_file(&args.output.join("matches.csv"), &matches_csv(&lines_a.segments, &lines_b.segments, matches))?;
 
     let mut line = format!(
         "{}+{} {}: {}|{} segments, {} matches | load {:.1} ms, detect {:.1}+{:.1} ms, describe {:.1}+{:.1} ms, match {:.2} ms",
@@ -224,11 +207,11 @@ pub fn run(args: &Args) -> anyhow::Result<String> {
         lines_b.segments.len(),
         matches.len(),
         timings.load,
-        timings.detect_first,
-        timings.detect_second,
-        timings.describe_first,
-        timings.describe_second,
-        timings.match_lines
+        timings.lines.detect_ms[0],
+        timings.lines.detect_ms[1],
+        timings.lines.describe_ms[0],
+        timings.lines.describe_ms[1],
+        timings.lines.match_ms
     );
     if let (Some((a, b)), Some(ms)) = (&point_sets, timings.points) {
         write!(line, " | orb {}|{} points, {} matches, {ms:.1} ms", a.points.len(), b.points.len(), point_matches.len())?;
@@ -266,21 +249,13 @@ fn draw(
     points: Option<&(PointFeatures, PointFeatures)>,
     point_matches: &[FeatureMatch],
 ) -> SideBySide {
-    let (w, h) = (first.width().max(0) as u32, first.height().max(0) as u32);
-    let mut picture = match (first.pixels(), second.pixels()) {
-        (Some(a), Some(b)) => SideBySide::from_gray(w, h, a, b),
-        _ => SideBySide::blank(w, h),
-    };
-    for s in &lines_a.segments {
-        picture.segment(Side::First, s, UNMATCHED, 1);
-    }
-    for s in &lines_b.segments {
-        picture.segment(Side::Second, s, UNMATCHED, 1);
-    }
-    for (k, m) in matches.iter().enumerate() {
-        picture.segment(Side::First, &lines_a.segments[m.query], palette(k), 2);
-        picture.segment(Side::Second, &lines_b.segments[m.train], palette(k), 2);
-    }
+    let size = (first.width().max(0) as u32, first.height().max(0) as u32);
+    let mut picture = segment_matches(
+        size,
+        [first.pixels(), second.pixels()],
+        [&lines_a.segments, &lines_b.segments],
+        matches.iter().map(|m| (m.query, m.train)),
+    );
     if let Some((a, b)) = points {
         for (k, m) in point_matches.iter().enumerate() {
             picture.point(Side::First, a.points[m.query], palette(k + matches.len()), 3);

@@ -55,10 +55,18 @@ pub struct Args {
 
 /// Writes the sequence; returns the summary to print.
 pub fn run(args: &Args) -> anyhow::Result<String> {
-    if args.frames == 0 {
+    let output = args.output.clone().unwrap_or_else(|| PathBuf::from(format!("out/sequences/{}-{}", args.preset.name(), args.seed)));
+    generate(args.preset, args.seed, args.frames, &output)
+}
+
+/// Renders `frames` stereo frames of `preset` with `seed` into `output` (EuRoC layout,
+/// depth, scene files, contact sheet), reporting progress on stderr; returns a summary.
+pub fn generate(preset: Preset, seed: u64, frames: usize, output: &Path) -> anyhow::Result<String> {
+    if frames == 0 {
         anyhow::bail!("--frames must be at least 1");
     }
-    let output = args.output.clone().unwrap_or_else(|| PathBuf::from(format!("out/sequences/{}-{}", args.preset.name(), args.seed)));
+    let args = Args { preset, seed, frames, output: Some(output.to_path_buf()) };
+    let output = output.to_path_buf();
     let config = args.preset.config(args.seed, args.frames);
     let renderer = SequenceRenderer::new(config.clone());
     let mut writer = EurocWriter::create(&output, &config.rig, config.rate_hz)?;
