@@ -1,0 +1,249 @@
+//! Frame-to-frame motion by Gauss–Newton on SE(3) (PL-StVO): point reprojection errors and
+//! the distances of projected 3-D segment endpoints to the observed 2-D lines, with
+//! pseudo-Huber weights and per-observation uncertainty weights, in two passes
+//! (optimise → drop outliers → refine).
+//!
+//! The unknown is `T`, mapping points of the previous left camera frame into the current
+//! one (`p_curr = T · p_prev`). Updates are applied on the left: `T ← exp(δ) · T`,
+//! δ = (ρ, φ) ∈ ℝ⁶, for which the Jacobian of a transformed point `p' = T·X` is
+//! `[I₃ | −[p']×]`.
+
+use linetrack_geometry::{Point, Segment, StereoRig};
+use nalgebra::{Isometry3, Matrix2x3, Matrix3, Matrix6, Point3, SMatrix, Translation3, UnitQuaternion, Vector2, Vector3, Vector6};
+use serde::{Deserialize, Serialize};
+
+/// A 3-D point of the previous frame and where it is seen now.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PointObservation {
+    /// Position in the previous left camera frame, metres.
+    pub position: Point3<f64>,
+    /// Pixel in the current left image.
+    pub pixel: Point,
+    /// Uncertainty weight in (0, 1].
+    pub weight: f64,
+}
+
+/// A 3-D segment of the previous frame and the line it is seen on now.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LineObservation {
+    /// Endpoints in the previous left camera frame, metres.
+    pub endpoints: [Point3<f64>; 2],
+    /// The observed line `a·u + b·v + c = 0` with `a² + b² = 1` (so residuals are pixels).
+    pub line: Vector3<f64>,
+    /// Uncertainty weight in (0, 1].
+    pub weight: f64,
+}
+
+impl LineObservation {
+    /// The observation of `endpoints` on the current segment `seen`; `None` if `seen` has
+    /// no direction.
+    pub fn new(endpoints: [Point3<f64>; 2], seen: &Segment, weight: f64) -> Option<Self> {
+        let (a, b) = (seen.start, seen.end);
+        let line = Vector3::new(a.y - b.y, b.x - a.x, a.x * b.y - b.x * a.y);
+        let norm = line.xy().norm();
+        (norm > 1e-9 && line.iter().all(|v| v.is_finite())).then(|| Self { endpoints, line: line / norm, weight })
+    }
+}
+
+/// Gauss–Newton settings.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct MotionConfig {
+    /// Iterations per pass at most.
+    pub max_iterations: usize,
+    /// Stop when the update's norm falls below this.
+    pub min_step: f64,
+    /// Scale of the pseudo-Huber loss, pixels.
+    pub huber_px: f64,
+    /// After the first pass, observations with a residual above this are outliers, pixels.
+    pub outlier_px: f64,
+    /// Fewer inlier observations (points + lines) than this: the frame is lost.
+    pub min_inliers: usize,
+    /// Smallest eigenvalue of the normal matrix relative to the largest below this:
+    /// the motion is not constrained (degenerate), the frame is lost.
+    pub min_relative_eigenvalue: f64,
+}
+
+impl Default for MotionConfig {
+    fn default() -> Self {
+        Self { max_iterations: 20, min_step: 1e-9, huber_px: 1.0, outlier_px: 3.0, min_inliers: 12, min_relative_eigenvalue: 1e-9 }
+    }
+}
+
+/// A successful estimate.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MotionEstimate {
+    /// `p_curr = motion · p_prev`.
+    pub motion: Isometry3<f64>,
+    /// Point observations kept as inliers.
+    pub inlier_points: usize,
+    /// Line observations kept as inliers.
+    pub inlier_lines: usize,
+    /// Gauss–Newton iterations, both passes.
+    pub iterations: usize,
+    /// RMS residual of the inliers at the end, pixels.
+    pub rms_px: f64,
+}
+
+/// Why no motion could be estimated (the frame is reported as lost).
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum MotionError {
+    /// Not enough inliers to trust an estimate.
+    #[error("too few inliers: {inliers} (need {needed})")]
+    TooFewInliers {
+        /// Inliers found.
+        inliers: usize,
+        /// The minimum.
+        needed: usize,
+    },
+    /// The observations do not constrain all six degrees of freedom.
+    #[error("degenerate geometry: relative eigenvalue {relative_eigenvalue:e}")]
+    Degenerate {
+        /// Smallest over largest eigenvalue of the normal matrix.
+        relative_eigenvalue: f64,
+    },
+}
+
+/// `(π(p), ∂π/∂p)` for the left camera; `None` behind it.
+fn project(rig: &StereoRig, p: &Point3<f64>) -> Option<(Vector2<f64>, Matrix2x3<f64>)> {
+    if p.z <= 1e-6 {
+        return None;
+    }
+    let (f, z) = (rig.focal_px, p.z);
+    let pixel = Vector2::new(f * p.x / z + rig.cx_px, f * p.y / z + rig.cy_px);
+    let jacobian = Matrix2x3::new(f / z, 0.0, -f * p.x / (z * z), 0.0, f / z, -f * p.y / (z * z));
+    Some((pixel, jacobian))
+}
+
+/// `∂p'/∂δ = [I | −[p']×]` for the left-multiplied update.
+fn transform_jacobian(p: &Point3<f64>) -> SMatrix<f64, 3, 6> {
+    let mut j = SMatrix::<f64, 3, 6>::zeros();
+    j.fixed_view_mut::<3, 3>(0, 0).copy_from(&Matrix3::identity());
+    j.fixed_view_mut::<3, 3>(0, 3).copy_from(&(-p.coords.cross_matrix()));
+    j
+}
+
+/// Residuals and Jacobians of one point observation under `t`: 2 rows.
+pub fn point_residual(rig: &StereoRig, t: &Isometry3<f64>, obs: &PointObservation) -> Option<(Vector2<f64>, SMatrix<f64, 2, 6>)> {
+    let p = t * obs.position;
+    let (pixel, dpi) = project(rig, &p)?;
+    Some((pixel - Vector2::new(obs.pixel.x, obs.pixel.y), dpi * transform_jacobian(&p)))
+}
+
+/// Residuals (signed endpoint-to-line distances, pixels) and Jacobians of one line
+/// observation under `t`: 2 rows.
+pub fn line_residual(rig: &StereoRig, t: &Isometry3<f64>, obs: &LineObservation) -> Option<(Vector2<f64>, SMatrix<f64, 2, 6>)> {
+    let mut r = Vector2::zeros();
+    let mut j = SMatrix::<f64, 2, 6>::zeros();
+    let normal = obs.line.xy().transpose();
+    for (row, endpoint) in obs.endpoints.iter().enumerate() {
+        let p = t * endpoint;
+        let (pixel, dpi) = project(rig, &p)?;
+        r[row] = obs.line.x * pixel.x + obs.line.y * pixel.y + obs.line.z;
+        j.set_row(row, &(normal * dpi * transform_jacobian(&p)));
+    }
+    Some((r, j))
+}
+
+/// Which observations take part in a pass.
+struct Active<'a> {
+    points: &'a [bool],
+    lines: &'a [bool],
+}
+
+/// One Gauss–Newton pass from `t`; returns the final pose and iterations.
+fn optimise(
+    rig: &StereoRig,
+    points: &[PointObservation],
+    lines: &[LineObservation],
+    active: &Active<'_>,
+    mut t: Isometry3<f64>,
+    config: &MotionConfig,
+) -> Result<(Isometry3<f64>, usize), MotionError> {
+    let robust = |r: f64| 1.0 / (1.0 + (r / config.huber_px).powi(2)).sqrt();
+    for iteration in 1..=config.max_iterations {
+        let mut h = Matrix6::zeros();
+        let mut g = Vector6::zeros();
+        let mut accumulate = |r: Vector2<f64>, j: SMatrix<f64, 2, 6>, weight: f64| {
+            let w = weight * robust(r.norm());
+            h += w * j.transpose() * j;
+            g += w * j.transpose() * r;
+        };
+        for (obs, _) in points.iter().zip(active.points).filter(|(_, on)| **on) {
+            if let Some((r, j)) = point_residual(rig, &t, obs) {
+                accumulate(r, j, obs.weight);
+            }
+        }
+        for (obs, _) in lines.iter().zip(active.lines).filter(|(_, on)| **on) {
+            if let Some((r, j)) = line_residual(rig, &t, obs) {
+                accumulate(r, j, obs.weight);
+            }
+        }
+        let eigen = h.symmetric_eigenvalues();
+        let (low, high) = (eigen.min(), eigen.max());
+        let relative = if high > 0.0 { low / high } else { 0.0 };
+        if !(relative >= config.min_relative_eigenvalue) {
+            return Err(MotionError::Degenerate { relative_eigenvalue: relative });
+        }
+        let Some(step) = h.cholesky().map(|c| -c.solve(&g)) else {
+            return Err(MotionError::Degenerate { relative_eigenvalue: relative });
+        };
+        let update = Isometry3::from_parts(
+            Translation3::from(step.fixed_rows::<3>(0).into_owned()),
+            UnitQuaternion::from_scaled_axis(step.fixed_rows::<3>(3).into_owned()),
+        );
+        t = update * t;
+        if step.norm() < config.min_step {
+            return Ok((t, iteration));
+        }
+    }
+    Ok((t, config.max_iterations))
+}
+
+/// Estimates the motion from `initial` (e.g. identity, or the previous motion).
+pub fn estimate_motion(
+    rig: &StereoRig,
+    points: &[PointObservation],
+    lines: &[LineObservation],
+    initial: &Isometry3<f64>,
+    config: &MotionConfig,
+) -> Result<MotionEstimate, MotionError> {
+    let total = points.len() + lines.len();
+    if total < config.min_inliers {
+        return Err(MotionError::TooFewInliers { inliers: total, needed: config.min_inliers });
+    }
+    let all_points = vec![true; points.len()];
+    let all_lines = vec![true; lines.len()];
+    let (first, iterations_1) = optimise(rig, points, lines, &Active { points: &all_points, lines: &all_lines }, *initial, config)?;
+    let within = |r: Option<Vector2<f64>>| r.is_some_and(|r| r.amax() <= config.outlier_px);
+    let inlier_points: Vec<bool> = points.iter().map(|o| within(point_residual(rig, &first, o).map(|(r, _)| r))).collect();
+    let inlier_lines: Vec<bool> = lines.iter().map(|o| within(line_residual(rig, &first, o).map(|(r, _)| r))).collect();
+    let count = |v: &[bool]| v.iter().filter(|b| **b).count();
+    let (n_points, n_lines) = (count(&inlier_points), count(&inlier_lines));
+    if n_points + n_lines < config.min_inliers {
+        return Err(MotionError::TooFewInliers { inliers: n_points + n_lines, needed: config.min_inliers });
+    }
+    let active = Active { points: &inlier_points, lines: &inlier_lines };
+    let (motion, iterations_2) = optimise(rig, points, lines, &active, first, config)?;
+    let mut sum = 0.0;
+    let mut n = 0usize;
+    for (obs, _) in points.iter().zip(&inlier_points).filter(|(_, on)| **on) {
+        if let Some((r, _)) = point_residual(rig, &motion, obs) {
+            sum += r.norm_squared();
+            n += 2;
+        }
+    }
+    for (obs, _) in lines.iter().zip(&inlier_lines).filter(|(_, on)| **on) {
+        if let Some((r, _)) = line_residual(rig, &motion, obs) {
+            sum += r.norm_squared();
+            n += 2;
+        }
+    }
+    Ok(MotionEstimate {
+        motion,
+        inlier_points: n_points,
+        inlier_lines: n_lines,
+        iterations: iterations_1 + iterations_2,
+        rms_px: if n > 0 { (sum / n as f64).sqrt() } else { 0.0 },
+    })
+}
