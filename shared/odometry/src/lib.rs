@@ -1,0 +1,261 @@
+//! PL-StVO over a stream of rectified stereo frames.
+//!
+//! Per frame: ORB points and line segments (LSD or FLD) are detected in both images and
+//! matched stereo (segments with LBD or the ℓ1 matcher) and triangulated; the left image's
+//! features are matched to the previous frame's (same matchers, frame-to-frame case); each
+//! previous 3-D feature seen again becomes an observation, and the motion is estimated by
+//! `linetrack-stereo-vo` (Gauss–Newton on SE(3), two passes), starting from the previous
+//! motion (constant velocity). A frame with too few inliers or degenerate geometry is
+//! reported as lost: its pose repeats the last motion, and it becomes the new reference so
+//! tracking resumes on the next good frame instead of diverging.
+#![warn(missing_docs)]
+
+pub mod metrics;
+
+use linetrack_geometry::{MatchCase, Point, Segment, StereoRig};
+use linetrack_stereo_vo::{
+    LineObservation, MotionConfig, PointObservation, TriangulationLimits, disparity_weight, estimate_motion, triangulate_point,
+    triangulate_segment,
+};
+use linetrack_vision::{
+    AppearanceGates, DetectorKind, FeatureMatch, FrontendConfig, GrayImage, HammingMatcher, LineDetector, LineFeatures, MatcherKind,
+    OrbExtractor, PointFeatures, SegmentMatcher, VisionError, create_detector, create_segment_matcher, match_points,
+};
+use nalgebra::{Isometry3, Point3};
+use serde::{Deserialize, Serialize};
+use std::time::Instant;
+
+/// Which features the odometry uses.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Features {
+    /// ORB points and line segments.
+    PointsAndLines,
+    /// Line segments only.
+    LinesOnly,
+}
+
+/// Configuration of the odometry.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct OdometryConfig {
+    /// Line detector.
+    pub detector: DetectorKind,
+    /// Segment matcher, stereo and frame to frame.
+    pub matcher: MatcherKind,
+    /// Points and lines, or lines only.
+    pub features: Features,
+    /// Detection, description and matching options.
+    pub frontend: FrontendConfig,
+    /// Gauss–Newton options.
+    pub motion: MotionConfig,
+    /// Frame to frame: largest image motion of a feature, pixels (wider than the stereo
+    /// front end's default: the camera moves between frames).
+    pub max_displacement_px: f64,
+}
+
+impl Default for OdometryConfig {
+    fn default() -> Self {
+        Self {
+            detector: DetectorKind::Lsd,
+            matcher: MatcherKind::Lbd,
+            features: Features::PointsAndLines,
+            frontend: FrontendConfig::default(),
+            motion: MotionConfig::default(),
+            max_displacement_px: 60.0,
+        }
+    }
+}
+
+/// What happened in one frame.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize)]
+pub struct FrameStats {
+    /// Points detected left / right.
+    pub points: [usize; 2],
+    /// Segments detected left / right.
+    pub segments: [usize; 2],
+    /// Stereo matches triangulated: points, segments.
+    pub triangulated: [usize; 2],
+    /// Frame-to-frame observations used: points, segments.
+    pub observations: [usize; 2],
+    /// Inliers after the second pass: points, segments.
+    pub inliers: [usize; 2],
+    /// Gauss–Newton iterations.
+    pub iterations: usize,
+    /// Final RMS residual of the inliers, pixels.
+    pub rms_px: f64,
+    /// Milliseconds: detection, description, stereo matching + triangulation, frame-to-frame
+    /// matching, motion estimation.
+    pub ms: [f64; 5],
+}
+
+/// The result of one frame.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct FrameResult {
+    /// Pose of the left camera in the world of the first frame.
+    #[serde(skip)]
+    pub pose: Isometry3<f64>,
+    /// Whether tracking was lost in this frame (the pose is then a prediction).
+    pub lost: bool,
+    /// Why, when lost.
+    pub reason: Option<String>,
+    /// Counts and timings.
+    pub stats: FrameStats,
+}
+
+/// Features of one frame kept for matching the next.
+struct Reference {
+    points: PointFeatures,
+    point_positions: Vec<Option<(Point3<f64>, f64)>>,
+    lines: LineFeatures,
+    line_positions: Vec<Option<([Point3<f64>; 2], f64)>>,
+}
+
+/// The odometry: feed frames in order with [`Odometry::track`].
+pub struct Odometry {
+    config: OdometryConfig,
+    rig: StereoRig,
+    detector: Box<dyn LineDetector>,
+    matcher: Box<dyn SegmentMatcher>,
+    orb: OrbExtractor,
+    hamming: HammingMatcher,
+    reference: Option<Reference>,
+    pose: Isometry3<f64>,
+    last_motion: Isometry3<f64>,
+}
+
+/// Errors that stop the odometry (bad configuration; per-frame problems are `lost`).
+#[derive(Debug, thiserror::Error)]
+pub enum OdometryError {
+    /// The front end could not be built or failed on an image.
+    #[error(transparent)]
+    Vision(#[from] VisionError),
+}
+
+fn since(start: Instant) -> f64 {
+    start.elapsed().as_secs_f64() * 1e3
+}
+
+impl Odometry {
+    /// An odometry for frames from `rig`.
+    pub fn new(config: OdometryConfig, rig: StereoRig) -> Result<Self, OdometryError> {
+        Ok(Self {
+            detector: create_detector(config.detector, &config.frontend)?,
+            matcher: create_segment_matcher(config.matcher, &config.frontend)?,
+            orb: OrbExtractor::new(&config.frontend.orb)?,
+            hamming: HammingMatcher::new(),
+            reference: None,
+            pose: Isometry3::identity(),
+            last_motion: Isometry3::identity(),
+            config,
+            rig,
+        })
+    }
+
+    /// Tracks one stereo frame (rectified, the rig's size).
+    pub fn track(&mut self, left: &GrayImage, right: &GrayImage) -> Result<FrameResult, OdometryError> {
+        let mut stats = FrameStats::default();
+        let limits = TriangulationLimits::default();
+        let use_points = self.config.features == Features::PointsAndLines;
+
+        // Detection and description.
+        let started = Instant::now();
+        let (mut points_l, mut points_r) = (PointFeatures::default(), PointFeatures::default());
+        if use_points {
+            self.orb.extract(left, &mut points_l)?;
+            self.orb.extract(right, &mut points_r)?;
+        }
+        let (mut lines_l, mut lines_r) = (LineFeatures::default(), LineFeatures::default());
+        self.detector.detect(left, &mut lines_l.segments)?;
+        self.detector.detect(right, &mut lines_r.segments)?;
+        stats.ms[0] = since(started);
+        let started = Instant::now();
+        self.matcher.describe(left, &mut lines_l)?;
+        self.matcher.describe(right, &mut lines_r)?;
+        stats.ms[1] = since(started);
+        stats.points = [points_l.points.len(), points_r.points.len()];
+        stats.segments = [lines_l.segments.len(), lines_r.segments.len()];
+
+        // Stereo matching and triangulation.
+        let started = Instant::now();
+        let mut matches = Vec::new();
+        let mut point_positions = vec![None; points_l.points.len()];
+        if use_points {
+            let gates = &self.config.frontend.appearance_gates;
+            match_points(&mut self.hamming, MatchCase::Stereo, &points_l, &points_r, gates, self.config.frontend.orb.min_distance_ratio, &mut matches);
+            for m in &matches {
+                if let Some(t) = triangulate_point(&self.rig, points_l.points[m.query], points_r.points[m.train], &limits) {
+                    point_positions[m.query] = Some((t.position, disparity_weight(t.disparity_px)));
+                }
+            }
+        }
+        self.matcher.match_lines(MatchCase::Stereo, &lines_l, &lines_r, &mut matches);
+        let mut line_positions = vec![None; lines_l.segments.len()];
+        for m in &matches {
+            if let Some((a, b)) = triangulate_segment(&self.rig, &lines_l.segments[m.query], &lines_r.segments[m.train], &limits) {
+                let weight = 0.5 * (disparity_weight(a.disparity_px) + disparity_weight(b.disparity_px));
+                line_positions[m.query] = Some(([a.position, b.position], weight));
+            }
+        }
+        stats.triangulated = [point_positions.iter().flatten().count(), line_positions.iter().flatten().count()];
+        stats.ms[2] = since(started);
+
+        let current = Reference { points: points_l, point_positions, lines: lines_l, line_positions };
+        let Some(previous) = self.reference.take() else {
+            self.reference = Some(current);
+            return Ok(FrameResult { pose: self.pose, lost: false, reason: None, stats });
+        };
+
+        // Frame-to-frame matching: previous 3-D features seen again now.
+        let started = Instant::now();
+        let (point_obs, line_obs) = self.observations(&previous, &current, &mut matches);
+        self.reference = Some(current);
+        stats.observations = [point_obs.len(), line_obs.len()];
+        stats.ms[3] = since(started);
+
+        let started = Instant::now();
+        let estimate = estimate_motion(&self.rig, &point_obs, &line_obs, &self.last_motion, &self.config.motion);
+        stats.ms[4] = since(started);
+        match estimate {
+            Ok(e) => {
+                self.last_motion = e.motion;
+                self.pose *= e.motion.inverse();
+                stats.inliers = [e.inlier_points, e.inlier_lines];
+                stats.iterations = e.iterations;
+                stats.rms_px = e.rms_px;
+                Ok(FrameResult { pose: self.pose, lost: false, reason: None, stats })
+            }
+            Err(why) => {
+                // Predict with the last motion; this frame is the new reference.
+                self.pose *= self.last_motion.inverse();
+                Ok(FrameResult { pose: self.pose, lost: true, reason: Some(why.to_string()), stats })
+            }
+        }
+    }
+
+    /// Observations of `previous`'s triangulated features in `current`'s left image.
+    fn observations(&mut self, previous: &Reference, current: &Reference, scratch: &mut Vec<FeatureMatch>) -> (Vec<PointObservation>, Vec<LineObservation>) {
+        let mut points = Vec::new();
+        if self.config.features == Features::PointsAndLines {
+            let gates = AppearanceGates { max_displacement_px: self.config.max_displacement_px, ..self.config.frontend.appearance_gates };
+            match_points(&mut self.hamming, MatchCase::FrameToFrame, &previous.points, &current.points, &gates, self.config.frontend.orb.min_distance_ratio, scratch);
+            for m in scratch.iter() {
+                if let Some((position, weight)) = previous.point_positions[m.query] {
+                    let pixel: Point = current.points.points[m.train];
+                    points.push(PointObservation { position, pixel, weight });
+                }
+            }
+        }
+        self.matcher.match_lines(MatchCase::FrameToFrame, &previous.lines, &current.lines, scratch);
+        let mut lines = Vec::new();
+        for m in scratch.iter() {
+            if let Some((endpoints, weight)) = previous.line_positions[m.query] {
+                let seen: &Segment = &current.lines.segments[m.train];
+                if let Some(obs) = LineObservation::new(endpoints, seen, weight) {
+                    lines.push(obs);
+                }
+            }
+        }
+        (points, lines)
+    }
+}
