@@ -1,0 +1,68 @@
+//! Runs `linetrack-eval --quick` as CI does and checks the report: three tables with a row
+//! for every sequence and case, plots that exist, and inlier ratios that say the front end
+//! works on easy generated data.
+
+#![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failure here is a test failure
+
+use std::path::PathBuf;
+use std::process::Command;
+
+fn scratch(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("linetrack-eval-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    dir
+}
+
+fn run_report(dir: &PathBuf, extra: &[&str]) -> String {
+    let (sequences, output) = (dir.join("sequences"), dir.join("report"));
+    let mut args = vec!["--quick", "--frames", "4", "--sequences", sequences.to_str().unwrap(), "--output", output.to_str().unwrap()];
+    args.extend(extra);
+    let result = Command::new(env!("CARGO_BIN_EXE_linetrack-eval")).args(&args).output().unwrap();
+    assert!(result.status.success(), "{}", String::from_utf8_lossy(&result.stderr));
+    let report = std::fs::read_to_string(output.join("report.md")).unwrap();
+    for line in report.lines().filter(|l| l.starts_with("![")) {
+        let name = line.split('(').nth(1).unwrap().trim_end_matches(')');
+        let picture = std::fs::read(output.join(name)).unwrap();
+        assert!(picture.starts_with(b"\x89PNG"), "{name} is not a PNG");
+    }
+    report
+}
+
+/// The cells of the Table I row for `sequence` and `case`.
+fn table1_row(report: &str, sequence: &str, case: &str) -> Vec<String> {
+    let row = report.lines().find(|l| l.starts_with(&format!("| {sequence} | {case} |"))).unwrap_or_else(|| panic!("no row {sequence} {case}"));
+    row.split('|').map(str::trim).filter(|c| !c.is_empty()).skip(2).map(String::from).collect()
+}
+
+#[test]
+fn quick_report_has_every_table_row_and_plot() {
+    let dir = scratch("quick");
+    let report = run_report(&dir, &["--no-euroc"]);
+    for heading in ["## Table I", "## Table II", "## Table III", "RPE over pose pairs"] {
+        assert!(report.contains(heading), "missing {heading}");
+    }
+    for sequence in ["normal", "hdr-flicker", "left-right-mismatch"] {
+        for case in ["stereo", "frame to frame"] {
+            let cells = table1_row(&report, sequence, case);
+            assert_eq!(cells.len(), 4);
+            // LSD+LBD on easy generated frames: most matches are geometric inliers.
+            let ratio: f64 = cells[0].split(" / ").nth(1).unwrap().parse().unwrap();
+            assert!(ratio > 0.8, "{sequence} {case}: {}", cells[0]);
+        }
+        assert!(report.lines().any(|l| l.starts_with(&format!("| {sequence} |")) && l.contains(" mm / ")), "Table II row for {sequence}");
+    }
+    assert!(report.contains("| normal* |"), "the simulated illumination row");
+    assert_eq!(report.lines().filter(|l| l.starts_with("| LSD+") || l.starts_with("| FLD+")).count(), 4, "Table III rows");
+    let _ = std::fs::remove_dir_all(dir);
+}
+
+#[test]
+fn real_data_quick_report_includes_the_euroc_excerpt() {
+    let euroc = linetrack_test_data::euroc_dir().unwrap_or_else(|e| panic!("{e}"));
+    let dir = scratch("euroc");
+    let report = run_report(&dir, &["--euroc", euroc.to_str().unwrap()]);
+    let cells = table1_row(&report, "EuRoC V1_01_easy_micro", "frame to frame");
+    assert!(cells.iter().all(|c| c.ends_with("/ –")), "no depth, so no inlier ratio: {cells:?}");
+    assert!(report.contains("| EuRoC V1_01_easy_micro* |"));
+    let _ = std::fs::remove_dir_all(dir);
+}
