@@ -167,7 +167,7 @@ pub fn run(args: &Args) -> anyhow::Result<String> {
         }
 
         eprintln!("odometry: {}", entry.name);
-        let variants: Vec<(String, Option<&dyn Fn(f64) -> (f64, f64)>)> = if entry.perturb {
+        let variants: Vec<(String, tracking::Illumination<'_>)> = if entry.perturb {
             vec![(entry.name.clone(), None), (format!("{}*", entry.name), Some(&simulated))]
         } else {
             vec![(entry.name.clone(), None)]

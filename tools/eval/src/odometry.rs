@@ -35,7 +35,7 @@ pub fn run(
     features: Features,
     matcher: MatcherKind,
     frames: usize,
-    illumination: Option<&dyn Fn(f64) -> (f64, f64)>,
+    illumination: crate::tracking::Illumination<'_>,
 ) -> anyhow::Result<OdometryRun> {
     let config = OdometryConfig { detector: DetectorKind::Lsd, matcher, features, ..OdometryConfig::default() };
     let mut odometry = Odometry::new(config, sequence.rig)?;

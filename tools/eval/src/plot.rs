@@ -69,6 +69,6 @@ pub fn lines(path: &Path, title: &str, x_label: &str, y_label: &str, series: &[(
     text(&mut canvas, &format!("{x1:.2}"), W - MARGIN - LEGEND - 40, H - MARGIN + 18, 0)?;
     text(&mut canvas, &format!("{y0:.2}"), 5, H - MARGIN, 0)?;
     text(&mut canvas, &format!("{y1:.2}"), 5, MARGIN + 10, 0)?;
-    imgcodecs::imwrite(&path.display().to_string(), &canvas, &Vector::new()).with_context(|| format!("cannot write {}", path.display()))?;
+    imgcodecs::imwrite(path.display().to_string().as_str(), &canvas, &Vector::new()).with_context(|| format!("cannot write {}", path.display()))?;
     Ok(())
 }

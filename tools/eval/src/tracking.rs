@@ -19,6 +19,9 @@ use linetrack_vision::{DetectorKind, FeatureMatch, FrontendConfig, GrayImage, Li
 use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion};
 use std::path::Path;
 
+/// An optional illumination change: time in seconds → (gain, bias) for both images.
+pub type Illumination<'a> = Option<&'a dyn Fn(f64) -> (f64, f64)>;
+
 /// Detector × matcher combinations of the paper's tables.
 pub const COMBINATIONS: [(DetectorKind, MatcherKind); 4] = [
     (DetectorKind::Lsd, MatcherKind::Lbd),
@@ -126,7 +129,7 @@ pub fn evaluate(
     sequence: &StereoSequence,
     combination: (DetectorKind, MatcherKind),
     frames: usize,
-    illumination: Option<&dyn Fn(f64) -> (f64, f64)>,
+    illumination: Illumination<'_>,
 ) -> anyhow::Result<TrackingResult> {
     let config = FrontendConfig::default();
     let mut pair = LinePairMatcher::new(combination.0, combination.1, &config)?;

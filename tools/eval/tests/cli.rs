@@ -4,7 +4,7 @@
 
 #![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failure here is a test failure
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::Command;
 
 fn scratch(name: &str) -> PathBuf {
@@ -13,7 +13,7 @@ fn scratch(name: &str) -> PathBuf {
     dir
 }
 
-fn run_report(dir: &PathBuf, extra: &[&str]) -> String {
+fn run_report(dir: &Path, extra: &[&str]) -> String {
     let (sequences, output) = (dir.join("sequences"), dir.join("report"));
     let mut args = vec!["--quick", "--frames", "4", "--sequences", sequences.to_str().unwrap(), "--output", output.to_str().unwrap()];
     args.extend(extra);
