@@ -52,6 +52,10 @@ pub struct OdometryConfig {
     /// Frame to frame: largest image motion of a feature, pixels (wider than the stereo
     /// front end's default: the camera moves between frames).
     pub max_displacement_px: f64,
+    /// Segments closer than this to horizontal are not triangulated, degrees: an
+    /// endpoint's disparity is read off the right segment's line at the same row, so its
+    /// error grows as 1 / tan(angle).
+    pub min_line_angle_deg: f64,
 }
 
 impl Default for OdometryConfig {
@@ -63,6 +67,7 @@ impl Default for OdometryConfig {
             frontend: FrontendConfig::default(),
             motion: MotionConfig::default(),
             max_displacement_px: 60.0,
+            min_line_angle_deg: 10.0,
         }
     }
 }
@@ -155,7 +160,10 @@ impl Odometry {
     /// Tracks one stereo frame (rectified, the rig's size).
     pub fn track(&mut self, left: &GrayImage, right: &GrayImage) -> Result<FrameResult, OdometryError> {
         let mut stats = FrameStats::default();
-        let limits = TriangulationLimits::default();
+        let limits = TriangulationLimits {
+            min_sin_from_horizontal: self.config.min_line_angle_deg.to_radians().sin(),
+            ..TriangulationLimits::default()
+        };
         let use_points = self.config.features == Features::PointsAndLines;
 
         // Detection and description.

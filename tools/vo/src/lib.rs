@@ -54,6 +54,9 @@ pub struct Args {
     /// Process at most this many frames.
     #[arg(long)]
     pub frames: Option<usize>,
+    /// Segments closer than this to horizontal are not triangulated, degrees.
+    #[arg(long, default_value_t = 10.0)]
+    pub min_line_angle_deg: f64,
     /// Output folder.
     #[arg(long, default_value = "out/vo")]
     pub output: PathBuf,
@@ -63,7 +66,7 @@ pub struct Args {
 pub fn run(args: &Args) -> anyhow::Result<String> {
     let sequence = StereoSequence::open(&args.dataset).with_context(|| format!("cannot open dataset {}", args.dataset.display()))?;
     let features = if args.lines_only { Features::LinesOnly } else { Features::PointsAndLines };
-    let config = OdometryConfig { detector: args.detector, matcher: args.matcher, features, ..OdometryConfig::default() };
+    let config = OdometryConfig { detector: args.detector, matcher: args.matcher, features, min_line_angle_deg: args.min_line_angle_deg, ..OdometryConfig::default() };
     let mut odometry = Odometry::new(config, sequence.rig)?;
     let total = args.frames.unwrap_or(usize::MAX).min(sequence.frames.len());
     let start_ns = sequence.frames.first().map_or(0, |f| f.timestamp_ns);
