@@ -55,6 +55,14 @@ impl LinePairMatcher {
         format!("{}+{}", self.detector.name(), self.matcher.name())
     }
 
+    /// Matches already detected and described features (e.g. the left images of two
+    /// frames, each from its own stereo run); returns the milliseconds it took.
+    pub fn match_features(&mut self, case: MatchCase, first: &LineFeatures, second: &LineFeatures, out: &mut Vec<crate::FeatureMatch>) -> f64 {
+        let mut ms = 0.0;
+        timed(&mut ms, || self.matcher.match_lines(case, first, second, out));
+        ms
+    }
+
     /// Detects, describes and matches `first` against `second`.
     pub fn run(&mut self, case: MatchCase, first: &GrayImage, second: &GrayImage) -> Result<PairResult, VisionError> {
         let mut out = PairResult::default();

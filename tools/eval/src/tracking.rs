@@ -46,11 +46,12 @@ pub struct FrameCount {
 pub struct TrackingResult {
     /// Per frame, stereo.
     pub stereo: Vec<FrameCount>,
-    /// Per frame (k → k+1), frame to frame.
+    /// Per frame (k − 1 → k), frame to frame.
     pub frame_to_frame: Vec<FrameCount>,
-    /// Per frame: monocular tracking ms (detect + describe + f2f match).
+    /// Per tracked frame (from the second on): monocular ms (detect + describe the left
+    /// image + frame-to-frame match).
     pub mono_ms: Vec<f64>,
-    /// Per frame: stereo tracking ms (both images + stereo match + f2f match).
+    /// Per tracked frame: stereo ms (both images + stereo match + frame-to-frame match).
     pub stereo_ms: Vec<f64>,
 }
 
@@ -148,11 +149,15 @@ pub fn evaluate(
             None => Ok((f.left, f.right)),
         }
     };
-    let mut current = load(0)?;
+    // Each frame is detected and described once, in its stereo run; the frame-to-frame
+    // pass matches the left features of consecutive stereo runs.
+    let mut previous: Option<(linetrack_vision::LineFeatures, Option<DepthMap>, Option<Isometry3<f64>>)> = None;
+    let mut f2f_matches = Vec::new();
     for k in 0..n {
         let entry = &sequence.frames[k];
+        let (left, right) = load(k)?;
         let depth = left_depth(dataset, entry.timestamp_ns);
-        let stereo = pair.run(MatchCase::Stereo, &current.0, &current.1)?;
+        let stereo = pair.run(MatchCase::Stereo, &left, &right)?;
         let mut counts = FrameCount::default();
         judge(&mut counts, &stereo.matches, |m| {
             let depth = depth.as_ref()?;
@@ -160,26 +165,25 @@ pub fn evaluate(
         });
         result.stereo.push(counts);
         let t = stereo.timings;
-        let mut stereo_ms = t.detect_ms[0] + t.detect_ms[1] + t.describe_ms[0] + t.describe_ms[1] + t.match_ms;
-        let mut mono_ms = t.detect_ms[0] + t.describe_ms[0];
-        if k + 1 < n {
-            let next = load(k + 1)?;
-            let f2f = pair.run(MatchCase::FrameToFrame, &current.0, &next.0)?;
-            let relative = match (entry.pose, sequence.frames[k + 1].pose) {
+        let stereo_ms = t.detect_ms[0] + t.detect_ms[1] + t.describe_ms[0] + t.describe_ms[1] + t.match_ms;
+        let mono_ms = t.detect_ms[0] + t.describe_ms[0];
+        if let Some((prev_left, prev_depth, prev_pose)) = previous.take() {
+            let f2f_ms = pair.match_features(MatchCase::FrameToFrame, &prev_left, &stereo.first, &mut f2f_matches);
+            let relative = match (prev_pose, entry.pose) {
                 (Some(a), Some(b)) => Some(b.inverse() * a),
                 _ => None,
             };
             let mut counts = FrameCount::default();
-            judge(&mut counts, &f2f.matches, |m| {
-                match_error(&rig, depth.as_ref()?, relative.as_ref()?, &f2f.first.segments[m.query], &f2f.second.segments[m.train])
+            judge(&mut counts, &f2f_matches, |m| {
+                match_error(&rig, prev_depth.as_ref()?, relative.as_ref()?, &prev_left.segments[m.query], &stereo.first.segments[m.train])
             });
             result.frame_to_frame.push(counts);
-            stereo_ms += f2f.timings.match_ms;
-            mono_ms += f2f.timings.match_ms;
-            current = next;
+            // Tracking a frame = its own detection and description plus matching it to the
+            // previous one (and, in stereo, the stereo match).
+            result.mono_ms.push(mono_ms + f2f_ms);
+            result.stereo_ms.push(stereo_ms + f2f_ms);
         }
-        result.mono_ms.push(mono_ms);
-        result.stereo_ms.push(stereo_ms);
+        previous = Some((stereo.first, depth, entry.pose));
     }
     Ok(result)
 }
