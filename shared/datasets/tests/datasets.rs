@@ -87,13 +87,6 @@ fn real_data_stream_yields_every_frame_in_order_with_read_ahead() {
 const W: usize = 64;
 const H: usize = 48;
 
-fn scratch(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("linetrack-datasets-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
-
 fn write(path: &Path, text: &str) {
     std::fs::create_dir_all(path.parent().unwrap()).unwrap();
     std::fs::write(path, text).unwrap();
@@ -113,7 +106,7 @@ fn sensor_yaml(x_m: f64) -> String {
 
 /// A three-frame EuRoC sequence: 10 cm baseline, identity ground truth moving along x.
 fn euroc_fixture(name: &str) -> PathBuf {
-    let dir = scratch(name);
+    let dir = linetrack_test_data::scratch_dir("datasets", name).unwrap();
     let mav0 = dir.join("mav0");
     let stamps = [1_000_000_000u64, 1_050_000_000, 1_100_000_000];
     for (cam, x) in [("cam0", 0.0), ("cam1", 0.1)] {
@@ -198,7 +191,7 @@ fn malformed_calibration_and_ground_truth_are_refused() {
         assert!(message.contains(what), "{name}: {message}");
         let _ = std::fs::remove_dir_all(dir);
     }
-    let missing = scratch("not-a-dataset");
+    let missing = linetrack_test_data::scratch_dir("datasets", "not-a-dataset").unwrap();
     assert!(open_error(&missing).contains("expected mav0/"));
 }
 
@@ -235,7 +228,7 @@ fn a_wrongly_sized_frame_is_skipped_naming_it() {
 // ---------------------------------------------------------------- KITTI fixture
 
 fn kitti_fixture(name: &str) -> PathBuf {
-    let root = scratch(name);
+    let root = linetrack_test_data::scratch_dir("datasets", name).unwrap();
     let dir = root.join("sequences/07");
     let p0 = "P0: 700 0 600 0 0 700 180 0 0 0 1 0\n";
     let p1 = "P1: 700 0 600 -378 0 700 180 0 0 0 1 0\n";
@@ -284,7 +277,7 @@ fn malformed_kitti_files_are_refused_naming_them() {
 
 #[test]
 fn tum_round_trip_and_malformed_lines() {
-    let dir = scratch("tum");
+    let dir = linetrack_test_data::scratch_dir("datasets", "tum").unwrap();
     let path = dir.join("trajectory.txt");
     let poses = [
         tum::StampedPose { timestamp_s: 0.5, pose: Isometry3::identity() },

@@ -116,3 +116,20 @@ pub fn shift_left(pixels: &[u8], width: usize, shift: usize) -> Vec<u8> {
     }
     out
 }
+
+/// A per-process path under the system temp folder for a test's files,
+/// `linetrack-<owner>-<pid>-<name>`, with anything left there by an earlier run removed.
+/// Nothing is created: the code under test may want to create it itself.
+pub fn scratch_path(owner: &str, name: &str) -> PathBuf {
+    let path = std::env::temp_dir().join(format!("linetrack-{owner}-{}-{name}", std::process::id()));
+    // An earlier run's leftovers: a folder, or a file where a test put one.
+    let _ = std::fs::remove_dir_all(&path).or_else(|_| std::fs::remove_file(&path));
+    path
+}
+
+/// [`scratch_path`], created as an empty folder.
+pub fn scratch_dir(owner: &str, name: &str) -> std::io::Result<PathBuf> {
+    let path = scratch_path(owner, name);
+    std::fs::create_dir_all(&path)?;
+    Ok(path)
+}

@@ -101,19 +101,11 @@ impl LineDetector for LsdDetector {
     }
 
     fn detect(&mut self, image: &GrayImage, out: &mut Vec<Segment>) -> Result<(), VisionError> {
-        self.lines.clear();
-        out.clear();
-        if too_small(image) {
-            return Ok(());
-        }
-        let mut no_width = opencv::core::no_array();
-        let mut no_precision = opencv::core::no_array();
-        let mut no_nfa = opencv::core::no_array();
-        self.lsd
-            .detect(image.mat(), &mut self.lines, &mut no_width, &mut no_precision, &mut no_nfa)
-            .context("LSD detection")?;
-        keep_longest(&self.lines, self.keep, image_bounds(image), out);
-        Ok(())
+        let lsd = &mut self.lsd;
+        detect_with(image, &mut self.lines, self.keep, out, |lines| {
+            let (mut no_width, mut no_precision, mut no_nfa) = (opencv::core::no_array(), opencv::core::no_array(), opencv::core::no_array());
+            lsd.detect(image.mat(), lines, &mut no_width, &mut no_precision, &mut no_nfa).context("LSD detection")
+        })
     }
 }
 
@@ -146,24 +138,30 @@ impl LineDetector for FldDetector {
     }
 
     fn detect(&mut self, image: &GrayImage, out: &mut Vec<Segment>) -> Result<(), VisionError> {
-        self.lines.clear();
-        out.clear();
-        if too_small(image) {
-            return Ok(());
-        }
-        self.fld.detect(image.mat(), &mut self.lines).context("FLD detection")?;
-        keep_longest(&self.lines, self.keep, image_bounds(image), out);
-        Ok(())
+        let fld = &mut self.fld;
+        detect_with(image, &mut self.lines, self.keep, out, |lines| fld.detect(image.mat(), lines).context("FLD detection"))
     }
 }
 
-fn too_small(image: &GrayImage) -> bool {
-    image.width() < MIN_IMAGE_SIDE_PX || image.height() < MIN_IMAGE_SIDE_PX
-}
-
-/// The largest coordinates a pixel centre can have: (width − 1, height − 1).
-fn image_bounds(image: &GrayImage) -> (f64, f64) {
-    (f64::from(image.width() - 1), f64::from(image.height() - 1))
+/// What every detector does around its OpenCV call `run`: start empty, skip images under
+/// [`MIN_IMAGE_SIDE_PX`], then keep the longest segments clipped to the pixel centres'
+/// range [0, width − 1] × [0, height − 1].
+fn detect_with(
+    image: &GrayImage,
+    lines: &mut Vector<Vec4f>,
+    keep: LineOptions,
+    out: &mut Vec<Segment>,
+    run: impl FnOnce(&mut Vector<Vec4f>) -> Result<(), VisionError>,
+) -> Result<(), VisionError> {
+    lines.clear();
+    out.clear();
+    if image.width() < MIN_IMAGE_SIDE_PX || image.height() < MIN_IMAGE_SIDE_PX {
+        return Ok(());
+    }
+    run(lines)?;
+    let bounds = (f64::from(image.width() - 1), f64::from(image.height() - 1));
+    keep_longest(lines, keep, bounds, out);
+    Ok(())
 }
 
 /// Converts OpenCV's `(x0, y0, x1, y1)` lines into `out`: clipped to [0, max_x] × [0, max_y],

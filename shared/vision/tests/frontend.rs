@@ -9,7 +9,6 @@ use linetrack_test_data::{euroc_stereo_pair, shift_left, test_card, test_card_ed
 use linetrack_vision::*;
 use opencv::core::{Mat, Scalar, Vector};
 use opencv::imgcodecs;
-use std::path::PathBuf;
 
 const W: usize = 752;
 const H: usize = 480;
@@ -35,10 +34,6 @@ fn card(shift: usize) -> GrayImage {
     let pixels = test_card(W, H);
     let pixels = if shift == 0 { pixels } else { shift_left(&pixels, W, shift) };
     GrayImage::from_pixels(W, H, &pixels, &format!("test card shifted {shift} px")).unwrap()
-}
-
-fn temp_path(name: &str) -> PathBuf {
-    std::env::temp_dir().join(format!("linetrack-vision-{}-{name}", std::process::id()))
 }
 
 // ---------------------------------------------------------------- generated images
@@ -226,16 +221,16 @@ fn error_text(result: Result<GrayImage, VisionError>) -> String {
 
 #[test]
 fn bad_image_files_are_refused_naming_the_file() {
-    let missing = temp_path("missing.png");
+    let missing = linetrack_test_data::scratch_path("vision", "missing.png");
     let text = error_text(GrayImage::load(&missing));
     assert!(text.contains(missing.to_str().unwrap()) && text.contains("cannot read"), "{text}");
 
-    let empty = temp_path("empty.png");
+    let empty = linetrack_test_data::scratch_path("vision", "empty.png");
     std::fs::write(&empty, b"").unwrap();
     let text = error_text(GrayImage::load(&empty));
     assert!(text.contains(empty.to_str().unwrap()) && text.contains("empty"), "{text}");
 
-    let corrupt = temp_path("corrupt.png");
+    let corrupt = linetrack_test_data::scratch_path("vision", "corrupt.png");
     std::fs::write(&corrupt, b"\x89PNG\r\n\x1a\nthis is not really a png").unwrap();
     let text = error_text(GrayImage::load(&corrupt));
     assert!(text.contains(corrupt.to_str().unwrap()) && text.contains("not a decodable image"), "{text}");
@@ -246,7 +241,7 @@ fn bad_image_files_are_refused_naming_the_file() {
         imgcodecs::imencode(".png", card(0).mat(), &mut buffer, &Vector::new()).unwrap();
         buffer.as_slice().to_vec()
     });
-    let truncated = temp_path("truncated.png");
+    let truncated = linetrack_test_data::scratch_path("vision", "truncated.png");
     std::fs::write(&truncated, &whole[..whole.len() / 3]).unwrap();
     let text = error_text(GrayImage::load(&truncated));
     assert!(text.contains(truncated.to_str().unwrap()), "{text}");
@@ -262,7 +257,7 @@ fn colour_and_sixteen_bit_images_are_refused_with_what_was_found() {
         let mat = Mat::new_rows_cols_with_default(20, 30, mat_type, Scalar::all(100.0)).unwrap();
         let mut bytes = Vector::<u8>::new();
         imgcodecs::imencode(".png", &mat, &mut bytes, &Vector::new()).unwrap();
-        let path = temp_path(name);
+        let path = linetrack_test_data::scratch_path("vision", name);
         std::fs::write(&path, bytes.as_slice()).unwrap();
         let text = error_text(GrayImage::load(&path));
         assert!(text.contains(path.to_str().unwrap()) && text.contains(expect), "{text}");

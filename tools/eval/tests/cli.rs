@@ -4,14 +4,8 @@
 
 #![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failure here is a test failure
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::Command;
-
-fn scratch(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("linetrack-eval-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    dir
-}
 
 fn run_report(dir: &Path, extra: &[&str]) -> String {
     let (sequences, output) = (dir.join("sequences"), dir.join("report"));
@@ -36,7 +30,7 @@ fn table1_row(report: &str, sequence: &str, case: &str) -> Vec<String> {
 
 #[test]
 fn quick_report_has_every_table_row_and_plot() {
-    let dir = scratch("quick");
+    let dir = linetrack_test_data::scratch_path("eval", "quick");
     let report = run_report(&dir, &["--no-euroc"]);
     for heading in ["## Table I", "## Table II", "## Table III", "RPE over pose pairs"] {
         assert!(report.contains(heading), "missing {heading}");
@@ -59,7 +53,7 @@ fn quick_report_has_every_table_row_and_plot() {
 #[test]
 fn real_data_quick_report_includes_the_euroc_excerpt() {
     let euroc = linetrack_test_data::euroc_dir().unwrap_or_else(|e| panic!("{e}"));
-    let dir = scratch("euroc");
+    let dir = linetrack_test_data::scratch_path("eval", "euroc");
     let report = run_report(&dir, &["--euroc", euroc.to_str().unwrap()]);
     let cells = table1_row(&report, "EuRoC V1_01_easy_micro", "frame to frame");
     assert!(cells.iter().all(|c| c.ends_with("/ –")), "no depth, so no inlier ratio: {cells:?}");

@@ -2,17 +2,10 @@
 //! and writes, and how it fails on bad input.
 
 #![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failure here is a test failure
-use std::path::PathBuf;
 use std::process::{Command, Output};
 
 fn demo(args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_linetrack-match-demo")).args(args).output().expect("the demo binary starts")
-}
-
-fn scratch_dir(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("linetrack-match-demo-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    dir
 }
 
 fn workspace_file(relative: &str) -> String {
@@ -21,7 +14,7 @@ fn workspace_file(relative: &str) -> String {
 
 #[test]
 fn default_run_prints_both_cases_and_writes_pictures_and_json() {
-    let out = scratch_dir("default");
+    let out = linetrack_test_data::scratch_path("match-demo", "default");
     let result = demo(&["--no-images", "--output", out.to_str().unwrap()]);
     let stdout = String::from_utf8_lossy(&result.stdout);
     assert!(result.status.success(), "stderr: {}", String::from_utf8_lossy(&result.stderr));
@@ -45,7 +38,7 @@ fn default_run_prints_both_cases_and_writes_pictures_and_json() {
 
 #[test]
 fn list_prints_one_line_per_match_and_the_paper_config_loads() {
-    let out = scratch_dir("list");
+    let out = linetrack_test_data::scratch_path("match-demo", "list");
     let config = workspace_file("configs/l1-matcher-paper.toml");
     let result = demo(&["--no-images", "--case", "stereo", "--list", "--config", &config, "--seed", "3", "--output", out.to_str().unwrap()]);
     assert!(result.status.success());
@@ -61,11 +54,11 @@ fn list_prints_one_line_per_match_and_the_paper_config_loads() {
 
 #[test]
 fn missing_and_malformed_configs_fail_naming_the_culprit() {
-    let missing = demo(&["--config", "/nonexistent/matcher.toml", "--output", scratch_dir("missing").to_str().unwrap()]);
+    let missing = demo(&["--config", "/nonexistent/matcher.toml", "--output", linetrack_test_data::scratch_path("match-demo", "missing").to_str().unwrap()]);
     assert!(!missing.status.success());
     assert!(String::from_utf8_lossy(&missing.stderr).contains("/nonexistent/matcher.toml"));
 
-    let dir = scratch_dir("malformed");
+    let dir = linetrack_test_data::scratch_path("match-demo", "malformed");
     std::fs::create_dir_all(&dir).unwrap();
     let bad = dir.join("bad.toml");
     std::fs::write(&bad, "lambda = 0.1\n[gates]\nmax_angle_deg = 120\n").unwrap();
@@ -87,7 +80,7 @@ fn image_matches(stdout: &str, case: &str, pair: &str) -> usize {
 
 #[test]
 fn image_part_runs_lbd_and_l1_on_a_generated_sequence() {
-    let dir = scratch_dir("images");
+    let dir = linetrack_test_data::scratch_path("match-demo", "images");
     let sequence = dir.join("sequence");
     linetrack_synth::generate(linetrack_scene_render::Preset::Normal, 2, 3, &sequence).unwrap();
     let out = dir.join("out");
@@ -111,7 +104,7 @@ fn image_part_runs_lbd_and_l1_on_a_generated_sequence() {
 #[test]
 fn real_data_image_part_on_the_euroc_excerpt() {
     let euroc = linetrack_test_data::euroc_dir().unwrap_or_else(|e| panic!("{e}"));
-    let out = scratch_dir("euroc");
+    let out = linetrack_test_data::scratch_path("match-demo", "euroc");
     let result = demo(&["--dataset", euroc.to_str().unwrap(), "--detector", "fld", "--output", out.to_str().unwrap()]);
     let stdout = String::from_utf8_lossy(&result.stdout);
     assert!(result.status.success(), "stderr: {}", String::from_utf8_lossy(&result.stderr));
@@ -123,7 +116,7 @@ fn real_data_image_part_on_the_euroc_excerpt() {
 
 #[test]
 fn a_folder_that_is_not_a_dataset_is_named() {
-    let dir = scratch_dir("not-a-dataset");
+    let dir = linetrack_test_data::scratch_path("match-demo", "not-a-dataset");
     std::fs::create_dir_all(&dir).unwrap();
     let result = demo(&["--dataset", dir.to_str().unwrap(), "--output", dir.join("out").to_str().unwrap()]);
     assert!(!result.status.success());

@@ -3,18 +3,11 @@
 
 #![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failure here is a test failure
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::{Command, Output};
 
 fn run(args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_linetrack-match-pair")).args(args).output().expect("the binary starts")
-}
-
-fn scratch(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("linetrack-match-pair-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
 }
 
 fn save_gray(path: &Path, width: usize, height: usize, pixels: Vec<u8>) {
@@ -49,7 +42,7 @@ fn count_before(summary: &str, word: &str) -> usize {
 
 #[test]
 fn generated_pair_gives_picture_json_csv_and_summary_with_the_true_disparity() {
-    let dir = scratch("generated");
+    let dir = linetrack_test_data::scratch_dir("match-pair", "generated").unwrap();
     let (left, right) = card_pair(&dir, 10);
     let out = dir.join("out");
     for (detector, matcher) in [("lsd", "lbd"), ("fld", "l1")] {
@@ -87,7 +80,7 @@ fn generated_pair_gives_picture_json_csv_and_summary_with_the_true_disparity() {
 fn real_data_euroc_pairs_with_and_without_perturbation() {
     let (left, right) = linetrack_test_data::euroc_stereo_pair(0).unwrap_or_else(|e| panic!("{e}"));
     let (next, _) = linetrack_test_data::euroc_stereo_pair(1).unwrap_or_else(|e| panic!("{e}"));
-    let dir = scratch("euroc");
+    let dir = linetrack_test_data::scratch_dir("match-pair", "euroc").unwrap();
     let out = dir.to_str().unwrap();
     let stereo = stdout(&run(&[left.to_str().unwrap(), right.to_str().unwrap(), "--output", out]));
     assert!(count_before(&stereo, "segments") == 100 && count_before(&stereo, "matches") >= 15, "{stereo}");
@@ -112,7 +105,7 @@ fn real_data_euroc_pairs_with_and_without_perturbation() {
 
 #[test]
 fn bad_inputs_fail_naming_the_culprit() {
-    let dir = scratch("bad");
+    let dir = linetrack_test_data::scratch_dir("match-pair", "bad").unwrap();
     let (good, _) = card_pair(&dir, 4);
     let out = dir.join("out").display().to_string();
 

@@ -7,22 +7,15 @@
 use linetrack_datasets::StereoSequence;
 use linetrack_datasets::depth::read_depth_png;
 use linetrack_scene_render::{Preset, SequenceRenderer};
-use std::path::PathBuf;
 use std::process::{Command, Output};
 
 fn synth(args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_linetrack-synth")).args(args).output().expect("the binary starts")
 }
 
-fn scratch(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("linetrack-synth-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    dir
-}
-
 #[test]
 fn a_generated_sequence_loads_back_with_its_exact_ground_truth() {
-    let out = scratch("mismatch");
+    let out = linetrack_test_data::scratch_path("synth", "mismatch");
     let result = synth(&["--preset", "left-right-mismatch", "--seed", "4", "--frames", "3", "--output", out.to_str().unwrap()]);
     assert!(result.status.success(), "{}", String::from_utf8_lossy(&result.stderr));
     assert!(String::from_utf8_lossy(&result.stdout).contains("wrote 3 stereo frames (left-right-mismatch, seed 4)"));
@@ -54,7 +47,7 @@ fn a_generated_sequence_loads_back_with_its_exact_ground_truth() {
     assert_eq!(sheet.width(), 3 * 376 + 2 * 4);
 
     // The same seed again: the same bytes.
-    let again = scratch("mismatch-again");
+    let again = linetrack_test_data::scratch_path("synth", "mismatch-again");
     assert!(synth(&["--preset", "left-right-mismatch", "--seed", "4", "--frames", "3", "--output", again.to_str().unwrap()]).status.success());
     let name = format!("mav0/cam1/data/{}.png", frame.timestamp_ns);
     assert_eq!(std::fs::read(out.join(&name)).unwrap(), std::fs::read(again.join(&name)).unwrap());
@@ -68,9 +61,9 @@ fn bad_options_fail_with_a_clear_message() {
     let unknown = synth(&["--preset", "disco"]);
     assert!(!unknown.status.success());
     assert!(String::from_utf8_lossy(&unknown.stderr).contains("expected one of normal"));
-    let none = synth(&["--frames", "0", "--output", scratch("zero").to_str().unwrap()]);
+    let none = synth(&["--frames", "0", "--output", linetrack_test_data::scratch_path("synth", "zero").to_str().unwrap()]);
     assert!(!none.status.success() && String::from_utf8_lossy(&none.stderr).contains("--frames"));
-    let blocked = scratch("blocked");
+    let blocked = linetrack_test_data::scratch_path("synth", "blocked");
     std::fs::write(&blocked, b"a file where the folder should go").unwrap();
     let result = synth(&["--frames", "1", "--output", blocked.to_str().unwrap()]);
     assert!(!result.status.success());

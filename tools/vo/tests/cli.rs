@@ -4,22 +4,15 @@
 #![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failure here is a test failure
 
 use linetrack_datasets::tum;
-use std::path::PathBuf;
 use std::process::{Command, Output};
 
 fn vo(args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_linetrack-vo")).args(args).output().expect("the binary starts")
 }
 
-fn scratch(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("linetrack-vo-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    dir
-}
-
 #[test]
 fn a_generated_sequence_gives_trajectory_ground_truth_stats_and_metrics() {
-    let dir = scratch("generated");
+    let dir = linetrack_test_data::scratch_path("vo", "generated");
     let sequence = dir.join("sequence");
     linetrack_synth::generate(linetrack_scene_render::Preset::HandheldGainJumps, 3, 8, &sequence).unwrap();
     let out = dir.join("out");
@@ -42,7 +35,7 @@ fn a_generated_sequence_gives_trajectory_ground_truth_stats_and_metrics() {
 #[test]
 fn real_data_euroc_excerpt_is_tracked_without_losing_a_frame() {
     let euroc = linetrack_test_data::euroc_dir().unwrap_or_else(|e| panic!("{e}"));
-    let out = scratch("euroc");
+    let out = linetrack_test_data::scratch_path("vo", "euroc");
     let result = vo(&[euroc.to_str().unwrap(), "--output", out.to_str().unwrap()]);
     let stdout = String::from_utf8_lossy(&result.stdout);
     assert!(result.status.success(), "{}", String::from_utf8_lossy(&result.stderr));
@@ -55,7 +48,7 @@ fn real_data_euroc_excerpt_is_tracked_without_losing_a_frame() {
 
 #[test]
 fn a_folder_that_is_not_a_dataset_fails_naming_it() {
-    let dir = scratch("nothing");
+    let dir = linetrack_test_data::scratch_path("vo", "nothing");
     std::fs::create_dir_all(&dir).unwrap();
     let result = vo(&[dir.to_str().unwrap(), "--output", dir.join("out").to_str().unwrap()]);
     assert!(!result.status.success());
