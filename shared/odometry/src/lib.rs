@@ -1,6 +1,6 @@
 //! PL-StVO over a stream of rectified stereo frames.
 //!
-//! Per frame: ORB points and line segments (LSD or FLD) are detected in both images and
+//! [`Odometry`] per frame: ORB points and line segments (LSD or FLD) are detected in both images and
 //! matched stereo (segments with LBD or the ℓ1 matcher) and triangulated; the left image's
 //! features are matched to the previous frame's (same matchers, frame-to-frame case); each
 //! previous 3-D feature seen again becomes an observation, and the motion is estimated by
@@ -8,6 +8,9 @@
 //! motion (constant velocity). A frame with too few inliers or degenerate geometry is
 //! reported as lost: its pose repeats the last motion, and it becomes the new reference so
 //! tracking resumes on the next good frame instead of diverging.
+//!
+//! The back end alone, [`MotionTracker`], takes segments matched elsewhere (the pipeline's
+//! matcher stage) and does the rest.
 #![warn(missing_docs)]
 
 pub mod metrics;
@@ -108,20 +111,35 @@ pub struct FrameResult {
     pub stats: FrameStats,
 }
 
-/// Features of one frame kept for matching the next.
+/// Segments of one stereo frame, already matched: what the back end needs.
+#[derive(Debug, Clone, Copy)]
+pub struct MatchedLines<'a> {
+    /// Segments of the left image.
+    pub left: &'a [Segment],
+    /// Segments of the right image.
+    pub right: &'a [Segment],
+    /// Stereo matches: `query` indexes `left`, `train` indexes `right`.
+    pub stereo: &'a [FeatureMatch],
+    /// Frame-to-frame matches against the previous frame given to the tracker: `query`
+    /// indexes the previous frame's left segments, `train` this frame's; `None` when they
+    /// were not matched against that frame (tracking then restarts from this frame).
+    pub tracked: Option<&'a [FeatureMatch]>,
+}
+
+/// The previous frame's 3-D features.
 struct Reference {
     points: PointFeatures,
     point_positions: Vec<Option<(Point3<f64>, f64)>>,
-    lines: LineFeatures,
     line_positions: Vec<Option<([Point3<f64>; 2], f64)>>,
 }
 
-/// The odometry: feed frames in order with [`Odometry::track`].
-pub struct Odometry {
+/// The back end: given matched segments (and the images, for ORB points), triangulates,
+/// finds the previous frame's 3-D features again and estimates the motion. [`Odometry`]
+/// runs it after its own front end; the pipeline's pose stage runs it on the matcher
+/// stage's output.
+pub struct MotionTracker {
     config: OdometryConfig,
     rig: StereoRig,
-    detector: Box<dyn LineDetector>,
-    matcher: Box<dyn SegmentMatcher>,
     orb: OrbExtractor,
     hamming: HammingMatcher,
     reference: Option<Reference>,
@@ -129,24 +147,10 @@ pub struct Odometry {
     last_motion: Isometry3<f64>,
 }
 
-/// Errors that stop the odometry (bad configuration; per-frame problems are `lost`).
-#[derive(Debug, thiserror::Error)]
-pub enum OdometryError {
-    /// The front end could not be built or failed on an image.
-    #[error(transparent)]
-    Vision(#[from] VisionError),
-}
-
-fn since(start: Instant) -> f64 {
-    start.elapsed().as_secs_f64() * 1e3
-}
-
-impl Odometry {
-    /// An odometry for frames from `rig`.
+impl MotionTracker {
+    /// A tracker starting at the identity pose.
     pub fn new(config: OdometryConfig, rig: StereoRig) -> Result<Self, OdometryError> {
         Ok(Self {
-            detector: create_detector(config.detector, &config.frontend)?,
-            matcher: create_segment_matcher(config.matcher, &config.frontend)?,
             orb: OrbExtractor::new(&config.frontend.orb)?,
             hamming: HammingMatcher::new(),
             reference: None,
@@ -157,34 +161,44 @@ impl Odometry {
         })
     }
 
-    /// Tracks one stereo frame (rectified, the rig's size).
-    pub fn track(&mut self, left: &GrayImage, right: &GrayImage) -> Result<FrameResult, OdometryError> {
-        let mut stats = FrameStats::default();
+    /// Continues from `pose` (moving at `motion` per frame), as after a restart.
+    pub fn resume_from(&mut self, pose: Isometry3<f64>, motion: Isometry3<f64>) {
+        self.pose = pose;
+        self.last_motion = motion;
+        self.reference = None;
+    }
+
+    /// The current pose.
+    pub fn pose(&self) -> Isometry3<f64> {
+        self.pose
+    }
+
+    /// The last frame-to-frame motion.
+    pub fn last_motion(&self) -> Isometry3<f64> {
+        self.last_motion
+    }
+
+    /// Tracks one frame: `lines` matched, `stats` already holding the front end's counts and
+    /// timings. ORB points come from `images` (left, right) when the config uses points and
+    /// the images are given; without them the frame is tracked on its lines.
+    pub fn update(&mut self, images: Option<(&GrayImage, &GrayImage)>, lines: MatchedLines<'_>, mut stats: FrameStats) -> Result<FrameResult, OdometryError> {
         let limits = TriangulationLimits {
             min_sin_from_horizontal: self.config.min_line_angle_deg.to_radians().sin(),
             ..TriangulationLimits::default()
         };
-        let use_points = self.config.features == Features::PointsAndLines;
+        let images = images.filter(|_| self.config.features == Features::PointsAndLines);
+        let use_points = images.is_some();
 
-        // Detection and description.
         let started = Instant::now();
         let (mut points_l, mut points_r) = (PointFeatures::default(), PointFeatures::default());
-        if use_points {
+        if let Some((left, right)) = images {
             self.orb.extract(left, &mut points_l)?;
             self.orb.extract(right, &mut points_r)?;
         }
-        let (mut lines_l, mut lines_r) = (LineFeatures::default(), LineFeatures::default());
-        self.detector.detect(left, &mut lines_l.segments)?;
-        self.detector.detect(right, &mut lines_r.segments)?;
-        stats.ms[0] = since(started);
-        let started = Instant::now();
-        self.matcher.describe(left, &mut lines_l)?;
-        self.matcher.describe(right, &mut lines_r)?;
-        stats.ms[1] = since(started);
+        stats.ms[0] += since(started);
         stats.points = [points_l.points.len(), points_r.points.len()];
-        stats.segments = [lines_l.segments.len(), lines_r.segments.len()];
 
-        // Stereo matching and triangulation.
+        // Stereo triangulation.
         let started = Instant::now();
         let mut matches = Vec::new();
         let mut point_positions = vec![None; points_l.points.len()];
@@ -197,29 +211,31 @@ impl Odometry {
                 }
             }
         }
-        self.matcher.match_lines(MatchCase::Stereo, &lines_l, &lines_r, &mut matches);
-        let mut line_positions = vec![None; lines_l.segments.len()];
-        for m in &matches {
-            if let Some((a, b)) = triangulate_segment(&self.rig, &lines_l.segments[m.query], &lines_r.segments[m.train], &limits) {
+        let mut line_positions = vec![None; lines.left.len()];
+        for m in lines.stereo {
+            let (Some(l), Some(r)) = (lines.left.get(m.query), lines.right.get(m.train)) else { continue };
+            if let Some((a, b)) = triangulate_segment(&self.rig, l, r, &limits) {
                 let weight = 0.5 * (disparity_weight(a.disparity_px) + disparity_weight(b.disparity_px));
                 line_positions[m.query] = Some(([a.position, b.position], weight));
             }
         }
         stats.triangulated = [point_positions.iter().flatten().count(), line_positions.iter().flatten().count()];
-        stats.ms[2] = since(started);
+        stats.ms[2] += since(started);
 
-        let current = Reference { points: points_l, point_positions, lines: lines_l, line_positions };
-        let Some(previous) = self.reference.take() else {
+        let current = Reference { points: points_l, point_positions, line_positions };
+        let (Some(previous), Some(tracked)) = (self.reference.take(), lines.tracked) else {
+            // First frame, or not matched against the previous one: start again from here.
             self.reference = Some(current);
             return Ok(FrameResult { pose: self.pose, lost: false, reason: None, stats });
         };
 
-        // Frame-to-frame matching: previous 3-D features seen again now.
+        // Previous 3-D features seen again now.
         let started = Instant::now();
-        let (point_obs, line_obs) = self.observations(&previous, &current, &mut matches);
+        let point_obs = if use_points { self.point_observations(&previous, &current, &mut matches) } else { Vec::new() };
+        let line_obs = line_observations(&previous, lines.left, tracked);
         self.reference = Some(current);
         stats.observations = [point_obs.len(), line_obs.len()];
-        stats.ms[3] = since(started);
+        stats.ms[3] += since(started);
 
         let started = Instant::now();
         let estimate = estimate_motion(&self.rig, &point_obs, &line_obs, &self.last_motion, &self.config.motion);
@@ -241,29 +257,98 @@ impl Odometry {
         }
     }
 
-    /// Observations of `previous`'s triangulated features in `current`'s left image.
-    fn observations(&mut self, previous: &Reference, current: &Reference, scratch: &mut Vec<FeatureMatch>) -> (Vec<PointObservation>, Vec<LineObservation>) {
+    /// Observations of `previous`'s triangulated points in `current`'s left image.
+    fn point_observations(&mut self, previous: &Reference, current: &Reference, scratch: &mut Vec<FeatureMatch>) -> Vec<PointObservation> {
         let mut points = Vec::new();
         if self.config.features == Features::PointsAndLines {
             let gates = AppearanceGates { max_displacement_px: self.config.max_displacement_px, ..self.config.frontend.appearance_gates };
             match_points(&mut self.hamming, MatchCase::FrameToFrame, &previous.points, &current.points, &gates, self.config.frontend.orb.min_distance_ratio, scratch);
             for m in scratch.iter() {
-                if let Some((position, weight)) = previous.point_positions[m.query] {
+                if let Some(&Some((position, weight))) = previous.point_positions.get(m.query) {
                     let pixel: Point = current.points.points[m.train];
                     points.push(PointObservation { position, pixel, weight });
                 }
             }
         }
-        self.matcher.match_lines(MatchCase::FrameToFrame, &previous.lines, &current.lines, scratch);
-        let mut lines = Vec::new();
-        for m in scratch.iter() {
-            if let Some((endpoints, weight)) = previous.line_positions[m.query] {
-                let seen: &Segment = &current.lines.segments[m.train];
-                if let Some(obs) = LineObservation::new(endpoints, seen, weight) {
-                    lines.push(obs);
-                }
-            }
+        points
+    }
+}
+
+/// Observations of `previous`'s triangulated segments among this frame's `left` segments.
+fn line_observations(previous: &Reference, left: &[Segment], tracked: &[FeatureMatch]) -> Vec<LineObservation> {
+    let mut lines = Vec::new();
+    for m in tracked {
+        let (Some(&Some((endpoints, weight))), Some(seen)) = (previous.line_positions.get(m.query), left.get(m.train)) else { continue };
+        if let Some(obs) = LineObservation::new(endpoints, seen, weight) {
+            lines.push(obs);
         }
-        (points, lines)
+    }
+    lines
+}
+
+/// The odometry: feed frames in order with [`Odometry::track`].
+pub struct Odometry {
+    detector: Box<dyn LineDetector>,
+    matcher: Box<dyn SegmentMatcher>,
+    previous_lines: Option<LineFeatures>,
+    tracker: MotionTracker,
+}
+
+/// Errors that stop the odometry (bad configuration; per-frame problems are `lost`).
+#[derive(Debug, thiserror::Error)]
+pub enum OdometryError {
+    /// The front end could not be built or failed on an image.
+    #[error(transparent)]
+    Vision(#[from] VisionError),
+}
+
+fn since(start: Instant) -> f64 {
+    start.elapsed().as_secs_f64() * 1e3
+}
+
+impl Odometry {
+    /// An odometry for frames from `rig`.
+    pub fn new(config: OdometryConfig, rig: StereoRig) -> Result<Self, OdometryError> {
+        Ok(Self {
+            detector: create_detector(config.detector, &config.frontend)?,
+            matcher: create_segment_matcher(config.matcher, &config.frontend)?,
+            previous_lines: None,
+            tracker: MotionTracker::new(config, rig)?,
+        })
+    }
+
+    /// Tracks one stereo frame (rectified, the rig's size).
+    pub fn track(&mut self, left: &GrayImage, right: &GrayImage) -> Result<FrameResult, OdometryError> {
+        let mut stats = FrameStats::default();
+        let started = Instant::now();
+        let (mut lines_l, mut lines_r) = (LineFeatures::default(), LineFeatures::default());
+        self.detector.detect(left, &mut lines_l.segments)?;
+        self.detector.detect(right, &mut lines_r.segments)?;
+        stats.ms[0] = since(started);
+        let started = Instant::now();
+        self.matcher.describe(left, &mut lines_l)?;
+        self.matcher.describe(right, &mut lines_r)?;
+        stats.ms[1] = since(started);
+        stats.segments = [lines_l.segments.len(), lines_r.segments.len()];
+
+        let started = Instant::now();
+        let mut stereo = Vec::new();
+        self.matcher.match_lines(MatchCase::Stereo, &lines_l, &lines_r, &mut stereo);
+        stats.ms[2] = since(started);
+        let started = Instant::now();
+        let mut tracked = Vec::new();
+        if let Some(previous) = &self.previous_lines {
+            self.matcher.match_lines(MatchCase::FrameToFrame, previous, &lines_l, &mut tracked);
+        }
+        stats.ms[3] = since(started);
+        let lines = MatchedLines {
+            left: &lines_l.segments,
+            right: &lines_r.segments,
+            stereo: &stereo,
+            tracked: self.previous_lines.as_ref().map(|_| tracked.as_slice()),
+        };
+        let result = self.tracker.update(Some((left, right)), lines, stats);
+        self.previous_lines = Some(lines_l);
+        result
     }
 }

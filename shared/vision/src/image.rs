@@ -65,6 +65,25 @@ impl GrayImage {
         Self::from_mat(owned, origin)
     }
 
+    /// A view of row-major 8-bit pixels that the image does not own (a shared-memory
+    /// sample, say): read in place, never copied. The view cannot outlive `pixels`.
+    pub fn borrow_pixels<'a>(width: usize, height: usize, pixels: &'a [u8], origin: &str) -> Result<BorrowedGray<'a>, VisionError> {
+        let bad_size = || VisionError::RawSize { origin: origin.to_string(), len: pixels.len(), width, height };
+        if width == 0 || height == 0 || pixels.len() != width.checked_mul(height).ok_or_else(bad_size)? {
+            return Err(bad_size());
+        }
+        let (rows, cols) = (i32::try_from(height).map_err(|_| bad_size())?, i32::try_from(width).map_err(|_| bad_size())?);
+        // SAFETY: the Mat header points at `pixels`, which hold exactly rows × cols bytes
+        // (checked above) and outlive the returned view (its lifetime is `'a`). A header
+        // built on foreign data has no reference count, so dropping it never frees
+        // `pixels`. The view hands out only `&GrayImage`, through which OpenCV is given
+        // the Mat as input only; a clone copies the pixels into a Mat of its own.
+        #[allow(unsafe_code)]
+        let mat = unsafe { Mat::new_rows_cols_with_data_unsafe_def(rows, cols, core::CV_8UC1, pixels.as_ptr().cast::<std::ffi::c_void>().cast_mut()) }
+            .context("wrapping borrowed pixels")?;
+        Ok(BorrowedGray { image: Self::from_mat(mat, origin)?, _pixels: std::marker::PhantomData })
+    }
+
     /// The underlying OpenCV matrix (CV_8UC1).
     pub fn mat(&self) -> &Mat {
         &self.mat
@@ -101,6 +120,21 @@ impl GrayImage {
             second: other.origin.clone(),
             second_size: (other.width(), other.height()),
         })
+    }
+}
+
+/// A [`GrayImage`] reading pixels it does not own; see [`GrayImage::borrow_pixels`].
+#[derive(Debug)]
+pub struct BorrowedGray<'a> {
+    image: GrayImage,
+    _pixels: std::marker::PhantomData<&'a [u8]>,
+}
+
+impl std::ops::Deref for BorrowedGray<'_> {
+    type Target = GrayImage;
+
+    fn deref(&self) -> &GrayImage {
+        &self.image
     }
 }
 

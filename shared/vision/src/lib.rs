@@ -26,7 +26,7 @@ mod pair;
 pub use config::{AppearanceGates, FldOptions, FrontendConfig, LbdOptions, LineOptions, LsdOptions, LsdRefine, OrbOptions};
 pub use detect::{DetectorKind, FldDetector, LineDetector, LsdDetector, MIN_IMAGE_SIDE_PX, create_detector, keep_longest};
 pub use hamming::{BinaryDescriptors, FeatureMatch, HammingMatcher};
-pub use image::{GrayImage, perturb};
+pub use image::{BorrowedGray, GrayImage, perturb};
 pub use lbd::LbdExtractor;
 pub use matchers::{L1SegmentMatcher, LbdSegmentMatcher, LineFeatures, MatcherKind, SegmentMatcher, create_segment_matcher};
 pub use orb::{OrbExtractor, PointFeatures, match_points};

@@ -322,3 +322,24 @@ fn shipped_frontend_config_matches_the_defaults_and_names_are_checked() {
     assert_eq!("FLD".parse::<DetectorKind>(), Ok(DetectorKind::Fld));
     assert!("sift".parse::<MatcherKind>().unwrap_err().contains("lbd, l1"));
 }
+
+// ---------------------------------------------------------------- borrowed pixels
+
+#[test]
+fn borrowed_pixels_are_read_in_place_and_detect_like_owned_ones() {
+    let (w, h) = (320, 240);
+    let pixels = test_card(w, h);
+    let card = GrayImage::from_pixels(w, h, &pixels, "owned card").unwrap();
+    let view = GrayImage::borrow_pixels(w, h, &pixels, "borrowed card").unwrap();
+    // The view's Mat reads the caller's buffer itself, no copy.
+    assert_eq!(view.pixels().unwrap().as_ptr(), pixels.as_ptr());
+    let mut detector = create_detector(DetectorKind::Lsd, &FrontendConfig::default()).unwrap();
+    let (mut from_view, mut from_owned) = (Vec::new(), Vec::new());
+    detector.detect(&view, &mut from_view).unwrap();
+    detector.detect(&card, &mut from_owned).unwrap();
+    assert!(!from_owned.is_empty());
+    assert_eq!(from_view, from_owned);
+    // A wrong length names the image.
+    let err = GrayImage::borrow_pixels(w, h + 1, &pixels, "short buffer").unwrap_err().to_string();
+    assert!(err.contains("short buffer"), "{err}");
+}

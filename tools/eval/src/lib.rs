@@ -5,7 +5,6 @@
 #![warn(missing_docs)]
 
 mod odometry;
-mod plot;
 mod tracking;
 
 use anyhow::Context;
@@ -157,12 +156,12 @@ pub fn run(args: &Args) -> anyhow::Result<String> {
         };
         let path = args.output.join(format!("tracking-{slug}.png"));
         let series = vec![("LSD+LBD matches".to_string(), per_frame(&results[0], false)), ("LSD+l1 matches".to_string(), per_frame(&results[1], false))];
-        plot::lines(&path, &format!("{}: frame-to-frame matches (dashed: illumination events)", entry.name), "frame", "matches", &series, &events, false)?;
+        linetrack_plot::lines(&path, &format!("{}: frame-to-frame matches (dashed: illumination events)", entry.name), "frame", "matches", &series, &events, false)?;
         plots.push(path);
         if results[0].frame_to_frame.iter().any(|c| c.judged > 0) {
             let path = args.output.join(format!("inliers-{slug}.png"));
             let series = vec![("LSD+LBD inlier ratio".to_string(), per_frame(&results[0], true)), ("LSD+l1 inlier ratio".to_string(), per_frame(&results[1], true))];
-            plot::lines(&path, &format!("{}: frame-to-frame inlier ratio (dashed: illumination events)", entry.name), "frame", "inlier ratio", &series, &events, false)?;
+            linetrack_plot::lines(&path, &format!("{}: frame-to-frame inlier ratio (dashed: illumination events)", entry.name), "frame", "inlier ratio", &series, &events, false)?;
             plots.push(path);
         }
 
@@ -194,7 +193,7 @@ pub fn run(args: &Args) -> anyhow::Result<String> {
             }
             writeln!(table2, "| {row_name} | {} |", cells.join(" | "))?;
             let path = args.output.join(format!("trajectory-{}.png", row_name.replace(' ', "-").replace('*', "-perturbed")));
-            plot::lines(&path, &format!("{row_name}: top view of the left camera (x right, z forward of the first frame)"), "x [m]", "z [m]", &trajectories, &[], true)?;
+            linetrack_plot::lines(&path, &format!("{row_name}: top view of the left camera (x right, z forward of the first frame)"), "x [m]", "z [m]", &trajectories, &[], true)?;
             plots.push(path);
         }
     }

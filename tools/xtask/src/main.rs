@@ -1,9 +1,12 @@
 //! `cargo xtask <command>`: the project's user-facing commands, with setup included.
 //!
-//! - `cargo xtask demo [ARGS…]` — install system packages if missing, then run the demo
-//!   (ARGS go to it; `cargo xtask demo --help` lists them).
-//! - `cargo xtask test [ARGS…]` — install system packages if missing, then run the whole
-//!   test suite with cargo-nextest (or `cargo test` where nextest is not installed).
+//! - `cargo xtask demo [ARGS…]` — install system packages if missing, build the pipeline's
+//!   binaries and run `linetrack run ARGS…`: the multi-process pipeline on the default
+//!   generated sequence (`cargo xtask demo --help` lists the options).
+//! - `cargo xtask match-demo [ARGS…]` — the ℓ1 matcher demo on one scene and one stereo pair.
+//! - `cargo xtask test [ARGS…]` — install system packages if missing, build the binaries the
+//!   end-to-end tests start, then run the whole test suite with cargo-nextest (or `cargo
+//!   test` where nextest is not installed).
 //! - `cargo xtask setup` — only install the system packages.
 //!
 //! Every command can be run again: packages already installed are not touched.
@@ -15,10 +18,11 @@ use std::process::{Command, ExitCode};
 /// (LSD, FLD, LBD, ORB) and libclang for the `opencv` crate's binding generator.
 const SYSTEM_PACKAGES: &[&str] = &["libopencv-dev", "libopencv-contrib-dev", "clang", "libclang-dev"];
 
-const USAGE: &str = "usage: cargo xtask <demo|test|setup> [ARGS…]
-  demo   run the demo (ARGS are passed on; try `cargo xtask demo --help`)
-  test   run the whole test suite (ARGS are passed to cargo nextest run / cargo test)
-  setup  install the system packages only";
+const USAGE: &str = "usage: cargo xtask <demo|match-demo|test|setup> [ARGS…]
+  demo        run the pipeline: `linetrack run ARGS…` (try `cargo xtask demo --help`)
+  match-demo  the l1 matcher demo (ARGS are passed on)
+  test        run the whole test suite (ARGS are passed to cargo nextest run / cargo test)
+  setup       install the system packages only";
 
 fn main() -> ExitCode {
     match run() {
@@ -41,10 +45,31 @@ fn run() -> anyhow::Result<ExitCode> {
         }
         "demo" => {
             install_system_packages()?;
+            // The supervisor starts the stage binaries from its own folder: build them all.
+            let built = cargo(&["build", "--release", "--quiet", "--workspace", "--bins"], &[])?;
+            if built != ExitCode::SUCCESS {
+                return Ok(built);
+            }
+            let target = std::env::var_os("CARGO_TARGET_DIR").map_or_else(|| std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../target"), std::path::PathBuf::from);
+            let mut linetrack_args = vec!["run".to_string()];
+            if rest.first().is_some_and(|a| a == "--help" || a == "-h") {
+                linetrack_args.clear();
+            }
+            linetrack_args.extend(rest);
+            let status = Command::new(target.join("release/linetrack")).args(&linetrack_args).status().context("cannot start linetrack")?;
+            Ok(if status.success() { ExitCode::SUCCESS } else { ExitCode::FAILURE })
+        }
+        "match-demo" => {
+            install_system_packages()?;
             cargo(&["run", "--release", "--quiet", "--package", "linetrack-match-demo", "--"], &rest)
         }
         "test" => {
             install_system_packages()?;
+            // The end-to-end tests start the real stage processes.
+            let built = cargo(&["build", "--workspace", "--bins", "--profile", "test-release"], &[])?;
+            if built != ExitCode::SUCCESS {
+                return Ok(built);
+            }
             let with_real_data = real_data_present();
             if has_nextest() {
                 let mut fixed = vec!["nextest", "run", "--workspace", "--cargo-profile", "test-release"];

@@ -1,4 +1,5 @@
-//! Plots drawn with OpenCV (its built-in Hershey font labels the axes).
+//! Line plots drawn with OpenCV into PNG files (its built-in Hershey font labels the axes):
+//! evaluation curves, trajectories, latency histograms.
 
 use anyhow::Context;
 use opencv::core::{Mat, Point, Scalar, Vector, CV_8UC3};
@@ -71,4 +72,30 @@ pub fn lines(path: &Path, title: &str, x_label: &str, y_label: &str, series: &[(
     text(&mut canvas, &format!("{y1:.2}"), 5, MARGIN + 10, 0)?;
     imgcodecs::imwrite(path.display().to_string().as_str(), &canvas, &Vector::new()).with_context(|| format!("cannot write {}", path.display()))?;
     Ok(())
+}
+
+/// Histogram outlines: for each series `(name, values)`, the count of values per bin of
+/// width `bin` from 0, drawn as a step line; `markers` as dashed vertical lines (budgets).
+pub fn histogram(path: &Path, title: &str, x_label: &str, series: &[(String, Vec<f64>)], bin: f64, markers: &[f64]) -> anyhow::Result<()> {
+    anyhow::ensure!(bin.is_finite() && bin > 0.0, "histogram bin width must be positive, got {bin}");
+    let top = series.iter().flat_map(|(_, v)| v.iter().copied()).filter(|v| v.is_finite()).fold(0.0f64, f64::max).max(markers.iter().copied().fold(0.0, f64::max));
+    let bins = ((top / bin).floor() as usize + 1).min(10_000);
+    let outlines: Vec<(String, Vec<(f64, f64)>)> = series
+        .iter()
+        .map(|(name, values)| {
+            let mut counts = vec![0usize; bins];
+            for v in values.iter().filter(|v| v.is_finite() && **v >= 0.0) {
+                counts[((v / bin) as usize).min(bins - 1)] += 1;
+            }
+            let mut points = vec![(0.0, 0.0)];
+            for (k, c) in counts.iter().enumerate() {
+                let (x0, x1, y) = (k as f64 * bin, (k + 1) as f64 * bin, *c as f64);
+                points.push((x0, y));
+                points.push((x1, y));
+            }
+            points.push((bins as f64 * bin, 0.0));
+            (name.clone(), points)
+        })
+        .collect();
+    lines(path, title, x_label, "frames", &outlines, markers, false)
 }

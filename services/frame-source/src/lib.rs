@@ -1,0 +1,129 @@
+//! The frame source: reads a stereo sequence (EuRoC or KITTI layout, rectified on load)
+//! and publishes each frame's two images into one shared-memory message, paced at the
+//! sequence's rate or as fast as it can. A frame that cannot be read is published as a
+//! `corrupt` marker (no pixels) so that downstream stages and the records count it.
+
+use anyhow::Context;
+use linetrack_datasets::StereoSequence;
+use linetrack_ipc::{Bus, Inlet, Outlet, Shutdown, Wake};
+use linetrack_msgs::{Command, Control, FrameHeader, FrameStatus, StageKind, StatusKind, Topic, now_ns};
+use linetrack_pipeline_config::Pacing;
+use linetrack_stage_runtime::{Reporter, StageContext, stamp_end};
+use std::time::{Duration, Instant};
+use tracing::info_span;
+
+/// The source's connections.
+pub struct Ports {
+    frames: Outlet<u8>,
+    control: Inlet<Control>,
+    wake: Wake,
+    reporter: Reporter,
+}
+
+impl Ports {
+    /// Opens the source's services on `bus`.
+    pub fn open(bus: &Bus, ctx: &StageContext) -> anyhow::Result<Self> {
+        Ok(Self {
+            frames: bus.outlet(Topic::Frames, 2 * 752 * 480)?,
+            control: bus.inlet(Topic::Control)?,
+            wake: bus.wake(StageKind::FrameSource)?,
+            reporter: Reporter::new(bus, ctx, 0)?,
+        })
+    }
+}
+
+/// When frame `k` (0-based from the first one published) is due, from the start.
+fn due_offset(pacing: Pacing, rate_hz: f64, first_ns: u64, timestamp_ns: u64, k: usize) -> Duration {
+    match pacing {
+        Pacing::Fastest => Duration::ZERO,
+        Pacing::Realtime if rate_hz > 0.0 => Duration::from_secs_f64(k as f64 / rate_hz),
+        Pacing::Realtime => Duration::from_nanos(timestamp_ns.saturating_sub(first_ns)),
+    }
+}
+
+/// Whether a shutdown command arrived.
+fn shutdown_ordered(control: &mut Inlet<Control>, pid: u32) -> anyhow::Result<bool> {
+    Ok(control.receive_all()?.iter().any(|c| {
+        let c = c.payload().first().copied().unwrap_or_default();
+        Command::from_code(c.command) == Some(Command::Shutdown) && c.is_for(StageKind::FrameSource, pid)
+    }))
+}
+
+/// Publishes the sequence; returns when it is done or shutdown is asked for.
+pub fn run(ctx: &StageContext, mut ports: Ports, shutdown: &Shutdown) -> anyhow::Result<()> {
+    let source = &ctx.config.source;
+    let sequence = StereoSequence::open(&source.sequence).with_context(|| format!("opening sequence {}", source.sequence.display()))?;
+    let total = sequence.frames.len();
+    let start = ctx.args.start_frame.min(total);
+    let end = if source.max_frames > 0 { total.min(source.max_frames) } else { total };
+    let first_ns = sequence.frames.get(start).map_or(0, |f| f.timestamp_ns);
+    let rate = if source.rate_hz > 0.0 { source.rate_hz } else { 0.0 };
+    tracing::info!("{}: frames {start}..{end} of {total}, {:?}", sequence.name, source.pacing);
+    let stream = sequence.into_stream(start, 4);
+    ports.reporter.report(StatusKind::Ready, start as u64, 0);
+
+    let began = Instant::now();
+    let mut published = 0u64;
+    for (k, item) in stream.take(end.saturating_sub(start)).enumerate() {
+        let (index, timestamp_ns) = match &item {
+            Ok(frame) => (frame.index, frame.timestamp_ns),
+            Err(e) => (e.index, e.timestamp_ns),
+        };
+        // Wait for the frame's time, waking for commands.
+        let due = began + due_offset(source.pacing, rate, first_ns, timestamp_ns, k);
+        loop {
+            if shutdown.requested() || shutdown_ordered(&mut ports.control, ctx.pid)? {
+                tracing::info!("shutdown after {published} frames");
+                return Ok(());
+            }
+            let now = Instant::now();
+            if now >= due {
+                break;
+            }
+            ports.wake.wait((due - now).min(ports.reporter.until_due().max(Duration::from_millis(1))))?;
+            ports.reporter.beat(published);
+        }
+        let span = info_span!("publish_frame", frame_id = index as u64);
+        let _entered = span.enter();
+        let capture_ns = now_ns();
+        let mut header = FrameHeader::new(index as u64, timestamp_ns, capture_ns);
+        if let Some(stamp) = header.stamp_mut(StageKind::FrameSource) {
+            stamp.start_ns = capture_ns;
+        }
+        match item {
+            Ok(frame) => {
+                let (w, h) = (frame.left.width() as u32, frame.left.height() as u32);
+                header.width = w;
+                header.height = h;
+                let (Some(left), Some(right)) = (frame.left.pixels(), frame.right.pixels()) else {
+                    anyhow::bail!("frame {index}: images are not continuous in memory");
+                };
+                stamp_end(&mut header, StageKind::FrameSource);
+                ports.frames.publish(&header, &[left, right])?;
+            }
+            Err(e) => {
+                tracing::warn!("{e}");
+                header.mark(FrameStatus::Corrupt, StageKind::FrameSource);
+                stamp_end(&mut header, StageKind::FrameSource);
+                ports.frames.publish(&header, &[])?;
+            }
+        }
+        published += 1;
+        ports.reporter.report(StatusKind::Heartbeat, index as u64, published);
+    }
+    ports.reporter.report(StatusKind::SourceFinished, (start as u64 + published).saturating_sub(1), published);
+    tracing::info!("finished: {published} frames published");
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn pacing_follows_timestamps_or_the_rate() {
+        assert_eq!(due_offset(Pacing::Realtime, 0.0, 1_000, 51_000_000, 3), Duration::from_nanos(50_999_000));
+        assert_eq!(due_offset(Pacing::Realtime, 20.0, 0, 999, 4), Duration::from_millis(200));
+        assert_eq!(due_offset(Pacing::Fastest, 20.0, 0, 999, 4), Duration::ZERO);
+    }
+}

@@ -1,0 +1,11 @@
+//! The `linetrack-frame-source` process: one stage of the pipeline, started by the supervisor.
+
+use linetrack_msgs::StageKind;
+use std::process::ExitCode;
+
+fn main() -> ExitCode {
+    linetrack_stage_runtime::stage_main(StageKind::FrameSource, |ctx, bus, shutdown| {
+        let ports = linetrack_frame_source::Ports::open(bus, ctx)?;
+        linetrack_frame_source::run(ctx, ports, shutdown)
+    })
+}

@@ -1,0 +1,230 @@
+//! The matcher: stereo and frame-to-frame segment matching.
+//!
+//! It takes each frame's segments from the detector and, for LBD, the frame's images,
+//! held in shared memory since they arrived. In LBD mode it describes both images' segments
+//! and matches them by descriptor; in ℓ1 mode it matches by geometry only, and every
+//! `probe_every`-th frame also tries LBD and reports how many stereo matches it found, so
+//! the supervisor can tell when LBD works again. Frame-to-frame matching uses LBD when both
+//! frames were described, else ℓ1. The supervisor sets the mode; the matcher reports.
+
+use linetrack_ipc::{Bus, Inlet, Outlet, Received, Shutdown, Wake};
+use linetrack_msgs::{Command, Control, FrameHeader, FrameStatus, MatcherMode, NO_FRAME, SegmentRecord, StageKind, Topic, TrackedLine};
+use linetrack_pipeline_config::MatcherPolicy;
+use linetrack_stage_runtime::{HeldFrames, Reporter, StageContext, late_drop, stamp_end, stamp_start, stereo_views, to_segment};
+use linetrack_geometry::MatchCase;
+use linetrack_vision::{FeatureMatch, LineFeatures, MatcherKind, SegmentMatcher, create_segment_matcher};
+use std::time::Duration;
+use tracing::info_span;
+
+/// The matcher's connections.
+pub struct Ports {
+    frames: Inlet<u8>,
+    segments: Inlet<SegmentRecord>,
+    tracks: Outlet<TrackedLine>,
+    control: Inlet<Control>,
+    wake: Wake,
+    reporter: Reporter,
+}
+
+impl Ports {
+    /// Opens the matcher's services on `bus`.
+    pub fn open(bus: &Bus, ctx: &StageContext) -> anyhow::Result<Self> {
+        Ok(Self {
+            frames: bus.inlet(Topic::Frames)?,
+            segments: bus.inlet(Topic::Segments)?,
+            tracks: bus.outlet(Topic::Tracks, 128)?,
+            control: bus.inlet(Topic::Control)?,
+            wake: bus.wake(StageKind::Matcher)?,
+            reporter: Reporter::new(bus, ctx, 0)?,
+        })
+    }
+}
+
+/// The previous frame's left features.
+struct Previous {
+    frame_id: u64,
+    features: LineFeatures,
+    described: bool,
+}
+
+/// Matching state across frames.
+pub struct FrameMatcher {
+    lbd: Box<dyn SegmentMatcher>,
+    l1: Box<dyn SegmentMatcher>,
+    mode: MatcherMode,
+    probe_every: u32,
+    frames_in_l1: u32,
+    previous: Option<Previous>,
+    stereo: Vec<FeatureMatch>,
+    tracked: Vec<FeatureMatch>,
+}
+
+impl FrameMatcher {
+    /// A matcher with the run's front-end settings, starting in the policy's mode.
+    pub fn new(ctx: &StageContext) -> anyhow::Result<Self> {
+        let frontend = &ctx.config.odometry.frontend;
+        let mode = match ctx.config.matcher.mode {
+            MatcherPolicy::Auto | MatcherPolicy::Lbd => MatcherMode::Lbd,
+            MatcherPolicy::L1 => MatcherMode::L1,
+        };
+        Ok(Self {
+            lbd: create_segment_matcher(MatcherKind::Lbd, frontend)?,
+            l1: create_segment_matcher(MatcherKind::L1, frontend)?,
+            mode,
+            probe_every: ctx.config.matcher.fallback.probe_every,
+            frames_in_l1: 0,
+            previous: None,
+            stereo: Vec::new(),
+            tracked: Vec::new(),
+        })
+    }
+
+    /// The mode for the next frames.
+    pub fn set_mode(&mut self, mode: MatcherMode) {
+        if mode != self.mode {
+            tracing::info!("matcher mode {} -> {}", self.mode.name(), mode.name());
+            self.mode = mode;
+            self.frames_in_l1 = 0;
+        }
+    }
+
+    /// The current mode.
+    pub fn mode(&self) -> MatcherMode {
+        self.mode
+    }
+
+    /// Matches one frame's segments (`images` for LBD); fills `header`'s counts and returns
+    /// one record per left segment.
+    pub fn match_frame(&mut self, header: &mut FrameHeader, segments: &[SegmentRecord], images: Option<&Received<u8>>) -> anyhow::Result<Vec<TrackedLine>> {
+        let n_left = (header.left_count as usize).min(segments.len());
+        let (left_records, right_records) = segments.split_at(n_left);
+        let mut left = LineFeatures { segments: left_records.iter().map(|r| to_segment(&r.endpoints)).collect(), ..LineFeatures::default() };
+        let mut right = LineFeatures { segments: right_records.iter().map(|r| to_segment(&r.endpoints)).collect(), ..LineFeatures::default() };
+        let views = match images.map(stereo_views) {
+            Some(Ok(views)) => Some(views),
+            Some(Err(e)) => {
+                tracing::warn!("frame {}: {e}; matching by geometry", header.frame_id);
+                None
+            }
+            None => None,
+        };
+        let mut mode = self.mode;
+        if mode == MatcherMode::Lbd && views.is_none() {
+            mode = MatcherMode::L1;
+        }
+        let probe = mode == MatcherMode::L1 && self.mode == MatcherMode::L1 && views.is_some() && self.frames_in_l1 % self.probe_every == 0;
+        let mut described = false;
+        if let Some((l, r)) = &views
+            && (mode == MatcherMode::Lbd || probe)
+        {
+            let span = info_span!("describe");
+            let _entered = span.enter();
+            self.lbd.describe(l, &mut left)?;
+            self.lbd.describe(r, &mut right)?;
+            described = true;
+        }
+        {
+            let span = info_span!("stereo_match");
+            let _entered = span.enter();
+            if mode == MatcherMode::Lbd {
+                self.lbd.match_lines(MatchCase::Stereo, &left, &right, &mut self.stereo);
+            } else {
+                if probe {
+                    self.lbd.match_lines(MatchCase::Stereo, &left, &right, &mut self.stereo);
+                    header.lbd_probe_matches = self.stereo.len() as i32;
+                }
+                self.l1.match_lines(MatchCase::Stereo, &left, &right, &mut self.stereo);
+            }
+        }
+        self.tracked.clear();
+        header.previous_frame_id = NO_FRAME;
+        if let Some(previous) = &self.previous {
+            let span = info_span!("track_match");
+            let _entered = span.enter();
+            let use_lbd = mode == MatcherMode::Lbd && previous.described && described;
+            let matcher = if use_lbd { &mut self.lbd } else { &mut self.l1 };
+            matcher.match_lines(MatchCase::FrameToFrame, &previous.features, &left, &mut self.tracked);
+            header.previous_frame_id = previous.frame_id;
+        }
+        if self.mode == MatcherMode::L1 {
+            self.frames_in_l1 += 1;
+        }
+        header.matcher_mode = mode as u32;
+        header.stereo_matches = self.stereo.len() as u32;
+        header.tracked_matches = self.tracked.len() as u32;
+
+        let mut out: Vec<TrackedLine> = left_records.iter().map(|r| TrackedLine { left: r.endpoints, previous: -1, ..TrackedLine::default() }).collect();
+        for m in &self.stereo {
+            if let (Some(t), Some(r)) = (out.get_mut(m.query), right_records.get(m.train)) {
+                t.right = r.endpoints;
+                t.has_stereo = 1;
+            }
+        }
+        for m in &self.tracked {
+            if let Some(t) = out.get_mut(m.train) {
+                t.previous = i32::try_from(m.query).unwrap_or(-1);
+            }
+        }
+        self.previous = Some(Previous { frame_id: header.frame_id, features: left, described });
+        Ok(out)
+    }
+}
+
+/// Runs the matcher until shutdown.
+pub fn run(ctx: &StageContext, mut ports: Ports, shutdown: &Shutdown) -> anyhow::Result<()> {
+    let mut matcher = FrameMatcher::new(ctx)?;
+    let mut held = HeldFrames::new(10);
+    let mut processed = 0u64;
+    ports.reporter.report(linetrack_msgs::StatusKind::Ready, 0, 0);
+    while !shutdown.requested() {
+        for message in ports.control.receive_all()? {
+            let Some(&c) = message.payload().first() else { continue };
+            if !c.is_for(StageKind::Matcher, ctx.pid) {
+                continue;
+            }
+            match Command::from_code(c.command) {
+                Some(Command::Shutdown) => return Ok(()),
+                Some(Command::SetMatcherMode) => match MatcherMode::from_code(c.value) {
+                    Some(mode) => matcher.set_mode(mode),
+                    None => tracing::warn!("unknown matcher mode code {}", c.value),
+                },
+                _ => {}
+            }
+        }
+        for frame in ports.frames.receive_all()? {
+            held.push(frame);
+        }
+        let batch = ports.segments.receive_all()?;
+        let count = batch.len();
+        for (k, message) in batch.iter().enumerate() {
+            let mut header = *message.header();
+            let span = info_span!("match", frame_id = header.frame_id);
+            let _entered = span.enter();
+            stamp_start(&mut header, StageKind::Matcher);
+            let images = held.take(header.frame_id);
+            if header.frame_status() == FrameStatus::Ok
+                && let Some(status) = late_drop(&header, k + 1 < count, &ctx.config.budget)
+            {
+                header.mark(status, StageKind::Matcher);
+            }
+            let records = if header.frame_status() == FrameStatus::Ok {
+                match matcher.match_frame(&mut header, message.payload(), images.as_ref()) {
+                    Ok(records) => records,
+                    Err(e) => {
+                        tracing::warn!("frame {}: {e:#}", header.frame_id);
+                        header.mark(FrameStatus::StageError, StageKind::Matcher);
+                        Vec::new()
+                    }
+                }
+            } else {
+                Vec::new()
+            };
+            stamp_end(&mut header, StageKind::Matcher);
+            ports.tracks.publish(&header, &[&records])?;
+            processed += 1;
+        }
+        ports.reporter.beat(processed);
+        ports.wake.wait(ports.reporter.until_due().max(Duration::from_millis(1)))?;
+    }
+    Ok(())
+}

@@ -1,0 +1,200 @@
+//! The pose estimator: the odometry's back end on the matcher's output. It triangulates
+//! the stereo-matched segments (and ORB points of the frame's images, read in place, when
+//! the config uses points), finds the previous frame's 3-D features through the
+//! frame-to-frame matches, and publishes the frame's pose. When the tracks were matched
+//! against another frame than the one it last tracked (a drop upstream, a restart), it
+//! starts again from the current pose instead of using them.
+
+use anyhow::Context;
+use linetrack_datasets::StereoSequence;
+use linetrack_geometry::Segment;
+use linetrack_ipc::{Bus, Inlet, Outlet, Shutdown, Wake};
+use linetrack_msgs::{Command, Control, FrameHeader, FrameStatus, NO_FRAME, PoseRecord, StageKind, StatusKind, Topic, TrackedLine};
+use linetrack_odometry::{Features, FrameStats, MatchedLines, MotionTracker};
+use linetrack_stage_runtime::{HeldFrames, Reporter, StageContext, late_drop, stamp_end, stamp_start, stereo_views, to_segment};
+use linetrack_vision::FeatureMatch;
+use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion};
+use std::time::Duration;
+use tracing::info_span;
+
+/// The pose estimator's connections.
+pub struct Ports {
+    frames: Option<Inlet<u8>>,
+    tracks: Inlet<TrackedLine>,
+    poses: Outlet<PoseRecord>,
+    control: Inlet<Control>,
+    wake: Wake,
+    reporter: Reporter,
+}
+
+impl Ports {
+    /// Opens the pose estimator's services on `bus` (the images only when points are used).
+    pub fn open(bus: &Bus, ctx: &StageContext) -> anyhow::Result<Self> {
+        let points = ctx.config.odometry.features == Features::PointsAndLines;
+        Ok(Self {
+            frames: if points { Some(bus.inlet(Topic::Frames)?) } else { None },
+            tracks: bus.inlet(Topic::Tracks)?,
+            poses: bus.outlet(Topic::Poses, 1)?,
+            control: bus.inlet(Topic::Control)?,
+            wake: bus.wake(StageKind::PoseEstimator)?,
+            reporter: Reporter::new(bus, ctx, 0)?,
+        })
+    }
+}
+
+/// A pose as a record.
+pub fn pose_record(pose: &Isometry3<f64>) -> PoseRecord {
+    let t = pose.translation.vector;
+    let q = pose.rotation.quaternion();
+    PoseRecord { translation: [t.x, t.y, t.z], rotation_xyzw: [q.i, q.j, q.k, q.w], ..PoseRecord::default() }
+}
+
+/// Parses `frame,tx,ty,tz,qx,qy,qz,qw` (the supervisor's `--resume-pose`).
+pub fn parse_resume_pose(text: &str) -> anyhow::Result<(u64, Isometry3<f64>)> {
+    let fields: Vec<&str> = text.split(',').map(str::trim).collect();
+    anyhow::ensure!(fields.len() == 8, "--resume-pose {text:?}: expected frame,tx,ty,tz,qx,qy,qz,qw");
+    let frame: u64 = fields[0].parse().with_context(|| format!("--resume-pose: frame {:?}", fields[0]))?;
+    let mut v = [0.0f64; 7];
+    for (slot, f) in v.iter_mut().zip(&fields[1..]) {
+        *slot = f.parse().with_context(|| format!("--resume-pose: {f:?} is not a number"))?;
+        anyhow::ensure!(slot.is_finite(), "--resume-pose: {f:?} is not finite");
+    }
+    let q = Quaternion::new(v[6], v[3], v[4], v[5]);
+    anyhow::ensure!(q.norm() > 1e-9, "--resume-pose: zero quaternion");
+    Ok((frame, Isometry3::from_parts(Translation3::new(v[0], v[1], v[2]), UnitQuaternion::from_quaternion(q))))
+}
+
+/// Tracking state: the back end and the frame it last tracked.
+pub struct PoseTracker {
+    tracker: MotionTracker,
+    last_frame: u64,
+}
+
+impl PoseTracker {
+    /// A tracker for the run's sequence rig.
+    pub fn new(ctx: &StageContext) -> anyhow::Result<Self> {
+        let sequence = &ctx.config.source.sequence;
+        let rig = StereoSequence::open(sequence).with_context(|| format!("reading the rig of {}", sequence.display()))?.rig;
+        let mut tracker = MotionTracker::new(ctx.config.odometry_config(), rig)?;
+        if let Some(text) = &ctx.args.resume_pose {
+            let (frame, pose) = parse_resume_pose(text)?;
+            tracing::info!("resuming after frame {frame}");
+            tracker.resume_from(pose, Isometry3::identity());
+        }
+        Ok(Self { tracker, last_frame: NO_FRAME })
+    }
+
+    /// Tracks one frame.
+    pub fn track(&mut self, header: &FrameHeader, lines: &[TrackedLine], frame: Option<&linetrack_ipc::Received<u8>>) -> anyhow::Result<PoseRecord> {
+        let left: Vec<Segment> = lines.iter().map(|t| to_segment(&t.left)).collect();
+        let right: Vec<Segment> = lines.iter().filter(|t| t.has_stereo == 1).map(|t| to_segment(&t.right)).collect();
+        let mut stereo = Vec::new();
+        let mut tracked = Vec::new();
+        let mut r = 0;
+        for (i, t) in lines.iter().enumerate() {
+            if t.has_stereo == 1 {
+                stereo.push(FeatureMatch { query: i, train: r, distance: 0.0 });
+                r += 1;
+            }
+            if let Ok(previous) = usize::try_from(t.previous) {
+                tracked.push(FeatureMatch { query: previous, train: i, distance: 0.0 });
+            }
+        }
+        let continues = header.previous_frame_id != NO_FRAME && header.previous_frame_id == self.last_frame;
+        let matched = MatchedLines { left: &left, right: &right, stereo: &stereo, tracked: continues.then_some(tracked.as_slice()) };
+        let views = match frame.map(stereo_views) {
+            Some(Ok(v)) => Some(v),
+            Some(Err(e)) => {
+                tracing::warn!("frame {}: {e}; tracking on lines only", header.frame_id);
+                None
+            }
+            None => None,
+        };
+        let images = views.as_ref().map(|(l, r)| (&**l, &**r));
+        let result = self.tracker.update(images, matched, FrameStats::default())?;
+        self.last_frame = header.frame_id;
+        let mut record = pose_record(&result.pose);
+        record.lost = u32::from(result.lost);
+        record.inliers = result.stats.inliers.map(|n| n as u32);
+        record.observations = result.stats.observations.map(|n| n as u32);
+        record.rms_px = result.stats.rms_px;
+        if let Some(reason) = &result.reason {
+            tracing::debug!("frame {} lost: {reason}", header.frame_id);
+        }
+        Ok(record)
+    }
+}
+
+/// Runs the pose estimator until shutdown.
+pub fn run(ctx: &StageContext, mut ports: Ports, shutdown: &Shutdown) -> anyhow::Result<()> {
+    let mut tracker = PoseTracker::new(ctx)?;
+    let mut held = HeldFrames::new(10);
+    let mut processed = 0u64;
+    ports.reporter.report(StatusKind::Ready, 0, 0);
+    while !shutdown.requested() {
+        for message in ports.control.receive_all()? {
+            if let Some(&c) = message.payload().first()
+                && c.is_for(StageKind::PoseEstimator, ctx.pid)
+                && Command::from_code(c.command) == Some(Command::Shutdown)
+            {
+                return Ok(());
+            }
+        }
+        if let Some(frames) = &mut ports.frames {
+            for frame in frames.receive_all()? {
+                held.push(frame);
+            }
+        }
+        let batch = ports.tracks.receive_all()?;
+        let count = batch.len();
+        for (k, message) in batch.iter().enumerate() {
+            let mut header = *message.header();
+            let span = info_span!("estimate_pose", frame_id = header.frame_id);
+            let _entered = span.enter();
+            stamp_start(&mut header, StageKind::PoseEstimator);
+            let frame = held.take(header.frame_id);
+            if header.frame_status() == FrameStatus::Ok
+                && let Some(status) = late_drop(&header, k + 1 < count, &ctx.config.budget)
+            {
+                header.mark(status, StageKind::PoseEstimator);
+            }
+            let record = if header.frame_status() == FrameStatus::Ok {
+                match tracker.track(&header, message.payload(), frame.as_ref()) {
+                    Ok(record) => record,
+                    Err(e) => {
+                        tracing::warn!("frame {}: {e:#}", header.frame_id);
+                        header.mark(FrameStatus::StageError, StageKind::PoseEstimator);
+                        pose_record(&tracker.tracker.pose())
+                    }
+                }
+            } else {
+                pose_record(&tracker.tracker.pose())
+            };
+            stamp_end(&mut header, StageKind::PoseEstimator);
+            ports.poses.publish(&header, &[&[record]])?;
+            processed += 1;
+        }
+        ports.reporter.beat(processed);
+        ports.wake.wait(ports.reporter.until_due().max(Duration::from_millis(1)))?;
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn resume_pose_round_trips_and_rejects_garbage() {
+        let pose = Isometry3::from_parts(Translation3::new(1.0, -2.0, 0.5), UnitQuaternion::from_euler_angles(0.1, 0.2, -0.3));
+        let r = pose_record(&pose);
+        let text = format!("12,{},{},{},{},{},{},{}", r.translation[0], r.translation[1], r.translation[2], r.rotation_xyzw[0], r.rotation_xyzw[1], r.rotation_xyzw[2], r.rotation_xyzw[3]);
+        let (frame, back) = parse_resume_pose(&text).unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(frame, 12);
+        assert!((back.translation.vector - pose.translation.vector).norm() < 1e-12);
+        assert!(back.rotation.angle_to(&pose.rotation) < 1e-9);
+        for bad in ["", "1,2,3", "x,0,0,0,0,0,0,1", "1,0,0,nan,0,0,0,1", "1,0,0,0,0,0,0,0"] {
+            assert!(parse_resume_pose(bad).is_err(), "{bad:?} accepted");
+        }
+    }
+}

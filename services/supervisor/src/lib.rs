@@ -1,0 +1,645 @@
+//! The supervisor: runs the pipeline and records the run.
+//!
+//! In multi-process mode ([`Mode::Processes`]) it starts one process per stage
+//! (`linetrack-line-detector`, `linetrack-matcher`, `linetrack-pose-estimator`, then, once
+//! those report ready, `linetrack-frame-source`), watches their heartbeats and exits,
+//! restarts a stage that crashed or hung (with exponential backoff, up to a limit), hot-swaps
+//! the detector on command, steers the matcher between LBD and ℓ1, and shuts everything
+//! down on SIGINT/SIGTERM or when every frame has an outcome. In single-process mode
+//! ([`Mode::Threads`]) the same stage code runs on threads over crossbeam channels: the
+//! baseline that shows what the IPC costs (no restarts or swaps there).
+//!
+//! Records go to the run folder: see [`monitor::Monitor::finish`].
+
+pub mod fallback;
+pub mod monitor;
+
+use anyhow::{Context, bail};
+use linetrack_ipc::{Bus, Inlet, Outlet, Scope, Shutdown, Wake};
+use linetrack_msgs::{Command, Control, FrameHeader, MatcherMode, PoseRecord, StageKind, StatusKind, StatusReport, Topic, now_ns};
+use linetrack_pipeline_config::PipelineConfig;
+use linetrack_run_record::Report;
+use linetrack_stage_runtime::{StageContext, detector_code, detector_from_code};
+use linetrack_vision::DetectorKind;
+use monitor::Monitor;
+use serde::Serialize;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command as Process, Stdio};
+use std::time::{Duration, Instant};
+
+/// How the stages run.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Mode {
+    /// One process per stage, shared memory between them.
+    Processes,
+    /// One thread per stage in this process, channels between them.
+    Threads,
+}
+
+/// How to run.
+#[derive(Debug, Clone)]
+pub struct RunOptions {
+    /// Processes or threads.
+    pub mode: Mode,
+    /// Where the stage binaries are (default: next to this program).
+    pub bin_dir: Option<PathBuf>,
+    /// Print the live status line.
+    pub live_status: bool,
+}
+
+/// What a finished run left.
+#[derive(Debug)]
+pub struct RunOutcome {
+    /// The run folder.
+    pub run_dir: PathBuf,
+    /// The run id.
+    pub run_id: String,
+    /// Its report.
+    pub report: Report,
+    /// Whether it was stopped by a signal before the sequence ended.
+    pub interrupted: bool,
+}
+
+/// The supervisor's connections.
+struct Ports {
+    poses: Inlet<PoseRecord>,
+    status: Inlet<StatusReport>,
+    control_in: Inlet<Control>,
+    control: Outlet<Control>,
+    wake: Wake,
+}
+
+impl Ports {
+    fn open(bus: &Bus) -> anyhow::Result<Self> {
+        Ok(Self {
+            poses: bus.inlet(Topic::Poses)?,
+            status: bus.inlet(Topic::Status)?,
+            control_in: bus.inlet(Topic::Control)?,
+            control: bus.outlet(Topic::Control, 1)?,
+            wake: bus.wake(StageKind::Supervisor)?,
+        })
+    }
+
+    fn send(&mut self, stage: StageKind, pid: u32, command: Command, value: u32, frame_id: u64) -> anyhow::Result<()> {
+        let c = Control { command: command as u32, target_pid: pid, target_stage: stage.code(), value, frame_id };
+        self.control.publish(&FrameHeader::default(), &[&[c]])?;
+        Ok(())
+    }
+}
+
+/// A new run id: 8 hex digits from the clock and the process id.
+pub fn new_run_id() -> String {
+    format!("{:08x}", (now_ns() ^ (u64::from(std::process::id()) << 20)) as u32)
+}
+
+/// What `status.json` in the run folder says (read by `linetrack ctl` and the tests).
+#[derive(Debug, Clone, Serialize, serde::Deserialize)]
+pub struct LiveStatus {
+    /// The run id.
+    pub run_id: String,
+    /// The shared-memory prefix.
+    pub ipc_prefix: String,
+    /// The supervisor's pid.
+    pub supervisor_pid: u32,
+    /// The running stages.
+    pub stages: Vec<StageEntry>,
+    /// The active detector.
+    pub detector: String,
+    /// Frames with an outcome so far.
+    pub frames: usize,
+    /// Whether the run is over.
+    pub finished: bool,
+}
+
+/// One running stage process.
+#[derive(Debug, Clone, Serialize, serde::Deserialize)]
+pub struct StageEntry {
+    /// Stage name.
+    pub stage: String,
+    /// Process id.
+    pub pid: u32,
+    /// Whether it reported ready.
+    pub ready: bool,
+    /// A detector waiting to take over.
+    pub standby: bool,
+}
+
+/// Writes the effective config and prepares the run folder.
+fn prepare_run_dir(config: &PipelineConfig) -> anyhow::Result<(PathBuf, PathBuf)> {
+    let run_dir = config.output.run_dir.clone();
+    for stale in ["spans", "trace.json", "frames.csv", "events.csv", "summary.json", "poses.tum", "status.json"] {
+        let path = run_dir.join(stale);
+        if path.is_dir() {
+            std::fs::remove_dir_all(&path).with_context(|| format!("clearing {}", path.display()))?;
+        } else if path.exists() {
+            std::fs::remove_file(&path).with_context(|| format!("clearing {}", path.display()))?;
+        }
+    }
+    std::fs::create_dir_all(&run_dir).with_context(|| format!("creating run folder {}", run_dir.display()))?;
+    let config_path = run_dir.join("pipeline.toml");
+    std::fs::write(&config_path, toml::to_string(config)?).with_context(|| format!("writing {}", config_path.display()))?;
+    Ok((run_dir, config_path))
+}
+
+/// Runs the pipeline on `config` until the sequence is done or `shutdown` is set.
+pub fn run(config: &PipelineConfig, options: &RunOptions, shutdown: &Shutdown) -> anyhow::Result<RunOutcome> {
+    config.validate().map_err(|e| anyhow::anyhow!("pipeline config: {e}"))?;
+    let (run_dir, config_path) = prepare_run_dir(config)?;
+    let run_id = new_run_id();
+    match options.mode {
+        Mode::Processes => Supervisor::new(config, options, run_id, run_dir, config_path)?.run(shutdown),
+        Mode::Threads => run_threads(config, options, run_id, run_dir, shutdown),
+    }
+}
+
+/// A running stage process.
+struct StageProcess {
+    stage: StageKind,
+    child: Child,
+    pid: u32,
+    started: Instant,
+    last_seen: Instant,
+    ready: bool,
+    standby: bool,
+    detector: Option<DetectorKind>,
+    /// Expected to exit (handed over, finished, killed for hanging).
+    retiring: bool,
+}
+
+/// Restart bookkeeping of one stage.
+#[derive(Debug, Default, Clone, Copy)]
+struct Restarts {
+    count: u32,
+    due: Option<Instant>,
+}
+
+struct Supervisor {
+    config: PipelineConfig,
+    options: RunOptions,
+    run_id: String,
+    scope: Scope,
+    run_dir: PathBuf,
+    config_path: PathBuf,
+    bin_dir: PathBuf,
+    bus: Bus,
+    ports: Ports,
+    monitor: Monitor,
+    processes: Vec<StageProcess>,
+    restarts: [Restarts; 4],
+    detector: DetectorKind,
+    swap_to: Option<DetectorKind>,
+}
+
+fn stage_slot(stage: StageKind) -> usize {
+    stage.stamp_index().unwrap_or(0)
+}
+
+impl Supervisor {
+    fn new(config: &PipelineConfig, options: &RunOptions, run_id: String, run_dir: PathBuf, config_path: PathBuf) -> anyhow::Result<Self> {
+        let bin_dir = match &options.bin_dir {
+            Some(dir) => dir.clone(),
+            None => match std::env::var_os("LINETRACK_BIN_DIR") {
+                Some(dir) => PathBuf::from(dir),
+                None => std::env::current_exe()?.parent().map(Path::to_path_buf).context("locating the stage binaries")?,
+            },
+        };
+        for stage in StageKind::PROCESSING {
+            let bin = bin_dir.join(format!("linetrack-{}", stage.name()));
+            if !bin.is_file() {
+                bail!("{} not found: build the stage binaries (cargo build --release --workspace) or set LINETRACK_BIN_DIR", bin.display());
+            }
+        }
+        let scope = Scope::new(&run_id);
+        // Nodes of killed runs are cleaned when a node starts (or by the explicit call).
+        let dead_before = scope.dead_nodes()?;
+        let bus = Bus::shared_memory(&scope, &format!("supervisor-{}", std::process::id()))?;
+        bus.remove_stale_resources();
+        let stale = dead_before.saturating_sub(scope.dead_nodes()?);
+        let ports = Ports::open(&bus)?;
+        let mut monitor = Monitor::new(config, 0);
+        if stale > 0 {
+            monitor.event("stale-cleanup", "supervisor", None, format!("removed the shared memory of {stale} dead processes of earlier runs"));
+        }
+        Ok(Self {
+            config: config.clone(),
+            options: options.clone(),
+            run_id,
+            scope,
+            run_dir,
+            config_path,
+            bin_dir,
+            bus,
+            ports,
+            monitor,
+            processes: Vec::new(),
+            restarts: [Restarts::default(); 4],
+            detector: config.detector,
+            swap_to: None,
+        })
+    }
+
+    fn spawn(&mut self, stage: StageKind, detector: Option<DetectorKind>, standby: bool) -> anyhow::Result<()> {
+        let bin = self.bin_dir.join(format!("linetrack-{}", stage.name()));
+        let mut command = Process::new(&bin);
+        command
+            .arg("--config")
+            .arg(&self.config_path)
+            .arg("--run-id")
+            .arg(&self.run_id)
+            .arg("--run-dir")
+            .arg(&self.run_dir)
+            .env(Scope::PREFIX_VAR, &self.scope.prefix)
+            .stdin(Stdio::null())
+            .stdout(Stdio::null());
+        if let Some(kind) = detector {
+            command.arg("--detector").arg(kind.name());
+        }
+        if standby {
+            command.arg("--standby");
+        }
+        let restarted = self.restarts[stage_slot(stage)].count > 0;
+        if restarted && stage == StageKind::PoseEstimator
+            && let Some(pose) = self.monitor.resume_pose()
+        {
+            command.arg("--resume-pose").arg(pose);
+        }
+        if restarted && stage == StageKind::FrameSource {
+            command.arg("--start-frame").arg(self.monitor.next_source_frame().to_string());
+        }
+        let child = command.spawn().with_context(|| format!("starting {}", bin.display()))?;
+        let pid = child.id();
+        tracing::info!("started {stage} (pid {pid}{})", if standby { ", standby" } else { "" });
+        let now = Instant::now();
+        self.processes.push(StageProcess { stage, child, pid, started: now, last_seen: now, ready: false, standby, detector, retiring: false });
+        self.write_status(false);
+        Ok(())
+    }
+
+    fn write_status(&self, finished: bool) {
+        let status = LiveStatus {
+            run_id: self.run_id.clone(),
+            ipc_prefix: self.scope.prefix.clone(),
+            supervisor_pid: std::process::id(),
+            stages: self.processes.iter().map(|p| StageEntry { stage: p.stage.name().to_string(), pid: p.pid, ready: p.ready, standby: p.standby }).collect(),
+            detector: self.detector.name().to_string(),
+            frames: self.monitor.accounted(),
+            finished,
+        };
+        if let Ok(text) = serde_json::to_string_pretty(&status) {
+            let tmp = self.run_dir.join("status.json.tmp");
+            if std::fs::write(&tmp, text).is_ok() {
+                let _ = std::fs::rename(&tmp, self.run_dir.join("status.json"));
+            }
+        }
+    }
+
+    fn all_ready(&self, stages: &[StageKind]) -> bool {
+        stages.iter().all(|s| self.processes.iter().any(|p| p.stage == *s && p.ready && !p.standby))
+    }
+
+    fn run(mut self, shutdown: &Shutdown) -> anyhow::Result<RunOutcome> {
+        let result = self.supervise(shutdown);
+        self.stop_all();
+        if self.config.output.trace {
+            match linetrack_telemetry::merge_traces(&self.run_dir) {
+                Ok(n) => tracing::info!("trace: {n} spans in {}", self.run_dir.join("trace.json").display()),
+                Err(e) => tracing::warn!("trace not merged: {e}"),
+            }
+        }
+        let interrupted = result?;
+        self.write_status(true);
+        let report = self.monitor.finish(&self.run_dir, interrupted)?;
+        drop(self.ports);
+        drop(self.bus);
+        Ok(RunOutcome { run_dir: self.run_dir, run_id: self.run_id, report, interrupted })
+    }
+
+    /// The main loop; returns whether it was interrupted.
+    fn supervise(&mut self, shutdown: &Shutdown) -> anyhow::Result<bool> {
+        for stage in [StageKind::LineDetector, StageKind::Matcher, StageKind::PoseEstimator] {
+            let detector = (stage == StageKind::LineDetector).then_some(self.detector);
+            self.spawn(stage, detector, false)?;
+        }
+        let startup = Duration::from_millis(self.config.supervisor.startup_timeout_ms);
+        let waiting_since = Instant::now();
+        let mut source_started = false;
+        let mut drain_since: Option<Instant> = None;
+        let mut next_status = Instant::now();
+        let mut next_file = Instant::now();
+        let status_every = Duration::from_millis(self.config.supervisor.status_every_ms);
+        loop {
+            if shutdown.requested() {
+                tracing::info!("shutdown requested");
+                return Ok(true);
+            }
+            self.ports.wake.wait(Duration::from_millis(50))?;
+            self.handle_status()?;
+            self.handle_poses()?;
+            self.handle_requests()?;
+            self.check_processes(shutdown)?;
+            if !source_started {
+                if self.all_ready(&[StageKind::LineDetector, StageKind::Matcher, StageKind::PoseEstimator]) {
+                    self.spawn(StageKind::FrameSource, None, false)?;
+                    source_started = true;
+                } else if waiting_since.elapsed() > startup {
+                    bail!("stages not ready after {:?}: {}", startup, self.processes.iter().filter(|p| !p.ready).map(|p| p.stage.name()).collect::<Vec<_>>().join(", "));
+                }
+            }
+            if self.monitor.complete() {
+                tracing::info!("every frame accounted for");
+                return Ok(false);
+            }
+            if self.monitor.source_done() {
+                let since = *drain_since.get_or_insert_with(Instant::now);
+                if since.elapsed() > Duration::from_millis(self.config.supervisor.drain_timeout_ms) {
+                    tracing::warn!("drain timeout: frames still missing are recorded as missing");
+                    return Ok(false);
+                }
+            }
+            if Instant::now() >= next_file {
+                self.write_status(false);
+                next_file = Instant::now() + Duration::from_millis(200);
+            }
+            if self.options.live_status && status_every > Duration::ZERO && Instant::now() >= next_status {
+                println!("{}", self.monitor.status_line());
+                next_status = Instant::now() + status_every;
+            }
+        }
+    }
+
+    fn process_mut(&mut self, pid: u32) -> Option<&mut StageProcess> {
+        self.processes.iter_mut().find(|p| p.pid == pid)
+    }
+
+    fn handle_status(&mut self) -> anyhow::Result<()> {
+        for message in self.ports.status.receive_all()? {
+            let Some(&report) = message.payload().first() else { continue };
+            let Some(process) = self.process_mut(report.pid) else { continue };
+            process.last_seen = Instant::now();
+            let (stage, standby) = (process.stage, process.standby);
+            match StatusKind::from_code(report.kind) {
+                Some(StatusKind::Ready) => {
+                    process.ready = true;
+                    if standby {
+                        if let Some(old) = self.processes.iter().find(|p| p.stage == StageKind::LineDetector && !p.standby && !p.retiring) {
+                            let old_pid = old.pid;
+                            tracing::info!("standby detector {} ready holding frames from {}; asking {old_pid} to hand over", report.pid, report.frame_id);
+                            self.ports.send(StageKind::LineDetector, old_pid, Command::HandOver, 0, report.frame_id)?;
+                        } else {
+                            // No running detector to hand over from: take over at once.
+                            self.ports.send(StageKind::LineDetector, report.pid, Command::TakeOver, 0, report.frame_id)?;
+                            self.promote_standby(report.pid, report.frame_id);
+                        }
+                    } else if stage == StageKind::Matcher
+                        && let Some(mode) = self.monitor.matcher_mode()
+                        && mode != MatcherMode::Lbd
+                    {
+                        self.ports.send(StageKind::Matcher, report.pid, Command::SetMatcherMode, mode as u32, 0)?;
+                    }
+                    self.write_status(false);
+                }
+                Some(StatusKind::HandedOver) => {
+                    process.retiring = true;
+                    let old_kind = process.detector;
+                    if let Some(new_pid) = self.processes.iter().find(|p| p.standby).map(|p| p.pid) {
+                        self.ports.send(StageKind::LineDetector, new_pid, Command::TakeOver, 0, report.frame_id)?;
+                        self.promote_standby(new_pid, report.frame_id);
+                        let from = old_kind.map(|k| k.name()).unwrap_or("?");
+                        self.monitor.event("swap", "line-detector", Some(report.frame_id), format!("{from} (pid {}) -> {} (pid {new_pid})", report.pid, self.detector.name()));
+                    }
+                }
+                Some(StatusKind::SourceFinished) => {
+                    process.retiring = true;
+                    self.monitor.published(report.frame_id);
+                    self.monitor.source_finished(report.frame_id);
+                }
+                Some(StatusKind::Heartbeat) if stage == StageKind::FrameSource && report.value > 0 => self.monitor.published(report.frame_id),
+                _ => {}
+            }
+        }
+        Ok(())
+    }
+
+    fn promote_standby(&mut self, pid: u32, frame_id: u64) {
+        if let Some(p) = self.process_mut(pid) {
+            p.standby = false;
+            let kind = p.detector;
+            if let Some(kind) = kind {
+                self.detector = kind;
+            }
+        }
+        self.swap_to = None;
+        tracing::info!("detector {pid} takes over at frame {frame_id}");
+        self.write_status(false);
+    }
+
+    fn handle_poses(&mut self) -> anyhow::Result<()> {
+        for message in self.ports.poses.receive_all()? {
+            let Some(&pose) = message.payload().first() else { continue };
+            if let Some(switch) = self.monitor.on_pose(message.header(), &pose) {
+                self.ports.send(StageKind::Matcher, 0, Command::SetMatcherMode, switch.to as u32, 0)?;
+            }
+        }
+        Ok(())
+    }
+
+    fn handle_requests(&mut self) -> anyhow::Result<()> {
+        for message in self.ports.control_in.receive_all()? {
+            let Some(&c) = message.payload().first() else { continue };
+            if !c.is_for(StageKind::Supervisor, std::process::id()) || Command::from_code(c.command) != Some(Command::SwapDetector) {
+                continue;
+            }
+            let Some(kind) = detector_from_code(c.value) else {
+                tracing::warn!("swap request for unknown detector code {}", c.value);
+                continue;
+            };
+            if self.swap_to.is_some() {
+                tracing::warn!("swap to {} refused: a swap is in progress", kind.name());
+            } else if kind == self.detector {
+                tracing::info!("swap to {} ignored: already running", kind.name());
+            } else {
+                self.monitor.event("swap-requested", "line-detector", None, format!("{} -> {}", self.detector.name(), kind.name()));
+                self.swap_to = Some(kind);
+                self.spawn(StageKind::LineDetector, Some(kind), true)?;
+            }
+        }
+        Ok(())
+    }
+
+    fn check_processes(&mut self, shutdown: &Shutdown) -> anyhow::Result<()> {
+        let hang = Duration::from_millis(self.config.supervisor.hang_timeout_ms);
+        let startup = Duration::from_millis(self.config.supervisor.startup_timeout_ms);
+        let mut exited = Vec::new();
+        for (i, p) in self.processes.iter_mut().enumerate() {
+            match p.child.try_wait() {
+                Ok(Some(status)) => exited.push((i, status.to_string(), status.success())),
+                Ok(None) => {
+                    let silent = p.last_seen.elapsed();
+                    let limit = if p.ready { hang } else { startup };
+                    if !p.retiring && silent > limit {
+                        tracing::warn!("{} (pid {}) silent for {silent:?}: killing it", p.stage, p.pid);
+                        let _ = p.child.kill();
+                    }
+                }
+                Err(e) => tracing::warn!("cannot poll {} (pid {}): {e}", p.stage, p.pid),
+            }
+        }
+        for (i, status, success) in exited.into_iter().rev() {
+            let mut p = self.processes.remove(i);
+            let _ = p.child.wait();
+            let expected = p.retiring || (p.stage == StageKind::FrameSource && success && self.monitor.source_done());
+            if expected || shutdown.requested() {
+                tracing::info!("{} (pid {}) exited: {status}", p.stage, p.pid);
+                continue;
+            }
+            let silent = p.last_seen.elapsed() > if p.ready { hang } else { startup };
+            let kind = if silent { "hang" } else { "crash" };
+            self.monitor.event(kind, p.stage.name(), None, format!("pid {} {status} after {:.1} s", p.pid, p.started.elapsed().as_secs_f64()));
+            if p.standby {
+                self.monitor.event("swap-abandoned", "line-detector", None, "the standby detector died before taking over".to_string());
+                self.swap_to = None;
+                continue;
+            }
+            let slot = &mut self.restarts[stage_slot(p.stage)];
+            if slot.count >= self.config.supervisor.max_restarts {
+                bail!("{} died {} times (restart limit {}): giving up", p.stage, slot.count + 1, self.config.supervisor.max_restarts);
+            }
+            let backoff = self.config.supervisor.restart_backoff_ms.saturating_mul(1 << slot.count.min(16)).min(self.config.supervisor.restart_backoff_max_ms);
+            slot.due = Some(Instant::now() + Duration::from_millis(backoff));
+            self.write_status(false);
+        }
+        for stage in StageKind::PROCESSING {
+            let slot = self.restarts[stage_slot(stage)];
+            if let Some(due) = slot.due
+                && Instant::now() >= due
+            {
+                self.restarts[stage_slot(stage)] = Restarts { count: slot.count + 1, due: None };
+                let detector = (stage == StageKind::LineDetector).then_some(self.detector);
+                self.monitor.event("restart", stage.name(), None, format!("restart {} of {}", slot.count + 1, self.config.supervisor.max_restarts));
+                self.spawn(stage, detector, false)?;
+            }
+        }
+        Ok(())
+    }
+
+    /// Asks every stage to exit, waits for the grace period, then kills what is left.
+    fn stop_all(&mut self) {
+        for stage in StageKind::PROCESSING {
+            if let Err(e) = self.ports.send(stage, 0, Command::Shutdown, 0, 0) {
+                tracing::warn!("shutdown command to {stage} not sent: {e}");
+            }
+        }
+        let grace = Instant::now() + Duration::from_millis(self.config.supervisor.shutdown_grace_ms);
+        while !self.processes.is_empty() {
+            self.processes.retain_mut(|p| !matches!(p.child.try_wait(), Ok(Some(_))));
+            if Instant::now() >= grace {
+                for p in &mut self.processes {
+                    tracing::warn!("{} (pid {}) did not exit in time: killing it", p.stage, p.pid);
+                    let _ = p.child.kill();
+                    let _ = p.child.wait();
+                }
+                self.processes.clear();
+                break;
+            }
+            let _ = self.ports.wake.wait(Duration::from_millis(20));
+        }
+        let cleaned = self.bus.remove_stale_resources();
+        if cleaned > 0 {
+            tracing::info!("removed the shared memory of {cleaned} killed stage processes");
+        }
+        self.write_status(false);
+    }
+}
+
+/// Runs the stages on threads of this process over channels.
+fn run_threads(config: &PipelineConfig, options: &RunOptions, run_id: String, run_dir: PathBuf, shutdown: &Shutdown) -> anyhow::Result<RunOutcome> {
+    let bus = Bus::local();
+    let hub = bus.local_hub().context("a local bus has a hub")?;
+    let mut ports = Ports::open(&bus)?;
+    let stage_shutdown = Shutdown::default();
+    let ctx = |stage| StageContext::in_process(stage, config.clone(), run_dir.clone());
+    let mut threads = Vec::new();
+    macro_rules! start {
+        ($stage:expr, $krate:ident) => {{
+            let c = ctx($stage);
+            let s = stage_shutdown.clone();
+            let h = hub.clone();
+            let handle = std::thread::Builder::new().name($stage.name().to_string()).spawn(move || {
+                let bus = h.bus();
+                let p = $krate::Ports::open(&bus, &c)?;
+                $krate::run(&c, p, &s)
+            })?;
+            threads.push(($stage, handle));
+        }};
+    }
+    start!(StageKind::LineDetector, linetrack_line_detector);
+    start!(StageKind::Matcher, linetrack_matcher);
+    start!(StageKind::PoseEstimator, linetrack_pose_estimator);
+    let mut monitor = Monitor::new(config, 0);
+    let mut ready = 0;
+    let mut source_started = false;
+    let mut drain_since: Option<Instant> = None;
+    let status_every = Duration::from_millis(config.supervisor.status_every_ms);
+    let mut next_status = Instant::now();
+    let mut failure = None;
+    let interrupted = loop {
+        if shutdown.requested() {
+            break true;
+        }
+        ports.wake.wait(Duration::from_millis(50))?;
+        for message in ports.status.receive_all()? {
+            let Some(report) = message.payload().first() else { continue };
+            match StatusKind::from_code(report.kind) {
+                Some(StatusKind::Ready) => ready += 1,
+                Some(StatusKind::SourceFinished) => monitor.source_finished(report.frame_id),
+                _ => {}
+            }
+        }
+        if !source_started && ready >= 3 {
+            start!(StageKind::FrameSource, linetrack_frame_source);
+            source_started = true;
+        }
+        for message in ports.poses.receive_all()? {
+            let Some(&pose) = message.payload().first() else { continue };
+            if let Some(switch) = monitor.on_pose(message.header(), &pose) {
+                ports.send(StageKind::Matcher, 0, Command::SetMatcherMode, switch.to as u32, 0)?;
+            }
+        }
+        if let Some((stage, _)) = threads.iter().find(|(s, h)| h.is_finished() && *s != StageKind::FrameSource) {
+            failure = Some(format!("{stage} stopped"));
+            break false;
+        }
+        if monitor.complete() {
+            break false;
+        }
+        if monitor.source_done() && drain_since.get_or_insert_with(Instant::now).elapsed() > Duration::from_millis(config.supervisor.drain_timeout_ms) {
+            break false;
+        }
+        if options.live_status && status_every > Duration::ZERO && Instant::now() >= next_status {
+            println!("{}", monitor.status_line());
+            next_status = Instant::now() + status_every;
+        }
+    };
+    stage_shutdown.request();
+    for stage in StageKind::PROCESSING {
+        let _ = ports.send(stage, 0, Command::Shutdown, 0, 0);
+    }
+    let mut errors = Vec::new();
+    for (stage, handle) in threads {
+        match handle.join() {
+            Ok(Ok(())) => {}
+            Ok(Err(e)) => errors.push(format!("{stage}: {e:#}")),
+            Err(_) => errors.push(format!("{stage}: panicked")),
+        }
+    }
+    if let Some(f) = failure {
+        bail!("{f}: {}", errors.join("; "));
+    }
+    let report = monitor.finish(&run_dir, interrupted)?;
+    Ok(RunOutcome { run_dir, run_id, report, interrupted })
+}
+
+/// The detector wire code (re-exported for `linetrack ctl`).
+pub fn detector_wire_code(kind: DetectorKind) -> u32 {
+    detector_code(kind)
+}

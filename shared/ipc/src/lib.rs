@@ -1,0 +1,577 @@
+//! The pipeline's transport behind one API, in two implementations:
+//!
+//! - **shared memory** ([`Bus::shared_memory`]): iceoryx2 publish-subscribe between
+//!   processes. A publisher writes a message once into a loaned shared-memory sample; every
+//!   subscriber reads that same memory in place ([`Received`] derefs into it). Publishers
+//!   wake their topic's consumers through one iceoryx2 event service per stage, on which
+//!   each stage blocks ([`Wake::wait`]): no polling.
+//! - **local** ([`Bus::local`]): crossbeam channels between threads of one process, with
+//!   the same fan-out and wake-up semantics; the baseline that measures what IPC costs.
+//!
+//! Every message is a slice of [`Record`]s under a [`FrameHeader`].
+
+use crossbeam_channel::{Receiver, Sender, TrySendError};
+use iceoryx2::config::Config;
+use iceoryx2::node::Node;
+use iceoryx2::port::listener::Listener;
+use iceoryx2::port::notifier::Notifier;
+use iceoryx2::port::publisher::Publisher;
+use iceoryx2::port::subscriber::Subscriber;
+use iceoryx2::prelude::{AllocationStrategy, FileName, NodeBuilder, NodeName, SemanticString, ServiceName, SignalHandlingMode, ZeroCopySend, ipc};
+use iceoryx2::sample::Sample;
+use linetrack_msgs::{FrameHeader, StageKind, Topic, wake_service_name};
+use std::any::Any;
+use std::collections::HashMap;
+use std::fmt::Debug;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex};
+use std::time::Duration;
+
+/// Transport errors; each names the service and what failed.
+#[derive(Debug, thiserror::Error)]
+pub enum IpcError {
+    /// A service, port or node could not be created or opened.
+    #[error("{what} for {service}: {message}")]
+    Setup {
+        /// What was being created.
+        what: &'static str,
+        /// The service.
+        service: String,
+        /// The cause.
+        message: String,
+    },
+    /// Publishing, receiving or waiting failed.
+    #[error("{what} on {service}: {message}")]
+    Transfer {
+        /// The operation.
+        what: &'static str,
+        /// The service.
+        service: String,
+        /// The cause.
+        message: String,
+    },
+}
+
+fn setup<'a>(what: &'static str, service: &'a str) -> impl FnOnce(String) -> IpcError + 'a {
+    move |message| IpcError::Setup { what, service: service.to_string(), message }
+}
+
+fn transfer<'a>(what: &'static str, service: &'a str) -> impl FnOnce(String) -> IpcError + 'a {
+    move |message| IpcError::Transfer { what, service: service.to_string(), message }
+}
+
+/// What a message carries: fixed layout, no pointers.
+pub trait Record: Debug + Copy + Default + ZeroCopySend + Send + Sync + 'static {}
+
+impl<T: Debug + Copy + Default + ZeroCopySend + Send + Sync + 'static> Record for T {}
+
+/// Where a run's shared-memory resources live: every file is named with `prefix`, every
+/// service with `run_id`, so runs (and tests) side by side never meet, and a run's leftovers
+/// are found by prefix.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Scope {
+    /// File-name prefix of the iceoryx2 resources (`linetrack_` unless
+    /// `LINETRACK_IPC_PREFIX` says otherwise).
+    pub prefix: String,
+    /// The run.
+    pub run_id: String,
+}
+
+impl Scope {
+    /// The environment variable that overrides the prefix.
+    pub const PREFIX_VAR: &'static str = "LINETRACK_IPC_PREFIX";
+
+    /// A scope for `run_id` with the prefix from the environment or the default.
+    pub fn new(run_id: &str) -> Self {
+        let prefix = std::env::var(Self::PREFIX_VAR).ok().filter(|p| !p.is_empty()).unwrap_or_else(|| "linetrack_".to_string());
+        Self { prefix, run_id: run_id.to_string() }
+    }
+
+    /// The iceoryx2 configuration of this scope.
+    pub fn config(&self) -> Result<Config, IpcError> {
+        let mut config = Config::default();
+        config.global.prefix = FileName::new(self.prefix.as_bytes()).map_err(|e| setup("iceoryx2 prefix", &self.prefix)(format!("{e:?}")))?;
+        Ok(config)
+    }
+}
+
+/// iceoryx2 resources left in a scope: nodes (alive or dead) and services.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct Resources {
+    /// Nodes registered under the prefix.
+    pub nodes: usize,
+    /// Services whose static description exists under the prefix.
+    pub services: usize,
+}
+
+impl Scope {
+    /// Counts the nodes and services that exist under this scope's prefix (of any run).
+    pub fn resources(&self) -> Result<Resources, IpcError> {
+        use iceoryx2::prelude::{CallbackProgression, Service as _};
+        let config = self.config()?;
+        let mut found = Resources::default();
+        Node::<ipc::Service>::list(&config, |_| {
+            found.nodes += 1;
+            CallbackProgression::Continue
+        })
+        .map_err(|e| transfer("listing nodes", &self.prefix)(format!("{e:?}")))?;
+        ipc::Service::list(&config, |_| {
+            found.services += 1;
+            CallbackProgression::Continue
+        })
+        .map_err(|e| transfer("listing services", &self.prefix)(format!("{e:?}")))?;
+        Ok(found)
+    }
+}
+
+impl Scope {
+    /// Counts the nodes of processes that died without removing their resources.
+    pub fn dead_nodes(&self) -> Result<usize, IpcError> {
+        use iceoryx2::prelude::{CallbackProgression, NodeState};
+        let config = self.config()?;
+        let mut dead = 0;
+        Node::<ipc::Service>::list(&config, |state| {
+            if matches!(state, NodeState::Dead(_)) {
+                dead += 1;
+            }
+            CallbackProgression::Continue
+        })
+        .map_err(|e| transfer("listing nodes", &self.prefix)(format!("{e:?}")))?;
+        Ok(dead)
+    }
+}
+
+/// A shutdown flag: set by SIGINT/SIGTERM or by the program itself.
+#[derive(Debug, Clone, Default)]
+pub struct Shutdown(Arc<AtomicBool>);
+
+impl Shutdown {
+    /// A flag that SIGINT and SIGTERM set.
+    pub fn on_signals() -> Result<Self, std::io::Error> {
+        let flag = Shutdown::default();
+        for signal in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
+            signal_hook::flag::register(signal, Arc::clone(&flag.0))?;
+        }
+        Ok(flag)
+    }
+
+    /// Asks for shutdown.
+    pub fn request(&self) {
+        self.0.store(true, Ordering::SeqCst);
+    }
+
+    /// Whether shutdown was asked for.
+    pub fn requested(&self) -> bool {
+        self.0.load(Ordering::SeqCst)
+    }
+}
+
+type LocalMessage = Arc<dyn Any + Send + Sync>;
+
+/// A message in the local transport.
+#[derive(Debug)]
+pub struct LocalPayload<P> {
+    header: FrameHeader,
+    payload: Vec<P>,
+}
+
+#[derive(Default)]
+struct LocalRegistry {
+    topics: HashMap<Topic, Arc<Mutex<Vec<Sender<LocalMessage>>>>>,
+    wakes: HashMap<StageKind, (Sender<()>, Receiver<()>)>,
+}
+
+/// A handle on a local transport that can move to another thread.
+#[derive(Clone, Default)]
+pub struct LocalHub(Arc<Mutex<LocalRegistry>>);
+
+impl LocalHub {
+    /// A bus on this transport.
+    pub fn bus(&self) -> Bus {
+        Bus { kind: BusKind::Local(Arc::clone(&self.0)) }
+    }
+}
+
+enum BusKind {
+    Shm { node: Node<ipc::Service>, scope: Scope },
+    Local(Arc<Mutex<LocalRegistry>>),
+}
+
+/// The transport of one process (shared memory) or of all stages of one process (local).
+pub struct Bus {
+    kind: BusKind,
+}
+
+impl Bus {
+    /// The shared-memory transport, as a node named `node_name` in `scope`.
+    pub fn shared_memory(scope: &Scope, node_name: &str) -> Result<Self, IpcError> {
+        let config = scope.config()?;
+        let name = NodeName::new(node_name).map_err(|e| setup("node name", node_name)(format!("{e:?}")))?;
+        let node = NodeBuilder::new()
+            .name(&name)
+            .config(&config)
+            .signal_handling_mode(SignalHandlingMode::Disabled)
+            .create::<ipc::Service>()
+            .map_err(|e| setup("iceoryx2 node", node_name)(format!("{e:?}")))?;
+        Ok(Self { kind: BusKind::Shm { node, scope: scope.clone() } })
+    }
+
+    /// A fresh local transport.
+    pub fn local() -> Self {
+        LocalHub::default().bus()
+    }
+
+    /// Another handle on the same local transport, to hand to another thread; `None` for
+    /// shared memory, where each process makes its own bus.
+    pub fn local_hub(&self) -> Option<LocalHub> {
+        match &self.kind {
+            BusKind::Local(registry) => Some(LocalHub(Arc::clone(registry))),
+            BusKind::Shm { .. } => None,
+        }
+    }
+
+    /// Removes the shared-memory resources of processes of this scope that died without
+    /// cleaning up; returns how many such processes were cleaned (0 for local).
+    pub fn remove_stale_resources(&self) -> u64 {
+        match &self.kind {
+            BusKind::Shm { node, .. } => node.try_cleanup_dead_nodes().cleanups,
+            BusKind::Local(_) => 0,
+        }
+    }
+
+    fn lock_local(registry: &Mutex<LocalRegistry>) -> std::sync::MutexGuard<'_, LocalRegistry> {
+        registry.lock().unwrap_or_else(|poisoned| poisoned.into_inner())
+    }
+
+    fn local_wake_sender(registry: &Mutex<LocalRegistry>, stage: StageKind) -> Sender<()> {
+        let mut r = Self::lock_local(registry);
+        r.wakes.entry(stage).or_insert_with(|| crossbeam_channel::bounded(1)).0.clone()
+    }
+
+    /// A publisher on `topic` whose messages hold up to `initial_len` records (more are
+    /// allocated when needed), waking the topic's consumers.
+    pub fn outlet<P: Record>(&self, topic: Topic, initial_len: usize) -> Result<Outlet<P>, IpcError> {
+        match &self.kind {
+            BusKind::Shm { node, scope } => {
+                let service_name = topic.service_name(&scope.run_id);
+                let service = pubsub_service::<P>(node, topic, &service_name)?;
+                let publisher = service
+                    .publisher_builder()
+                    .initial_max_slice_len(initial_len.max(1))
+                    .allocation_strategy(AllocationStrategy::PowerOfTwo)
+                    .create()
+                    .map_err(|e| setup("publisher", &service_name)(format!("{e:?}")))?;
+                let mut notifiers = Vec::new();
+                for &stage in topic.consumers() {
+                    let wake_name = wake_service_name(&scope.run_id, stage);
+                    let event = event_service(node, &wake_name)?;
+                    notifiers.push(event.notifier_builder().create().map_err(|e| setup("notifier", &wake_name)(format!("{e:?}")))?);
+                }
+                Ok(Outlet { service_name, inner: OutletInner::Shm { publisher, notifiers } })
+            }
+            BusKind::Local(registry) => {
+                let subscribers = Arc::clone(Self::lock_local(registry).topics.entry(topic).or_default());
+                let wakes = topic.consumers().iter().map(|&s| Self::local_wake_sender(registry, s)).collect();
+                Ok(Outlet { service_name: topic.name().to_string(), inner: OutletInner::Local { subscribers, wakes, _record: std::marker::PhantomData } })
+            }
+        }
+    }
+
+    /// A subscriber on `topic`.
+    pub fn inlet<P: Record>(&self, topic: Topic) -> Result<Inlet<P>, IpcError> {
+        match &self.kind {
+            BusKind::Shm { node, scope } => {
+                let service_name = topic.service_name(&scope.run_id);
+                let service = pubsub_service::<P>(node, topic, &service_name)?;
+                let subscriber = service
+                    .subscriber_builder()
+                    .buffer_size(topic.queue_depth())
+                    .create()
+                    .map_err(|e| setup("subscriber", &service_name)(format!("{e:?}")))?;
+                Ok(Inlet { service_name, inner: InletInner::Shm(subscriber) })
+            }
+            BusKind::Local(registry) => {
+                let (tx, rx) = crossbeam_channel::bounded(topic.queue_depth());
+                let list = Arc::clone(Self::lock_local(registry).topics.entry(topic).or_default());
+                list.lock().unwrap_or_else(|p| p.into_inner()).push(tx);
+                Ok(Inlet { service_name: topic.name().to_string(), inner: InletInner::Local(rx, std::marker::PhantomData) })
+            }
+        }
+    }
+
+    /// What wakes `stage` when a topic it consumes has a message.
+    pub fn wake(&self, stage: StageKind) -> Result<Wake, IpcError> {
+        match &self.kind {
+            BusKind::Shm { node, scope } => {
+                let wake_name = wake_service_name(&scope.run_id, stage);
+                let event = event_service(node, &wake_name)?;
+                let listener = event.listener_builder().create().map_err(|e| setup("listener", &wake_name)(format!("{e:?}")))?;
+                Ok(Wake { service_name: wake_name, inner: WakeInner::Shm(listener) })
+            }
+            BusKind::Local(registry) => {
+                let mut r = Self::lock_local(registry);
+                let rx = r.wakes.entry(stage).or_insert_with(|| crossbeam_channel::bounded(1)).1.clone();
+                Ok(Wake { service_name: stage.name().to_string(), inner: WakeInner::Local(rx) })
+            }
+        }
+    }
+}
+
+fn pubsub_service<P: Record>(
+    node: &Node<ipc::Service>,
+    topic: Topic,
+    service_name: &str,
+) -> Result<iceoryx2::service::port_factory::publish_subscribe::PortFactory<ipc::Service, [P], FrameHeader>, IpcError> {
+    let name = ServiceName::new(service_name).map_err(|e| setup("service name", service_name)(format!("{e:?}")))?;
+    node.service_builder(&name)
+        .publish_subscribe::<[P]>()
+        .user_header::<FrameHeader>()
+        .max_publishers(topic.max_publishers())
+        .max_subscribers(8)
+        .subscriber_max_buffer_size(topic.queue_depth())
+        .subscriber_max_borrowed_samples(topic.queue_depth())
+        .history_size(0)
+        .enable_safe_overflow(true)
+        .open_or_create()
+        .map_err(|e| setup("publish-subscribe service", service_name)(format!("{e:?}")))
+}
+
+fn event_service(node: &Node<ipc::Service>, service_name: &str) -> Result<iceoryx2::service::port_factory::event::PortFactory<ipc::Service>, IpcError> {
+    let name = ServiceName::new(service_name).map_err(|e| setup("service name", service_name)(format!("{e:?}")))?;
+    node.service_builder(&name)
+        .event()
+        .max_listeners(4)
+        .max_notifiers(16)
+        .open_or_create()
+        .map_err(|e| setup("event service", service_name)(format!("{e:?}")))
+}
+
+enum OutletInner<P: Record> {
+    Shm { publisher: Publisher<ipc::Service, [P], FrameHeader>, notifiers: Vec<Notifier<ipc::Service>> },
+    Local { subscribers: Arc<Mutex<Vec<Sender<LocalMessage>>>>, wakes: Vec<Sender<()>>, _record: std::marker::PhantomData<P> },
+}
+
+/// Publishes messages on one topic.
+pub struct Outlet<P: Record> {
+    service_name: String,
+    inner: OutletInner<P>,
+}
+
+impl<P: Record> Outlet<P> {
+    /// Publishes `header` with the concatenation of `parts` as payload, written once into
+    /// shared memory, and wakes the consumers. Returns how many subscribers got it.
+    pub fn publish(&mut self, header: &FrameHeader, parts: &[&[P]]) -> Result<usize, IpcError> {
+        let len: usize = parts.iter().map(|p| p.len()).sum();
+        match &mut self.inner {
+            OutletInner::Shm { publisher, notifiers } => {
+                let mut sample = publisher.loan_slice_uninit(len).map_err(|e| transfer("loan", &self.service_name)(format!("{e:?}")))?;
+                *sample.user_header_mut() = *header;
+                let mut offset = 0;
+                let payload = sample.payload_mut();
+                for part in parts {
+                    payload[offset..offset + part.len()].write_copy_of_slice(part);
+                    offset += part.len();
+                }
+                // SAFETY: `parts` hold exactly `len` records in all, and every one of them was
+                // written into the payload's `len` slots above, so the payload is initialised.
+                #[allow(unsafe_code)]
+                let sample = unsafe { sample.assume_init() };
+                let delivered = sample.send().map_err(|e| transfer("send", &self.service_name)(format!("{e:?}")))?;
+                for notifier in notifiers.iter() {
+                    notifier.notify().map_err(|e| transfer("notify", &self.service_name)(format!("{e:?}")))?;
+                }
+                Ok(delivered)
+            }
+            OutletInner::Local { subscribers, wakes, .. } => {
+                let mut payload = Vec::with_capacity(len);
+                for part in parts {
+                    payload.extend_from_slice(part);
+                }
+                let message: LocalMessage = Arc::new(LocalPayload { header: *header, payload });
+                let list = subscribers.lock().unwrap_or_else(|p| p.into_inner());
+                let mut delivered = 0;
+                for tx in list.iter() {
+                    match tx.try_send(Arc::clone(&message)) {
+                        Ok(()) => delivered += 1,
+                        // A full queue loses the message for that subscriber, as a shared
+                        // memory subscriber's overflow would; the gap shows in the records.
+                        Err(TrySendError::Full(_)) | Err(TrySendError::Disconnected(_)) => {}
+                    }
+                }
+                for wake in wakes {
+                    let _ = wake.try_send(());
+                }
+                Ok(delivered)
+            }
+        }
+    }
+
+    /// The service name.
+    pub fn service_name(&self) -> &str {
+        &self.service_name
+    }
+}
+
+enum InletInner<P: Record> {
+    Shm(Subscriber<ipc::Service, [P], FrameHeader>),
+    Local(Receiver<LocalMessage>, std::marker::PhantomData<P>),
+}
+
+/// Receives messages on one topic.
+pub struct Inlet<P: Record> {
+    service_name: String,
+    inner: InletInner<P>,
+}
+
+/// A received message: in shared memory, read in place, or a local message.
+pub enum Received<P: Record> {
+    /// A shared-memory sample.
+    Shm(Sample<ipc::Service, [P], FrameHeader>),
+    /// A local message.
+    Local(Arc<LocalPayload<P>>),
+}
+
+impl<P: Record> Received<P> {
+    /// The header.
+    pub fn header(&self) -> &FrameHeader {
+        match self {
+            Received::Shm(s) => s.user_header(),
+            Received::Local(m) => &m.header,
+        }
+    }
+
+    /// The records.
+    pub fn payload(&self) -> &[P] {
+        match self {
+            Received::Shm(s) => s.payload(),
+            Received::Local(m) => &m.payload,
+        }
+    }
+}
+
+impl<P: Record> Inlet<P> {
+    /// The oldest waiting message, if any.
+    pub fn receive(&mut self) -> Result<Option<Received<P>>, IpcError> {
+        match &mut self.inner {
+            InletInner::Shm(subscriber) => {
+                subscriber.receive().map(|s| s.map(Received::Shm)).map_err(|e| transfer("receive", &self.service_name)(format!("{e:?}")))
+            }
+            InletInner::Local(rx, _) => match rx.try_recv() {
+                Ok(message) => match message.downcast::<LocalPayload<P>>() {
+                    Ok(m) => Ok(Some(Received::Local(m))),
+                    Err(_) => Err(transfer("receive", &self.service_name)("a message of another type".to_string())),
+                },
+                Err(_) => Ok(None),
+            },
+        }
+    }
+
+    /// Every waiting message, oldest first.
+    pub fn receive_all(&mut self) -> Result<Vec<Received<P>>, IpcError> {
+        let mut all = Vec::new();
+        while let Some(m) = self.receive()? {
+            all.push(m);
+        }
+        Ok(all)
+    }
+
+    /// The service name.
+    pub fn service_name(&self) -> &str {
+        &self.service_name
+    }
+}
+
+enum WakeInner {
+    Shm(Listener<ipc::Service>),
+    Local(Receiver<()>),
+}
+
+/// Blocks a stage until a topic it consumes has a message.
+pub struct Wake {
+    service_name: String,
+    inner: WakeInner,
+}
+
+impl Wake {
+    /// Blocks until woken or `timeout` passes; clears every pending wake-up.
+    pub fn wait(&self, timeout: Duration) -> Result<(), IpcError> {
+        match &self.inner {
+            WakeInner::Shm(listener) => match listener.timed_wait(|_| {}, timeout) {
+                // A signal (SIGINT, SIGTERM) cut the wait short: the caller checks its flag.
+                Ok(_) | Err(iceoryx2::port::listener::ListenerWaitError::InterruptSignal) => Ok(()),
+                Err(e) => Err(transfer("wait", &self.service_name)(format!("{e:?}"))),
+            },
+            WakeInner::Local(rx) => {
+                let _ = rx.recv_timeout(timeout);
+                while rx.try_recv().is_ok() {}
+                Ok(())
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use linetrack_msgs::SegmentRecord;
+
+    fn unique_scope(tag: &str) -> Scope {
+        Scope { prefix: format!("ltipc{}_", std::process::id()), run_id: format!("{tag}{}", std::process::id()) }
+    }
+
+    fn round_trip(publisher_bus: &Bus, subscriber_bus: &Bus) {
+        let mut inlet = subscriber_bus.inlet::<SegmentRecord>(Topic::Segments).unwrap_or_else(|e| panic!("{e}"));
+        let wake = subscriber_bus.wake(StageKind::Matcher).unwrap_or_else(|e| panic!("{e}"));
+        let mut outlet = publisher_bus.outlet::<SegmentRecord>(Topic::Segments, 4).unwrap_or_else(|e| panic!("{e}"));
+        let a = [SegmentRecord { endpoints: [1.0, 2.0, 3.0, 4.0] }];
+        let b = [SegmentRecord { endpoints: [5.0, 6.0, 7.0, 8.0] }; 9];
+        let mut header = FrameHeader::new(7, 0, 0);
+        header.left_count = 1;
+        // More records than the initial length: the publisher grows its slices.
+        let delivered = outlet.publish(&header, &[&a, &b]).unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(delivered, 1);
+        wake.wait(Duration::from_secs(2)).unwrap_or_else(|e| panic!("{e}"));
+        let got = inlet.receive().unwrap_or_else(|e| panic!("{e}")).unwrap_or_else(|| panic!("no message"));
+        assert_eq!(got.header().frame_id, 7);
+        assert_eq!(got.payload().len(), 10);
+        assert_eq!(got.payload()[0], a[0]);
+        assert_eq!(got.payload()[9], b[0]);
+        assert!(inlet.receive().unwrap_or_else(|e| panic!("{e}")).is_none());
+    }
+
+    #[test]
+    fn local_messages_fan_out_with_payload_intact() {
+        let bus = Bus::local();
+        let peer = bus.local_hub().unwrap_or_else(|| panic!("local bus has peers")).bus();
+        round_trip(&bus, &peer);
+    }
+
+    #[test]
+    fn shared_memory_messages_arrive_in_place() {
+        let scope = unique_scope("rt");
+        let publisher = Bus::shared_memory(&scope, "test-publisher").unwrap_or_else(|e| panic!("{e}"));
+        let subscriber = Bus::shared_memory(&scope, "test-subscriber").unwrap_or_else(|e| panic!("{e}"));
+        round_trip(&publisher, &subscriber);
+    }
+
+    #[test]
+    fn dropping_every_port_and_node_leaves_no_resources() {
+        let scope = unique_scope("gone");
+        {
+            let bus = Bus::shared_memory(&scope, "test-lifetime").unwrap_or_else(|e| panic!("{e}"));
+            let _outlet = bus.outlet::<SegmentRecord>(Topic::Segments, 4).unwrap_or_else(|e| panic!("{e}"));
+            let during = scope.resources().unwrap_or_else(|e| panic!("{e}"));
+            assert!(during.nodes >= 1 && during.services >= 1, "{during:?}");
+        }
+        assert_eq!(scope.resources().unwrap_or_else(|e| panic!("{e}")), Resources::default());
+    }
+
+    #[test]
+    fn a_wait_without_messages_times_out() {
+        let bus = Bus::local();
+        let wake = bus.wake(StageKind::Matcher).unwrap_or_else(|e| panic!("{e}"));
+        let started = std::time::Instant::now();
+        wake.wait(Duration::from_millis(30)).unwrap_or_else(|e| panic!("{e}"));
+        assert!(started.elapsed() >= Duration::from_millis(25));
+    }
+}

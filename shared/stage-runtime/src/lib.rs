@@ -1,0 +1,309 @@
+//! What every stage process of the pipeline shares.
+//!
+//! A stage binary's `main` is one call, [`stage_main`]: it parses the [`StageArgs`] the
+//! supervisor passes, loads the run's config, starts telemetry, joins the run's
+//! shared-memory bus, arms SIGINT/SIGTERM, and runs the stage's loop. The loop uses a
+//! [`Reporter`] for heartbeats and events, and [`late_drop`] for the budget policy.
+
+use clap::Parser;
+use linetrack_geometry::{Point, Segment};
+use linetrack_ipc::{Bus, IpcError, Outlet, Received, Scope, Shutdown};
+use linetrack_msgs::SegmentRecord;
+use linetrack_vision::{BorrowedGray, GrayImage, VisionError};
+use std::collections::VecDeque;
+use linetrack_msgs::{FrameHeader, FrameStatus, StageKind, StatusKind, StatusReport, Topic, now_ns};
+use linetrack_pipeline_config::{BudgetConfig, PipelineConfig};
+use linetrack_vision::DetectorKind;
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::time::{Duration, Instant};
+
+/// The arguments the supervisor passes to every stage.
+#[derive(Debug, Clone, Parser)]
+#[command(about = "A linetrack pipeline stage; started by the supervisor (`linetrack run`).")]
+pub struct StageArgs {
+    /// The run's pipeline config (the supervisor writes the effective one into the run folder).
+    #[arg(long)]
+    pub config: PathBuf,
+    /// The run's id: it names the shared-memory services.
+    #[arg(long)]
+    pub run_id: String,
+    /// The run folder (span files go under it).
+    #[arg(long)]
+    pub run_dir: PathBuf,
+    /// Line detector: overrides the config's (a hot swap starts the other one).
+    #[arg(long)]
+    pub detector: Option<DetectorKind>,
+    /// Start as a standby detector: warm up, report ready, wait for the hand-over.
+    #[arg(long)]
+    pub standby: bool,
+    /// Frame source: start at this frame (after a restart).
+    #[arg(long, default_value_t = 0)]
+    pub start_frame: usize,
+    /// Pose estimator: continue from this pose, "frame,tx,ty,tz,qx,qy,qz,qw" (after a restart).
+    #[arg(long)]
+    pub resume_pose: Option<String>,
+}
+
+/// A stage's view of its run.
+#[derive(Debug, Clone)]
+pub struct StageContext {
+    /// Which stage this is.
+    pub stage: StageKind,
+    /// The run's config.
+    pub config: PipelineConfig,
+    /// Arguments.
+    pub args: StageArgs,
+    /// This process.
+    pub pid: u32,
+}
+
+impl StageContext {
+    /// A context for an in-process stage (single-process mode and tests).
+    pub fn in_process(stage: StageKind, config: PipelineConfig, run_dir: PathBuf) -> Self {
+        let args = StageArgs { config: PathBuf::new(), run_id: "local".to_string(), run_dir, detector: None, standby: false, start_frame: 0, resume_pose: None };
+        Self { stage, config, args, pid: std::process::id() }
+    }
+
+    /// The heartbeat period.
+    pub fn heartbeat(&self) -> Duration {
+        Duration::from_millis(self.config.supervisor.heartbeat_ms)
+    }
+
+    /// This stage's budget, milliseconds.
+    pub fn budget_ms(&self) -> f64 {
+        self.config.budget.stage_ms(self.stage.name()).unwrap_or(f64::INFINITY)
+    }
+}
+
+/// Sends a stage's heartbeats and events on the status topic.
+pub struct Reporter {
+    outlet: Outlet<StatusReport>,
+    stage: StageKind,
+    pid: u32,
+    detail: u32,
+    every: Duration,
+    last: Option<Instant>,
+}
+
+impl Reporter {
+    /// A reporter for `ctx`'s stage; `detail` travels in every report (the detector kind).
+    pub fn new(bus: &Bus, ctx: &StageContext, detail: u32) -> Result<Self, IpcError> {
+        Ok(Self { outlet: bus.outlet(Topic::Status, 1)?, stage: ctx.stage, pid: ctx.pid, detail, every: ctx.heartbeat(), last: None })
+    }
+
+    /// Sends an event.
+    pub fn report(&mut self, kind: StatusKind, frame_id: u64, value: u64) {
+        let report = StatusReport { stage: self.stage.code(), pid: self.pid, kind: kind as u32, detail: self.detail, frame_id, value };
+        if let Err(e) = self.outlet.publish(&FrameHeader::default(), &[&[report]]) {
+            tracing::warn!("status report lost: {e}");
+        }
+        if kind == StatusKind::Heartbeat {
+            self.last = Some(Instant::now());
+        }
+    }
+
+    /// Sends a heartbeat if one is due; `processed` = frames handled so far.
+    pub fn beat(&mut self, processed: u64) {
+        if self.last.is_none_or(|t| t.elapsed() >= self.every) {
+            self.report(StatusKind::Heartbeat, 0, processed);
+        }
+    }
+
+    /// How long until the next heartbeat is due.
+    pub fn until_due(&self) -> Duration {
+        self.last.map_or(Duration::ZERO, |t| self.every.saturating_sub(t.elapsed()))
+    }
+}
+
+/// The budget policy for a frame a stage is about to take: `Some(status)` when it must be
+/// dropped instead. `newer_waiting` says whether a newer frame is already queued behind it.
+pub fn late_drop(header: &FrameHeader, newer_waiting: bool, budget: &BudgetConfig) -> Option<FrameStatus> {
+    if !budget.drop_late {
+        return None;
+    }
+    if newer_waiting {
+        return Some(FrameStatus::DroppedBehind);
+    }
+    (header.age_ms(now_ns()) > budget.end_to_end_ms).then_some(FrameStatus::DroppedLate)
+}
+
+/// Marks `header` as taken by `stage` now.
+pub fn stamp_start(header: &mut FrameHeader, stage: StageKind) {
+    if let Some(s) = header.stamp_mut(stage) {
+        s.start_ns = now_ns();
+    }
+}
+
+/// Marks `header` as published by `stage` now.
+pub fn stamp_end(header: &mut FrameHeader, stage: StageKind) {
+    if let Some(s) = header.stamp_mut(stage) {
+        s.end_ns = now_ns();
+    }
+}
+
+/// The two images of a frame message, read in place.
+pub fn stereo_views<'a>(frame: &'a Received<u8>) -> Result<(BorrowedGray<'a>, BorrowedGray<'a>), VisionError> {
+    let header = frame.header();
+    let (w, h) = (header.width as usize, header.height as usize);
+    let pixels = frame.payload();
+    let origin = |side: &str| format!("frame {} {side} image", header.frame_id);
+    let half = w.saturating_mul(h);
+    if pixels.len() != 2 * half {
+        return Err(VisionError::RawSize { origin: origin("stereo"), len: pixels.len(), width: w, height: 2 * h });
+    }
+    let (left, right) = pixels.split_at(half);
+    Ok((GrayImage::borrow_pixels(w, h, left, &origin("left"))?, GrayImage::borrow_pixels(w, h, right, &origin("right"))?))
+}
+
+/// Frame messages held (in shared memory, not copied) until the stage's other input for
+/// the same frame arrives.
+pub struct HeldFrames {
+    held: VecDeque<Received<u8>>,
+    capacity: usize,
+}
+
+impl HeldFrames {
+    /// Holds at most `capacity` frames; the oldest is released first.
+    pub fn new(capacity: usize) -> Self {
+        Self { held: VecDeque::new(), capacity: capacity.max(1) }
+    }
+
+    /// Holds `frame` (releasing the oldest when full).
+    pub fn push(&mut self, frame: Received<u8>) {
+        if self.held.len() == self.capacity {
+            self.held.pop_front();
+        }
+        self.held.push_back(frame);
+    }
+
+    /// Takes frame `frame_id`, releasing every older one (their turn has passed).
+    pub fn take(&mut self, frame_id: u64) -> Option<Received<u8>> {
+        while self.held.front().is_some_and(|f| f.header().frame_id < frame_id) {
+            self.held.pop_front();
+        }
+        if self.held.front().is_some_and(|f| f.header().frame_id == frame_id) { self.held.pop_front() } else { None }
+    }
+
+    /// Takes the oldest held frame.
+    pub fn take_next(&mut self) -> Option<Received<u8>> {
+        self.held.pop_front()
+    }
+
+    /// Frames held.
+    pub fn len(&self) -> usize {
+        self.held.len()
+    }
+
+    /// Whether none is held.
+    pub fn is_empty(&self) -> bool {
+        self.held.is_empty()
+    }
+
+    /// The oldest held frame's id.
+    pub fn first_id(&self) -> Option<u64> {
+        self.held.front().map(|f| f.header().frame_id)
+    }
+}
+
+/// Segments as records.
+pub fn to_records(segments: &[Segment]) -> Vec<SegmentRecord> {
+    segments.iter().map(|s| SegmentRecord { endpoints: [s.start.x as f32, s.start.y as f32, s.end.x as f32, s.end.y as f32] }).collect()
+}
+
+/// A record as a segment.
+pub fn to_segment(endpoints: &[f32; 4]) -> Segment {
+    let [x1, y1, x2, y2] = endpoints.map(f64::from);
+    Segment::new(Point::new(x1, y1), Point::new(x2, y2))
+}
+
+/// The wire code of a detector kind (in status reports and frame headers).
+pub fn detector_code(kind: DetectorKind) -> u32 {
+    match kind {
+        DetectorKind::Lsd => 0,
+        DetectorKind::Fld => 1,
+    }
+}
+
+/// The detector kind of a wire code.
+pub fn detector_from_code(code: u32) -> Option<DetectorKind> {
+    match code {
+        0 => Some(DetectorKind::Lsd),
+        1 => Some(DetectorKind::Fld),
+        _ => None,
+    }
+}
+
+/// The whole `main` of a stage binary: `run` gets the context, the process's bus and the
+/// shutdown flag. Errors are logged with their causes and give exit code 1.
+pub fn stage_main(stage: StageKind, run: fn(&StageContext, &Bus, &Shutdown) -> anyhow::Result<()>) -> ExitCode {
+    let args = StageArgs::parse();
+    match start(stage, args, run) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            tracing::error!("{stage}: {e:#}");
+            eprintln!("linetrack-{stage}: {e:#}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+fn start(stage: StageKind, args: StageArgs, run: fn(&StageContext, &Bus, &Shutdown) -> anyhow::Result<()>) -> anyhow::Result<()> {
+    let config = PipelineConfig::from_file(&args.config)?;
+    let pid = std::process::id();
+    let spans = config.output.trace.then(|| linetrack_telemetry::span_file(&args.run_dir, stage.name(), pid));
+    linetrack_telemetry::init(stage.name(), "warn", spans.as_deref())?;
+    let shutdown = Shutdown::on_signals()?;
+    watch_parent(&shutdown);
+    let bus = Bus::shared_memory(&Scope::new(&args.run_id), &format!("{}-{pid}", stage.name()))?;
+    let ctx = StageContext { stage, config, args, pid };
+    run(&ctx, &bus, &shutdown)
+}
+
+/// Asks for shutdown when the process that started this one (the supervisor) dies: a stage
+/// never outlives its supervisor.
+fn watch_parent(shutdown: &Shutdown) {
+    let parent = std::os::unix::process::parent_id();
+    let flag = shutdown.clone();
+    let _ = std::thread::Builder::new().name("parent-watch".to_string()).spawn(move || {
+        while !flag.requested() {
+            std::thread::sleep(Duration::from_millis(250));
+            if std::os::unix::process::parent_id() != parent {
+                tracing::warn!("the supervisor (pid {parent}) is gone: shutting down");
+                flag.request();
+            }
+        }
+    });
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn late_frames_are_dropped_only_under_the_policy() {
+        let budget = BudgetConfig { end_to_end_ms: 100.0, ..BudgetConfig::default() };
+        let fresh = FrameHeader::new(1, 0, now_ns());
+        let stale = FrameHeader::new(2, 0, now_ns() - 200_000_000);
+        assert_eq!(late_drop(&fresh, false, &budget), None);
+        assert_eq!(late_drop(&fresh, true, &budget), Some(FrameStatus::DroppedBehind));
+        assert_eq!(late_drop(&stale, false, &budget), Some(FrameStatus::DroppedLate));
+        let keep_all = BudgetConfig { drop_late: false, ..budget };
+        assert_eq!(late_drop(&stale, true, &keep_all), None);
+    }
+
+    #[test]
+    fn heartbeats_are_paced() {
+        let bus = Bus::local();
+        let ctx = StageContext::in_process(StageKind::Matcher, PipelineConfig::default(), PathBuf::new());
+        let mut inlet = bus.inlet::<StatusReport>(Topic::Status).unwrap_or_else(|e| panic!("{e}"));
+        let mut reporter = Reporter::new(&bus, &ctx, 0).unwrap_or_else(|e| panic!("{e}"));
+        reporter.beat(1);
+        reporter.beat(2); // too soon: not sent
+        let got = inlet.receive_all().unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(got.len(), 1);
+        assert_eq!(got[0].payload()[0].value, 1);
+        assert_eq!(got[0].payload()[0].stage, StageKind::Matcher.code());
+        assert!(reporter.until_due() > Duration::ZERO);
+    }
+}

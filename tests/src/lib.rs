@@ -1,0 +1,203 @@
+//! Helpers of the end-to-end tests: generated sequences (made once, then copied and
+//! altered), a pipeline run started as a user would (`linetrack run` in its own process,
+//! with its own shared-memory prefix), and its records.
+
+use linetrack_ipc::{Resources, Scope};
+use linetrack_run_record::{EventRecord, FrameRecord, read_events, read_frames};
+use linetrack_scene_render::Preset;
+use linetrack_supervisor::LiveStatus;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+/// The folder holding the workspace's binaries (`linetrack`, the stages): the test binary
+/// lives in its `deps/`.
+pub fn bin_dir() -> PathBuf {
+    let exe = std::env::current_exe().unwrap_or_else(|e| panic!("current_exe: {e}"));
+    let dir = exe.parent().and_then(Path::parent).unwrap_or_else(|| panic!("no bin folder above {}", exe.display())).to_path_buf();
+    for name in ["linetrack", "linetrack-frame-source", "linetrack-line-detector", "linetrack-matcher", "linetrack-pose-estimator"] {
+        assert!(
+            dir.join(name).is_file(),
+            "{} is missing: build the binaries first (`cargo build --workspace --bins --profile test-release`; `cargo xtask test` does it)",
+            dir.join(name).display()
+        );
+    }
+    dir
+}
+
+/// Where the tests keep their files: beside the binaries, in `e2e-tmp/`.
+fn tmp_root() -> PathBuf {
+    let exe = std::env::current_exe().unwrap_or_else(|e| panic!("current_exe: {e}"));
+    exe.parent().and_then(Path::parent).unwrap_or_else(|| panic!("no folder above {}", exe.display())).join("e2e-tmp")
+}
+
+/// A scratch folder for one test, emptied.
+pub fn scratch(name: &str) -> PathBuf {
+    let dir = tmp_root().join("runs").join(name);
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap_or_else(|e| panic!("{}: {e}", dir.display()));
+    dir
+}
+
+/// The shared generated sequence of `frames` frames (preset normal), rendered on first use.
+pub fn base_sequence(frames: usize) -> PathBuf {
+    let dir = tmp_root().join(format!("sequence-{frames}"));
+    if dir.join("mav0/cam1/data.csv").is_file() {
+        return dir;
+    }
+    let partial = tmp_root().join(format!("sequence-{frames}.partial-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&partial);
+    linetrack_synth::generate(Preset::Normal, 1, frames, &partial).unwrap_or_else(|e| panic!("generating the sequence: {e:#}"));
+    // Another test may have finished first: either copy is the same sequence.
+    if std::fs::rename(&partial, &dir).is_err() {
+        let _ = std::fs::remove_dir_all(&partial);
+    }
+    dir
+}
+
+fn copy_tree(from: &Path, to: &Path) {
+    std::fs::create_dir_all(to).unwrap_or_else(|e| panic!("{}: {e}", to.display()));
+    for entry in std::fs::read_dir(from).unwrap_or_else(|e| panic!("{}: {e}", from.display())).flatten() {
+        let target = to.join(entry.file_name());
+        if entry.path().is_dir() {
+            copy_tree(&entry.path(), &target);
+        } else {
+            std::fs::copy(entry.path(), &target).unwrap_or_else(|e| panic!("{}: {e}", target.display()));
+        }
+    }
+}
+
+/// A copy of the base sequence in `dir`, for tests that alter images.
+pub fn sequence_copy(frames: usize, dir: &Path) -> PathBuf {
+    let target = dir.join("sequence");
+    copy_tree(&base_sequence(frames).join("mav0"), &target.join("mav0"));
+    target
+}
+
+/// The image files of camera `cam` (0 left, 1 right) of a sequence, in time order.
+pub fn images(sequence: &Path, cam: u32) -> Vec<PathBuf> {
+    let dir = sequence.join(format!("mav0/cam{cam}/data"));
+    let mut files: Vec<PathBuf> = std::fs::read_dir(&dir).unwrap_or_else(|e| panic!("{}: {e}", dir.display())).flatten().map(|e| e.path()).collect();
+    // Named by timestamp (not zero-padded): order by the number.
+    files.sort_by_key(|p| p.file_stem().and_then(|s| s.to_str()).and_then(|s| s.parse::<u64>().ok()).unwrap_or(u64::MAX));
+    files
+}
+
+/// A pipeline run in its own process.
+pub struct Run {
+    /// The `linetrack run` process.
+    pub child: Child,
+    /// Its run folder.
+    pub run_dir: PathBuf,
+    /// Its shared-memory prefix.
+    pub prefix: String,
+}
+
+/// Writes a pipeline config for `sequence` into `dir` with `extra` TOML appended to the
+/// test defaults (10 Hz, quick supervision), and starts `linetrack run` on it.
+pub fn start(dir: &Path, sequence: &Path, extra: &str) -> Run {
+    let prefix = format!("lte2e{}_{}_", std::process::id(), dir.file_name().and_then(|n| n.to_str()).unwrap_or("x").replace('-', ""));
+    start_with_prefix(dir, sequence, extra, &prefix)
+}
+
+/// [`start`] with a given shared-memory prefix.
+pub fn start_with_prefix(dir: &Path, sequence: &Path, extra: &str, prefix: &str) -> Run {
+    let prefix = prefix.to_string();
+    let run_dir = dir.join("run");
+    let config = dir.join("pipeline.toml");
+    let text = format!(
+        "{extra}\n[source]\nsequence = {:?}\nrate_hz = 10.0\n[output]\nrun_dir = {:?}\n",
+        sequence.display().to_string(),
+        run_dir.display().to_string()
+    );
+    std::fs::write(&config, text).unwrap_or_else(|e| panic!("{e}"));
+    let child = Command::new(bin_dir().join("linetrack"))
+        .args(["run", "--quiet", "--config"])
+        .arg(&config)
+        .env(Scope::PREFIX_VAR, &prefix)
+        .stdin(Stdio::null())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::inherit())
+        .spawn()
+        .unwrap_or_else(|e| panic!("starting linetrack: {e}"));
+    Run { child, run_dir, prefix }
+}
+
+impl Run {
+    /// The run's live status, once the supervisor wrote it.
+    pub fn status(&self) -> Option<LiveStatus> {
+        let text = std::fs::read_to_string(self.run_dir.join("status.json")).ok()?;
+        serde_json::from_str(&text).ok()
+    }
+
+    /// Waits until `ready(status)` holds, or panics after `timeout`.
+    pub fn wait_for(&mut self, what: &str, timeout: Duration, ready: impl Fn(&LiveStatus) -> bool) -> LiveStatus {
+        let deadline = Instant::now() + timeout;
+        loop {
+            if let Some(s) = self.status()
+                && ready(&s)
+            {
+                return s;
+            }
+            if let Ok(Some(status)) = self.child.try_wait() {
+                panic!("the run exited ({status}) before {what}");
+            }
+            assert!(Instant::now() < deadline, "no {what} within {timeout:?}");
+            std::thread::sleep(Duration::from_millis(50));
+        }
+    }
+
+    /// Waits for the run to end (panics after `timeout`); returns its stdout.
+    pub fn finish(mut self, timeout: Duration) -> (std::process::ExitStatus, String, Records) {
+        let deadline = Instant::now() + timeout;
+        let status = loop {
+            if let Ok(Some(status)) = self.child.try_wait() {
+                break status;
+            }
+            if Instant::now() > deadline {
+                let _ = self.child.kill();
+                panic!("the run did not finish within {timeout:?}");
+            }
+            std::thread::sleep(Duration::from_millis(50));
+        };
+        let mut out = String::new();
+        if let Some(mut stdout) = self.child.stdout.take() {
+            use std::io::Read;
+            let _ = stdout.read_to_string(&mut out);
+        }
+        let records = Records::read(&self.run_dir, &self.prefix);
+        (status, out, records)
+    }
+}
+
+/// What a run left.
+pub struct Records {
+    /// Per frame.
+    pub frames: Vec<FrameRecord>,
+    /// Events.
+    pub events: Vec<EventRecord>,
+    /// iceoryx2 resources left under the run's prefix.
+    pub leftovers: Resources,
+}
+
+impl Records {
+    /// Reads a run folder.
+    pub fn read(run_dir: &Path, prefix: &str) -> Self {
+        let frames = read_frames(&run_dir.join("frames.csv")).unwrap_or_else(|e| panic!("{e}"));
+        let events = read_events(&run_dir.join("events.csv")).unwrap_or_else(|e| panic!("{e}"));
+        let scope = Scope { prefix: prefix.to_string(), run_id: String::new() };
+        let leftovers = scope.resources().unwrap_or_else(|e| panic!("{e}"));
+        Self { frames, events, leftovers }
+    }
+
+    /// The events of `kind`.
+    pub fn events_of(&self, kind: &str) -> Vec<&EventRecord> {
+        self.events.iter().filter(|e| e.kind == kind).collect()
+    }
+}
+
+/// Sends `signal` (e.g. "KILL", "TERM") to `pid` with kill(1).
+pub fn signal(pid: u32, signal: &str) {
+    let status = Command::new("kill").arg(format!("-{signal}")).arg(pid.to_string()).status().unwrap_or_else(|e| panic!("kill: {e}"));
+    assert!(status.success(), "kill -{signal} {pid} failed");
+}

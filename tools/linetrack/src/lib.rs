@@ -1,0 +1,258 @@
+//! The `linetrack` command.
+//!
+//! - `linetrack run`: the pipeline end to end (one process per stage over shared memory, or
+//!   `--single-process`), with a live status line and the final latency report.
+//! - `linetrack ctl swap-detector fld`: hot-swaps the detector of a running pipeline.
+//! - `linetrack report [RUN_DIR]`: the latency report of a run, with its histogram PNG.
+
+use anyhow::{Context, bail};
+use clap::{Parser, Subcommand};
+use linetrack_ipc::{Bus, Scope, Shutdown};
+use linetrack_msgs::{Command, Control, FrameHeader, StageKind, Topic};
+use linetrack_pipeline_config::{Pacing, PipelineConfig};
+use linetrack_run_record::{Report, STAGES, read_events, read_frames};
+use linetrack_scene_render::Preset;
+use linetrack_supervisor::{LiveStatus, Mode, RunOptions};
+use linetrack_vision::DetectorKind;
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+/// Frames of the generated default sequence (10 s at 20 Hz).
+const DEFAULT_FRAMES: usize = 200;
+
+/// The command line.
+#[derive(Debug, Parser)]
+#[command(
+    name = "linetrack",
+    version,
+    about = "Geometric line tracking for stereo visual odometry: the multi-process pipeline.",
+    after_help = "EXAMPLES:
+    linetrack run                                   # generated sequence, live status, report
+    linetrack run --dataset ../shared/data/euroc/V1_01_easy_micro --pacing fastest
+    linetrack run --single-process                  # same stages on threads (baseline)
+    linetrack ctl swap-detector fld                 # while a run is going, from another shell
+    linetrack report out/runs/latest                # latency report + histogram PNG"
+)]
+pub struct Cli {
+    /// What to do.
+    #[command(subcommand)]
+    pub command: Cmd,
+}
+
+/// Subcommands.
+#[derive(Debug, Subcommand)]
+pub enum Cmd {
+    /// Run the pipeline on a sequence and report.
+    Run(RunArgs),
+    /// Steer a running pipeline.
+    Ctl(CtlArgs),
+    /// Latency report of a finished run.
+    Report(ReportArgs),
+}
+
+/// `linetrack run`.
+#[derive(Debug, clap::Args)]
+pub struct RunArgs {
+    /// Pipeline config.
+    #[arg(long, default_value = "configs/pipeline.toml")]
+    pub config: PathBuf,
+    /// A EuRoC or KITTI sequence folder (default: the config's; the generated default
+    /// sequence is rendered on first use).
+    #[arg(long)]
+    pub dataset: Option<PathBuf>,
+    /// Stop after this many frames.
+    #[arg(long)]
+    pub frames: Option<usize>,
+    /// realtime (the sequence's rate) or fastest.
+    #[arg(long)]
+    pub pacing: Option<String>,
+    /// Start with this detector (lsd or fld).
+    #[arg(long)]
+    pub detector: Option<DetectorKind>,
+    /// Run folder (default: the config's).
+    #[arg(long)]
+    pub run_dir: Option<PathBuf>,
+    /// Run the stages as threads of this process over channels instead of processes over
+    /// shared memory.
+    #[arg(long)]
+    pub single_process: bool,
+    /// No live status line.
+    #[arg(long)]
+    pub quiet: bool,
+}
+
+/// `linetrack ctl`.
+#[derive(Debug, clap::Args)]
+pub struct CtlArgs {
+    /// The running pipeline's run folder.
+    #[arg(long, default_value = "out/runs/latest")]
+    pub run_dir: PathBuf,
+    /// The command.
+    #[command(subcommand)]
+    pub action: CtlAction,
+}
+
+/// Commands to a running pipeline.
+#[derive(Debug, Subcommand)]
+pub enum CtlAction {
+    /// Replace the line detector without stopping (lsd or fld); waits for the take-over.
+    SwapDetector {
+        /// The detector to switch to.
+        detector: DetectorKind,
+        /// How long to wait for the take-over, seconds.
+        #[arg(long, default_value_t = 30.0)]
+        timeout: f64,
+    },
+}
+
+/// `linetrack report`.
+#[derive(Debug, clap::Args)]
+pub struct ReportArgs {
+    /// Run folder.
+    #[arg(default_value = "out/runs/latest")]
+    pub run_dir: PathBuf,
+    /// Histogram bin width, milliseconds.
+    #[arg(long, default_value_t = 5.0)]
+    pub bin_ms: f64,
+}
+
+/// Runs a command.
+pub fn main(cli: Cli) -> anyhow::Result<()> {
+    match cli.command {
+        Cmd::Run(args) => run(&args).map(|_| ()),
+        Cmd::Ctl(args) => ctl(&args),
+        Cmd::Report(args) => {
+            print!("{}", report(&args.run_dir, args.bin_ms)?);
+            Ok(())
+        }
+    }
+}
+
+/// The run's config: the file with the command line's overrides.
+pub fn effective_config(args: &RunArgs) -> anyhow::Result<PipelineConfig> {
+    let mut config = PipelineConfig::from_file(&args.config)?;
+    if let Some(dataset) = &args.dataset {
+        config.source.sequence = dataset.clone();
+    }
+    if let Some(frames) = args.frames {
+        config.source.max_frames = frames;
+    }
+    if let Some(pacing) = &args.pacing {
+        config.source.pacing = match pacing.as_str() {
+            "realtime" => Pacing::Realtime,
+            "fastest" => Pacing::Fastest,
+            other => bail!("--pacing {other:?}: expected realtime or fastest"),
+        };
+    }
+    if let Some(detector) = args.detector {
+        config.detector = detector;
+    }
+    if let Some(dir) = &args.run_dir {
+        config.output.run_dir = dir.clone();
+    }
+    Ok(config)
+}
+
+/// `linetrack run`: returns the run folder.
+pub fn run(args: &RunArgs) -> anyhow::Result<PathBuf> {
+    linetrack_telemetry::init("supervisor", "info", None)?;
+    let config = effective_config(args)?;
+    let sequence = &config.source.sequence;
+    if args.dataset.is_none() && !sequence.join("mav0/cam0/data.csv").is_file() && sequence.ends_with("out/sequences/pipeline") {
+        eprintln!("generating the default sequence ({DEFAULT_FRAMES} frames, preset normal) in {} (first run only)", sequence.display());
+        linetrack_synth::generate(Preset::Normal, 1, DEFAULT_FRAMES, sequence)?;
+    }
+    let mode = if args.single_process { Mode::Threads } else { Mode::Processes };
+    println!(
+        "linetrack: {} on {} ({}, {}), detector {}, matcher {}",
+        if args.single_process { "single process" } else { "one process per stage" },
+        sequence.display(),
+        match config.source.pacing {
+            Pacing::Realtime => "realtime",
+            Pacing::Fastest => "fastest",
+        },
+        if config.source.max_frames > 0 { format!("{} frames", config.source.max_frames) } else { "all frames".to_string() },
+        config.detector.name(),
+        config.matcher.mode_name(),
+    );
+    let options = RunOptions { mode, bin_dir: None, live_status: !args.quiet };
+    let outcome = linetrack_supervisor::run(&config, &options, &Shutdown::on_signals()?)?;
+    println!();
+    print!("{}", report(&outcome.run_dir, 5.0)?);
+    if outcome.interrupted {
+        println!("(interrupted)");
+    }
+    Ok(outcome.run_dir)
+}
+
+/// `linetrack report`: the text, after writing `latency-histogram.png` into the run folder.
+pub fn report(run_dir: &Path, bin_ms: f64) -> anyhow::Result<String> {
+    let frames = read_frames(&run_dir.join("frames.csv")).with_context(|| format!("{} holds no finished run", run_dir.display()))?;
+    let events = read_events(&run_dir.join("events.csv"))?;
+    let report = Report::new(&frames, &events);
+    let mut series: Vec<(String, Vec<f64>)> = STAGES.iter().enumerate().map(|(i, s)| (s.to_string(), frames.iter().map(|f| f.stage_ms[i]).collect())).collect();
+    series.push(("end-to-end".to_string(), frames.iter().filter(|f| f.has_pose()).map(|f| f.end_to_end_ms).collect()));
+    let budget = PipelineConfig::from_file(&run_dir.join("pipeline.toml")).map(|c| c.budget.end_to_end_ms).ok();
+    let png = run_dir.join("latency-histogram.png");
+    linetrack_plot::histogram(&png, "latency per frame (dashed: end-to-end budget)", "milliseconds", &series, bin_ms, budget.as_slice())?;
+    let mut text = format!("run {}\n{}", run_dir.display(), report.to_text());
+    for e in events.iter().filter(|e| e.kind != "stale-cleanup") {
+        let at = e.frame_id.map(|f| format!(" frame {f}")).unwrap_or_default();
+        text.push_str(&format!("  {:7.2} s {} [{}]{at}: {}\n", e.time_s, e.kind, e.stage, e.detail));
+    }
+    let trace = run_dir.join("trace.json");
+    text.push_str(&format!("histogram: {}\n", png.display()));
+    if trace.is_file() {
+        text.push_str(&format!("trace (open in ui.perfetto.dev or chrome://tracing): {}\n", trace.display()));
+    }
+    Ok(text)
+}
+
+/// Reads a running pipeline's `status.json`.
+pub fn live_status(run_dir: &Path) -> anyhow::Result<LiveStatus> {
+    let path = run_dir.join("status.json");
+    let text = std::fs::read_to_string(&path).with_context(|| format!("no running pipeline in {} (cannot read {})", run_dir.display(), path.display()))?;
+    serde_json::from_str(&text).with_context(|| format!("{} is damaged", path.display()))
+}
+
+/// `linetrack ctl`.
+pub fn ctl(args: &CtlArgs) -> anyhow::Result<()> {
+    let status = live_status(&args.run_dir)?;
+    if status.finished {
+        bail!("the run in {} has finished", args.run_dir.display());
+    }
+    match &args.action {
+        CtlAction::SwapDetector { detector, timeout } => {
+            if status.detector == detector.name() {
+                println!("detector is already {}", detector.name());
+                return Ok(());
+            }
+            let scope = Scope { prefix: status.ipc_prefix.clone(), run_id: status.run_id.clone() };
+            let bus = Bus::shared_memory(&scope, &format!("ctl-{}", std::process::id()))?;
+            let mut control = bus.outlet::<Control>(Topic::Control, 1)?;
+            let request = Control {
+                command: Command::SwapDetector as u32,
+                target_pid: status.supervisor_pid,
+                target_stage: StageKind::Supervisor.code(),
+                value: linetrack_supervisor::detector_wire_code(*detector),
+                frame_id: 0,
+            };
+            control.publish(&FrameHeader::default(), &[&[request]])?;
+            println!("asked the supervisor (pid {}) to swap {} -> {}", status.supervisor_pid, status.detector, detector.name());
+            let deadline = Instant::now() + Duration::from_secs_f64(timeout.max(0.1));
+            // Keep the request's publisher alive until the swap shows in the run's status.
+            while Instant::now() < deadline {
+                std::thread::sleep(Duration::from_millis(100));
+                let now = live_status(&args.run_dir)?;
+                if now.detector == detector.name() {
+                    println!("{} took over", detector.name());
+                    return Ok(());
+                }
+                if now.finished {
+                    bail!("the run finished before the swap");
+                }
+            }
+            bail!("no take-over within {timeout} s (see the supervisor's log)")
+        }
+    }
+}
