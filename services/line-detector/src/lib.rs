@@ -9,8 +9,8 @@
 //! old detector and frames from F on only from the new one: none lost, none twice.
 
 use linetrack_ipc::{Bus, Inlet, Outlet, Received, Shutdown, Wake};
-use linetrack_msgs::{Command, Control, FrameHeader, FrameStatus, SegmentRecord, StageKind, StatusKind, Topic};
-use linetrack_stage_runtime::{HeldFrames, Reporter, StageContext, detector_code, late_drop, stamp_end, stamp_start, stereo_views, to_records};
+use linetrack_msgs::{Command, Control, FrameHeader, SegmentRecord, StageKind, StatusKind, Topic};
+use linetrack_stage_runtime::{HeldFrames, Reporter, StageContext, detector_code, process_frame, stereo_views, to_records};
 use linetrack_vision::{GrayImage, LineDetector, create_detector};
 use std::time::Duration;
 use tracing::info_span;
@@ -63,37 +63,19 @@ impl Detector {
         let mut header: FrameHeader = *frame.header();
         let span = info_span!("detect", frame_id = header.frame_id);
         let _entered = span.enter();
-        stamp_start(&mut header, StageKind::LineDetector);
         header.detector = self.kind_code;
         header.detector_pid = self.pid;
-        if header.frame_status() == FrameStatus::Ok {
-            if let Some(status) = late_drop(&header, newer_waiting, &ctx.config.budget) {
-                header.mark(status, StageKind::LineDetector);
-            }
-        }
-        if header.frame_status() != FrameStatus::Ok {
-            stamp_end(&mut header, StageKind::LineDetector);
-            out.publish(&header, &[])?;
-            return Ok(());
-        }
-        let detected = stereo_views(frame).map_err(anyhow::Error::from).and_then(|(left, right)| {
+        let work = |h: &mut FrameHeader| {
+            let (left, right) = stereo_views(frame)?;
             self.detector.detect(&left, &mut self.left)?;
             self.detector.detect(&right, &mut self.right)?;
-            Ok(())
-        });
-        let (left, right) = match detected {
-            Ok(()) => (to_records(&self.left), to_records(&self.right)),
-            Err(e) => {
-                tracing::warn!("frame {}: {e:#}", header.frame_id);
-                header.mark(FrameStatus::StageError, StageKind::LineDetector);
-                (Vec::new(), Vec::new())
-            }
+            h.left_count = self.left.len() as u32;
+            h.right_count = self.right.len() as u32;
+            let mut records = to_records(&self.left);
+            records.extend(to_records(&self.right));
+            Ok(records)
         };
-        header.left_count = left.len() as u32;
-        header.right_count = right.len() as u32;
-        stamp_end(&mut header, StageKind::LineDetector);
-        out.publish(&header, &[&left, &right])?;
-        Ok(())
+        process_frame(StageKind::LineDetector, header, newer_waiting, &ctx.config.budget, out, work, Vec::new)
     }
 }
 

@@ -8,9 +8,9 @@
 //! frames were described, else ℓ1. The supervisor sets the mode; the matcher reports.
 
 use linetrack_ipc::{Bus, Inlet, Outlet, Received, Shutdown, Wake};
-use linetrack_msgs::{Command, Control, FrameHeader, FrameStatus, MatcherMode, NO_FRAME, SegmentRecord, StageKind, Topic, TrackedLine};
+use linetrack_msgs::{Command, Control, FrameHeader, MatcherMode, NO_FRAME, SegmentRecord, StageKind, Topic, TrackedLine};
 use linetrack_pipeline_config::MatcherPolicy;
-use linetrack_stage_runtime::{HeldFrames, Reporter, StageContext, late_drop, stamp_end, stamp_start, stereo_views, to_segment};
+use linetrack_stage_runtime::{HeldFrames, Reporter, StageContext, process_frame, stereo_views, to_segment};
 use linetrack_geometry::MatchCase;
 use linetrack_vision::{FeatureMatch, LineFeatures, MatcherKind, SegmentMatcher, create_segment_matcher};
 use std::time::Duration;
@@ -197,30 +197,12 @@ pub fn run(ctx: &StageContext, mut ports: Ports, shutdown: &Shutdown) -> anyhow:
         let batch = ports.segments.receive_all()?;
         let count = batch.len();
         for (k, message) in batch.iter().enumerate() {
-            let mut header = *message.header();
+            let header = *message.header();
             let span = info_span!("match", frame_id = header.frame_id);
             let _entered = span.enter();
-            stamp_start(&mut header, StageKind::Matcher);
             let images = held.take(header.frame_id);
-            if header.frame_status() == FrameStatus::Ok
-                && let Some(status) = late_drop(&header, k + 1 < count, &ctx.config.budget)
-            {
-                header.mark(status, StageKind::Matcher);
-            }
-            let records = if header.frame_status() == FrameStatus::Ok {
-                match matcher.match_frame(&mut header, message.payload(), images.as_ref()) {
-                    Ok(records) => records,
-                    Err(e) => {
-                        tracing::warn!("frame {}: {e:#}", header.frame_id);
-                        header.mark(FrameStatus::StageError, StageKind::Matcher);
-                        Vec::new()
-                    }
-                }
-            } else {
-                Vec::new()
-            };
-            stamp_end(&mut header, StageKind::Matcher);
-            ports.tracks.publish(&header, &[&records])?;
+            let work = |h: &mut FrameHeader| matcher.match_frame(h, message.payload(), images.as_ref());
+            process_frame(StageKind::Matcher, header, k + 1 < count, &ctx.config.budget, &mut ports.tracks, work, Vec::new)?;
             processed += 1;
         }
         ports.reporter.beat(processed);

@@ -9,9 +9,9 @@ use anyhow::Context;
 use linetrack_datasets::StereoSequence;
 use linetrack_geometry::Segment;
 use linetrack_ipc::{Bus, Inlet, Outlet, Shutdown, Wake};
-use linetrack_msgs::{Command, Control, FrameHeader, FrameStatus, NO_FRAME, PoseRecord, StageKind, StatusKind, Topic, TrackedLine};
+use linetrack_msgs::{Command, Control, FrameHeader, NO_FRAME, PoseRecord, StageKind, StatusKind, Topic, TrackedLine};
 use linetrack_odometry::{Features, FrameStats, MatchedLines, MotionTracker};
-use linetrack_stage_runtime::{HeldFrames, Reporter, StageContext, late_drop, stamp_end, stamp_start, stereo_views, to_segment};
+use linetrack_stage_runtime::{HeldFrames, Reporter, StageContext, process_frame, stereo_views, to_segment};
 use linetrack_vision::FeatureMatch;
 use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion};
 use std::time::Duration;
@@ -148,30 +148,14 @@ pub fn run(ctx: &StageContext, mut ports: Ports, shutdown: &Shutdown) -> anyhow:
         let batch = ports.tracks.receive_all()?;
         let count = batch.len();
         for (k, message) in batch.iter().enumerate() {
-            let mut header = *message.header();
+            let header = *message.header();
             let span = info_span!("estimate_pose", frame_id = header.frame_id);
             let _entered = span.enter();
-            stamp_start(&mut header, StageKind::PoseEstimator);
             let frame = held.take(header.frame_id);
-            if header.frame_status() == FrameStatus::Ok
-                && let Some(status) = late_drop(&header, k + 1 < count, &ctx.config.budget)
-            {
-                header.mark(status, StageKind::PoseEstimator);
-            }
-            let record = if header.frame_status() == FrameStatus::Ok {
-                match tracker.track(&header, message.payload(), frame.as_ref()) {
-                    Ok(record) => record,
-                    Err(e) => {
-                        tracing::warn!("frame {}: {e:#}", header.frame_id);
-                        header.mark(FrameStatus::StageError, StageKind::PoseEstimator);
-                        pose_record(&tracker.tracker.pose())
-                    }
-                }
-            } else {
-                pose_record(&tracker.tracker.pose())
-            };
-            stamp_end(&mut header, StageKind::PoseEstimator);
-            ports.poses.publish(&header, &[&[record]])?;
+            // A dropped or failed frame repeats the last pose.
+            let last = pose_record(&tracker.tracker.pose());
+            let work = |h: &mut FrameHeader| tracker.track(h, message.payload(), frame.as_ref()).map(|r| vec![r]);
+            process_frame(StageKind::PoseEstimator, header, k + 1 < count, &ctx.config.budget, &mut ports.poses, work, || vec![last])?;
             processed += 1;
         }
         ports.reporter.beat(processed);

@@ -306,7 +306,7 @@ impl Bus {
                 let wake_name = wake_service_name(&scope.run_id, stage);
                 let event = event_service(node, &wake_name)?;
                 let listener = event.listener_builder().create().map_err(|e| setup("listener", &wake_name)(format!("{e:?}")))?;
-                Ok(Wake { service_name: wake_name, inner: WakeInner::Shm(listener) })
+                Ok(Wake { service_name: wake_name, inner: WakeInner::Shm(Box::new(listener)) })
             }
             BusKind::Local(registry) => {
                 let mut r = Self::lock_local(registry);
@@ -482,7 +482,7 @@ impl<P: Record> Inlet<P> {
 }
 
 enum WakeInner {
-    Shm(Listener<ipc::Service>),
+    Shm(Box<Listener<ipc::Service>>),
     Local(Receiver<()>),
 }
 

@@ -128,6 +128,42 @@ pub fn late_drop(header: &FrameHeader, newer_waiting: bool, budget: &BudgetConfi
     (header.age_ms(now_ns()) > budget.end_to_end_ms).then_some(FrameStatus::DroppedLate)
 }
 
+/// Takes one frame through a stage: stamps when it took it, applies the drop policy
+/// (`newer_waiting`: a newer frame is queued behind it), runs `work` on a frame still to be
+/// processed — an error marks the frame failed by this stage and is logged — and publishes
+/// what `work` returned, or `placeholder()` for a dropped or failed frame, under the
+/// stamped header.
+pub fn process_frame<O: linetrack_ipc::Record>(
+    stage: StageKind,
+    mut header: FrameHeader,
+    newer_waiting: bool,
+    budget: &BudgetConfig,
+    out: &mut Outlet<O>,
+    work: impl FnOnce(&mut FrameHeader) -> anyhow::Result<Vec<O>>,
+    placeholder: impl FnOnce() -> Vec<O>,
+) -> anyhow::Result<()> {
+    stamp_start(&mut header, stage);
+    if header.frame_status() == FrameStatus::Ok
+        && let Some(status) = late_drop(&header, newer_waiting, budget)
+    {
+        header.mark(status, stage);
+    }
+    let records = match header.frame_status() {
+        FrameStatus::Ok => match work(&mut header) {
+            Ok(records) => records,
+            Err(e) => {
+                tracing::warn!("frame {}: {e:#}", header.frame_id);
+                header.mark(FrameStatus::StageError, stage);
+                placeholder()
+            }
+        },
+        _ => placeholder(),
+    };
+    stamp_end(&mut header, stage);
+    out.publish(&header, &[&records])?;
+    Ok(())
+}
+
 /// Marks `header` as taken by `stage` now.
 pub fn stamp_start(header: &mut FrameHeader, stage: StageKind) {
     if let Some(s) = header.stamp_mut(stage) {

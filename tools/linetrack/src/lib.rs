@@ -17,8 +17,8 @@ use linetrack_vision::DetectorKind;
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
-/// Frames of the generated default sequence (10 s at 20 Hz).
-const DEFAULT_FRAMES: usize = 200;
+/// Frames of the generated default sequence (5 s at 20 Hz).
+const DEFAULT_FRAMES: usize = 100;
 
 /// The command line.
 #[derive(Debug, Parser)]

@@ -1,0 +1,238 @@
+//! `linetrack-pipeline-bench`: in one run, (1) the cost of one hop of a 752×480 stereo
+//! frame between two processes over iceoryx2 shared memory, against the same hop between
+//! two threads over the local channels, and (2) the pipeline's end-to-end latency with one
+//! process per stage against all stages on threads of one process, on the same generated
+//! sequence, runs alternating so that load drifts hit both.
+
+use anyhow::{Context, bail};
+use clap::Parser;
+use linetrack_ipc::{Bus, Scope, Shutdown};
+use linetrack_msgs::{FrameHeader, PoseRecord, StageKind, Topic, now_ns};
+use linetrack_pipeline_config::{Pacing, PipelineConfig};
+use linetrack_run_record::{Percentiles, read_frames};
+use linetrack_scene_render::Preset;
+use linetrack_supervisor::{Mode, RunOptions};
+use std::fmt::Write as _;
+use std::path::PathBuf;
+use std::process::{Command, ExitCode, Stdio};
+use std::time::{Duration, Instant};
+
+/// Benchmarks the pipeline's transport and end-to-end latency.
+#[derive(Parser)]
+#[command(after_help = "Writes the tables to stdout and to <output>/pipeline-bench.md.")]
+struct Args {
+    /// Round trips per transport for the hop cost.
+    #[arg(long, default_value_t = 500)]
+    round_trips: usize,
+    /// Frames per pipeline run.
+    #[arg(long, default_value_t = 100)]
+    frames: usize,
+    /// Pipeline runs per mode (alternating).
+    #[arg(long, default_value_t = 2)]
+    repeats: usize,
+    /// Generated sequence to use (rendered if missing).
+    #[arg(long, default_value = "out/sequences/pipeline")]
+    sequence: PathBuf,
+    /// Output folder.
+    #[arg(long, default_value = "out/bench")]
+    output: PathBuf,
+    /// Internal: be the echo peer of the hop benchmark in run `echo`.
+    #[arg(long, hide = true)]
+    echo: Option<String>,
+}
+
+const WIDTH: usize = 752;
+const HEIGHT: usize = 480;
+
+/// The peer: returns every frame's header as a pose, after reading the frame in place.
+fn echo(run_id: &str, hub: Option<linetrack_ipc::LocalHub>, count: usize) -> anyhow::Result<()> {
+    let bus = match hub {
+        Some(h) => h.bus(),
+        None => Bus::shared_memory(&Scope::new(run_id), "bench-echo")?,
+    };
+    let mut frames = bus.inlet::<u8>(Topic::Frames)?;
+    let mut pongs = bus.outlet::<PoseRecord>(Topic::Poses, 1)?;
+    let wake = bus.wake(StageKind::LineDetector)?;
+    pongs.publish(&FrameHeader::new(u64::MAX, 0, 0), &[&[PoseRecord::default()]])?; // ready
+    let mut seen = 0;
+    let deadline = Instant::now() + Duration::from_secs(120);
+    while seen < count && Instant::now() < deadline {
+        wake.wait(Duration::from_millis(100))?;
+        while let Some(frame) = frames.receive()? {
+            // Read the images where they are: one byte per cache line.
+            let checksum: u64 = frame.payload().iter().step_by(64).map(|&b| u64::from(b)).sum();
+            let mut header = *frame.header();
+            header.sequence_ns = checksum;
+            pongs.publish(&header, &[&[PoseRecord::default()]])?;
+            seen += 1;
+        }
+    }
+    Ok(())
+}
+
+/// The pinging side's ports: made before the peer starts, so its ready message is heard.
+struct Pinger {
+    frames: linetrack_ipc::Outlet<u8>,
+    pongs: linetrack_ipc::Inlet<PoseRecord>,
+    wake: linetrack_ipc::Wake,
+}
+
+impl Pinger {
+    fn new(bus: &Bus) -> anyhow::Result<Self> {
+        Ok(Self { frames: bus.outlet::<u8>(Topic::Frames, 2 * WIDTH * HEIGHT)?, pongs: bus.inlet::<PoseRecord>(Topic::Poses)?, wake: bus.wake(StageKind::Supervisor)? })
+    }
+}
+
+/// One-way latencies (half round trips), microseconds.
+fn ping(pinger: Pinger, round_trips: usize) -> anyhow::Result<Vec<f64>> {
+    let Pinger { mut frames, mut pongs, wake } = pinger;
+    let deadline = Instant::now() + Duration::from_secs(30);
+    // Wait for the peer's ready message.
+    loop {
+        wake.wait(Duration::from_millis(100))?;
+        if pongs.receive()?.is_some() {
+            break;
+        }
+        if Instant::now() > deadline {
+            bail!("the echo peer did not start");
+        }
+    }
+    let pixels: Vec<u8> = (0..2 * WIDTH * HEIGHT).map(|i| (i * 31 % 251) as u8).collect();
+    let (left, right) = pixels.split_at(WIDTH * HEIGHT);
+    let mut one_way = Vec::with_capacity(round_trips);
+    for k in 0..round_trips + 20 {
+        let mut header = FrameHeader::new(k as u64, 0, now_ns());
+        header.width = WIDTH as u32;
+        header.height = HEIGHT as u32;
+        let sent = Instant::now();
+        frames.publish(&header, &[left, right])?;
+        let back = loop {
+            wake.wait(Duration::from_secs(5))?;
+            if let Some(p) = pongs.receive()? {
+                break p;
+            }
+            if sent.elapsed() > Duration::from_secs(5) {
+                bail!("no echo of frame {k}");
+            }
+        };
+        let rtt = sent.elapsed();
+        anyhow::ensure!(back.header().frame_id == k as u64, "echo of frame {} for {k}", back.header().frame_id);
+        if k >= 20 {
+            // The first round trips warm up caches and page mappings.
+            one_way.push(rtt.as_secs_f64() * 1e6 / 2.0);
+        }
+    }
+    Ok(one_way)
+}
+
+fn hop_shm(round_trips: usize) -> anyhow::Result<Vec<f64>> {
+    let run_id = format!("bench{}", std::process::id());
+    let bus = Bus::shared_memory(&Scope::new(&run_id), "bench-ping")?;
+    let pinger = Pinger::new(&bus)?;
+    let exe = std::env::current_exe()?;
+    let mut peer = Command::new(exe).args(["--echo", &run_id, "--round-trips", &(round_trips + 20).to_string()]).stdout(Stdio::null()).spawn().context("starting the echo peer")?;
+    let result = ping(pinger, round_trips);
+    let _ = peer.wait();
+    result
+}
+
+fn hop_local(round_trips: usize) -> anyhow::Result<Vec<f64>> {
+    let bus = Bus::local();
+    let hub = bus.local_hub().context("local hub")?;
+    let pinger = Pinger::new(&bus)?;
+    let peer = std::thread::spawn(move || echo("local", Some(hub), round_trips + 20));
+    let result = ping(pinger, round_trips);
+    peer.join().map_err(|_| anyhow::anyhow!("echo thread panicked"))??;
+    result
+}
+
+fn row(out: &mut String, name: &str, p: &Percentiles, unit: &str) {
+    let _ = writeln!(out, "| {name} | {} | {:.1} | {:.1} | {:.1} | {:.1} {unit} |", p.count, p.p50, p.p90, p.p99, p.max);
+}
+
+fn main() -> ExitCode {
+    let args = Args::parse();
+    if let Some(run_id) = &args.echo {
+        return match echo(run_id, None, args.round_trips) {
+            Ok(()) => ExitCode::SUCCESS,
+            Err(e) => {
+                eprintln!("echo: {e:#}");
+                ExitCode::FAILURE
+            }
+        };
+    }
+    match bench(&args) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("linetrack-pipeline-bench: {e:#}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+fn bench(args: &Args) -> anyhow::Result<()> {
+    let mut out = String::new();
+    let _ = writeln!(out, "## One hop of a {WIDTH}×{HEIGHT} stereo frame ({} KiB), one way (half the round trip), µs\n", 2 * WIDTH * HEIGHT / 1024);
+    let _ = writeln!(out, "| transport | n | p50 | p90 | p99 | max |\n|---|---|---|---|---|---|");
+    eprintln!("hop cost: {} round trips per transport", args.round_trips);
+    let shm = Percentiles::of(hop_shm(args.round_trips)?).context("no shared-memory samples")?;
+    let local = Percentiles::of(hop_local(args.round_trips)?).context("no local samples")?;
+    row(&mut out, "iceoryx2 shared memory, two processes", &shm, "");
+    row(&mut out, "crossbeam channels, two threads", &local, "");
+    let _ = writeln!(out, "\nshared memory / channels, medians: {:.2}\n", shm.p50 / local.p50);
+
+    if !args.sequence.join("mav0/cam0/data.csv").is_file() {
+        eprintln!("generating {} ({} frames)", args.sequence.display(), args.frames.max(100));
+        linetrack_synth::generate(Preset::Normal, 1, args.frames.max(100), &args.sequence)?;
+    }
+    let mut e2e: [Vec<f64>; 2] = [Vec::new(), Vec::new()];
+    let mut stage: [Vec<Vec<f64>>; 2] = [vec![Vec::new(); 4], vec![Vec::new(); 4]];
+    let mut drops = [0usize; 2];
+    for repeat in 0..args.repeats {
+        for (m, mode) in [Mode::Processes, Mode::Threads].into_iter().enumerate() {
+            let mut config = PipelineConfig::default();
+            config.source.sequence = args.sequence.clone();
+            config.source.max_frames = args.frames;
+            config.source.pacing = Pacing::Realtime;
+            config.output.trace = false;
+            config.output.run_dir = args.output.join(format!("run-{}-{repeat}", if m == 0 { "processes" } else { "threads" }));
+            eprintln!("pipeline run {}/{}: {:?}", repeat + 1, args.repeats, mode);
+            let outcome = linetrack_supervisor::run(&config, &RunOptions { mode, bin_dir: None, live_status: false }, &Shutdown::default())?;
+            let frames = read_frames(&outcome.run_dir.join("frames.csv"))?;
+            for f in &frames {
+                if f.has_pose() {
+                    e2e[m].push(f.end_to_end_ms);
+                    for (i, ms) in f.stage_ms.iter().enumerate() {
+                        stage[m][i].push(*ms);
+                    }
+                } else {
+                    drops[m] += 1;
+                }
+            }
+        }
+    }
+    let _ = writeln!(
+        out,
+        "## End to end, {} frames × {} runs per mode, {WIDTH}×{HEIGHT} stereo at 20 Hz (generated `normal`), LSD + LBD, points and lines, ms\n",
+        args.frames, args.repeats
+    );
+    let _ = writeln!(out, "| mode | stage | n | p50 | p90 | p99 | max |\n|---|---|---|---|---|---|---|");
+    let names = ["one process per stage (iceoryx2)", "one process, threads (channels)"];
+    let mut medians = [f64::NAN; 2];
+    for m in 0..2 {
+        for (i, name) in linetrack_run_record::STAGES.iter().enumerate() {
+            if let Some(p) = Percentiles::of(stage[m][i].iter().copied()) {
+                let _ = writeln!(out, "| {} | {name} | {} | {:.2} | {:.2} | {:.2} | {:.2} |", names[m], p.count, p.p50, p.p90, p.p99, p.max);
+            }
+        }
+        let p = Percentiles::of(e2e[m].iter().copied()).context("no frame reached the end")?;
+        medians[m] = p.p50;
+        let _ = writeln!(out, "| {} | **end to end** | {} | {:.2} | {:.2} | {:.2} | {:.2} |", names[m], p.count, p.p50, p.p90, p.p99, p.max);
+    }
+    let _ = writeln!(out, "\nframes dropped by policy: processes {}, threads {}", drops[0], drops[1]);
+    let _ = writeln!(out, "end-to-end median, processes / threads: {:.3}", medians[0] / medians[1]);
+    print!("{out}");
+    std::fs::create_dir_all(&args.output)?;
+    std::fs::write(args.output.join("pipeline-bench.md"), &out)?;
+    Ok(())
+}
