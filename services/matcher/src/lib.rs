@@ -112,7 +112,7 @@ impl FrameMatcher {
         if mode == MatcherMode::Lbd && views.is_none() {
             mode = MatcherMode::L1;
         }
-        let probe = mode == MatcherMode::L1 && self.mode == MatcherMode::L1 && views.is_some() && self.frames_in_l1 % self.probe_every == 0;
+        let probe = mode == MatcherMode::L1 && self.mode == MatcherMode::L1 && views.is_some() && self.frames_in_l1.is_multiple_of(self.probe_every);
         let mut described = false;
         if let Some((l, r)) = &views
             && (mode == MatcherMode::Lbd || probe)

@@ -144,6 +144,9 @@ fn prepare_run_dir(config: &PipelineConfig) -> anyhow::Result<(PathBuf, PathBuf)
 /// Runs the pipeline on `config` until the sequence is done or `shutdown` is set.
 pub fn run(config: &PipelineConfig, options: &RunOptions, shutdown: &Shutdown) -> anyhow::Result<RunOutcome> {
     config.validate().map_err(|e| anyhow::anyhow!("pipeline config: {e}"))?;
+    // Refuse a sequence no stage could open before starting any.
+    let sequence = linetrack_datasets::StereoSequence::open(&config.source.sequence).with_context(|| format!("source.sequence {}", config.source.sequence.display()))?;
+    anyhow::ensure!(!sequence.frames.is_empty(), "source.sequence {}: no frames", config.source.sequence.display());
     let (run_dir, config_path) = prepare_run_dir(config)?;
     let run_id = new_run_id();
     match options.mode {
@@ -491,6 +494,10 @@ impl Supervisor {
             if expected || shutdown.requested() {
                 tracing::info!("{} (pid {}) exited: {status}", p.stage, p.pid);
                 continue;
+            }
+            if !p.ready && !p.standby {
+                // A stage that cannot start will not start on a retry either.
+                bail!("{} (pid {}) exited before it was ready ({status}); its error is above", p.stage, p.pid);
             }
             let silent = p.last_seen.elapsed() > if p.ready { hang } else { startup };
             let kind = if silent { "hang" } else { "crash" };

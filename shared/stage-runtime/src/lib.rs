@@ -329,6 +329,34 @@ mod tests {
     }
 
     #[test]
+    fn a_frame_is_processed_dropped_or_failed_and_always_published() {
+        let bus = Bus::local();
+        let mut inlet = bus.inlet::<SegmentRecord>(Topic::Segments).unwrap_or_else(|e| panic!("{e}"));
+        let mut out = bus.outlet::<SegmentRecord>(Topic::Segments, 4).unwrap_or_else(|e| panic!("{e}"));
+        let budget = BudgetConfig { end_to_end_ms: 100.0, ..BudgetConfig::default() };
+        let record = SegmentRecord { endpoints: [1.0, 2.0, 3.0, 4.0] };
+        let stage = StageKind::LineDetector;
+        let fresh = FrameHeader::new(1, 0, now_ns());
+        let stale = FrameHeader::new(2, 0, now_ns() - 500_000_000);
+        let ok = |h: &mut FrameHeader| {
+            h.left_count = 1;
+            Ok(vec![record])
+        };
+        process_frame(stage, fresh, false, &budget, &mut out, ok, Vec::new).unwrap_or_else(|e| panic!("{e}"));
+        process_frame(stage, stale, false, &budget, &mut out, |_| panic!("a late frame is not processed"), Vec::new).unwrap_or_else(|e| panic!("{e}"));
+        process_frame(stage, fresh, true, &budget, &mut out, |_| panic!("a frame behind is not processed"), Vec::new).unwrap_or_else(|e| panic!("{e}"));
+        process_frame(stage, fresh, false, &budget, &mut out, |_| anyhow::bail!("detector failed"), || vec![SegmentRecord::default()]).unwrap_or_else(|e| panic!("{e}"));
+        let got = inlet.receive_all().unwrap_or_else(|e| panic!("{e}"));
+        let summary: Vec<(FrameStatus, usize)> = got.iter().map(|m| (m.header().frame_status(), m.payload().len())).collect();
+        assert_eq!(summary, [(FrameStatus::Ok, 1), (FrameStatus::DroppedLate, 0), (FrameStatus::DroppedBehind, 0), (FrameStatus::StageError, 1)]);
+        let first = got[0].header();
+        assert_eq!((first.left_count, got[0].payload()[0]), (1, record));
+        let stamp = first.stamps[1];
+        assert!(stamp.start_ns > 0 && stamp.end_ns >= stamp.start_ns, "{stamp:?}");
+        assert!(got[1..].iter().all(|m| m.header().dropped_by == stage.code()));
+    }
+
+    #[test]
     fn heartbeats_are_paced() {
         let bus = Bus::local();
         let ctx = StageContext::in_process(StageKind::Matcher, PipelineConfig::default(), PathBuf::new());

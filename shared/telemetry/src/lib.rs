@@ -25,7 +25,7 @@ use tracing_subscriber::{EnvFilter, Layer};
 #[derive(Debug, thiserror::Error)]
 pub enum TelemetryError {
     /// A file could not be created, read or written.
-    #[error("{path}: {source}")]
+    #[error("{}", path.display())]
     Io {
         /// The file.
         path: PathBuf,

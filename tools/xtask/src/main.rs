@@ -52,9 +52,6 @@ fn run() -> anyhow::Result<ExitCode> {
             }
             let target = std::env::var_os("CARGO_TARGET_DIR").map_or_else(|| std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../target"), std::path::PathBuf::from);
             let mut linetrack_args = vec!["run".to_string()];
-            if rest.first().is_some_and(|a| a == "--help" || a == "-h") {
-                linetrack_args.clear();
-            }
             linetrack_args.extend(rest);
             let status = Command::new(target.join("release/linetrack")).args(&linetrack_args).status().context("cannot start linetrack")?;
             Ok(if status.success() { ExitCode::SUCCESS } else { ExitCode::FAILURE })
