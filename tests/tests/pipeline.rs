@@ -43,11 +43,17 @@ fn every_frame_gets_a_pose_and_the_run_leaves_no_shared_memory() {
     assert_every_frame_accounted(&records);
     let tracked = records.frames.iter().filter(|f| f.outcome == "pose").count();
     assert!(tracked >= FRAMES / 2, "only {tracked} of {FRAMES} frames tracked:\n{out}");
-    // Per-stage latencies were measured in each process.
+    // Per-stage latencies were measured in each process. On a loaded machine the matcher
+    // may go over budget and fall back: then ℓ1 frames follow a recorded fallback.
+    let first_fallback = records.events_of("fallback").first().and_then(|e| e.frame_id);
     for f in records.frames.iter().filter(|f| f.outcome == "pose") {
         assert!(f.stage_ms[1..].iter().all(|ms| ms.is_finite() && *ms >= 0.0), "frame {}: {:?}", f.frame_id, f.stage_ms);
         assert_eq!(f.detector, "lsd");
-        assert_eq!(f.matcher, "lbd");
+        match f.matcher.as_str() {
+            "lbd" => {}
+            "l1" => assert!(first_fallback.is_some_and(|at| at < f.frame_id), "frame {} matched by l1 without a fallback before it: {:?}", f.frame_id, records.events),
+            other => panic!("frame {}: matcher {other:?}", f.frame_id),
+        }
     }
     assert_eq!(records.leftovers, Default::default(), "iceoryx2 nodes or services left behind");
     // The report and the merged trace: spans of all four stage processes, with frame ids.
@@ -152,7 +158,8 @@ fn matching_falls_back_to_l1_when_the_right_image_turns_unmatchable() {
     }
     // This scene gives LBD ~80 stereo matches a frame; a few dozen chance matches survive
     // the inversion, so the test sets its bar between the two.
-    let thresholds = "[matcher.fallback]\nmin_stereo_matches = 45\nrecover_stereo_matches = 60\n";
+    // Only the matches decide here: a loaded test machine must not trigger the budget rule.
+    let thresholds = "[matcher.fallback]\nmin_stereo_matches = 45\nrecover_stereo_matches = 60\nover_budget = false\n";
     let (status, out, records) = start(&dir, &sequence, &format!("{}{thresholds}", quick())).finish(RUN_TIMEOUT);
     assert!(status.success(), "{status}\n{out}");
     assert_every_frame_accounted(&records);

@@ -258,7 +258,7 @@ pub struct Report {
     pub lost: usize,
     /// Dropped frames by outcome (corrupt, dropped-late, ...), sorted by name.
     pub drops: Vec<(String, usize)>,
-    /// Per stage in [`STAGES`] order.
+    /// Per stage in [`STAGES`] order, over the frames that got a pose.
     pub stage_latency: Vec<(String, Option<Percentiles>)>,
     /// End to end.
     pub end_to_end: Option<Percentiles>,
@@ -289,7 +289,9 @@ impl Report {
             poses: frames.iter().filter(|f| f.outcome == "pose").count(),
             lost: frames.iter().filter(|f| f.outcome == "lost").count(),
             drops: drops.into_iter().collect(),
-            stage_latency: STAGES.iter().enumerate().map(|(i, s)| (s.to_string(), Percentiles::of(frames.iter().map(|f| f.stage_ms[i])))).collect(),
+            // Over the frames every stage worked on: a dropped frame's near-zero times
+            // would flatter the stages.
+            stage_latency: STAGES.iter().enumerate().map(|(i, s)| (s.to_string(), Percentiles::of(frames.iter().filter(|f| f.has_pose()).map(|f| f.stage_ms[i])))).collect(),
             end_to_end: Percentiles::of(frames.iter().filter(|f| f.has_pose()).map(|f| f.end_to_end_ms)),
             deadline_misses: frames.iter().filter(|f| f.deadline_miss).count(),
             l1_frames: frames.iter().filter(|f| f.matcher == "l1").count(),
@@ -366,6 +368,7 @@ mod tests {
         let report = Report::new(&back, &events_back);
         assert_eq!((report.frames, report.poses, report.lost, report.dropped(), report.deadline_misses, report.fallbacks), (4, 1, 1, 2, 1, 1));
         assert_eq!(report.end_to_end.map(|p| p.max), Some(60.0));
+        assert_eq!(report.stage_latency[1].1.map(|p| p.count), Some(2), "stage latency over the frames with a pose");
         assert!(report.to_text().contains("dropped missing: 1"));
         // A damaged file names the line.
         std::fs::write(dir.join("bad.csv"), format!("{FRAME_HEADER}\n0,pose,,x,,,,,,,0,0,0\n")).unwrap_or_else(|e| panic!("{e}"));

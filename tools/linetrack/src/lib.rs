@@ -190,7 +190,7 @@ pub fn report(run_dir: &Path, bin_ms: f64) -> anyhow::Result<String> {
     let frames = read_frames(&run_dir.join("frames.csv")).with_context(|| format!("{} holds no finished run", run_dir.display()))?;
     let events = read_events(&run_dir.join("events.csv"))?;
     let report = Report::new(&frames, &events);
-    let mut series: Vec<(String, Vec<f64>)> = STAGES.iter().enumerate().map(|(i, s)| (s.to_string(), frames.iter().map(|f| f.stage_ms[i]).collect())).collect();
+    let mut series: Vec<(String, Vec<f64>)> = STAGES.iter().enumerate().map(|(i, s)| (s.to_string(), frames.iter().filter(|f| f.has_pose()).map(|f| f.stage_ms[i]).collect())).collect();
     series.push(("end-to-end".to_string(), frames.iter().filter(|f| f.has_pose()).map(|f| f.end_to_end_ms).collect()));
     let budget = PipelineConfig::from_file(&run_dir.join("pipeline.toml")).map(|c| c.budget.end_to_end_ms).ok();
     let png = run_dir.join("latency-histogram.png");
