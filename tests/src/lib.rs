@@ -14,8 +14,18 @@ use std::time::{Duration, Instant};
 /// lives in its `deps/`.
 pub fn bin_dir() -> PathBuf {
     let exe = std::env::current_exe().unwrap_or_else(|e| panic!("current_exe: {e}"));
-    let dir = exe.parent().and_then(Path::parent).unwrap_or_else(|| panic!("no bin folder above {}", exe.display())).to_path_buf();
-    for name in ["linetrack", "linetrack-frame-source", "linetrack-line-detector", "linetrack-matcher", "linetrack-pose-estimator"] {
+    let dir = exe
+        .parent()
+        .and_then(Path::parent)
+        .unwrap_or_else(|| panic!("no bin folder above {}", exe.display()))
+        .to_path_buf();
+    for name in [
+        "linetrack",
+        "linetrack-frame-source",
+        "linetrack-line-detector",
+        "linetrack-matcher",
+        "linetrack-pose-estimator",
+    ] {
         assert!(
             dir.join(name).is_file(),
             "{} is missing: build the binaries first (`cargo build --workspace --bins --profile test-release`; `cargo xtask test` does it)",
@@ -28,7 +38,10 @@ pub fn bin_dir() -> PathBuf {
 /// Where the tests keep their files: beside the binaries, in `e2e-tmp/`.
 fn tmp_root() -> PathBuf {
     let exe = std::env::current_exe().unwrap_or_else(|e| panic!("current_exe: {e}"));
-    exe.parent().and_then(Path::parent).unwrap_or_else(|| panic!("no folder above {}", exe.display())).join("e2e-tmp")
+    exe.parent()
+        .and_then(Path::parent)
+        .unwrap_or_else(|| panic!("no folder above {}", exe.display()))
+        .join("e2e-tmp")
 }
 
 /// A scratch folder for one test, emptied.
@@ -47,7 +60,8 @@ pub fn base_sequence(frames: usize) -> PathBuf {
     }
     let partial = tmp_root().join(format!("sequence-{frames}.partial-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&partial);
-    linetrack_synth::generate(Preset::Normal, 1, frames, &partial).unwrap_or_else(|e| panic!("generating the sequence: {e:#}"));
+    linetrack_synth::generate(Preset::Normal, 1, frames, &partial)
+        .unwrap_or_else(|e| panic!("generating the sequence: {e:#}"));
     // Another test may have finished first: either copy is the same sequence.
     if std::fs::rename(&partial, &dir).is_err() {
         let _ = std::fs::remove_dir_all(&partial);
@@ -57,12 +71,16 @@ pub fn base_sequence(frames: usize) -> PathBuf {
 
 fn copy_tree(from: &Path, to: &Path) {
     std::fs::create_dir_all(to).unwrap_or_else(|e| panic!("{}: {e}", to.display()));
-    for entry in std::fs::read_dir(from).unwrap_or_else(|e| panic!("{}: {e}", from.display())).flatten() {
+    for entry in std::fs::read_dir(from)
+        .unwrap_or_else(|e| panic!("{}: {e}", from.display()))
+        .flatten()
+    {
         let target = to.join(entry.file_name());
         if entry.path().is_dir() {
             copy_tree(&entry.path(), &target);
         } else {
-            std::fs::copy(entry.path(), &target).unwrap_or_else(|e| panic!("{}: {e}", target.display()));
+            std::fs::copy(entry.path(), &target)
+                .unwrap_or_else(|e| panic!("{}: {e}", target.display()));
         }
     }
 }
@@ -77,9 +95,18 @@ pub fn sequence_copy(frames: usize, dir: &Path) -> PathBuf {
 /// The image files of camera `cam` (0 left, 1 right) of a sequence, in time order.
 pub fn images(sequence: &Path, cam: u32) -> Vec<PathBuf> {
     let dir = sequence.join(format!("mav0/cam{cam}/data"));
-    let mut files: Vec<PathBuf> = std::fs::read_dir(&dir).unwrap_or_else(|e| panic!("{}: {e}", dir.display())).flatten().map(|e| e.path()).collect();
+    let mut files: Vec<PathBuf> = std::fs::read_dir(&dir)
+        .unwrap_or_else(|e| panic!("{}: {e}", dir.display()))
+        .flatten()
+        .map(|e| e.path())
+        .collect();
     // Named by timestamp (not zero-padded): order by the number.
-    files.sort_by_key(|p| p.file_stem().and_then(|s| s.to_str()).and_then(|s| s.parse::<u64>().ok()).unwrap_or(u64::MAX));
+    files.sort_by_key(|p| {
+        p.file_stem()
+            .and_then(|s| s.to_str())
+            .and_then(|s| s.parse::<u64>().ok())
+            .unwrap_or(u64::MAX)
+    });
     files
 }
 
@@ -96,7 +123,14 @@ pub struct Run {
 /// Writes a pipeline config for `sequence` into `dir` with `extra` TOML appended to the
 /// test defaults (10 Hz, quick supervision), and starts `linetrack run` on it.
 pub fn start(dir: &Path, sequence: &Path, extra: &str) -> Run {
-    let prefix = format!("lte2e{}_{}_", std::process::id(), dir.file_name().and_then(|n| n.to_str()).unwrap_or("x").replace('-', ""));
+    let prefix = format!(
+        "lte2e{}_{}_",
+        std::process::id(),
+        dir.file_name()
+            .and_then(|n| n.to_str())
+            .unwrap_or("x")
+            .replace('-', "")
+    );
     start_with_prefix(dir, sequence, extra, &prefix)
 }
 
@@ -120,7 +154,11 @@ pub fn start_with_prefix(dir: &Path, sequence: &Path, extra: &str, prefix: &str)
         .stderr(Stdio::inherit())
         .spawn()
         .unwrap_or_else(|e| panic!("starting linetrack: {e}"));
-    Run { child, run_dir, prefix }
+    Run {
+        child,
+        run_dir,
+        prefix,
+    }
 }
 
 impl Run {
@@ -131,7 +169,12 @@ impl Run {
     }
 
     /// Waits until `ready(status)` holds, or panics after `timeout`.
-    pub fn wait_for(&mut self, what: &str, timeout: Duration, ready: impl Fn(&LiveStatus) -> bool) -> LiveStatus {
+    pub fn wait_for(
+        &mut self,
+        what: &str,
+        timeout: Duration,
+        ready: impl Fn(&LiveStatus) -> bool,
+    ) -> LiveStatus {
         let deadline = Instant::now() + timeout;
         loop {
             if let Some(s) = self.status()
@@ -185,9 +228,16 @@ impl Records {
     pub fn read(run_dir: &Path, prefix: &str) -> Self {
         let frames = read_frames(&run_dir.join("frames.csv")).unwrap_or_else(|e| panic!("{e}"));
         let events = read_events(&run_dir.join("events.csv")).unwrap_or_else(|e| panic!("{e}"));
-        let scope = Scope { prefix: prefix.to_string(), run_id: String::new() };
+        let scope = Scope {
+            prefix: prefix.to_string(),
+            run_id: String::new(),
+        };
         let leftovers = scope.resources().unwrap_or_else(|e| panic!("{e}"));
-        Self { frames, events, leftovers }
+        Self {
+            frames,
+            events,
+            leftovers,
+        }
     }
 
     /// The events of `kind`.
@@ -198,6 +248,10 @@ impl Records {
 
 /// Sends `signal` (e.g. "KILL", "TERM") to `pid` with kill(1).
 pub fn signal(pid: u32, signal: &str) {
-    let status = Command::new("kill").arg(format!("-{signal}")).arg(pid.to_string()).status().unwrap_or_else(|e| panic!("kill: {e}"));
+    let status = Command::new("kill")
+        .arg(format!("-{signal}"))
+        .arg(pid.to_string())
+        .status()
+        .unwrap_or_else(|e| panic!("kill: {e}"));
     assert!(status.success(), "kill -{signal} {pid} failed");
 }

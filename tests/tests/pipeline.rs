@@ -21,15 +21,40 @@ fn ids(records: &Records) -> Vec<u64> {
 
 /// Every frame of the sequence appears exactly once, with a pose or a counted drop.
 fn assert_every_frame_accounted(records: &Records) {
-    assert_eq!(ids(records), (0..FRAMES as u64).collect::<Vec<_>>(), "every frame once, in order");
-    let known = ["pose", "lost", "corrupt", "dropped-late", "dropped-behind", "stage-error", "missing"];
+    assert_eq!(
+        ids(records),
+        (0..FRAMES as u64).collect::<Vec<_>>(),
+        "every frame once, in order"
+    );
+    let known = [
+        "pose",
+        "lost",
+        "corrupt",
+        "dropped-late",
+        "dropped-behind",
+        "stage-error",
+        "missing",
+    ];
     for f in &records.frames {
-        assert!(known.contains(&f.outcome.as_str()), "frame {}: outcome {:?}", f.frame_id, f.outcome);
+        assert!(
+            known.contains(&f.outcome.as_str()),
+            "frame {}: outcome {:?}",
+            f.frame_id,
+            f.outcome
+        );
         if f.has_pose() {
-            assert!(f.end_to_end_ms.is_finite() && f.end_to_end_ms > 0.0, "frame {} has a pose but no latency", f.frame_id);
+            assert!(
+                f.end_to_end_ms.is_finite() && f.end_to_end_ms > 0.0,
+                "frame {} has a pose but no latency",
+                f.frame_id
+            );
         }
     }
-    assert!(records.events_of("duplicate").is_empty(), "{:?}", records.events);
+    assert!(
+        records.events_of("duplicate").is_empty(),
+        "{:?}",
+        records.events
+    );
 }
 
 #[test]
@@ -41,28 +66,76 @@ fn every_frame_gets_a_pose_and_the_run_leaves_no_shared_memory() {
     let (status, out, records) = run.finish(RUN_TIMEOUT);
     assert!(status.success(), "{status}\n{out}");
     assert_every_frame_accounted(&records);
-    let tracked = records.frames.iter().filter(|f| f.outcome == "pose").count();
-    assert!(tracked >= FRAMES / 2, "only {tracked} of {FRAMES} frames tracked:\n{out}");
+    let tracked = records
+        .frames
+        .iter()
+        .filter(|f| f.outcome == "pose")
+        .count();
+    assert!(
+        tracked >= FRAMES / 2,
+        "only {tracked} of {FRAMES} frames tracked:\n{out}"
+    );
     // Per-stage latencies were measured in each process. On a loaded machine the matcher
     // may go over budget and fall back: then ℓ1 frames follow a recorded fallback.
-    let first_fallback = records.events_of("fallback").first().and_then(|e| e.frame_id);
+    let first_fallback = records
+        .events_of("fallback")
+        .first()
+        .and_then(|e| e.frame_id);
     for f in records.frames.iter().filter(|f| f.outcome == "pose") {
-        assert!(f.stage_ms[1..].iter().all(|ms| ms.is_finite() && *ms >= 0.0), "frame {}: {:?}", f.frame_id, f.stage_ms);
+        assert!(
+            f.stage_ms[1..]
+                .iter()
+                .all(|ms| ms.is_finite() && *ms >= 0.0),
+            "frame {}: {:?}",
+            f.frame_id,
+            f.stage_ms
+        );
         assert_eq!(f.detector, "lsd");
         match f.matcher.as_str() {
             "lbd" => {}
-            "l1" => assert!(first_fallback.is_some_and(|at| at < f.frame_id), "frame {} matched by l1 without a fallback before it: {:?}", f.frame_id, records.events),
+            "l1" => assert!(
+                first_fallback.is_some_and(|at| at < f.frame_id),
+                "frame {} matched by l1 without a fallback before it: {:?}",
+                f.frame_id,
+                records.events
+            ),
             other => panic!("frame {}: matcher {other:?}", f.frame_id),
         }
     }
-    assert_eq!(records.leftovers, Default::default(), "iceoryx2 nodes or services left behind");
+    assert_eq!(
+        records.leftovers,
+        Default::default(),
+        "iceoryx2 nodes or services left behind"
+    );
     // The report and the merged trace: spans of all four stage processes, with frame ids.
     assert!(out.contains("end-to-end") && out.contains("p99"), "{out}");
-    let trace: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(run_dir.join("trace.json")).unwrap_or_default()).unwrap_or_default();
+    let trace: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(run_dir.join("trace.json")).unwrap_or_default(),
+    )
+    .unwrap_or_default();
     let events = trace["traceEvents"].as_array().cloned().unwrap_or_default();
-    let processes: BTreeSet<String> = events.iter().filter(|e| e["ph"] == "M").filter_map(|e| e["args"]["name"].as_str().map(|n| n.split(' ').next().unwrap_or("").to_string())).collect();
-    assert_eq!(processes, ["frame-source", "line-detector", "matcher", "pose-estimator"].map(String::from).into_iter().collect());
-    assert!(events.iter().any(|e| e["name"] == "describe" && e["args"]["frame_id"] == 5), "no describe span of frame 5");
+    let processes: BTreeSet<String> = events
+        .iter()
+        .filter(|e| e["ph"] == "M")
+        .filter_map(|e| {
+            e["args"]["name"]
+                .as_str()
+                .map(|n| n.split(' ').next().unwrap_or("").to_string())
+        })
+        .collect();
+    assert_eq!(
+        processes,
+        ["frame-source", "line-detector", "matcher", "pose-estimator"]
+            .map(String::from)
+            .into_iter()
+            .collect()
+    );
+    assert!(
+        events
+            .iter()
+            .any(|e| e["name"] == "describe" && e["args"]["frame_id"] == 5),
+        "no describe span of frame 5"
+    );
     assert!(run_dir.join("latency-histogram.png").is_file());
 }
 
@@ -70,20 +143,48 @@ fn kill_and_recover(stage: &str) {
     let dir = scratch(&format!("kill-{stage}"));
     let mut run = start(&dir, &base_sequence(FRAMES), &quick());
     let status = run.wait_for("10 frames", RUN_TIMEOUT, |s| s.frames >= 10);
-    let victim = status.stages.iter().find(|s| s.stage == stage).unwrap_or_else(|| panic!("no {stage} in {:?}", status.stages)).pid;
+    let victim = status
+        .stages
+        .iter()
+        .find(|s| s.stage == stage)
+        .unwrap_or_else(|| panic!("no {stage} in {:?}", status.stages))
+        .pid;
     signal(victim, "KILL");
     let (exit, out, records) = run.finish(RUN_TIMEOUT);
     assert!(exit.success(), "{exit}\n{out}");
     assert_every_frame_accounted(&records);
     let crashes = records.events_of("crash");
-    assert!(crashes.iter().any(|e| e.stage == stage && e.detail.contains(&victim.to_string())), "{:?}", records.events);
-    assert!(records.events_of("restart").iter().any(|e| e.stage == stage), "{:?}", records.events);
+    assert!(
+        crashes
+            .iter()
+            .any(|e| e.stage == stage && e.detail.contains(&victim.to_string())),
+        "{:?}",
+        records.events
+    );
+    assert!(
+        records
+            .events_of("restart")
+            .iter()
+            .any(|e| e.stage == stage),
+        "{:?}",
+        records.events
+    );
     // Tracking goes on after the restart: the last frames have poses.
-    let tail: Vec<&str> = records.frames[FRAMES - 5..].iter().map(|f| f.outcome.as_str()).collect();
-    assert!(tail.iter().all(|o| *o == "pose" || *o == "lost"), "after the restart: {tail:?}");
+    let tail: Vec<&str> = records.frames[FRAMES - 5..]
+        .iter()
+        .map(|f| f.outcome.as_str())
+        .collect();
+    assert!(
+        tail.iter().all(|o| *o == "pose" || *o == "lost"),
+        "after the restart: {tail:?}"
+    );
     let missing = records.frames.iter().filter(|f| !f.has_pose()).count();
     assert!(missing < FRAMES / 2, "{missing} frames without a pose");
-    assert_eq!(records.leftovers, Default::default(), "the killed process's shared memory was not reclaimed");
+    assert_eq!(
+        records.leftovers,
+        Default::default(),
+        "the killed process's shared memory was not reclaimed"
+    );
 }
 
 #[test]
@@ -106,14 +207,25 @@ fn a_corrupt_frame_is_skipped_and_counted() {
     let dir = scratch("corrupt");
     let sequence = sequence_copy(FRAMES, &dir);
     let victim = &images(&sequence, 0)[12];
-    std::fs::write(victim, b"\x89PNG\r\n\x1a\n this is not an image").unwrap_or_else(|e| panic!("{e}"));
+    std::fs::write(victim, b"\x89PNG\r\n\x1a\n this is not an image")
+        .unwrap_or_else(|e| panic!("{e}"));
     let (status, out, records) = start(&dir, &sequence, &quick()).finish(RUN_TIMEOUT);
     assert!(status.success(), "{status}\n{out}");
     assert_every_frame_accounted(&records);
     let frame = &records.frames[12];
-    assert_eq!((frame.outcome.as_str(), frame.dropped_by.as_str()), ("corrupt", "frame-source"));
+    assert_eq!(
+        (frame.outcome.as_str(), frame.dropped_by.as_str()),
+        ("corrupt", "frame-source")
+    );
     assert!(out.contains("dropped corrupt: 1"), "{out}");
-    assert!(records.frames[13..].iter().filter(|f| f.outcome == "pose").count() >= FRAMES - 13 - 2, "tracking did not go on");
+    assert!(
+        records.frames[13..]
+            .iter()
+            .filter(|f| f.outcome == "pose")
+            .count()
+            >= FRAMES - 13 - 2,
+        "tracking did not go on"
+    );
 }
 
 #[test]
@@ -129,15 +241,29 @@ fn a_hot_swap_to_fld_loses_and_duplicates_no_frame() {
         .env(linetrack_ipc::Scope::PREFIX_VAR, &run.prefix)
         .output()
         .unwrap_or_else(|e| panic!("linetrack ctl: {e}"));
-    assert!(ctl.status.success(), "ctl: {}{}", String::from_utf8_lossy(&ctl.stdout), String::from_utf8_lossy(&ctl.stderr));
+    assert!(
+        ctl.status.success(),
+        "ctl: {}{}",
+        String::from_utf8_lossy(&ctl.stdout),
+        String::from_utf8_lossy(&ctl.stderr)
+    );
     let (status, out, records) = run.finish(RUN_TIMEOUT);
     assert!(status.success(), "{status}\n{out}");
     assert_every_frame_accounted(&records);
-    let outcomes: Vec<(u64, &str)> = records.frames.iter().map(|f| (f.frame_id, f.outcome.as_str())).collect();
-    assert!(records.frames.iter().all(|f| f.has_pose()), "a frame without a pose: {outcomes:?}");
+    let outcomes: Vec<(u64, &str)> = records
+        .frames
+        .iter()
+        .map(|f| (f.frame_id, f.outcome.as_str()))
+        .collect();
+    assert!(
+        records.frames.iter().all(|f| f.has_pose()),
+        "a frame without a pose: {outcomes:?}"
+    );
     let swaps = records.events_of("swap");
     assert_eq!(swaps.len(), 1, "{:?}", records.events);
-    let at = swaps[0].frame_id.unwrap_or_else(|| panic!("swap without a frame"));
+    let at = swaps[0]
+        .frame_id
+        .unwrap_or_else(|| panic!("swap without a frame"));
     assert!(at > 0 && at < FRAMES as u64, "swap at {at}");
     for f in &records.frames {
         let expected = if f.frame_id < at { "lsd" } else { "fld" };
@@ -152,28 +278,52 @@ fn matching_falls_back_to_l1_when_the_right_image_turns_unmatchable() {
     // From frame 10 the right camera sees inverted intensities: every edge keeps its place
     // (geometry) but flips its gradient, so appearance descriptors no longer match.
     for path in &images(&sequence, 1)[10..] {
-        let mut image = image::open(path).unwrap_or_else(|e| panic!("{}: {e}", path.display())).into_luma8();
+        let mut image = image::open(path)
+            .unwrap_or_else(|e| panic!("{}: {e}", path.display()))
+            .into_luma8();
         image::imageops::invert(&mut image);
-        image.save(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+        image
+            .save(path)
+            .unwrap_or_else(|e| panic!("{}: {e}", path.display()));
     }
     // This scene gives LBD ~80 stereo matches a frame; a few dozen chance matches survive
     // the inversion, so the test sets its bar between the two.
     // Only the matches decide here: a loaded test machine must not trigger the budget rule.
     let thresholds = "[matcher.fallback]\nmin_stereo_matches = 45\nrecover_stereo_matches = 60\nover_budget = false\n";
-    let (status, out, records) = start(&dir, &sequence, &format!("{}{thresholds}", quick())).finish(RUN_TIMEOUT);
+    let (status, out, records) =
+        start(&dir, &sequence, &format!("{}{thresholds}", quick())).finish(RUN_TIMEOUT);
     assert!(status.success(), "{status}\n{out}");
     assert_every_frame_accounted(&records);
     let fallbacks = records.events_of("fallback");
     assert_eq!(fallbacks.len(), 1, "{:?}", records.events);
-    let at = fallbacks[0].frame_id.unwrap_or_else(|| panic!("fallback without a frame"));
+    let at = fallbacks[0]
+        .frame_id
+        .unwrap_or_else(|| panic!("fallback without a frame"));
     assert!((10..20).contains(&at), "fell back at frame {at}");
-    assert!(fallbacks[0].detail.contains("lbd -> l1"), "{}", fallbacks[0].detail);
-    assert!(records.frames[..10].iter().all(|f| f.matcher == "lbd"), "before the change");
+    assert!(
+        fallbacks[0].detail.contains("lbd -> l1"),
+        "{}",
+        fallbacks[0].detail
+    );
+    assert!(
+        records.frames[..10].iter().all(|f| f.matcher == "lbd"),
+        "before the change"
+    );
     // The switch reaches the matcher while the pose of frame `at` is computed: from the
     // frame after next at the latest, everything is matched by ℓ1.
-    let after: Vec<&str> = records.frames[at as usize + 2..].iter().map(|f| f.matcher.as_str()).collect();
-    assert!(after.iter().all(|m| *m == "l1"), "after the fallback: {after:?}");
-    assert!(records.events_of("recover").is_empty(), "LBD cannot recover on inverted images: {:?}", records.events);
+    let after: Vec<&str> = records.frames[at as usize + 2..]
+        .iter()
+        .map(|f| f.matcher.as_str())
+        .collect();
+    assert!(
+        after.iter().all(|m| *m == "l1"),
+        "after the fallback: {after:?}"
+    );
+    assert!(
+        records.events_of("recover").is_empty(),
+        "LBD cannot recover on inverted images: {:?}",
+        records.events
+    );
 }
 
 #[test]
@@ -186,27 +336,57 @@ fn sigterm_stops_the_run_cleanly_and_a_killed_run_is_cleaned_up_by_the_next() {
     signal(status.supervisor_pid, "KILL");
     for s in &status.stages {
         // A stage may already be on its way out.
-        let _ = std::process::Command::new("kill").args(["-KILL", &s.pid.to_string()]).status();
+        let _ = std::process::Command::new("kill")
+            .args(["-KILL", &s.pid.to_string()])
+            .status();
     }
     let _ = killed.child.wait();
     std::thread::sleep(Duration::from_millis(300));
-    let left = linetrack_ipc::Scope { prefix: killed.prefix.clone(), run_id: String::new() }.resources().unwrap_or_else(|e| panic!("{e}"));
-    assert!(left.nodes > 0, "a killed run should leave nodes behind: {left:?}");
+    let left = linetrack_ipc::Scope {
+        prefix: killed.prefix.clone(),
+        run_id: String::new(),
+    }
+    .resources()
+    .unwrap_or_else(|e| panic!("{e}"));
+    assert!(
+        left.nodes > 0,
+        "a killed run should leave nodes behind: {left:?}"
+    );
     // ... which the next run with the same prefix removes; SIGTERM then ends it cleanly.
-    let mut next = start_with_prefix(&scratch("signals-next"), &sequence, &quick(), &killed.prefix);
+    let mut next = start_with_prefix(
+        &scratch("signals-next"),
+        &sequence,
+        &quick(),
+        &killed.prefix,
+    );
     let status = next.wait_for("3 frames", RUN_TIMEOUT, |s| s.frames >= 3);
     signal(status.supervisor_pid, "TERM");
     let (exit, out, records) = next.finish(RUN_TIMEOUT);
     assert!(exit.success(), "{exit}\n{out}");
     assert!(out.contains("(interrupted)"), "{out}");
-    assert!(!records.events_of("stale-cleanup").is_empty(), "{:?}", records.events);
+    assert!(
+        !records.events_of("stale-cleanup").is_empty(),
+        "{:?}",
+        records.events
+    );
     assert!(!records.events_of("interrupted").is_empty());
-    assert_eq!(records.leftovers, Default::default(), "resources left after SIGTERM");
+    assert_eq!(
+        records.leftovers,
+        Default::default(),
+        "resources left after SIGTERM"
+    );
     for s in &status.stages {
-        assert!(!std::path::Path::new(&format!("/proc/{}", s.pid)).exists() || proc_is_zombie_or_gone(s.pid), "stage {} (pid {}) still running", s.stage, s.pid);
+        assert!(
+            !std::path::Path::new(&format!("/proc/{}", s.pid)).exists()
+                || proc_is_zombie_or_gone(s.pid),
+            "stage {} (pid {}) still running",
+            s.stage,
+            s.pid
+        );
     }
 }
 
 fn proc_is_zombie_or_gone(pid: u32) -> bool {
-    std::fs::read_to_string(format!("/proc/{pid}/stat")).map_or(true, |s| s.split_whitespace().nth(2) == Some("Z"))
+    std::fs::read_to_string(format!("/proc/{pid}/stat"))
+        .map_or(true, |s| s.split_whitespace().nth(2) == Some("Z"))
 }

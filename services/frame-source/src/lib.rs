@@ -6,7 +6,9 @@
 use anyhow::Context;
 use linetrack_datasets::StereoSequence;
 use linetrack_ipc::{Bus, Inlet, Outlet, Shutdown, Wake};
-use linetrack_msgs::{Command, Control, FrameHeader, FrameStatus, StageKind, StatusKind, Topic, now_ns};
+use linetrack_msgs::{
+    Command, Control, FrameHeader, FrameStatus, StageKind, StatusKind, Topic, now_ns,
+};
 use linetrack_pipeline_config::Pacing;
 use linetrack_stage_runtime::{Reporter, StageContext, stamp_end};
 use std::time::{Duration, Instant};
@@ -33,7 +35,13 @@ impl Ports {
 }
 
 /// When frame `k` (0-based from the first one published) is due, from the start.
-fn due_offset(pacing: Pacing, rate_hz: f64, first_ns: u64, timestamp_ns: u64, k: usize) -> Duration {
+fn due_offset(
+    pacing: Pacing,
+    rate_hz: f64,
+    first_ns: u64,
+    timestamp_ns: u64,
+    k: usize,
+) -> Duration {
     match pacing {
         Pacing::Fastest => Duration::ZERO,
         Pacing::Realtime if rate_hz > 0.0 => Duration::from_secs_f64(k as f64 / rate_hz),
@@ -45,20 +53,34 @@ fn due_offset(pacing: Pacing, rate_hz: f64, first_ns: u64, timestamp_ns: u64, k:
 fn shutdown_ordered(control: &mut Inlet<Control>, pid: u32) -> anyhow::Result<bool> {
     Ok(control.receive_all()?.iter().any(|c| {
         let c = c.payload().first().copied().unwrap_or_default();
-        Command::from_code(c.command) == Some(Command::Shutdown) && c.is_for(StageKind::FrameSource, pid)
+        Command::from_code(c.command) == Some(Command::Shutdown)
+            && c.is_for(StageKind::FrameSource, pid)
     }))
 }
 
 /// Publishes the sequence; returns when it is done or shutdown is asked for.
 pub fn run(ctx: &StageContext, mut ports: Ports, shutdown: &Shutdown) -> anyhow::Result<()> {
     let source = &ctx.config.source;
-    let sequence = StereoSequence::open(&source.sequence).with_context(|| format!("opening sequence {}", source.sequence.display()))?;
+    let sequence = StereoSequence::open(&source.sequence)
+        .with_context(|| format!("opening sequence {}", source.sequence.display()))?;
     let total = sequence.frames.len();
     let start = ctx.args.start_frame.min(total);
-    let end = if source.max_frames > 0 { total.min(source.max_frames) } else { total };
+    let end = if source.max_frames > 0 {
+        total.min(source.max_frames)
+    } else {
+        total
+    };
     let first_ns = sequence.frames.get(start).map_or(0, |f| f.timestamp_ns);
-    let rate = if source.rate_hz > 0.0 { source.rate_hz } else { 0.0 };
-    tracing::info!("{}: frames {start}..{end} of {total}, {:?}", sequence.name, source.pacing);
+    let rate = if source.rate_hz > 0.0 {
+        source.rate_hz
+    } else {
+        0.0
+    };
+    tracing::info!(
+        "{}: frames {start}..{end} of {total}, {:?}",
+        sequence.name,
+        source.pacing
+    );
     let stream = sequence.into_stream(start, 4);
     ports.reporter.report(StatusKind::Ready, start as u64, 0);
 
@@ -80,7 +102,9 @@ pub fn run(ctx: &StageContext, mut ports: Ports, shutdown: &Shutdown) -> anyhow:
             if now >= due {
                 break;
             }
-            ports.wake.wait((due - now).min(ports.reporter.until_due().max(Duration::from_millis(1))))?;
+            ports
+                .wake
+                .wait((due - now).min(ports.reporter.until_due().max(Duration::from_millis(1))))?;
             ports.reporter.beat(published);
         }
         let span = info_span!("publish_frame", frame_id = index as u64);
@@ -109,9 +133,15 @@ pub fn run(ctx: &StageContext, mut ports: Ports, shutdown: &Shutdown) -> anyhow:
             }
         }
         published += 1;
-        ports.reporter.report(StatusKind::Heartbeat, index as u64, published);
+        ports
+            .reporter
+            .report(StatusKind::Heartbeat, index as u64, published);
     }
-    ports.reporter.report(StatusKind::SourceFinished, (start as u64 + published).saturating_sub(1), published);
+    ports.reporter.report(
+        StatusKind::SourceFinished,
+        (start as u64 + published).saturating_sub(1),
+        published,
+    );
     tracing::info!("finished: {published} frames published");
     Ok(())
 }
@@ -122,8 +152,14 @@ mod tests {
 
     #[test]
     fn pacing_follows_timestamps_or_the_rate() {
-        assert_eq!(due_offset(Pacing::Realtime, 0.0, 1_000, 51_000_000, 3), Duration::from_nanos(50_999_000));
-        assert_eq!(due_offset(Pacing::Realtime, 20.0, 0, 999, 4), Duration::from_millis(200));
+        assert_eq!(
+            due_offset(Pacing::Realtime, 0.0, 1_000, 51_000_000, 3),
+            Duration::from_nanos(50_999_000)
+        );
+        assert_eq!(
+            due_offset(Pacing::Realtime, 20.0, 0, 999, 4),
+            Duration::from_millis(200)
+        );
         assert_eq!(due_offset(Pacing::Fastest, 20.0, 0, 999, 4), Duration::ZERO);
     }
 }

@@ -10,7 +10,9 @@
 
 use linetrack_ipc::{Bus, Inlet, Outlet, Received, Shutdown, Wake};
 use linetrack_msgs::{Command, Control, FrameHeader, SegmentRecord, StageKind, StatusKind, Topic};
-use linetrack_stage_runtime::{HeldFrames, Reporter, StageContext, detector_code, process_frame, stereo_views, to_records};
+use linetrack_stage_runtime::{
+    HeldFrames, Reporter, StageContext, detector_code, process_frame, stereo_views, to_records,
+};
 use linetrack_vision::{GrayImage, LineDetector, create_detector};
 use std::time::Duration;
 use tracing::info_span;
@@ -59,7 +61,13 @@ struct Detector {
 
 impl Detector {
     /// Detects and publishes one frame (or forwards its drop marker).
-    fn process(&mut self, ctx: &StageContext, frame: &Received<u8>, newer_waiting: bool, out: &mut Outlet<SegmentRecord>) -> anyhow::Result<()> {
+    fn process(
+        &mut self,
+        ctx: &StageContext,
+        frame: &Received<u8>,
+        newer_waiting: bool,
+        out: &mut Outlet<SegmentRecord>,
+    ) -> anyhow::Result<()> {
         let mut header: FrameHeader = *frame.header();
         let span = info_span!("detect", frame_id = header.frame_id);
         let _entered = span.enter();
@@ -75,7 +83,15 @@ impl Detector {
             records.extend(to_records(&self.right));
             Ok(records)
         };
-        process_frame(StageKind::LineDetector, header, newer_waiting, &ctx.config.budget, out, work, Vec::new)
+        process_frame(
+            StageKind::LineDetector,
+            header,
+            newer_waiting,
+            &ctx.config.budget,
+            out,
+            work,
+            Vec::new,
+        )
     }
 }
 
@@ -91,11 +107,23 @@ pub fn run(ctx: &StageContext, mut ports: Ports, shutdown: &Shutdown) -> anyhow:
     };
     // Warm up on a synthetic image: the first detection allocates.
     let (w, h) = (752, 480);
-    let card: Vec<u8> = (0..w * h).map(|i| if (i % w) / 40 % 2 == (i / w) / 40 % 2 { 40 } else { 200 }).collect();
+    let card: Vec<u8> = (0..w * h)
+        .map(|i| {
+            if (i % w) / 40 % 2 == (i / w) / 40 % 2 {
+                40
+            } else {
+                200
+            }
+        })
+        .collect();
     let warm = GrayImage::from_pixels(w, h, &card, "warm-up card")?;
     detector.detector.detect(&warm, &mut detector.left)?;
 
-    let mut role = if ctx.args.standby { Role::Standby } else { Role::Active };
+    let mut role = if ctx.args.standby {
+        Role::Standby
+    } else {
+        Role::Active
+    };
     let mut held = HeldFrames::new(10);
     let mut next_unpublished = 0u64;
     let mut processed = 0u64;
@@ -108,7 +136,9 @@ pub fn run(ctx: &StageContext, mut ports: Ports, shutdown: &Shutdown) -> anyhow:
     while !shutdown.requested() {
         // Commands first: they decide what to do with the frames.
         for message in ports.control.receive_all()? {
-            let Some(&c) = message.payload().first() else { continue };
+            let Some(&c) = message.payload().first() else {
+                continue;
+            };
             if !c.is_for(StageKind::LineDetector, ctx.pid) {
                 continue;
             }
@@ -125,9 +155,14 @@ pub fn run(ctx: &StageContext, mut ports: Ports, shutdown: &Shutdown) -> anyhow:
                     if let Some(first) = held.first_id()
                         && first > c.frame_id
                     {
-                        tracing::warn!("frames {}..{first} were released before the take-over", c.frame_id);
+                        tracing::warn!(
+                            "frames {}..{first} were released before the take-over",
+                            c.frame_id
+                        );
                     }
-                    let frames: Vec<Received<u8>> = std::iter::from_fn(|| held.take_next()).filter(|f| f.header().frame_id >= c.frame_id).collect();
+                    let frames: Vec<Received<u8>> = std::iter::from_fn(|| held.take_next())
+                        .filter(|f| f.header().frame_id >= c.frame_id)
+                        .collect();
                     role = Role::Active;
                     // Held frames were queued by the swap, not by slowness: none is dropped as
                     // behind (the age limit still applies).
@@ -177,7 +212,9 @@ pub fn run(ctx: &StageContext, mut ports: Ports, shutdown: &Shutdown) -> anyhow:
             return Ok(());
         }
         ports.reporter.beat(processed);
-        ports.wake.wait(ports.reporter.until_due().max(Duration::from_millis(1)))?;
+        ports
+            .wake
+            .wait(ports.reporter.until_due().max(Duration::from_millis(1)))?;
     }
     Ok(())
 }

@@ -1,18 +1,26 @@
 //! The matcher: stereo and frame-to-frame segment matching.
 //!
-//! It takes each frame's segments from the detector and, for LBD, the frame's images,
-//! held in shared memory since they arrived. In LBD mode it describes both images' segments
-//! and matches them by descriptor; in ℓ1 mode it matches by geometry only, and every
+//! It takes each frame's segments from the detector and the frame's images, held in shared
+//! memory since they arrived. In LBD mode it describes both images' segments and matches
+//! them by descriptor; in ℓ1 mode it matches by geometry and the intensity profiles
+//! across the segments (the ℓ1 matcher's photometric check), and every
 //! `probe_every`-th frame also tries LBD and reports how many stereo matches it found, so
 //! the supervisor can tell when LBD works again. Frame-to-frame matching uses LBD when both
 //! frames were described, else ℓ1. The supervisor sets the mode; the matcher reports.
 
-use linetrack_ipc::{Bus, Inlet, Outlet, Received, Shutdown, Wake};
-use linetrack_msgs::{Command, Control, FrameHeader, MatcherMode, NO_FRAME, SegmentRecord, StageKind, Topic, TrackedLine};
-use linetrack_pipeline_config::MatcherPolicy;
-use linetrack_stage_runtime::{HeldFrames, Reporter, StageContext, process_frame, stereo_views, to_segment};
 use linetrack_geometry::MatchCase;
-use linetrack_vision::{FeatureMatch, LineFeatures, MatcherKind, SegmentMatcher, create_segment_matcher};
+use linetrack_ipc::{Bus, Inlet, Outlet, Received, Shutdown, Wake};
+use linetrack_msgs::{
+    Command, Control, FrameHeader, MatcherMode, NO_FRAME, SegmentRecord, StageKind, Topic,
+    TrackedLine,
+};
+use linetrack_pipeline_config::MatcherPolicy;
+use linetrack_stage_runtime::{
+    HeldFrames, Reporter, StageContext, process_frame, stereo_views, to_segment,
+};
+use linetrack_vision::{
+    FeatureMatch, LineFeatures, MatcherKind, SegmentMatcher, create_segment_matcher,
+};
 use std::time::Duration;
 use tracing::info_span;
 
@@ -93,13 +101,31 @@ impl FrameMatcher {
         self.mode
     }
 
-    /// Matches one frame's segments (`images` for LBD); fills `header`'s counts and returns
+    /// Matches one frame's segments (with `images` for LBD and the ℓ1 matcher's photometric
+    /// check; without, by geometry alone); fills `header`'s counts and returns
     /// one record per left segment.
-    pub fn match_frame(&mut self, header: &mut FrameHeader, segments: &[SegmentRecord], images: Option<&Received<u8>>) -> anyhow::Result<Vec<TrackedLine>> {
+    pub fn match_frame(
+        &mut self,
+        header: &mut FrameHeader,
+        segments: &[SegmentRecord],
+        images: Option<&Received<u8>>,
+    ) -> anyhow::Result<Vec<TrackedLine>> {
         let n_left = (header.left_count as usize).min(segments.len());
         let (left_records, right_records) = segments.split_at(n_left);
-        let mut left = LineFeatures { segments: left_records.iter().map(|r| to_segment(&r.endpoints)).collect(), ..LineFeatures::default() };
-        let mut right = LineFeatures { segments: right_records.iter().map(|r| to_segment(&r.endpoints)).collect(), ..LineFeatures::default() };
+        let mut left = LineFeatures {
+            segments: left_records
+                .iter()
+                .map(|r| to_segment(&r.endpoints))
+                .collect(),
+            ..LineFeatures::default()
+        };
+        let mut right = LineFeatures {
+            segments: right_records
+                .iter()
+                .map(|r| to_segment(&r.endpoints))
+                .collect(),
+            ..LineFeatures::default()
+        };
         let views = match images.map(stereo_views) {
             Some(Ok(views)) => Some(views),
             Some(Err(e)) => {
@@ -112,28 +138,39 @@ impl FrameMatcher {
         if mode == MatcherMode::Lbd && views.is_none() {
             mode = MatcherMode::L1;
         }
-        let probe = mode == MatcherMode::L1 && self.mode == MatcherMode::L1 && views.is_some() && self.frames_in_l1.is_multiple_of(self.probe_every);
+        let probe = mode == MatcherMode::L1
+            && self.mode == MatcherMode::L1
+            && views.is_some()
+            && self.frames_in_l1.is_multiple_of(self.probe_every);
         let mut described = false;
-        if let Some((l, r)) = &views
-            && (mode == MatcherMode::Lbd || probe)
-        {
+        if let Some((l, r)) = &views {
             let span = info_span!("describe");
             let _entered = span.enter();
-            self.lbd.describe(l, &mut left)?;
-            self.lbd.describe(r, &mut right)?;
-            described = true;
+            if mode == MatcherMode::Lbd || probe {
+                self.lbd.describe(l, &mut left)?;
+                self.lbd.describe(r, &mut right)?;
+                described = true;
+            }
+            if mode == MatcherMode::L1 {
+                // The ℓ1 matcher's photometric check reads the images too (tens of µs).
+                self.l1.describe(l, &mut left)?;
+                self.l1.describe(r, &mut right)?;
+            }
         }
         {
             let span = info_span!("stereo_match");
             let _entered = span.enter();
             if mode == MatcherMode::Lbd {
-                self.lbd.match_lines(MatchCase::Stereo, &left, &right, &mut self.stereo);
+                self.lbd
+                    .match_lines(MatchCase::Stereo, &left, &right, &mut self.stereo);
             } else {
                 if probe {
-                    self.lbd.match_lines(MatchCase::Stereo, &left, &right, &mut self.stereo);
+                    self.lbd
+                        .match_lines(MatchCase::Stereo, &left, &right, &mut self.stereo);
                     header.lbd_probe_matches = self.stereo.len() as i32;
                 }
-                self.l1.match_lines(MatchCase::Stereo, &left, &right, &mut self.stereo);
+                self.l1
+                    .match_lines(MatchCase::Stereo, &left, &right, &mut self.stereo);
             }
         }
         self.tracked.clear();
@@ -143,7 +180,12 @@ impl FrameMatcher {
             let _entered = span.enter();
             let use_lbd = mode == MatcherMode::Lbd && previous.described && described;
             let matcher = if use_lbd { &mut self.lbd } else { &mut self.l1 };
-            matcher.match_lines(MatchCase::FrameToFrame, &previous.features, &left, &mut self.tracked);
+            matcher.match_lines(
+                MatchCase::FrameToFrame,
+                &previous.features,
+                &left,
+                &mut self.tracked,
+            );
             header.previous_frame_id = previous.frame_id;
         }
         if self.mode == MatcherMode::L1 {
@@ -153,7 +195,14 @@ impl FrameMatcher {
         header.stereo_matches = self.stereo.len() as u32;
         header.tracked_matches = self.tracked.len() as u32;
 
-        let mut out: Vec<TrackedLine> = left_records.iter().map(|r| TrackedLine { left: r.endpoints, previous: -1, ..TrackedLine::default() }).collect();
+        let mut out: Vec<TrackedLine> = left_records
+            .iter()
+            .map(|r| TrackedLine {
+                left: r.endpoints,
+                previous: -1,
+                ..TrackedLine::default()
+            })
+            .collect();
         for m in &self.stereo {
             if let (Some(t), Some(r)) = (out.get_mut(m.query), right_records.get(m.train)) {
                 t.right = r.endpoints;
@@ -165,7 +214,11 @@ impl FrameMatcher {
                 t.previous = i32::try_from(m.query).unwrap_or(-1);
             }
         }
-        self.previous = Some(Previous { frame_id: header.frame_id, features: left, described });
+        self.previous = Some(Previous {
+            frame_id: header.frame_id,
+            features: left,
+            described,
+        });
         Ok(out)
     }
 }
@@ -175,10 +228,14 @@ pub fn run(ctx: &StageContext, mut ports: Ports, shutdown: &Shutdown) -> anyhow:
     let mut matcher = FrameMatcher::new(ctx)?;
     let mut held = HeldFrames::new(10);
     let mut processed = 0u64;
-    ports.reporter.report(linetrack_msgs::StatusKind::Ready, 0, 0);
+    ports
+        .reporter
+        .report(linetrack_msgs::StatusKind::Ready, 0, 0);
     while !shutdown.requested() {
         for message in ports.control.receive_all()? {
-            let Some(&c) = message.payload().first() else { continue };
+            let Some(&c) = message.payload().first() else {
+                continue;
+            };
             if !c.is_for(StageKind::Matcher, ctx.pid) {
                 continue;
             }
@@ -201,12 +258,23 @@ pub fn run(ctx: &StageContext, mut ports: Ports, shutdown: &Shutdown) -> anyhow:
             let span = info_span!("match", frame_id = header.frame_id);
             let _entered = span.enter();
             let images = held.take(header.frame_id);
-            let work = |h: &mut FrameHeader| matcher.match_frame(h, message.payload(), images.as_ref());
-            process_frame(StageKind::Matcher, header, k + 1 < count, &ctx.config.budget, &mut ports.tracks, work, Vec::new)?;
+            let work =
+                |h: &mut FrameHeader| matcher.match_frame(h, message.payload(), images.as_ref());
+            process_frame(
+                StageKind::Matcher,
+                header,
+                k + 1 < count,
+                &ctx.config.budget,
+                &mut ports.tracks,
+                work,
+                Vec::new,
+            )?;
             processed += 1;
         }
         ports.reporter.beat(processed);
-        ports.wake.wait(ports.reporter.until_due().max(Duration::from_millis(1)))?;
+        ports
+            .wake
+            .wait(ports.reporter.until_due().max(Duration::from_millis(1)))?;
     }
     Ok(())
 }

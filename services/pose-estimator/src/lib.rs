@@ -9,9 +9,13 @@ use anyhow::Context;
 use linetrack_datasets::StereoSequence;
 use linetrack_geometry::Segment;
 use linetrack_ipc::{Bus, Inlet, Outlet, Shutdown, Wake};
-use linetrack_msgs::{Command, Control, FrameHeader, NO_FRAME, PoseRecord, StageKind, StatusKind, Topic, TrackedLine};
+use linetrack_msgs::{
+    Command, Control, FrameHeader, NO_FRAME, PoseRecord, StageKind, StatusKind, Topic, TrackedLine,
+};
 use linetrack_odometry::{Features, FrameStats, MatchedLines, MotionTracker};
-use linetrack_stage_runtime::{HeldFrames, Reporter, StageContext, process_frame, stereo_views, to_segment};
+use linetrack_stage_runtime::{
+    HeldFrames, Reporter, StageContext, process_frame, stereo_views, to_segment,
+};
 use linetrack_vision::FeatureMatch;
 use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion};
 use std::time::Duration;
@@ -32,7 +36,11 @@ impl Ports {
     pub fn open(bus: &Bus, ctx: &StageContext) -> anyhow::Result<Self> {
         let points = ctx.config.odometry.features == Features::PointsAndLines;
         Ok(Self {
-            frames: if points { Some(bus.inlet(Topic::Frames)?) } else { None },
+            frames: if points {
+                Some(bus.inlet(Topic::Frames)?)
+            } else {
+                None
+            },
             tracks: bus.inlet(Topic::Tracks)?,
             poses: bus.outlet(Topic::Poses, 1)?,
             control: bus.inlet(Topic::Control)?,
@@ -46,22 +54,39 @@ impl Ports {
 pub fn pose_record(pose: &Isometry3<f64>) -> PoseRecord {
     let t = pose.translation.vector;
     let q = pose.rotation.quaternion();
-    PoseRecord { translation: [t.x, t.y, t.z], rotation_xyzw: [q.i, q.j, q.k, q.w], ..PoseRecord::default() }
+    PoseRecord {
+        translation: [t.x, t.y, t.z],
+        rotation_xyzw: [q.i, q.j, q.k, q.w],
+        ..PoseRecord::default()
+    }
 }
 
 /// Parses `frame,tx,ty,tz,qx,qy,qz,qw` (the supervisor's `--resume-pose`).
 pub fn parse_resume_pose(text: &str) -> anyhow::Result<(u64, Isometry3<f64>)> {
     let fields: Vec<&str> = text.split(',').map(str::trim).collect();
-    anyhow::ensure!(fields.len() == 8, "--resume-pose {text:?}: expected frame,tx,ty,tz,qx,qy,qz,qw");
-    let frame: u64 = fields[0].parse().with_context(|| format!("--resume-pose: frame {:?}", fields[0]))?;
+    anyhow::ensure!(
+        fields.len() == 8,
+        "--resume-pose {text:?}: expected frame,tx,ty,tz,qx,qy,qz,qw"
+    );
+    let frame: u64 = fields[0]
+        .parse()
+        .with_context(|| format!("--resume-pose: frame {:?}", fields[0]))?;
     let mut v = [0.0f64; 7];
     for (slot, f) in v.iter_mut().zip(&fields[1..]) {
-        *slot = f.parse().with_context(|| format!("--resume-pose: {f:?} is not a number"))?;
+        *slot = f
+            .parse()
+            .with_context(|| format!("--resume-pose: {f:?} is not a number"))?;
         anyhow::ensure!(slot.is_finite(), "--resume-pose: {f:?} is not finite");
     }
     let q = Quaternion::new(v[6], v[3], v[4], v[5]);
     anyhow::ensure!(q.norm() > 1e-9, "--resume-pose: zero quaternion");
-    Ok((frame, Isometry3::from_parts(Translation3::new(v[0], v[1], v[2]), UnitQuaternion::from_quaternion(q))))
+    Ok((
+        frame,
+        Isometry3::from_parts(
+            Translation3::new(v[0], v[1], v[2]),
+            UnitQuaternion::from_quaternion(q),
+        ),
+    ))
 }
 
 /// Tracking state: the back end and the frame it last tracked.
@@ -74,34 +99,62 @@ impl PoseTracker {
     /// A tracker for the run's sequence rig.
     pub fn new(ctx: &StageContext) -> anyhow::Result<Self> {
         let sequence = &ctx.config.source.sequence;
-        let rig = StereoSequence::open(sequence).with_context(|| format!("reading the rig of {}", sequence.display()))?.rig;
+        let rig = StereoSequence::open(sequence)
+            .with_context(|| format!("reading the rig of {}", sequence.display()))?
+            .rig;
         let mut tracker = MotionTracker::new(ctx.config.odometry_config(), rig)?;
         if let Some(text) = &ctx.args.resume_pose {
             let (frame, pose) = parse_resume_pose(text)?;
             tracing::info!("resuming after frame {frame}");
             tracker.resume_from(pose, Isometry3::identity());
         }
-        Ok(Self { tracker, last_frame: NO_FRAME })
+        Ok(Self {
+            tracker,
+            last_frame: NO_FRAME,
+        })
     }
 
     /// Tracks one frame.
-    pub fn track(&mut self, header: &FrameHeader, lines: &[TrackedLine], frame: Option<&linetrack_ipc::Received<u8>>) -> anyhow::Result<PoseRecord> {
+    pub fn track(
+        &mut self,
+        header: &FrameHeader,
+        lines: &[TrackedLine],
+        frame: Option<&linetrack_ipc::Received<u8>>,
+    ) -> anyhow::Result<PoseRecord> {
         let left: Vec<Segment> = lines.iter().map(|t| to_segment(&t.left)).collect();
-        let right: Vec<Segment> = lines.iter().filter(|t| t.has_stereo == 1).map(|t| to_segment(&t.right)).collect();
+        let right: Vec<Segment> = lines
+            .iter()
+            .filter(|t| t.has_stereo == 1)
+            .map(|t| to_segment(&t.right))
+            .collect();
         let mut stereo = Vec::new();
         let mut tracked = Vec::new();
         let mut r = 0;
         for (i, t) in lines.iter().enumerate() {
             if t.has_stereo == 1 {
-                stereo.push(FeatureMatch { query: i, train: r, distance: 0.0 });
+                stereo.push(FeatureMatch {
+                    query: i,
+                    train: r,
+                    distance: 0.0,
+                });
                 r += 1;
             }
             if let Ok(previous) = usize::try_from(t.previous) {
-                tracked.push(FeatureMatch { query: previous, train: i, distance: 0.0 });
+                tracked.push(FeatureMatch {
+                    query: previous,
+                    train: i,
+                    distance: 0.0,
+                });
             }
         }
-        let continues = header.previous_frame_id != NO_FRAME && header.previous_frame_id == self.last_frame;
-        let matched = MatchedLines { left: &left, right: &right, stereo: &stereo, tracked: continues.then_some(tracked.as_slice()) };
+        let continues =
+            header.previous_frame_id != NO_FRAME && header.previous_frame_id == self.last_frame;
+        let matched = MatchedLines {
+            left: &left,
+            right: &right,
+            stereo: &stereo,
+            tracked: continues.then_some(tracked.as_slice()),
+        };
         let views = match frame.map(stereo_views) {
             Some(Ok(v)) => Some(v),
             Some(Err(e)) => {
@@ -111,7 +164,9 @@ impl PoseTracker {
             None => None,
         };
         let images = views.as_ref().map(|(l, r)| (&**l, &**r));
-        let result = self.tracker.update(images, matched, FrameStats::default())?;
+        let result = self
+            .tracker
+            .update(images, matched, FrameStats::default())?;
         self.last_frame = header.frame_id;
         let mut record = pose_record(&result.pose);
         record.lost = u32::from(result.lost);
@@ -154,12 +209,26 @@ pub fn run(ctx: &StageContext, mut ports: Ports, shutdown: &Shutdown) -> anyhow:
             let frame = held.take(header.frame_id);
             // A dropped or failed frame repeats the last pose.
             let last = pose_record(&tracker.tracker.pose());
-            let work = |h: &mut FrameHeader| tracker.track(h, message.payload(), frame.as_ref()).map(|r| vec![r]);
-            process_frame(StageKind::PoseEstimator, header, k + 1 < count, &ctx.config.budget, &mut ports.poses, work, || vec![last])?;
+            let work = |h: &mut FrameHeader| {
+                tracker
+                    .track(h, message.payload(), frame.as_ref())
+                    .map(|r| vec![r])
+            };
+            process_frame(
+                StageKind::PoseEstimator,
+                header,
+                k + 1 < count,
+                &ctx.config.budget,
+                &mut ports.poses,
+                work,
+                || vec![last],
+            )?;
             processed += 1;
         }
         ports.reporter.beat(processed);
-        ports.wake.wait(ports.reporter.until_due().max(Duration::from_millis(1)))?;
+        ports
+            .wake
+            .wait(ports.reporter.until_due().max(Duration::from_millis(1)))?;
     }
     Ok(())
 }
@@ -170,14 +239,32 @@ mod tests {
 
     #[test]
     fn resume_pose_round_trips_and_rejects_garbage() {
-        let pose = Isometry3::from_parts(Translation3::new(1.0, -2.0, 0.5), UnitQuaternion::from_euler_angles(0.1, 0.2, -0.3));
+        let pose = Isometry3::from_parts(
+            Translation3::new(1.0, -2.0, 0.5),
+            UnitQuaternion::from_euler_angles(0.1, 0.2, -0.3),
+        );
         let r = pose_record(&pose);
-        let text = format!("12,{},{},{},{},{},{},{}", r.translation[0], r.translation[1], r.translation[2], r.rotation_xyzw[0], r.rotation_xyzw[1], r.rotation_xyzw[2], r.rotation_xyzw[3]);
+        let text = format!(
+            "12,{},{},{},{},{},{},{}",
+            r.translation[0],
+            r.translation[1],
+            r.translation[2],
+            r.rotation_xyzw[0],
+            r.rotation_xyzw[1],
+            r.rotation_xyzw[2],
+            r.rotation_xyzw[3]
+        );
         let (frame, back) = parse_resume_pose(&text).unwrap_or_else(|e| panic!("{e}"));
         assert_eq!(frame, 12);
         assert!((back.translation.vector - pose.translation.vector).norm() < 1e-12);
         assert!(back.rotation.angle_to(&pose.rotation) < 1e-9);
-        for bad in ["", "1,2,3", "x,0,0,0,0,0,0,1", "1,0,0,nan,0,0,0,1", "1,0,0,0,0,0,0,0"] {
+        for bad in [
+            "",
+            "1,2,3",
+            "x,0,0,0,0,0,0,1",
+            "1,0,0,nan,0,0,0,1",
+            "1,0,0,0,0,0,0,0",
+        ] {
             assert!(parse_resume_pose(bad).is_err(), "{bad:?} accepted");
         }
     }

@@ -32,7 +32,13 @@ pub struct FallbackController {
 impl FallbackController {
     /// A controller starting in LBD mode.
     pub fn new(config: FallbackConfig, matcher_budget_ms: f64) -> Self {
-        Self { config, matcher_budget_ms, mode: MatcherMode::Lbd, bad_streak: 0, good_probes: 0 }
+        Self {
+            config,
+            matcher_budget_ms,
+            mode: MatcherMode::Lbd,
+            bad_streak: 0,
+            good_probes: 0,
+        }
     }
 
     /// The mode the controller wants.
@@ -44,16 +50,27 @@ impl FallbackController {
     fn failure(&self, header: &FrameHeader, pose: &PoseRecord) -> Option<String> {
         let c = &self.config;
         if header.stereo_matches < c.min_stereo_matches {
-            return Some(format!("too few LBD stereo matches ({} < {})", header.stereo_matches, c.min_stereo_matches));
+            return Some(format!(
+                "too few LBD stereo matches ({} < {})",
+                header.stereo_matches, c.min_stereo_matches
+            ));
         }
         let observed = pose.observations[1];
-        if observed >= c.min_observations && f64::from(pose.inliers[1]) < c.min_inlier_ratio * f64::from(observed) {
-            return Some(format!("line inlier ratio collapsed ({}/{} < {:.2})", pose.inliers[1], observed, c.min_inlier_ratio));
+        if observed >= c.min_observations
+            && f64::from(pose.inliers[1]) < c.min_inlier_ratio * f64::from(observed)
+        {
+            return Some(format!(
+                "line inlier ratio collapsed ({}/{} < {:.2})",
+                pose.inliers[1], observed, c.min_inlier_ratio
+            ));
         }
         let stamp = header.stamps[StageKind::Matcher.stamp_index().unwrap_or(2)];
         let ms = stamp.end_ns.saturating_sub(stamp.start_ns) as f64 * 1e-6;
         if c.over_budget && ms > self.matcher_budget_ms {
-            return Some(format!("matcher over budget ({ms:.1} ms > {:.1} ms)", self.matcher_budget_ms));
+            return Some(format!(
+                "matcher over budget ({ms:.1} ms > {:.1} ms)",
+                self.matcher_budget_ms
+            ));
         }
         None
     }
@@ -73,8 +90,12 @@ impl FallbackController {
                             self.mode = MatcherMode::L1;
                             self.bad_streak = 0;
                             self.good_probes = 0;
-                            let reason = format!("{reason}, {} frames in a row", self.config.bad_frames);
-                            return Some(Switch { to: MatcherMode::L1, reason });
+                            let reason =
+                                format!("{reason}, {} frames in a row", self.config.bad_frames);
+                            return Some(Switch {
+                                to: MatcherMode::L1,
+                                reason,
+                            });
                         }
                     }
                     None => self.bad_streak = 0,
@@ -82,7 +103,9 @@ impl FallbackController {
                 None
             }
             MatcherMode::L1 => {
-                let Ok(found) = u32::try_from(header.lbd_probe_matches) else { return None };
+                let Ok(found) = u32::try_from(header.lbd_probe_matches) else {
+                    return None;
+                };
                 if found >= self.config.recover_stereo_matches {
                     self.good_probes += 1;
                 } else {
@@ -95,7 +118,10 @@ impl FallbackController {
                         "LBD probes found >= {} stereo matches on {} probes in a row (last {found})",
                         self.config.recover_stereo_matches, self.config.recover_probes
                     );
-                    return Some(Switch { to: MatcherMode::Lbd, reason });
+                    return Some(Switch {
+                        to: MatcherMode::Lbd,
+                        reason,
+                    });
                 }
                 None
             }
@@ -118,11 +144,24 @@ mod tests {
     }
 
     fn pose(inliers: u32, observations: u32) -> PoseRecord {
-        PoseRecord { inliers: [0, inliers], observations: [0, observations], ..PoseRecord::default() }
+        PoseRecord {
+            inliers: [0, inliers],
+            observations: [0, observations],
+            ..PoseRecord::default()
+        }
     }
 
     fn controller() -> FallbackController {
-        FallbackController::new(FallbackConfig { bad_frames: 3, recover_probes: 2, min_stereo_matches: 12, recover_stereo_matches: 24, ..FallbackConfig::default() }, 50.0)
+        FallbackController::new(
+            FallbackConfig {
+                bad_frames: 3,
+                recover_probes: 2,
+                min_stereo_matches: 12,
+                recover_stereo_matches: 24,
+                ..FallbackConfig::default()
+            },
+            50.0,
+        )
     }
 
     #[test]
@@ -132,12 +171,24 @@ mod tests {
         let few = frame(MatcherMode::Lbd, 3, -1, 5);
         assert_eq!(c.observe(&few, &pose(20, 30)), None);
         assert_eq!(c.observe(&few, &pose(20, 30)), None);
-        assert_eq!(c.observe(&good, &pose(20, 30)), None, "a good frame resets the streak");
+        assert_eq!(
+            c.observe(&good, &pose(20, 30)),
+            None,
+            "a good frame resets the streak"
+        );
         assert_eq!(c.observe(&few, &pose(20, 30)), None);
         assert_eq!(c.observe(&few, &pose(20, 30)), None);
-        let switch = c.observe(&few, &pose(20, 30)).unwrap_or_else(|| panic!("no fallback"));
+        let switch = c
+            .observe(&few, &pose(20, 30))
+            .unwrap_or_else(|| panic!("no fallback"));
         assert_eq!(switch.to, MatcherMode::L1);
-        assert!(switch.reason.contains("too few LBD stereo matches (3 < 12)"), "{}", switch.reason);
+        assert!(
+            switch
+                .reason
+                .contains("too few LBD stereo matches (3 < 12)"),
+            "{}",
+            switch.reason
+        );
         assert_eq!(c.mode(), MatcherMode::L1);
     }
 
@@ -145,20 +196,30 @@ mod tests {
     fn inlier_collapse_and_budget_are_failures_too() {
         let mut c = controller();
         for _ in 0..2 {
-            assert_eq!(c.observe(&frame(MatcherMode::Lbd, 40, -1, 5), &pose(2, 30)), None);
+            assert_eq!(
+                c.observe(&frame(MatcherMode::Lbd, 40, -1, 5), &pose(2, 30)),
+                None
+            );
         }
-        let s = c.observe(&frame(MatcherMode::Lbd, 40, -1, 5), &pose(2, 30)).unwrap_or_else(|| panic!("no fallback"));
+        let s = c
+            .observe(&frame(MatcherMode::Lbd, 40, -1, 5), &pose(2, 30))
+            .unwrap_or_else(|| panic!("no fallback"));
         assert!(s.reason.contains("inlier ratio"), "{}", s.reason);
         let mut c = controller();
         for _ in 0..2 {
             c.observe(&frame(MatcherMode::Lbd, 40, -1, 80), &pose(20, 30));
         }
-        let s = c.observe(&frame(MatcherMode::Lbd, 40, -1, 80), &pose(20, 30)).unwrap_or_else(|| panic!("no fallback"));
+        let s = c
+            .observe(&frame(MatcherMode::Lbd, 40, -1, 80), &pose(20, 30))
+            .unwrap_or_else(|| panic!("no fallback"));
         assert!(s.reason.contains("over budget"), "{}", s.reason);
         // Few observations: the ratio is not judged.
         let mut c = controller();
         for _ in 0..5 {
-            assert_eq!(c.observe(&frame(MatcherMode::Lbd, 40, -1, 5), &pose(0, 5)), None);
+            assert_eq!(
+                c.observe(&frame(MatcherMode::Lbd, 40, -1, 5), &pose(0, 5)),
+                None
+            );
         }
     }
 
@@ -170,12 +231,30 @@ mod tests {
         }
         assert_eq!(c.mode(), MatcherMode::L1);
         // Frames without a probe, and probes between the two thresholds, do not bring it back.
-        assert_eq!(c.observe(&frame(MatcherMode::L1, 50, -1, 5), &pose(0, 0)), None);
-        assert_eq!(c.observe(&frame(MatcherMode::L1, 50, 18, 5), &pose(0, 0)), None);
-        assert_eq!(c.observe(&frame(MatcherMode::L1, 50, 30, 5), &pose(0, 0)), None);
-        assert_eq!(c.observe(&frame(MatcherMode::L1, 50, 18, 5), &pose(0, 0)), None, "a failed probe resets the count");
-        assert_eq!(c.observe(&frame(MatcherMode::L1, 50, 30, 5), &pose(0, 0)), None);
-        let back = c.observe(&frame(MatcherMode::L1, 50, 31, 5), &pose(0, 0)).unwrap_or_else(|| panic!("no recovery"));
+        assert_eq!(
+            c.observe(&frame(MatcherMode::L1, 50, -1, 5), &pose(0, 0)),
+            None
+        );
+        assert_eq!(
+            c.observe(&frame(MatcherMode::L1, 50, 18, 5), &pose(0, 0)),
+            None
+        );
+        assert_eq!(
+            c.observe(&frame(MatcherMode::L1, 50, 30, 5), &pose(0, 0)),
+            None
+        );
+        assert_eq!(
+            c.observe(&frame(MatcherMode::L1, 50, 18, 5), &pose(0, 0)),
+            None,
+            "a failed probe resets the count"
+        );
+        assert_eq!(
+            c.observe(&frame(MatcherMode::L1, 50, 30, 5), &pose(0, 0)),
+            None
+        );
+        let back = c
+            .observe(&frame(MatcherMode::L1, 50, 31, 5), &pose(0, 0))
+            .unwrap_or_else(|| panic!("no recovery"));
         assert_eq!(back.to, MatcherMode::Lbd);
         assert_eq!(c.mode(), MatcherMode::Lbd);
     }

@@ -16,7 +16,10 @@ pub mod monitor;
 
 use anyhow::{Context, bail};
 use linetrack_ipc::{Bus, Inlet, Outlet, Scope, Shutdown, Wake};
-use linetrack_msgs::{Command, Control, FrameHeader, MatcherMode, PoseRecord, StageKind, StatusKind, StatusReport, Topic, now_ns};
+use linetrack_msgs::{
+    Command, Control, FrameHeader, MatcherMode, PoseRecord, StageKind, StatusKind, StatusReport,
+    Topic, now_ns,
+};
 use linetrack_pipeline_config::PipelineConfig;
 use linetrack_run_record::Report;
 use linetrack_stage_runtime::{StageContext, detector_code, detector_from_code};
@@ -80,8 +83,21 @@ impl Ports {
         })
     }
 
-    fn send(&mut self, stage: StageKind, pid: u32, command: Command, value: u32, frame_id: u64) -> anyhow::Result<()> {
-        let c = Control { command: command as u32, target_pid: pid, target_stage: stage.code(), value, frame_id };
+    fn send(
+        &mut self,
+        stage: StageKind,
+        pid: u32,
+        command: Command,
+        value: u32,
+        frame_id: u64,
+    ) -> anyhow::Result<()> {
+        let c = Control {
+            command: command as u32,
+            target_pid: pid,
+            target_stage: stage.code(),
+            value,
+            frame_id,
+        };
         self.control.publish(&FrameHeader::default(), &[&[c]])?;
         Ok(())
     }
@@ -89,7 +105,10 @@ impl Ports {
 
 /// A new run id: 8 hex digits from the clock and the process id.
 pub fn new_run_id() -> String {
-    format!("{:08x}", (now_ns() ^ (u64::from(std::process::id()) << 20)) as u32)
+    format!(
+        "{:08x}",
+        (now_ns() ^ (u64::from(std::process::id()) << 20)) as u32
+    )
 }
 
 /// What `status.json` in the run folder says (read by `linetrack ctl` and the tests).
@@ -127,30 +146,54 @@ pub struct StageEntry {
 /// Writes the effective config and prepares the run folder.
 fn prepare_run_dir(config: &PipelineConfig) -> anyhow::Result<(PathBuf, PathBuf)> {
     let run_dir = config.output.run_dir.clone();
-    for stale in ["spans", "trace.json", "frames.csv", "events.csv", "summary.json", "poses.tum", "status.json"] {
+    for stale in [
+        "spans",
+        "trace.json",
+        "frames.csv",
+        "events.csv",
+        "summary.json",
+        "poses.tum",
+        "status.json",
+    ] {
         let path = run_dir.join(stale);
         if path.is_dir() {
-            std::fs::remove_dir_all(&path).with_context(|| format!("clearing {}", path.display()))?;
+            std::fs::remove_dir_all(&path)
+                .with_context(|| format!("clearing {}", path.display()))?;
         } else if path.exists() {
             std::fs::remove_file(&path).with_context(|| format!("clearing {}", path.display()))?;
         }
     }
-    std::fs::create_dir_all(&run_dir).with_context(|| format!("creating run folder {}", run_dir.display()))?;
+    std::fs::create_dir_all(&run_dir)
+        .with_context(|| format!("creating run folder {}", run_dir.display()))?;
     let config_path = run_dir.join("pipeline.toml");
-    std::fs::write(&config_path, toml::to_string(config)?).with_context(|| format!("writing {}", config_path.display()))?;
+    std::fs::write(&config_path, toml::to_string(config)?)
+        .with_context(|| format!("writing {}", config_path.display()))?;
     Ok((run_dir, config_path))
 }
 
 /// Runs the pipeline on `config` until the sequence is done or `shutdown` is set.
-pub fn run(config: &PipelineConfig, options: &RunOptions, shutdown: &Shutdown) -> anyhow::Result<RunOutcome> {
-    config.validate().map_err(|e| anyhow::anyhow!("pipeline config: {e}"))?;
+pub fn run(
+    config: &PipelineConfig,
+    options: &RunOptions,
+    shutdown: &Shutdown,
+) -> anyhow::Result<RunOutcome> {
+    config
+        .validate()
+        .map_err(|e| anyhow::anyhow!("pipeline config: {e}"))?;
     // Refuse a sequence no stage could open before starting any.
-    let sequence = linetrack_datasets::StereoSequence::open(&config.source.sequence).with_context(|| format!("source.sequence {}", config.source.sequence.display()))?;
-    anyhow::ensure!(!sequence.frames.is_empty(), "source.sequence {}: no frames", config.source.sequence.display());
+    let sequence = linetrack_datasets::StereoSequence::open(&config.source.sequence)
+        .with_context(|| format!("source.sequence {}", config.source.sequence.display()))?;
+    anyhow::ensure!(
+        !sequence.frames.is_empty(),
+        "source.sequence {}: no frames",
+        config.source.sequence.display()
+    );
     let (run_dir, config_path) = prepare_run_dir(config)?;
     let run_id = new_run_id();
     match options.mode {
-        Mode::Processes => Supervisor::new(config, options, run_id, run_dir, config_path)?.run(shutdown),
+        Mode::Processes => {
+            Supervisor::new(config, options, run_id, run_dir, config_path)?.run(shutdown)
+        }
         Mode::Threads => run_threads(config, options, run_id, run_dir, shutdown),
     }
 }
@@ -198,18 +241,30 @@ fn stage_slot(stage: StageKind) -> usize {
 }
 
 impl Supervisor {
-    fn new(config: &PipelineConfig, options: &RunOptions, run_id: String, run_dir: PathBuf, config_path: PathBuf) -> anyhow::Result<Self> {
+    fn new(
+        config: &PipelineConfig,
+        options: &RunOptions,
+        run_id: String,
+        run_dir: PathBuf,
+        config_path: PathBuf,
+    ) -> anyhow::Result<Self> {
         let bin_dir = match &options.bin_dir {
             Some(dir) => dir.clone(),
             None => match std::env::var_os("LINETRACK_BIN_DIR") {
                 Some(dir) => PathBuf::from(dir),
-                None => std::env::current_exe()?.parent().map(Path::to_path_buf).context("locating the stage binaries")?,
+                None => std::env::current_exe()?
+                    .parent()
+                    .map(Path::to_path_buf)
+                    .context("locating the stage binaries")?,
             },
         };
         for stage in StageKind::PROCESSING {
             let bin = bin_dir.join(format!("linetrack-{}", stage.name()));
             if !bin.is_file() {
-                bail!("{} not found: build the stage binaries (cargo build --release --workspace) or set LINETRACK_BIN_DIR", bin.display());
+                bail!(
+                    "{} not found: build the stage binaries (cargo build --release --workspace) or set LINETRACK_BIN_DIR",
+                    bin.display()
+                );
             }
         }
         let scope = Scope::new(&run_id);
@@ -221,7 +276,12 @@ impl Supervisor {
         let ports = Ports::open(&bus)?;
         let mut monitor = Monitor::new(config, 0);
         if stale > 0 {
-            monitor.event("stale-cleanup", "supervisor", None, format!("removed the shared memory of {stale} dead processes of earlier runs"));
+            monitor.event(
+                "stale-cleanup",
+                "supervisor",
+                None,
+                format!("removed the shared memory of {stale} dead processes of earlier runs"),
+            );
         }
         Ok(Self {
             config: config.clone(),
@@ -241,7 +301,12 @@ impl Supervisor {
         })
     }
 
-    fn spawn(&mut self, stage: StageKind, detector: Option<DetectorKind>, standby: bool) -> anyhow::Result<()> {
+    fn spawn(
+        &mut self,
+        stage: StageKind,
+        detector: Option<DetectorKind>,
+        standby: bool,
+    ) -> anyhow::Result<()> {
         let bin = self.bin_dir.join(format!("linetrack-{}", stage.name()));
         let mut command = Process::new(&bin);
         command
@@ -261,19 +326,37 @@ impl Supervisor {
             command.arg("--standby");
         }
         let restarted = self.restarts[stage_slot(stage)].count > 0;
-        if restarted && stage == StageKind::PoseEstimator
+        if restarted
+            && stage == StageKind::PoseEstimator
             && let Some(pose) = self.monitor.resume_pose()
         {
             command.arg("--resume-pose").arg(pose);
         }
         if restarted && stage == StageKind::FrameSource {
-            command.arg("--start-frame").arg(self.monitor.next_source_frame().to_string());
+            command
+                .arg("--start-frame")
+                .arg(self.monitor.next_source_frame().to_string());
         }
-        let child = command.spawn().with_context(|| format!("starting {}", bin.display()))?;
+        let child = command
+            .spawn()
+            .with_context(|| format!("starting {}", bin.display()))?;
         let pid = child.id();
-        tracing::info!("started {stage} (pid {pid}{})", if standby { ", standby" } else { "" });
+        tracing::info!(
+            "started {stage} (pid {pid}{})",
+            if standby { ", standby" } else { "" }
+        );
         let now = Instant::now();
-        self.processes.push(StageProcess { stage, child, pid, started: now, last_seen: now, ready: false, standby, detector, retiring: false });
+        self.processes.push(StageProcess {
+            stage,
+            child,
+            pid,
+            started: now,
+            last_seen: now,
+            ready: false,
+            standby,
+            detector,
+            retiring: false,
+        });
         self.write_status(false);
         Ok(())
     }
@@ -283,7 +366,16 @@ impl Supervisor {
             run_id: self.run_id.clone(),
             ipc_prefix: self.scope.prefix.clone(),
             supervisor_pid: std::process::id(),
-            stages: self.processes.iter().map(|p| StageEntry { stage: p.stage.name().to_string(), pid: p.pid, ready: p.ready, standby: p.standby }).collect(),
+            stages: self
+                .processes
+                .iter()
+                .map(|p| StageEntry {
+                    stage: p.stage.name().to_string(),
+                    pid: p.pid,
+                    ready: p.ready,
+                    standby: p.standby,
+                })
+                .collect(),
             detector: self.detector.name().to_string(),
             frames: self.monitor.accounted(),
             finished,
@@ -297,7 +389,11 @@ impl Supervisor {
     }
 
     fn all_ready(&self, stages: &[StageKind]) -> bool {
-        stages.iter().all(|s| self.processes.iter().any(|p| p.stage == *s && p.ready && !p.standby))
+        stages.iter().all(|s| {
+            self.processes
+                .iter()
+                .any(|p| p.stage == *s && p.ready && !p.standby)
+        })
     }
 
     fn run(mut self, shutdown: &Shutdown) -> anyhow::Result<RunOutcome> {
@@ -305,7 +401,10 @@ impl Supervisor {
         self.stop_all();
         if self.config.output.trace {
             match linetrack_telemetry::merge_traces(&self.run_dir) {
-                Ok(n) => tracing::info!("trace: {n} spans in {}", self.run_dir.join("trace.json").display()),
+                Ok(n) => tracing::info!(
+                    "trace: {n} spans in {}",
+                    self.run_dir.join("trace.json").display()
+                ),
                 Err(e) => tracing::warn!("trace not merged: {e}"),
             }
         }
@@ -314,12 +413,21 @@ impl Supervisor {
         let report = self.monitor.finish(&self.run_dir, interrupted)?;
         drop(self.ports);
         drop(self.bus);
-        Ok(RunOutcome { run_dir: self.run_dir, run_id: self.run_id, report, interrupted })
+        Ok(RunOutcome {
+            run_dir: self.run_dir,
+            run_id: self.run_id,
+            report,
+            interrupted,
+        })
     }
 
     /// The main loop; returns whether it was interrupted.
     fn supervise(&mut self, shutdown: &Shutdown) -> anyhow::Result<bool> {
-        for stage in [StageKind::LineDetector, StageKind::Matcher, StageKind::PoseEstimator] {
+        for stage in [
+            StageKind::LineDetector,
+            StageKind::Matcher,
+            StageKind::PoseEstimator,
+        ] {
             let detector = (stage == StageKind::LineDetector).then_some(self.detector);
             self.spawn(stage, detector, false)?;
         }
@@ -341,11 +449,24 @@ impl Supervisor {
             self.handle_requests()?;
             self.check_processes(shutdown)?;
             if !source_started {
-                if self.all_ready(&[StageKind::LineDetector, StageKind::Matcher, StageKind::PoseEstimator]) {
+                if self.all_ready(&[
+                    StageKind::LineDetector,
+                    StageKind::Matcher,
+                    StageKind::PoseEstimator,
+                ]) {
                     self.spawn(StageKind::FrameSource, None, false)?;
                     source_started = true;
                 } else if waiting_since.elapsed() > startup {
-                    bail!("stages not ready after {:?}: {}", startup, self.processes.iter().filter(|p| !p.ready).map(|p| p.stage.name()).collect::<Vec<_>>().join(", "));
+                    bail!(
+                        "stages not ready after {:?}: {}",
+                        startup,
+                        self.processes
+                            .iter()
+                            .filter(|p| !p.ready)
+                            .map(|p| p.stage.name())
+                            .collect::<Vec<_>>()
+                            .join(", ")
+                    );
                 }
             }
             if self.monitor.complete() {
@@ -354,7 +475,8 @@ impl Supervisor {
             }
             if self.monitor.source_done() {
                 let since = *drain_since.get_or_insert_with(Instant::now);
-                if since.elapsed() > Duration::from_millis(self.config.supervisor.drain_timeout_ms) {
+                if since.elapsed() > Duration::from_millis(self.config.supervisor.drain_timeout_ms)
+                {
                     tracing::warn!("drain timeout: frames still missing are recorded as missing");
                     return Ok(false);
                 }
@@ -363,7 +485,10 @@ impl Supervisor {
                 self.write_status(false);
                 next_file = Instant::now() + Duration::from_millis(200);
             }
-            if self.options.live_status && status_every > Duration::ZERO && Instant::now() >= next_status {
+            if self.options.live_status
+                && status_every > Duration::ZERO
+                && Instant::now() >= next_status
+            {
                 println!("{}", self.monitor.status_line());
                 next_status = Instant::now() + status_every;
             }
@@ -376,39 +501,83 @@ impl Supervisor {
 
     fn handle_status(&mut self) -> anyhow::Result<()> {
         for message in self.ports.status.receive_all()? {
-            let Some(&report) = message.payload().first() else { continue };
-            let Some(process) = self.process_mut(report.pid) else { continue };
+            let Some(&report) = message.payload().first() else {
+                continue;
+            };
+            let Some(process) = self.process_mut(report.pid) else {
+                continue;
+            };
             process.last_seen = Instant::now();
             let (stage, standby) = (process.stage, process.standby);
             match StatusKind::from_code(report.kind) {
                 Some(StatusKind::Ready) => {
                     process.ready = true;
                     if standby {
-                        if let Some(old) = self.processes.iter().find(|p| p.stage == StageKind::LineDetector && !p.standby && !p.retiring) {
+                        if let Some(old) = self.processes.iter().find(|p| {
+                            p.stage == StageKind::LineDetector && !p.standby && !p.retiring
+                        }) {
                             let old_pid = old.pid;
-                            tracing::info!("standby detector {} ready holding frames from {}; asking {old_pid} to hand over", report.pid, report.frame_id);
-                            self.ports.send(StageKind::LineDetector, old_pid, Command::HandOver, 0, report.frame_id)?;
+                            tracing::info!(
+                                "standby detector {} ready holding frames from {}; asking {old_pid} to hand over",
+                                report.pid,
+                                report.frame_id
+                            );
+                            self.ports.send(
+                                StageKind::LineDetector,
+                                old_pid,
+                                Command::HandOver,
+                                0,
+                                report.frame_id,
+                            )?;
                         } else {
                             // No running detector to hand over from: take over at once.
-                            self.ports.send(StageKind::LineDetector, report.pid, Command::TakeOver, 0, report.frame_id)?;
+                            self.ports.send(
+                                StageKind::LineDetector,
+                                report.pid,
+                                Command::TakeOver,
+                                0,
+                                report.frame_id,
+                            )?;
                             self.promote_standby(report.pid, report.frame_id);
                         }
                     } else if stage == StageKind::Matcher
                         && let Some(mode) = self.monitor.matcher_mode()
                         && mode != MatcherMode::Lbd
                     {
-                        self.ports.send(StageKind::Matcher, report.pid, Command::SetMatcherMode, mode as u32, 0)?;
+                        self.ports.send(
+                            StageKind::Matcher,
+                            report.pid,
+                            Command::SetMatcherMode,
+                            mode as u32,
+                            0,
+                        )?;
                     }
                     self.write_status(false);
                 }
                 Some(StatusKind::HandedOver) => {
                     process.retiring = true;
                     let old_kind = process.detector;
-                    if let Some(new_pid) = self.processes.iter().find(|p| p.standby).map(|p| p.pid) {
-                        self.ports.send(StageKind::LineDetector, new_pid, Command::TakeOver, 0, report.frame_id)?;
+                    if let Some(new_pid) = self.processes.iter().find(|p| p.standby).map(|p| p.pid)
+                    {
+                        self.ports.send(
+                            StageKind::LineDetector,
+                            new_pid,
+                            Command::TakeOver,
+                            0,
+                            report.frame_id,
+                        )?;
                         self.promote_standby(new_pid, report.frame_id);
                         let from = old_kind.map(|k| k.name()).unwrap_or("?");
-                        self.monitor.event("swap", "line-detector", Some(report.frame_id), format!("{from} (pid {}) -> {} (pid {new_pid})", report.pid, self.detector.name()));
+                        self.monitor.event(
+                            "swap",
+                            "line-detector",
+                            Some(report.frame_id),
+                            format!(
+                                "{from} (pid {}) -> {} (pid {new_pid})",
+                                report.pid,
+                                self.detector.name()
+                            ),
+                        );
                     }
                 }
                 Some(StatusKind::SourceFinished) => {
@@ -416,7 +585,11 @@ impl Supervisor {
                     self.monitor.published(report.frame_id);
                     self.monitor.source_finished(report.frame_id);
                 }
-                Some(StatusKind::Heartbeat) if stage == StageKind::FrameSource && report.value > 0 => self.monitor.published(report.frame_id),
+                Some(StatusKind::Heartbeat)
+                    if stage == StageKind::FrameSource && report.value > 0 =>
+                {
+                    self.monitor.published(report.frame_id)
+                }
                 _ => {}
             }
         }
@@ -438,9 +611,17 @@ impl Supervisor {
 
     fn handle_poses(&mut self) -> anyhow::Result<()> {
         for message in self.ports.poses.receive_all()? {
-            let Some(&pose) = message.payload().first() else { continue };
+            let Some(&pose) = message.payload().first() else {
+                continue;
+            };
             if let Some(switch) = self.monitor.on_pose(message.header(), &pose) {
-                self.ports.send(StageKind::Matcher, 0, Command::SetMatcherMode, switch.to as u32, 0)?;
+                self.ports.send(
+                    StageKind::Matcher,
+                    0,
+                    Command::SetMatcherMode,
+                    switch.to as u32,
+                    0,
+                )?;
             }
         }
         Ok(())
@@ -448,8 +629,12 @@ impl Supervisor {
 
     fn handle_requests(&mut self) -> anyhow::Result<()> {
         for message in self.ports.control_in.receive_all()? {
-            let Some(&c) = message.payload().first() else { continue };
-            if !c.is_for(StageKind::Supervisor, std::process::id()) || Command::from_code(c.command) != Some(Command::SwapDetector) {
+            let Some(&c) = message.payload().first() else {
+                continue;
+            };
+            if !c.is_for(StageKind::Supervisor, std::process::id())
+                || Command::from_code(c.command) != Some(Command::SwapDetector)
+            {
                 continue;
             }
             let Some(kind) = detector_from_code(c.value) else {
@@ -461,7 +646,12 @@ impl Supervisor {
             } else if kind == self.detector {
                 tracing::info!("swap to {} ignored: already running", kind.name());
             } else {
-                self.monitor.event("swap-requested", "line-detector", None, format!("{} -> {}", self.detector.name(), kind.name()));
+                self.monitor.event(
+                    "swap-requested",
+                    "line-detector",
+                    None,
+                    format!("{} -> {}", self.detector.name(), kind.name()),
+                );
                 self.swap_to = Some(kind);
                 self.spawn(StageKind::LineDetector, Some(kind), true)?;
             }
@@ -480,7 +670,11 @@ impl Supervisor {
                     let silent = p.last_seen.elapsed();
                     let limit = if p.ready { hang } else { startup };
                     if !p.retiring && silent > limit {
-                        tracing::warn!("{} (pid {}) silent for {silent:?}: killing it", p.stage, p.pid);
+                        tracing::warn!(
+                            "{} (pid {}) silent for {silent:?}: killing it",
+                            p.stage,
+                            p.pid
+                        );
                         let _ = p.child.kill();
                     }
                 }
@@ -490,28 +684,57 @@ impl Supervisor {
         for (i, status, success) in exited.into_iter().rev() {
             let mut p = self.processes.remove(i);
             let _ = p.child.wait();
-            let expected = p.retiring || (p.stage == StageKind::FrameSource && success && self.monitor.source_done());
+            let expected = p.retiring
+                || (p.stage == StageKind::FrameSource && success && self.monitor.source_done());
             if expected || shutdown.requested() {
                 tracing::info!("{} (pid {}) exited: {status}", p.stage, p.pid);
                 continue;
             }
             if !p.ready && !p.standby {
                 // A stage that cannot start will not start on a retry either.
-                bail!("{} (pid {}) exited before it was ready ({status}); its error is above", p.stage, p.pid);
+                bail!(
+                    "{} (pid {}) exited before it was ready ({status}); its error is above",
+                    p.stage,
+                    p.pid
+                );
             }
             let silent = p.last_seen.elapsed() > if p.ready { hang } else { startup };
             let kind = if silent { "hang" } else { "crash" };
-            self.monitor.event(kind, p.stage.name(), None, format!("pid {} {status} after {:.1} s", p.pid, p.started.elapsed().as_secs_f64()));
+            self.monitor.event(
+                kind,
+                p.stage.name(),
+                None,
+                format!(
+                    "pid {} {status} after {:.1} s",
+                    p.pid,
+                    p.started.elapsed().as_secs_f64()
+                ),
+            );
             if p.standby {
-                self.monitor.event("swap-abandoned", "line-detector", None, "the standby detector died before taking over".to_string());
+                self.monitor.event(
+                    "swap-abandoned",
+                    "line-detector",
+                    None,
+                    "the standby detector died before taking over".to_string(),
+                );
                 self.swap_to = None;
                 continue;
             }
             let slot = &mut self.restarts[stage_slot(p.stage)];
             if slot.count >= self.config.supervisor.max_restarts {
-                bail!("{} died {} times (restart limit {}): giving up", p.stage, slot.count + 1, self.config.supervisor.max_restarts);
+                bail!(
+                    "{} died {} times (restart limit {}): giving up",
+                    p.stage,
+                    slot.count + 1,
+                    self.config.supervisor.max_restarts
+                );
             }
-            let backoff = self.config.supervisor.restart_backoff_ms.saturating_mul(1 << slot.count.min(16)).min(self.config.supervisor.restart_backoff_max_ms);
+            let backoff = self
+                .config
+                .supervisor
+                .restart_backoff_ms
+                .saturating_mul(1 << slot.count.min(16))
+                .min(self.config.supervisor.restart_backoff_max_ms);
             slot.due = Some(Instant::now() + Duration::from_millis(backoff));
             self.write_status(false);
         }
@@ -520,9 +743,21 @@ impl Supervisor {
             if let Some(due) = slot.due
                 && Instant::now() >= due
             {
-                self.restarts[stage_slot(stage)] = Restarts { count: slot.count + 1, due: None };
+                self.restarts[stage_slot(stage)] = Restarts {
+                    count: slot.count + 1,
+                    due: None,
+                };
                 let detector = (stage == StageKind::LineDetector).then_some(self.detector);
-                self.monitor.event("restart", stage.name(), None, format!("restart {} of {}", slot.count + 1, self.config.supervisor.max_restarts));
+                self.monitor.event(
+                    "restart",
+                    stage.name(),
+                    None,
+                    format!(
+                        "restart {} of {}",
+                        slot.count + 1,
+                        self.config.supervisor.max_restarts
+                    ),
+                );
                 self.spawn(stage, detector, false)?;
             }
         }
@@ -536,12 +771,18 @@ impl Supervisor {
                 tracing::warn!("shutdown command to {stage} not sent: {e}");
             }
         }
-        let grace = Instant::now() + Duration::from_millis(self.config.supervisor.shutdown_grace_ms);
+        let grace =
+            Instant::now() + Duration::from_millis(self.config.supervisor.shutdown_grace_ms);
         while !self.processes.is_empty() {
-            self.processes.retain_mut(|p| !matches!(p.child.try_wait(), Ok(Some(_))));
+            self.processes
+                .retain_mut(|p| !matches!(p.child.try_wait(), Ok(Some(_))));
             if Instant::now() >= grace {
                 for p in &mut self.processes {
-                    tracing::warn!("{} (pid {}) did not exit in time: killing it", p.stage, p.pid);
+                    tracing::warn!(
+                        "{} (pid {}) did not exit in time: killing it",
+                        p.stage,
+                        p.pid
+                    );
                     let _ = p.child.kill();
                     let _ = p.child.wait();
                 }
@@ -559,7 +800,13 @@ impl Supervisor {
 }
 
 /// Runs the stages on threads of this process over channels.
-fn run_threads(config: &PipelineConfig, options: &RunOptions, run_id: String, run_dir: PathBuf, shutdown: &Shutdown) -> anyhow::Result<RunOutcome> {
+fn run_threads(
+    config: &PipelineConfig,
+    options: &RunOptions,
+    run_id: String,
+    run_dir: PathBuf,
+    shutdown: &Shutdown,
+) -> anyhow::Result<RunOutcome> {
     let bus = Bus::local();
     let hub = bus.local_hub().context("a local bus has a hub")?;
     let mut ports = Ports::open(&bus)?;
@@ -571,11 +818,13 @@ fn run_threads(config: &PipelineConfig, options: &RunOptions, run_id: String, ru
             let c = ctx($stage);
             let s = stage_shutdown.clone();
             let h = hub.clone();
-            let handle = std::thread::Builder::new().name($stage.name().to_string()).spawn(move || {
-                let bus = h.bus();
-                let p = $krate::Ports::open(&bus, &c)?;
-                $krate::run(&c, p, &s)
-            })?;
+            let handle = std::thread::Builder::new()
+                .name($stage.name().to_string())
+                .spawn(move || {
+                    let bus = h.bus();
+                    let p = $krate::Ports::open(&bus, &c)?;
+                    $krate::run(&c, p, &s)
+                })?;
             threads.push(($stage, handle));
         }};
     }
@@ -595,7 +844,9 @@ fn run_threads(config: &PipelineConfig, options: &RunOptions, run_id: String, ru
         }
         ports.wake.wait(Duration::from_millis(50))?;
         for message in ports.status.receive_all()? {
-            let Some(report) = message.payload().first() else { continue };
+            let Some(report) = message.payload().first() else {
+                continue;
+            };
             match StatusKind::from_code(report.kind) {
                 Some(StatusKind::Ready) => ready += 1,
                 Some(StatusKind::SourceFinished) => monitor.source_finished(report.frame_id),
@@ -607,19 +858,33 @@ fn run_threads(config: &PipelineConfig, options: &RunOptions, run_id: String, ru
             source_started = true;
         }
         for message in ports.poses.receive_all()? {
-            let Some(&pose) = message.payload().first() else { continue };
+            let Some(&pose) = message.payload().first() else {
+                continue;
+            };
             if let Some(switch) = monitor.on_pose(message.header(), &pose) {
-                ports.send(StageKind::Matcher, 0, Command::SetMatcherMode, switch.to as u32, 0)?;
+                ports.send(
+                    StageKind::Matcher,
+                    0,
+                    Command::SetMatcherMode,
+                    switch.to as u32,
+                    0,
+                )?;
             }
         }
-        if let Some((stage, _)) = threads.iter().find(|(s, h)| h.is_finished() && *s != StageKind::FrameSource) {
+        if let Some((stage, _)) = threads
+            .iter()
+            .find(|(s, h)| h.is_finished() && *s != StageKind::FrameSource)
+        {
             failure = Some(format!("{stage} stopped"));
             break false;
         }
         if monitor.complete() {
             break false;
         }
-        if monitor.source_done() && drain_since.get_or_insert_with(Instant::now).elapsed() > Duration::from_millis(config.supervisor.drain_timeout_ms) {
+        if monitor.source_done()
+            && drain_since.get_or_insert_with(Instant::now).elapsed()
+                > Duration::from_millis(config.supervisor.drain_timeout_ms)
+        {
             break false;
         }
         if options.live_status && status_every > Duration::ZERO && Instant::now() >= next_status {
@@ -643,7 +908,12 @@ fn run_threads(config: &PipelineConfig, options: &RunOptions, run_id: String, ru
         bail!("{f}: {}", errors.join("; "));
     }
     let report = monitor.finish(&run_dir, interrupted)?;
-    Ok(RunOutcome { run_dir, run_id, report, interrupted })
+    Ok(RunOutcome {
+        run_dir,
+        run_id,
+        report,
+        interrupted,
+    })
 }
 
 /// The detector wire code (re-exported for `linetrack ctl`).

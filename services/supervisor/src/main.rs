@@ -20,7 +20,15 @@ fn main() -> ExitCode {
     let run = || -> anyhow::Result<()> {
         linetrack_telemetry::init("supervisor", "info", None)?;
         let config = PipelineConfig::from_file(&args.config)?;
-        let outcome = linetrack_supervisor::run(&config, &RunOptions { mode: Mode::Processes, bin_dir: None, live_status: true }, &Shutdown::on_signals()?)?;
+        let outcome = linetrack_supervisor::run(
+            &config,
+            &RunOptions {
+                mode: Mode::Processes,
+                bin_dir: None,
+                live_status: true,
+            },
+            &Shutdown::on_signals()?,
+        )?;
         print!("{}", outcome.report.to_text());
         Ok(())
     };

@@ -39,7 +39,10 @@ pub struct Rectifier {
 
 impl std::fmt::Debug for Rectifier {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("Rectifier").field("rig", &self.rig).field("left_rotation", &self.left_rotation).finish_non_exhaustive()
+        f.debug_struct("Rectifier")
+            .field("rig", &self.rig)
+            .field("left_rotation", &self.left_rotation)
+            .finish_non_exhaustive()
     }
 }
 
@@ -58,42 +61,76 @@ fn camera_matrix(c: &PinholeCamera) -> Result<Mat, DatasetError> {
 }
 
 fn read(m: &Mat, r: i32, c: i32) -> Result<f64, DatasetError> {
-    m.at_2d::<f64>(r, c).copied().map_err(cv("reading a rectification matrix"))
+    m.at_2d::<f64>(r, c)
+        .copied()
+        .map_err(cv("reading a rectification matrix"))
 }
 
 impl Rectifier {
     /// Rectifies the rig made of `left` and `right` (poses relative to a common body frame).
     /// Errors name what is wrong with the calibration (sizes differ, non-finite values).
     pub fn new(left: &PinholeCamera, right: &PinholeCamera) -> Result<Self, DatasetError> {
-        if (left.width, left.height) != (right.width, right.height) || left.width == 0 || left.height == 0 {
+        if (left.width, left.height) != (right.width, right.height)
+            || left.width == 0
+            || left.height == 0
+        {
             return Err(DatasetError::Calibration(format!(
                 "left is {}×{} but right is {}×{}: a stereo rig needs two equal, non-empty image sizes",
                 left.width, left.height, right.width, right.height
             )));
         }
         for (name, c) in [("left", left), ("right", right)] {
-            let values = c.intrinsics.iter().chain(&c.distortion).chain(c.body_from_camera.translation.vector.iter());
-            if !values.clone().all(|v| v.is_finite()) || !c.body_from_camera.rotation.coords.iter().all(|v| v.is_finite()) {
-                return Err(DatasetError::Calibration(format!("{name} camera has a non-finite intrinsic, distortion or pose value")));
+            let values = c
+                .intrinsics
+                .iter()
+                .chain(&c.distortion)
+                .chain(c.body_from_camera.translation.vector.iter());
+            if !values.clone().all(|v| v.is_finite())
+                || !c
+                    .body_from_camera
+                    .rotation
+                    .coords
+                    .iter()
+                    .all(|v| v.is_finite())
+            {
+                return Err(DatasetError::Calibration(format!(
+                    "{name} camera has a non-finite intrinsic, distortion or pose value"
+                )));
             }
             if c.intrinsics[0] <= 0.0 || c.intrinsics[1] <= 0.0 {
-                return Err(DatasetError::Calibration(format!("{name} camera has a non-positive focal length {:?}", &c.intrinsics[..2])));
+                return Err(DatasetError::Calibration(format!(
+                    "{name} camera has a non-positive focal length {:?}",
+                    &c.intrinsics[..2]
+                )));
             }
         }
         // Points in the left camera frame → right camera frame: p_r = R p_l + t.
         let right_from_left = right.body_from_camera.inverse() * left.body_from_camera;
         let t = right_from_left.translation.vector;
         if t.norm() < 1e-6 {
-            return Err(DatasetError::Calibration("the two cameras are at the same place: no baseline".to_string()));
+            return Err(DatasetError::Calibration(
+                "the two cameras are at the same place: no baseline".to_string(),
+            ));
         }
         let size = Size::new(left.width as i32, left.height as i32);
         let (k1, k2) = (camera_matrix(left)?, camera_matrix(right)?);
-        let (d1, d2) = (Mat::from_slice(&left.distortion).map_err(cv("distortion"))?, Mat::from_slice(&right.distortion).map_err(cv("distortion"))?);
+        let (d1, d2) = (
+            Mat::from_slice(&left.distortion).map_err(cv("distortion"))?,
+            Mat::from_slice(&right.distortion).map_err(cv("distortion"))?,
+        );
         let r = mat3(right_from_left.rotation.to_rotation_matrix().matrix())?;
         let t_values = [t.x, t.y, t.z];
         // A 3×1 column, as stereoRectify asserts.
-        let t_mat = Mat::from_slice(&t_values).and_then(|row| row.reshape(1, 3)?.try_clone()).map_err(cv("translation"))?;
-        let (mut r1, mut r2, mut p1, mut p2, mut q) = (Mat::default(), Mat::default(), Mat::default(), Mat::default(), Mat::default());
+        let t_mat = Mat::from_slice(&t_values)
+            .and_then(|row| row.reshape(1, 3)?.try_clone())
+            .map_err(cv("translation"))?;
+        let (mut r1, mut r2, mut p1, mut p2, mut q) = (
+            Mat::default(),
+            Mat::default(),
+            Mat::default(),
+            Mat::default(),
+            Mat::default(),
+        );
         let (mut roi1, mut roi2) = (Rect::default(), Rect::default());
         calib3d::stereo_rectify(
             &k1,
@@ -115,10 +152,25 @@ impl Rectifier {
             Some(&mut roi2),
         )
         .map_err(cv("stereoRectify"))?;
-        let mut maps = [(Mat::default(), Mat::default()), (Mat::default(), Mat::default())];
-        for ((k, d, rr, p), map) in [(&k1, &d1, &r1, &p1), (&k2, &d2, &r2, &p2)].into_iter().zip(maps.iter_mut()) {
-            calib3d::init_undistort_rectify_map(k, d, rr, p, size, core::CV_16SC2, &mut map.0, &mut map.1)
-                .map_err(cv("initUndistortRectifyMap"))?;
+        let mut maps = [
+            (Mat::default(), Mat::default()),
+            (Mat::default(), Mat::default()),
+        ];
+        for ((k, d, rr, p), map) in [(&k1, &d1, &r1, &p1), (&k2, &d2, &r2, &p2)]
+            .into_iter()
+            .zip(maps.iter_mut())
+        {
+            calib3d::init_undistort_rectify_map(
+                k,
+                d,
+                rr,
+                p,
+                size,
+                core::CV_16SC2,
+                &mut map.0,
+                &mut map.1,
+            )
+            .map_err(cv("initUndistortRectifyMap"))?;
         }
         let focal_px = read(&p1, 0, 0)?;
         let baseline_m = -read(&p2, 0, 3)? / read(&p2, 0, 0)?;
@@ -130,8 +182,14 @@ impl Rectifier {
             width_px: left.width,
             height_px: left.height,
         };
-        if !(rig.focal_px.is_finite() && rig.focal_px > 0.0 && rig.baseline_m.is_finite() && rig.baseline_m > 0.0) {
-            return Err(DatasetError::Calibration(format!("rectification gave an unusable rig {rig:?} (is the right camera to the right?)")));
+        if !(rig.focal_px.is_finite()
+            && rig.focal_px > 0.0
+            && rig.baseline_m.is_finite()
+            && rig.baseline_m > 0.0)
+        {
+            return Err(DatasetError::Calibration(format!(
+                "rectification gave an unusable rig {rig:?} (is the right camera to the right?)"
+            )));
         }
         let mut m = Matrix3::zeros();
         for row in 0..3 {
@@ -139,7 +197,11 @@ impl Rectifier {
                 m[(row, col)] = read(&r1, row as i32, col as i32)?;
             }
         }
-        Ok(Self { rig, left_rotation: Rotation3::from_matrix_unchecked(m), maps })
+        Ok(Self {
+            rig,
+            left_rotation: Rotation3::from_matrix_unchecked(m),
+            maps,
+        })
     }
 
     /// The rectified rig: what matching and triangulation use.
@@ -156,7 +218,8 @@ impl Rectifier {
 
     /// Rectifies one image of the pair (`right = false`: left camera).
     pub fn rectify(&self, image: &GrayImage, right: bool) -> Result<GrayImage, DatasetError> {
-        if (image.width(), image.height()) != (self.rig.width_px as i32, self.rig.height_px as i32) {
+        if (image.width(), image.height()) != (self.rig.width_px as i32, self.rig.height_px as i32)
+        {
             return Err(DatasetError::Calibration(format!(
                 "{} is {}×{} but the calibration is for {}×{}",
                 image.origin(),
@@ -168,8 +231,17 @@ impl Rectifier {
         }
         let (map1, map2) = &self.maps[usize::from(right)];
         let mut out = Mat::default();
-        imgproc::remap(image.mat(), &mut out, map1, map2, imgproc::INTER_LINEAR, core::BORDER_CONSTANT, Scalar::all(0.0))
-            .map_err(cv("remap"))?;
-        GrayImage::from_mat(out, &format!("{} (rectified)", image.origin())).map_err(DatasetError::Image)
+        imgproc::remap(
+            image.mat(),
+            &mut out,
+            map1,
+            map2,
+            imgproc::INTER_LINEAR,
+            core::BORDER_CONSTANT,
+            Scalar::all(0.0),
+        )
+        .map_err(cv("remap"))?;
+        GrayImage::from_mat(out, &format!("{} (rectified)", image.origin()))
+            .map_err(DatasetError::Image)
     }
 }

@@ -21,12 +21,17 @@ pub struct DepthMap {
 impl DepthMap {
     /// Depth at pixel (u, v); `None` outside or unknown.
     pub fn at(&self, u: usize, v: usize) -> Option<f32> {
-        (u < self.width && v < self.height).then(|| self.metres[v * self.width + u]).filter(|d| *d > 0.0)
+        (u < self.width && v < self.height)
+            .then(|| self.metres[v * self.width + u])
+            .filter(|d| *d > 0.0)
     }
 }
 
 fn image_error(path: &Path, error: image::ImageError) -> DatasetError {
-    DatasetError::Io { path: path.to_path_buf(), reason: std::io::Error::other(error.to_string()) }
+    DatasetError::Io {
+        path: path.to_path_buf(),
+        reason: std::io::Error::other(error.to_string()),
+    }
 }
 
 /// Writes a depth map (depths beyond 13.1 m are written as unknown).
@@ -36,11 +41,24 @@ pub fn write_depth_png(path: &Path, depth: &DepthMap) -> Result<(), DatasetError
         .iter()
         .map(|d| {
             let level = (d * DEPTH_SCALE).round();
-            if *d > 0.0 && level <= f32::from(u16::MAX) { level as u16 } else { 0 }
+            if *d > 0.0 && level <= f32::from(u16::MAX) {
+                level as u16
+            } else {
+                0
+            }
         })
         .collect();
-    let buffer = image::ImageBuffer::<image::Luma<u16>, Vec<u16>>::from_raw(depth.width as u32, depth.height as u32, levels)
-        .ok_or_else(|| DatasetError::Calibration(format!("{}: depth map size does not match its data", path.display())))?;
+    let buffer = image::ImageBuffer::<image::Luma<u16>, Vec<u16>>::from_raw(
+        depth.width as u32,
+        depth.height as u32,
+        levels,
+    )
+    .ok_or_else(|| {
+        DatasetError::Calibration(format!(
+            "{}: depth map size does not match its data",
+            path.display()
+        ))
+    })?;
     buffer.save(path).map_err(|e| image_error(path, e))
 }
 
@@ -48,9 +66,21 @@ pub fn write_depth_png(path: &Path, depth: &DepthMap) -> Result<(), DatasetError
 pub fn read_depth_png(path: &Path) -> Result<DepthMap, DatasetError> {
     let image = image::open(path).map_err(|e| image_error(path, e))?;
     let image::DynamicImage::ImageLuma16(buffer) = image else {
-        return Err(crate::parse_error(path, 0, "a depth map must be a 16-bit single-channel PNG"));
+        return Err(crate::parse_error(
+            path,
+            0,
+            "a depth map must be a 16-bit single-channel PNG",
+        ));
     };
     let (width, height) = (buffer.width() as usize, buffer.height() as usize);
-    let metres = buffer.into_raw().into_iter().map(|v| f32::from(v) / DEPTH_SCALE).collect();
-    Ok(DepthMap { width, height, metres })
+    let metres = buffer
+        .into_raw()
+        .into_iter()
+        .map(|v| f32::from(v) / DEPTH_SCALE)
+        .collect();
+    Ok(DepthMap {
+        width,
+        height,
+        metres,
+    })
 }

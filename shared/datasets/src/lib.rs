@@ -4,6 +4,8 @@
 //!   `data/<ns>.png`, `sensor.yaml`; ground truth from `state_groundtruth_estimate0`).
 //! - [`StereoSequence::open_kitti`]: KITTI odometry (`image_0|image_1/`, `calib.txt`,
 //!   `times.txt`, `poses/NN.txt`).
+//! - [`list_middlebury`]: Middlebury stereo pairs with ground-truth disparity (single
+//!   rectified pairs, no sequence), for scoring stereo matching on real images.
 //! - [`tum`]: TUM-format trajectories (`t tx ty tz qx qy qz qw`), read and written.
 //!
 //! Unrectified rigs are rectified once from the calibration ([`Rectifier`]); every frame is
@@ -20,12 +22,14 @@ mod calib;
 pub mod depth;
 mod euroc;
 mod kitti;
+mod middlebury;
 mod sequence;
 pub mod tum;
 mod writer;
 
 pub use calib::{PinholeCamera, Rectifier};
 pub use euroc::read_euroc_camera;
+pub use middlebury::{DisparityMap, LoadedPair, MiddleburyPair, list_middlebury};
 pub use sequence::{FrameEntry, FrameError, StereoFrame, StereoSequence, StereoStream};
 pub use writer::EurocWriter;
 
@@ -69,9 +73,20 @@ pub enum DatasetError {
 }
 
 pub(crate) fn read_text(path: &std::path::Path) -> Result<String, DatasetError> {
-    std::fs::read_to_string(path).map_err(|reason| DatasetError::Io { path: path.to_path_buf(), reason })
+    std::fs::read_to_string(path).map_err(|reason| DatasetError::Io {
+        path: path.to_path_buf(),
+        reason,
+    })
 }
 
-pub(crate) fn parse_error(path: &std::path::Path, line: usize, message: impl Into<String>) -> DatasetError {
-    DatasetError::Parse { path: path.to_path_buf(), line, message: message.into() }
+pub(crate) fn parse_error(
+    path: &std::path::Path,
+    line: usize,
+    message: impl Into<String>,
+) -> DatasetError {
+    DatasetError::Parse {
+        path: path.to_path_buf(),
+        line,
+        message: message.into(),
+    }
 }

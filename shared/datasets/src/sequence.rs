@@ -51,7 +51,11 @@ pub struct FrameError {
 
 impl std::fmt::Display for FrameError {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(f, "frame {} (t = {} ns) skipped: {}", self.index, self.timestamp_ns, self.error)
+        write!(
+            f,
+            "frame {} (t = {} ns) skipped: {}",
+            self.index, self.timestamp_ns, self.error
+        )
     }
 }
 
@@ -70,8 +74,20 @@ pub struct StereoSequence {
 }
 
 impl StereoSequence {
-    pub(crate) fn new(name: String, frames: Vec<FrameEntry>, rig: StereoRig, rectifier: Option<Rectifier>, rate_hz: f64) -> Self {
-        Self { name, frames, rig, rate_hz, rectifier }
+    pub(crate) fn new(
+        name: String,
+        frames: Vec<FrameEntry>,
+        rig: StereoRig,
+        rectifier: Option<Rectifier>,
+        rate_hz: f64,
+    ) -> Self {
+        Self {
+            name,
+            frames,
+            rig,
+            rate_hz,
+            rectifier,
+        }
     }
 
     /// Opens `dir` as EuRoC when it holds `mav0/`, else as KITTI when it holds `calib.txt`.
@@ -102,10 +118,17 @@ impl StereoSequence {
             return Err(FrameError {
                 index,
                 timestamp_ns: 0,
-                error: DatasetError::Calibration(format!("frame {index} out of range (sequence has {})", self.frames.len())),
+                error: DatasetError::Calibration(format!(
+                    "frame {index} out of range (sequence has {})",
+                    self.frames.len()
+                )),
             });
         };
-        self.load_entry(entry).map_err(|error| FrameError { index, timestamp_ns: entry.timestamp_ns, error })
+        self.load_entry(entry).map_err(|error| FrameError {
+            index,
+            timestamp_ns: entry.timestamp_ns,
+            error,
+        })
     }
 
     fn load_entry(&self, entry: &FrameEntry) -> Result<StereoFrame, DatasetError> {
@@ -125,7 +148,13 @@ impl StereoSequence {
             Some(r) => (r.rectify(&left, false)?, r.rectify(&right, true)?),
             None => (left, right),
         };
-        Ok(StereoFrame { index: entry.index, timestamp_ns: entry.timestamp_ns, left, right, pose: entry.pose })
+        Ok(StereoFrame {
+            index: entry.index,
+            timestamp_ns: entry.timestamp_ns,
+            left,
+            right,
+            pose: entry.pose,
+        })
     }
 
     /// Streams the frames from `start`, loading up to `read_ahead` ahead on a thread.
@@ -144,7 +173,13 @@ impl StereoSequence {
                 }
             })
             .ok();
-        StereoStream { receiver, worker, rig, total, skipped: 0 }
+        StereoStream {
+            receiver,
+            worker,
+            rig,
+            total,
+            skipped: 0,
+        }
     }
 }
 

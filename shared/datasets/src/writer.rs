@@ -7,8 +7,8 @@
 //! mav0/state_groundtruth_estimate0/data.csv               body = left camera
 //! ```
 
-use crate::depth::{DepthMap, write_depth_png};
 use crate::DatasetError;
+use crate::depth::{DepthMap, write_depth_png};
 use linetrack_geometry::StereoRig;
 use nalgebra::Isometry3;
 use std::fmt::Write as _;
@@ -24,7 +24,10 @@ pub struct EurocWriter {
 }
 
 fn io(path: &Path) -> impl Fn(std::io::Error) -> DatasetError + '_ {
-    move |reason| DatasetError::Io { path: path.to_path_buf(), reason }
+    move |reason| DatasetError::Io {
+        path: path.to_path_buf(),
+        reason,
+    }
 }
 
 fn create(path: &Path) -> Result<BufWriter<File>, DatasetError> {
@@ -45,7 +48,13 @@ impl EurocWriter {
     /// Creates the folders and calibration files under `root`.
     pub fn create(root: &Path, rig: &StereoRig, rate_hz: f64) -> Result<Self, DatasetError> {
         let mav0 = root.join("mav0");
-        for folder in ["cam0/data", "cam1/data", "depth0/data", "depth1/data", "state_groundtruth_estimate0"] {
+        for folder in [
+            "cam0/data",
+            "cam1/data",
+            "depth0/data",
+            "depth1/data",
+            "state_groundtruth_estimate0",
+        ] {
             let path = mav0.join(folder);
             std::fs::create_dir_all(&path).map_err(io(&path))?;
         }
@@ -58,12 +67,21 @@ impl EurocWriter {
             writeln!(file, "#timestamp [ns],filename").map_err(io(&mav0.join(folder)))?;
             Ok(file)
         };
-        let lists = [list("cam0")?, list("cam1")?, list("depth0")?, list("depth1")?];
+        let lists = [
+            list("cam0")?,
+            list("cam1")?,
+            list("depth0")?,
+            list("depth1")?,
+        ];
         let gt_path = mav0.join("state_groundtruth_estimate0/data.csv");
         let mut ground_truth = create(&gt_path)?;
         writeln!(ground_truth, "#timestamp, p_RS_R_x [m], p_RS_R_y [m], p_RS_R_z [m], q_RS_w [], q_RS_x [], q_RS_y [], q_RS_z []")
             .map_err(io(&gt_path))?;
-        Ok(Self { mav0, lists, ground_truth })
+        Ok(Self {
+            mav0,
+            lists,
+            ground_truth,
+        })
     }
 
     /// Appends one frame: both images (8-bit, row-major), both depth maps, and the left
@@ -79,8 +97,16 @@ impl EurocWriter {
         for (k, (pixels, width, height)) in images.into_iter().enumerate() {
             let path = self.mav0.join(format!("cam{k}/data")).join(&name);
             let image = image::GrayImage::from_raw(width as u32, height as u32, pixels.to_vec())
-                .ok_or_else(|| DatasetError::Calibration(format!("{}: image size does not match its data", path.display())))?;
-            image.save(&path).map_err(|e| DatasetError::Io { path: path.clone(), reason: std::io::Error::other(e.to_string()) })?;
+                .ok_or_else(|| {
+                    DatasetError::Calibration(format!(
+                        "{}: image size does not match its data",
+                        path.display()
+                    ))
+                })?;
+            image.save(&path).map_err(|e| DatasetError::Io {
+                path: path.clone(),
+                reason: std::io::Error::other(e.to_string()),
+            })?;
             writeln!(self.lists[k], "{timestamp_ns},{name}").map_err(io(&path))?;
         }
         for (k, depth) in depths.into_iter().enumerate() {
@@ -91,7 +117,11 @@ impl EurocWriter {
         let t = world_from_left.translation.vector;
         let q = world_from_left.rotation.quaternion();
         let mut line = String::new();
-        let _ = write!(line, "{timestamp_ns},{:.9},{:.9},{:.9},{:.9},{:.9},{:.9},{:.9}", t.x, t.y, t.z, q.w, q.i, q.j, q.k);
+        let _ = write!(
+            line,
+            "{timestamp_ns},{:.9},{:.9},{:.9},{:.9},{:.9},{:.9},{:.9}",
+            t.x, t.y, t.z, q.w, q.i, q.j, q.k
+        );
         writeln!(self.ground_truth, "{line}").map_err(io(&self.mav0))?;
         Ok(())
     }

@@ -5,7 +5,10 @@
 
 use linetrack_datasets::{DatasetError, StereoSequence, tum};
 use linetrack_geometry::MatchCase;
-use linetrack_vision::{AppearanceGates, GrayImage, HammingMatcher, OrbExtractor, OrbOptions, PointFeatures, match_points};
+use linetrack_vision::{
+    AppearanceGates, GrayImage, HammingMatcher, OrbExtractor, OrbOptions, PointFeatures,
+    match_points,
+};
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 use std::path::{Path, PathBuf};
 
@@ -27,10 +30,22 @@ fn real_data_euroc_excerpt_loads_with_rig_and_ground_truth() {
     assert_eq!((rig.width_px, rig.height_px), (752, 480));
     assert!((400.0..470.0).contains(&rig.focal_px), "{rig:?}");
     assert!((rig.baseline_m - 0.110).abs() < 0.002, "{rig:?}");
-    assert!(seq.frames.windows(2).all(|w| w[1].timestamp_ns > w[0].timestamp_ns && w[1].timestamp_ns - w[0].timestamp_ns < 60_000_000));
+    assert!(
+        seq.frames
+            .windows(2)
+            .all(|w| w[1].timestamp_ns > w[0].timestamp_ns
+                && w[1].timestamp_ns - w[0].timestamp_ns < 60_000_000)
+    );
     // Ground truth for every frame; the vehicle is almost still (README of the excerpt).
-    let poses: Vec<Isometry3<f64>> = seq.frames.iter().map(|f| f.pose.expect("ground truth")).collect();
-    let path: f64 = poses.windows(2).map(|w| (w[1].translation.vector - w[0].translation.vector).norm()).sum();
+    let poses: Vec<Isometry3<f64>> = seq
+        .frames
+        .iter()
+        .map(|f| f.pose.expect("ground truth"))
+        .collect();
+    let path: f64 = poses
+        .windows(2)
+        .map(|w| (w[1].translation.vector - w[0].translation.vector).norm())
+        .sum();
     assert!(path < 0.05, "path {path} m");
 }
 
@@ -41,10 +56,24 @@ fn row_differences(left: &GrayImage, right: &GrayImage) -> Vec<f64> {
     let (mut a, mut b) = (PointFeatures::default(), PointFeatures::default());
     orb.extract(left, &mut a).unwrap();
     orb.extract(right, &mut b).unwrap();
-    let gates = AppearanceGates { max_row_difference_px: 20.0, ..Default::default() };
+    let gates = AppearanceGates {
+        max_row_difference_px: 20.0,
+        ..Default::default()
+    };
     let mut out = Vec::new();
-    match_points(&mut HammingMatcher::new(), MatchCase::Stereo, &a, &b, &gates, 2.0, &mut out);
-    let mut dy: Vec<f64> = out.iter().map(|m| (a.points[m.query].y - b.points[m.train].y).abs()).collect();
+    match_points(
+        &mut HammingMatcher::new(),
+        MatchCase::Stereo,
+        &a,
+        &b,
+        &gates,
+        2.0,
+        &mut out,
+    );
+    let mut dy: Vec<f64> = out
+        .iter()
+        .map(|m| (a.points[m.query].y - b.points[m.train].y).abs())
+        .collect();
     dy.sort_by(f64::total_cmp);
     dy
 }
@@ -56,10 +85,21 @@ fn real_data_rectified_matches_lie_on_the_same_row() {
     let seq = euroc();
     let frame = seq.load_frame(0).unwrap();
     let rectified = row_differences(&frame.left, &frame.right);
-    let raw = row_differences(&GrayImage::load(&seq.frames[0].left).unwrap(), &GrayImage::load(&seq.frames[0].right).unwrap());
+    let raw = row_differences(
+        &GrayImage::load(&seq.frames[0].left).unwrap(),
+        &GrayImage::load(&seq.frames[0].right).unwrap(),
+    );
     let median = |v: &[f64]| v[v.len() / 2];
-    let within_1px = rectified.iter().filter(|d| **d <= 1.0).count() as f64 / rectified.len() as f64;
-    eprintln!("raw: {} matches, median {:.2}; rectified: {} matches, median {:.2}, {:.0}% within 1 px", raw.len(), median(&raw), rectified.len(), median(&rectified), 100.0 * within_1px);
+    let within_1px =
+        rectified.iter().filter(|d| **d <= 1.0).count() as f64 / rectified.len() as f64;
+    eprintln!(
+        "raw: {} matches, median {:.2}; rectified: {} matches, median {:.2}, {:.0}% within 1 px",
+        raw.len(),
+        median(&raw),
+        rectified.len(),
+        median(&rectified),
+        100.0 * within_1px
+    );
     assert!(median(&raw) > 5.0, "the raw pair should be visibly off-row");
     assert!(rectified.len() > raw.len());
     assert!(median(&rectified) <= 0.5);
@@ -94,8 +134,13 @@ fn write(path: &Path, text: &str) {
 
 fn png(path: &Path, seed: u8) {
     std::fs::create_dir_all(path.parent().unwrap()).unwrap();
-    let pixels: Vec<u8> = (0..W * H).map(|k| ((k % W) as u8).wrapping_mul(3).wrapping_add(seed)).collect();
-    image::GrayImage::from_raw(W as u32, H as u32, pixels).unwrap().save(path).unwrap();
+    let pixels: Vec<u8> = (0..W * H)
+        .map(|k| ((k % W) as u8).wrapping_mul(3).wrapping_add(seed))
+        .collect();
+    image::GrayImage::from_raw(W as u32, H as u32, pixels)
+        .unwrap()
+        .save(path)
+        .unwrap();
 }
 
 fn sensor_yaml(x_m: f64) -> String {
@@ -114,7 +159,10 @@ fn euroc_fixture(name: &str) -> PathBuf {
         let mut csv = String::from("#timestamp [ns],filename\n");
         for (k, t) in stamps.iter().enumerate() {
             csv.push_str(&format!("{t},{t}.png\n"));
-            png(&mav0.join(cam).join("data").join(format!("{t}.png")), k as u8);
+            png(
+                &mav0.join(cam).join("data").join(format!("{t}.png")),
+                k as u8,
+            );
         }
         write(&mav0.join(cam).join("data.csv"), &csv);
     }
@@ -127,7 +175,9 @@ fn euroc_fixture(name: &str) -> PathBuf {
 }
 
 fn open_error(dir: &Path) -> String {
-    StereoSequence::open(dir).expect_err("malformed dataset must be refused").to_string()
+    StereoSequence::open(dir)
+        .expect_err("malformed dataset must be refused")
+        .to_string()
 }
 
 #[test]
@@ -137,40 +187,78 @@ fn euroc_fixture_opens_with_its_calibration_and_ground_truth() {
     assert_eq!(seq.frames.len(), 3);
     // An ideal rig (no distortion, equal intrinsics, pure x baseline) is used as is.
     assert!(!seq.is_rectified_on_load());
-    assert_eq!((seq.rig.focal_px, seq.rig.cx_px, seq.rig.cy_px), (50.0, 32.0, 24.0));
+    assert_eq!(
+        (seq.rig.focal_px, seq.rig.cx_px, seq.rig.cy_px),
+        (50.0, 32.0, 24.0)
+    );
     assert!((seq.rig.baseline_m - 0.1).abs() < 1e-12, "{:?}", seq.rig);
     let p = seq.frames[2].pose.unwrap();
     assert!((p.translation.vector - Vector3::new(0.02, 0.0, 0.0)).norm() < 1e-9);
     let frame = seq.load_frame(1).unwrap();
-    assert_eq!((frame.left.width(), frame.left.height()), (W as i32, H as i32));
+    assert_eq!(
+        (frame.left.width(), frame.left.height()),
+        (W as i32, H as i32)
+    );
     let _ = std::fs::remove_dir_all(dir);
 }
 
 #[test]
 fn a_distorted_fixture_is_rectified_on_load() {
     let dir = euroc_fixture("distorted");
-    write(&dir.join("mav0/cam1/sensor.yaml"), &sensor_yaml(0.1).replace("[0.0, 0.0, 0.0, 0.0]", "[-0.05, 0.01, 0.0, 0.0]"));
+    write(
+        &dir.join("mav0/cam1/sensor.yaml"),
+        &sensor_yaml(0.1).replace("[0.0, 0.0, 0.0, 0.0]", "[-0.05, 0.01, 0.0, 0.0]"),
+    );
     let seq = StereoSequence::open(&dir).unwrap();
     assert!(seq.is_rectified_on_load());
-    assert!((seq.rig.baseline_m - 0.1).abs() < 1e-6 && (seq.rig.focal_px - 50.0).abs() < 5.0, "{:?}", seq.rig);
+    assert!(
+        (seq.rig.baseline_m - 0.1).abs() < 1e-6 && (seq.rig.focal_px - 50.0).abs() < 5.0,
+        "{:?}",
+        seq.rig
+    );
     let frame = seq.load_frame(0).unwrap();
-    assert!(frame.left.origin().contains("rectified") && frame.right.origin().contains("rectified"));
+    assert!(
+        frame.left.origin().contains("rectified") && frame.right.origin().contains("rectified")
+    );
     let _ = std::fs::remove_dir_all(dir);
 }
 
 #[test]
 fn malformed_image_lists_name_file_and_line() {
     let cases = [
-        ("columns", "#timestamp [ns],filename\n1000000000\n", "data.csv:2", "2 columns"),
-        ("number", "#timestamp [ns],filename\n1000000000,a.png\n10x0,b.png\n", "data.csv:3", "not a whole number"),
-        ("order", "#timestamp [ns],filename\n1100000000,a.png\n1000000000,b.png\n", "data.csv:3", "does not increase"),
-        ("empty", "#timestamp [ns],filename\n", "data.csv", "lists no images"),
+        (
+            "columns",
+            "#timestamp [ns],filename\n1000000000\n",
+            "data.csv:2",
+            "2 columns",
+        ),
+        (
+            "number",
+            "#timestamp [ns],filename\n1000000000,a.png\n10x0,b.png\n",
+            "data.csv:3",
+            "not a whole number",
+        ),
+        (
+            "order",
+            "#timestamp [ns],filename\n1100000000,a.png\n1000000000,b.png\n",
+            "data.csv:3",
+            "does not increase",
+        ),
+        (
+            "empty",
+            "#timestamp [ns],filename\n",
+            "data.csv",
+            "lists no images",
+        ),
     ];
     for (name, csv, place, what) in cases {
         let dir = euroc_fixture(name);
         write(&dir.join("mav0/cam0/data.csv"), csv);
         let text = open_error(&dir);
-        assert!(text.contains(place) && text.contains(what), "{name}: {text}");
+        assert!(
+            text.contains(place) && text.contains(what),
+            "{name}: {text}"
+        );
         let _ = std::fs::remove_dir_all(dir);
     }
 }
@@ -178,11 +266,36 @@ fn malformed_image_lists_name_file_and_line() {
 #[test]
 fn malformed_calibration_and_ground_truth_are_refused() {
     let cases: [(&str, &str, String, &str); 5] = [
-        ("no-intrinsics", "mav0/cam1/sensor.yaml", sensor_yaml(0.1).replace("intrinsics", "intrinsix"), "missing key `intrinsics`"),
-        ("bad-number", "mav0/cam1/sensor.yaml", sensor_yaml(0.1).replace("50.0, 50.0", "50.0, fifty"), "sensor.yaml:13"),
-        ("not-rigid", "mav0/cam0/sensor.yaml", sensor_yaml(0.0).replace("data: [1.0", "data: [2.0"), "T_BS is not a rigid transform"),
-        ("same-place", "mav0/cam1/sensor.yaml", sensor_yaml(0.0), "no baseline"),
-        ("gt-quaternion", "mav0/state_groundtruth_estimate0/data.csv", "1000000000,0,0,0,2,0,0,0\n".to_string(), "data.csv:1: quaternion norm"),
+        (
+            "no-intrinsics",
+            "mav0/cam1/sensor.yaml",
+            sensor_yaml(0.1).replace("intrinsics", "intrinsix"),
+            "missing key `intrinsics`",
+        ),
+        (
+            "bad-number",
+            "mav0/cam1/sensor.yaml",
+            sensor_yaml(0.1).replace("50.0, 50.0", "50.0, fifty"),
+            "sensor.yaml:13",
+        ),
+        (
+            "not-rigid",
+            "mav0/cam0/sensor.yaml",
+            sensor_yaml(0.0).replace("data: [1.0", "data: [2.0"),
+            "T_BS is not a rigid transform",
+        ),
+        (
+            "same-place",
+            "mav0/cam1/sensor.yaml",
+            sensor_yaml(0.0),
+            "no baseline",
+        ),
+        (
+            "gt-quaternion",
+            "mav0/state_groundtruth_estimate0/data.csv",
+            "1000000000,0,0,0,2,0,0,0\n".to_string(),
+            "data.csv:1: quaternion norm",
+        ),
     ];
     for (name, file, text, what) in cases {
         let dir = euroc_fixture(name);
@@ -205,10 +318,16 @@ fn missing_and_corrupt_frames_are_skipped_counted_and_named() {
     let results: Vec<_> = stream.by_ref().collect();
     assert_eq!(results.len(), 3);
     let first = results[0].as_ref().unwrap_err().to_string();
-    assert!(first.contains("frame 0") && first.contains("cam1/data/1000000000.png"), "{first}");
+    assert!(
+        first.contains("frame 0") && first.contains("cam1/data/1000000000.png"),
+        "{first}"
+    );
     assert_eq!(results[1].as_ref().unwrap().index, 1);
     let third = results[2].as_ref().unwrap_err().to_string();
-    assert!(third.contains("cam0/data/1100000000.png") && third.contains("not a decodable image"), "{third}");
+    assert!(
+        third.contains("cam0/data/1100000000.png") && third.contains("not a decodable image"),
+        "{third}"
+    );
     assert_eq!(stream.skipped(), 2);
     let _ = std::fs::remove_dir_all(dir);
 }
@@ -220,7 +339,10 @@ fn a_wrongly_sized_frame_is_skipped_naming_it() {
     image::GrayImage::new(32, 24).save(&path).unwrap();
     let seq = StereoSequence::open(&dir).unwrap();
     let error = seq.load_frame(1).unwrap_err().to_string();
-    assert!(error.contains("1050000000.png") && error.contains("same size"), "{error}");
+    assert!(
+        error.contains("1050000000.png") && error.contains("same size"),
+        "{error}"
+    );
     assert!(seq.load_frame(0).is_ok() && seq.load_frame(2).is_ok());
     let _ = std::fs::remove_dir_all(dir);
 }
@@ -238,7 +360,10 @@ fn kitti_fixture(name: &str) -> PathBuf {
         png(&dir.join(format!("image_0/{k:06}.png")), k as u8);
         png(&dir.join(format!("image_1/{k:06}.png")), k as u8);
     }
-    write(&root.join("poses/07.txt"), "1 0 0 0 0 1 0 0 0 0 1 0\n1 0 0 0 0 1 0 0 0 0 1 0.5\n1 0 0 0 0 1 0 0 0 0 1 1.0\n");
+    write(
+        &root.join("poses/07.txt"),
+        "1 0 0 0 0 1 0 0 0 0 1 0\n1 0 0 0 0 1 0 0 0 0 1 0.5\n1 0 0 0 0 1 0 0 0 0 1 1.0\n",
+    );
     root
 }
 
@@ -249,7 +374,11 @@ fn kitti_fixture_opens_with_rig_times_and_poses() {
     assert_eq!(seq.name, "07");
     assert!(!seq.is_rectified_on_load());
     assert_eq!(seq.frames.len(), 3);
-    assert!((seq.rig.baseline_m - 0.54).abs() < 1e-12 && seq.rig.focal_px == 700.0 && seq.rig.cy_px == 180.0);
+    assert!(
+        (seq.rig.baseline_m - 0.54).abs() < 1e-12
+            && seq.rig.focal_px == 700.0
+            && seq.rig.cy_px == 180.0
+    );
     assert_eq!(seq.frames[1].timestamp_ns, 100_000_000);
     assert!((seq.frames[2].pose.unwrap().translation.z - 1.0).abs() < 1e-12);
     assert!((seq.rate_hz - 10.0).abs() < 1e-9);
@@ -259,10 +388,26 @@ fn kitti_fixture_opens_with_rig_times_and_poses() {
 #[test]
 fn malformed_kitti_files_are_refused_naming_them() {
     let cases = [
-        ("sequences/07/calib.txt", "P0: 700 0 600 0 0 700 180 0 0 0 1 0\n", "missing P1"),
-        ("sequences/07/calib.txt", "P0: 700 0 600 0 0 700 180 0 0 0 1\nP1: 1 2\n", "calib.txt:1: P0 has 11 values"),
-        ("sequences/07/times.txt", "0.0\n0.2\n0.1\n", "times.txt:3: time 0.1 does not increase"),
-        ("poses/07.txt", "1 0 0 0 0 1 0 0 0 0 1 0\n", "1 poses for 3 frames"),
+        (
+            "sequences/07/calib.txt",
+            "P0: 700 0 600 0 0 700 180 0 0 0 1 0\n",
+            "missing P1",
+        ),
+        (
+            "sequences/07/calib.txt",
+            "P0: 700 0 600 0 0 700 180 0 0 0 1\nP1: 1 2\n",
+            "calib.txt:1: P0 has 11 values",
+        ),
+        (
+            "sequences/07/times.txt",
+            "0.0\n0.2\n0.1\n",
+            "times.txt:3: time 0.1 does not increase",
+        ),
+        (
+            "poses/07.txt",
+            "1 0 0 0 0 1 0 0 0 0 1 0\n",
+            "1 poses for 3 frames",
+        ),
     ];
     for (k, (file, text, what)) in cases.into_iter().enumerate() {
         let root = kitti_fixture(&format!("kitti-bad-{k}"));
@@ -280,10 +425,16 @@ fn tum_round_trip_and_malformed_lines() {
     let dir = linetrack_test_data::scratch_dir("datasets", "tum").unwrap();
     let path = dir.join("trajectory.txt");
     let poses = [
-        tum::StampedPose { timestamp_s: 0.5, pose: Isometry3::identity() },
+        tum::StampedPose {
+            timestamp_s: 0.5,
+            pose: Isometry3::identity(),
+        },
         tum::StampedPose {
             timestamp_s: 0.55,
-            pose: Isometry3::from_parts(Translation3::new(1.0, -2.0, 0.25), UnitQuaternion::from_euler_angles(0.1, -0.2, 0.3)),
+            pose: Isometry3::from_parts(
+                Translation3::new(1.0, -2.0, 0.25),
+                UnitQuaternion::from_euler_angles(0.1, -0.2, 0.3),
+            ),
         },
     ];
     tum::write(&path, &poses).unwrap();
@@ -298,12 +449,120 @@ fn tum_round_trip_and_malformed_lines() {
         ("0 1 2 3 0 0 0\n", "trajectory.txt:1: expected 8 values"),
         ("# c\n0 1 2 3 0 0 0 x\n", "trajectory.txt:2: not a number"),
         ("0 0 0 0 0 0 0 3\n", "quaternion norm"),
-        ("1 0 0 0 0 0 0 1\n0.5 0 0 0 0 0 0 1\n", "trajectory.txt:2: timestamp 0.5 does not increase"),
+        (
+            "1 0 0 0 0 0 0 1\n0.5 0 0 0 0 0 0 1\n",
+            "trajectory.txt:2: timestamp 0.5 does not increase",
+        ),
     ] {
         std::fs::write(&path, text).unwrap();
         let message = tum::read(&path).unwrap_err().to_string();
         assert!(message.contains(what), "{message}");
     }
-    assert!(matches!(tum::read(&dir.join("absent.txt")), Err(DatasetError::Io { .. })));
+    assert!(matches!(
+        tum::read(&dir.join("absent.txt")),
+        Err(DatasetError::Io { .. })
+    ));
     let _ = std::fs::remove_dir_all(dir);
+}
+
+// ---------------------------------------------------------------- Middlebury
+
+#[test]
+fn real_data_middlebury_lists_every_pair_with_its_disparity_scale() {
+    let dir = linetrack_test_data::middlebury_dir().unwrap();
+    let pairs = linetrack_datasets::list_middlebury(&dir).unwrap();
+    assert_eq!(pairs.len(), 28);
+    let scale = |name: &str| pairs.iter().find(|p| p.name == name).unwrap().scale;
+    assert_eq!(
+        (
+            scale("Tsukuba"),
+            scale("Venus"),
+            scale("Cones"),
+            scale("Baby1")
+        ),
+        (16.0, 8.0, 4.0, 3.0)
+    );
+    let tsukuba = pairs
+        .iter()
+        .find(|p| p.name == "Tsukuba")
+        .unwrap()
+        .load()
+        .unwrap();
+    assert_eq!((tsukuba.left.width(), tsukuba.left.height()), (384, 288));
+    assert_eq!(
+        (tsukuba.disparity.width(), tsukuba.disparity.height()),
+        (384, 288)
+    );
+    // Tsukuba's disparities are 5–14 px; the centre of the lamp is in the front.
+    let known: Vec<f64> = (0..288)
+        .flat_map(|y| (0..384).map(move |x| (x, y)))
+        .filter_map(|(x, y)| tsukuba.disparity.at(f64::from(x), f64::from(y)))
+        .collect();
+    let (low, high) = known
+        .iter()
+        .fold((f64::MAX, f64::MIN), |(a, b), &d| (a.min(d), b.max(d)));
+    assert!(
+        (4.0..=6.0).contains(&low) && (13.0..=15.0).contains(&high),
+        "{low} {high}"
+    );
+    assert!(tsukuba.disparity.coverage() > 0.75);
+}
+
+/// A third-size 2005/2006 scene folder with a disparity map `disp1.png` of `map_size`.
+fn middlebury_fixture(name: &str, map_size: (u32, u32)) -> PathBuf {
+    let dir = linetrack_test_data::scratch_dir("datasets", name).unwrap();
+    let scene = dir.join("Scene");
+    let colour = image::RgbImage::from_fn(420, 30, |x, y| image::Rgb([x as u8, y as u8, 9]));
+    std::fs::create_dir_all(&scene).unwrap();
+    colour.save(scene.join("view1.png")).unwrap();
+    colour.save(scene.join("view5.png")).unwrap();
+    let map = image::GrayImage::from_fn(map_size.0, map_size.1, |x, _| {
+        image::Luma([(x % 4) as u8 * 30])
+    });
+    map.save(scene.join("disp1.png")).unwrap();
+    dir
+}
+
+#[test]
+fn a_middlebury_fixture_loads_grey_with_unknown_disparities() {
+    let dir = middlebury_fixture("middlebury-good", (420, 30));
+    let pairs = linetrack_datasets::list_middlebury(&dir).unwrap();
+    assert_eq!(pairs.len(), 1);
+    let pair = pairs[0].load().unwrap();
+    assert_eq!((pair.left.width(), pair.left.height()), (420, 30));
+    // Value 0 (x % 4 == 0) is unknown, not d = 0; 30 / 3 = 10 px.
+    assert_eq!(pair.disparity.at(0.0, 0.0), None);
+    assert_eq!(pair.disparity.at(1.0, 0.0), Some(10.0));
+    assert_eq!(pair.disparity.at(2.0, 5.0), Some(20.0));
+}
+
+#[test]
+fn malformed_middlebury_folders_are_refused_naming_the_file() {
+    let wrong_size = middlebury_fixture("middlebury-size", (400, 30));
+    let error = linetrack_datasets::list_middlebury(&wrong_size).unwrap()[0]
+        .load()
+        .unwrap_err()
+        .to_string();
+    assert!(
+        error.contains("disp1.png") && error.contains("400×30"),
+        "{error}"
+    );
+
+    let corrupt = middlebury_fixture("middlebury-corrupt", (420, 30));
+    std::fs::write(corrupt.join("Scene/disp1.png"), b"\x89PNG not really").unwrap();
+    let error = linetrack_datasets::list_middlebury(&corrupt).unwrap()[0]
+        .load()
+        .unwrap_err()
+        .to_string();
+    assert!(error.contains("disp1.png"), "{error}");
+
+    let empty = linetrack_test_data::scratch_dir("datasets", "middlebury-empty").unwrap();
+    let error = linetrack_datasets::list_middlebury(&empty)
+        .unwrap_err()
+        .to_string();
+    assert!(error.contains("no Middlebury pair"), "{error}");
+    let missing = linetrack_datasets::list_middlebury(Path::new("/nonexistent/middlebury"))
+        .unwrap_err()
+        .to_string();
+    assert!(missing.contains("/nonexistent/middlebury"), "{missing}");
 }

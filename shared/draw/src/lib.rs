@@ -35,7 +35,10 @@ pub struct SideBySide {
 impl SideBySide {
     /// Two blank `width × height` canvases.
     pub fn blank(width: u32, height: u32) -> Self {
-        Self { canvas: RgbImage::from_pixel(2 * width + GAP_PX, height, BACKGROUND), half_width: width }
+        Self {
+            canvas: RgbImage::from_pixel(2 * width + GAP_PX, height, BACKGROUND),
+            half_width: width,
+        }
     }
 
     /// Two grayscale images (row-major, `width × height` each), dimmed so that colour
@@ -86,7 +89,11 @@ impl SideBySide {
         for oy in 0..size {
             for ox in 0..size {
                 let (px, py) = (x.floor() + f64::from(ox), y.floor() + f64::from(oy));
-                if px >= 0.0 && py >= 0.0 && px < f64::from(self.canvas.width()) && py < f64::from(self.canvas.height()) {
+                if px >= 0.0
+                    && py >= 0.0
+                    && px < f64::from(self.canvas.width())
+                    && py < f64::from(self.canvas.height())
+                {
                     self.canvas.put_pixel(px as u32, py as u32, colour);
                 }
             }
@@ -154,14 +161,29 @@ mod tests {
     #[test]
     fn segments_land_in_their_half() {
         let mut picture = SideBySide::blank(20, 10);
-        picture.segment(Side::Second, &Segment::from_coords(0.0, 5.0, 19.0, 5.0), WRONG, 1);
+        picture.segment(
+            Side::Second,
+            &Segment::from_coords(0.0, 5.0, 19.0, 5.0),
+            WRONG,
+            1,
+        );
         let image = picture.image();
         assert_eq!(image.dimensions(), (48, 10));
         assert_eq!(*image.get_pixel(28, 5), WRONG);
         assert_eq!(*image.get_pixel(5, 5), BACKGROUND);
         // Off-canvas and non-finite input is ignored, not a panic.
-        picture.segment(Side::First, &Segment::from_coords(-50.0, -50.0, 500.0, 500.0), WRONG, 3);
-        picture.segment(Side::First, &Segment::from_coords(f64::NAN, 0.0, 1.0, 1.0), WRONG, 1);
+        picture.segment(
+            Side::First,
+            &Segment::from_coords(-50.0, -50.0, 500.0, 500.0),
+            WRONG,
+            3,
+        );
+        picture.segment(
+            Side::First,
+            &Segment::from_coords(f64::NAN, 0.0, 1.0, 1.0),
+            WRONG,
+            1,
+        );
         picture.point(Side::First, Point::new(f64::INFINITY, 0.0), WRONG, 2);
     }
 
@@ -169,10 +191,17 @@ mod tests {
     fn gray_images_are_copied_dimmed_and_palette_avoids_red() {
         let picture = SideBySide::from_gray(2, 1, &[100, 200], &[0, 255]);
         assert_eq!(*picture.image().get_pixel(1, 0), Rgb([120, 120, 120]));
-        assert_eq!(*picture.image().get_pixel(2 + GAP_PX + 1, 0), Rgb([153, 153, 153]));
+        assert_eq!(
+            *picture.image().get_pixel(2 + GAP_PX + 1, 0),
+            Rgb([153, 153, 153])
+        );
         for k in 0..50 {
             let Rgb([r, g, b]) = palette(k);
-            assert!(!(r > 200 && g < 120 && b < 120), "colour {k} looks like WRONG: {:?}", palette(k));
+            assert!(
+                !(r > 200 && g < 120 && b < 120),
+                "colour {k} looks like WRONG: {:?}",
+                palette(k)
+            );
         }
     }
 }

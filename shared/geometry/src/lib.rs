@@ -86,14 +86,23 @@ impl Segment {
     pub fn clipped_to(&self, width: f64, height: f64) -> Option<Segment> {
         let (p, d) = (self.start, self.end - self.start);
         let (mut t0, mut t1) = (0.0f64, 1.0f64);
-        for (denominator, numerator) in [(-d.x, p.x), (d.x, width - p.x), (-d.y, p.y), (d.y, height - p.y)] {
+        for (denominator, numerator) in [
+            (-d.x, p.x),
+            (d.x, width - p.x),
+            (-d.y, p.y),
+            (d.y, height - p.y),
+        ] {
             if denominator == 0.0 {
                 if numerator < 0.0 {
                     return None;
                 }
             } else {
                 let t = numerator / denominator;
-                if denominator < 0.0 { t0 = t0.max(t) } else { t1 = t1.min(t) }
+                if denominator < 0.0 {
+                    t0 = t0.max(t)
+                } else {
+                    t1 = t1.min(t)
+                }
             }
         }
         (t0 < t1).then(|| Segment::new(p + d * t0, p + d * t1))
@@ -101,7 +110,10 @@ impl Segment {
 
     /// Whether all four coordinates are finite.
     pub fn is_finite(&self) -> bool {
-        self.start.iter().chain(self.end.iter()).all(|c| c.is_finite())
+        self.start
+            .iter()
+            .chain(self.end.iter())
+            .all(|c| c.is_finite())
     }
 }
 
@@ -141,7 +153,14 @@ pub struct StereoRig {
 impl Default for StereoRig {
     /// Roughly the rectified EuRoC MAV rig: 752×480, f ≈ 458 px, 11 cm baseline.
     fn default() -> Self {
-        Self { focal_px: 458.0, cx_px: 376.0, cy_px: 240.0, baseline_m: 0.11, width_px: 752, height_px: 480 }
+        Self {
+            focal_px: 458.0,
+            cx_px: 376.0,
+            cy_px: 240.0,
+            baseline_m: 0.11,
+            width_px: 752,
+            height_px: 480,
+        }
     }
 }
 
@@ -149,7 +168,12 @@ impl StereoRig {
     /// Projects a point in the left camera's frame (x right, y down, z forward) to left
     /// image pixels; `None` behind the camera.
     pub fn project_left(&self, p: &nalgebra::Point3<f64>) -> Option<Point> {
-        (p.z > 0.0).then(|| Point::new(self.focal_px * p.x / p.z + self.cx_px, self.focal_px * p.y / p.z + self.cy_px))
+        (p.z > 0.0).then(|| {
+            Point::new(
+                self.focal_px * p.x / p.z + self.cx_px,
+                self.focal_px * p.y / p.z + self.cy_px,
+            )
+        })
     }
 
     /// Disparity in pixels of a point at depth `depth_m`.
@@ -301,7 +325,12 @@ impl Terms {
 
     /// β = [θ, θ^epip, ρ, μ], the column of the matcher's matrix A (before weighting).
     pub fn to_array(&self) -> [f64; 4] {
-        [self.angle_rad, self.epipolar_angle_rad, self.overlap, self.length_ratio]
+        [
+            self.angle_rad,
+            self.epipolar_angle_rad,
+            self.overlap,
+            self.length_ratio,
+        ]
     }
 }
 

@@ -18,7 +18,10 @@ fn close(actual: f64, expected: f64) -> bool {
 fn identical_vertical_pair_shifted_along_the_row_is_ideal_in_stereo() {
     let a = features(10.0, 0.0, 10.0, 10.0);
     let b = features(5.0, 0.0, 5.0, 10.0);
-    assert_eq!(Terms::between(&a, &b, MatchCase::Stereo).to_array(), IDEAL_TERMS);
+    assert_eq!(
+        Terms::between(&a, &b, MatchCase::Stereo).to_array(),
+        IDEAL_TERMS
+    );
 }
 
 #[test]
@@ -50,8 +53,14 @@ fn epipolar_angle_measures_flow_against_x_in_stereo_and_y_frame_to_frame() {
     // Midpoints (10, 10) and (7, 6): flow (3, 4).
     let a = features(10.0, 5.0, 10.0, 15.0);
     let b = features(7.0, 1.0, 7.0, 11.0);
-    assert!(close(epipolar_angle(&a, &b, MatchCase::Stereo), (4.0f64 / 5.0).asin()));
-    assert!(close(epipolar_angle(&a, &b, MatchCase::FrameToFrame), (3.0f64 / 5.0).asin()));
+    assert!(close(
+        epipolar_angle(&a, &b, MatchCase::Stereo),
+        (4.0f64 / 5.0).asin()
+    ));
+    assert!(close(
+        epipolar_angle(&a, &b, MatchCase::FrameToFrame),
+        (3.0f64 / 5.0).asin()
+    ));
 }
 
 #[test]
@@ -100,26 +109,44 @@ fn length_ratio_is_longer_over_shorter_either_way() {
 #[test]
 fn degenerate_segments_are_refused_with_the_reason() {
     let zero = Segment::from_coords(3.0, 4.0, 3.0, 4.0);
-    assert!(matches!(SegmentFeatures::new(&zero), Err(GeometryError::ZeroLength { .. })));
+    assert!(matches!(
+        SegmentFeatures::new(&zero),
+        Err(GeometryError::ZeroLength { .. })
+    ));
     for bad in [f64::NAN, f64::INFINITY, f64::NEG_INFINITY] {
         let seg = Segment::from_coords(0.0, bad, 1.0, 1.0);
         assert_eq!(SegmentFeatures::new(&seg), Err(GeometryError::NonFinite));
     }
     // Finite coordinates whose difference overflows.
     let huge = Segment::from_coords(-f64::MAX, 0.0, f64::MAX, 0.0);
-    assert!(matches!(SegmentFeatures::new(&huge), Err(GeometryError::ZeroLength { .. })));
+    assert!(matches!(
+        SegmentFeatures::new(&huge),
+        Err(GeometryError::ZeroLength { .. })
+    ));
 }
 
 #[test]
 fn clipping_keeps_the_inside_part_and_drops_outside_segments() {
-    let crossing = Segment::from_coords(-10.0, 5.0, 30.0, 5.0).clipped_to(20.0, 10.0).unwrap();
+    let crossing = Segment::from_coords(-10.0, 5.0, 30.0, 5.0)
+        .clipped_to(20.0, 10.0)
+        .unwrap();
     assert_eq!(crossing, Segment::from_coords(0.0, 5.0, 20.0, 5.0));
-    let diagonal = Segment::from_coords(-5.0, -5.0, 25.0, 25.0).clipped_to(20.0, 10.0).unwrap();
-    assert!(close(diagonal.start.x, 0.0) && close(diagonal.end.x, 10.0) && close(diagonal.end.y, 10.0));
+    let diagonal = Segment::from_coords(-5.0, -5.0, 25.0, 25.0)
+        .clipped_to(20.0, 10.0)
+        .unwrap();
+    assert!(
+        close(diagonal.start.x, 0.0) && close(diagonal.end.x, 10.0) && close(diagonal.end.y, 10.0)
+    );
     let inside = Segment::from_coords(1.0, 2.0, 3.0, 4.0);
     assert_eq!(inside.clipped_to(20.0, 10.0), Some(inside));
-    assert_eq!(Segment::from_coords(30.0, 0.0, 40.0, 5.0).clipped_to(20.0, 10.0), None);
-    assert_eq!(Segment::from_coords(5.0, -3.0, 8.0, -3.0).clipped_to(20.0, 10.0), None);
+    assert_eq!(
+        Segment::from_coords(30.0, 0.0, 40.0, 5.0).clipped_to(20.0, 10.0),
+        None
+    );
+    assert_eq!(
+        Segment::from_coords(5.0, -3.0, 8.0, -3.0).clipped_to(20.0, 10.0),
+        None
+    );
 }
 
 fn coord() -> impl Strategy<Value = f64> {

@@ -17,7 +17,10 @@ use iceoryx2::port::listener::Listener;
 use iceoryx2::port::notifier::Notifier;
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::subscriber::Subscriber;
-use iceoryx2::prelude::{AllocationStrategy, FileName, NodeBuilder, NodeName, SemanticString, ServiceName, SignalHandlingMode, ZeroCopySend, ipc};
+use iceoryx2::prelude::{
+    AllocationStrategy, FileName, NodeBuilder, NodeName, SemanticString, ServiceName,
+    SignalHandlingMode, ZeroCopySend, ipc,
+};
 use iceoryx2::sample::Sample;
 use linetrack_msgs::{FrameHeader, StageKind, Topic, wake_service_name};
 use std::any::Any;
@@ -53,11 +56,19 @@ pub enum IpcError {
 }
 
 fn setup<'a>(what: &'static str, service: &'a str) -> impl FnOnce(String) -> IpcError + 'a {
-    move |message| IpcError::Setup { what, service: service.to_string(), message }
+    move |message| IpcError::Setup {
+        what,
+        service: service.to_string(),
+        message,
+    }
 }
 
 fn transfer<'a>(what: &'static str, service: &'a str) -> impl FnOnce(String) -> IpcError + 'a {
-    move |message| IpcError::Transfer { what, service: service.to_string(), message }
+    move |message| IpcError::Transfer {
+        what,
+        service: service.to_string(),
+        message,
+    }
 }
 
 /// What a message carries: fixed layout, no pointers.
@@ -83,14 +94,21 @@ impl Scope {
 
     /// A scope for `run_id` with the prefix from the environment or the default.
     pub fn new(run_id: &str) -> Self {
-        let prefix = std::env::var(Self::PREFIX_VAR).ok().filter(|p| !p.is_empty()).unwrap_or_else(|| "linetrack_".to_string());
-        Self { prefix, run_id: run_id.to_string() }
+        let prefix = std::env::var(Self::PREFIX_VAR)
+            .ok()
+            .filter(|p| !p.is_empty())
+            .unwrap_or_else(|| "linetrack_".to_string());
+        Self {
+            prefix,
+            run_id: run_id.to_string(),
+        }
     }
 
     /// The iceoryx2 configuration of this scope.
     pub fn config(&self) -> Result<Config, IpcError> {
         let mut config = Config::default();
-        config.global.prefix = FileName::new(self.prefix.as_bytes()).map_err(|e| setup("iceoryx2 prefix", &self.prefix)(format!("{e:?}")))?;
+        config.global.prefix = FileName::new(self.prefix.as_bytes())
+            .map_err(|e| setup("iceoryx2 prefix", &self.prefix)(format!("{e:?}")))?;
         Ok(config)
     }
 }
@@ -188,12 +206,17 @@ pub struct LocalHub(Arc<Mutex<LocalRegistry>>);
 impl LocalHub {
     /// A bus on this transport.
     pub fn bus(&self) -> Bus {
-        Bus { kind: BusKind::Local(Arc::clone(&self.0)) }
+        Bus {
+            kind: BusKind::Local(Arc::clone(&self.0)),
+        }
     }
 }
 
 enum BusKind {
-    Shm { node: Node<ipc::Service>, scope: Scope },
+    Shm {
+        node: Node<ipc::Service>,
+        scope: Scope,
+    },
     Local(Arc<Mutex<LocalRegistry>>),
 }
 
@@ -206,14 +229,20 @@ impl Bus {
     /// The shared-memory transport, as a node named `node_name` in `scope`.
     pub fn shared_memory(scope: &Scope, node_name: &str) -> Result<Self, IpcError> {
         let config = scope.config()?;
-        let name = NodeName::new(node_name).map_err(|e| setup("node name", node_name)(format!("{e:?}")))?;
+        let name = NodeName::new(node_name)
+            .map_err(|e| setup("node name", node_name)(format!("{e:?}")))?;
         let node = NodeBuilder::new()
             .name(&name)
             .config(&config)
             .signal_handling_mode(SignalHandlingMode::Disabled)
             .create::<ipc::Service>()
             .map_err(|e| setup("iceoryx2 node", node_name)(format!("{e:?}")))?;
-        Ok(Self { kind: BusKind::Shm { node, scope: scope.clone() } })
+        Ok(Self {
+            kind: BusKind::Shm {
+                node,
+                scope: scope.clone(),
+            },
+        })
     }
 
     /// A fresh local transport.
@@ -240,17 +269,27 @@ impl Bus {
     }
 
     fn lock_local(registry: &Mutex<LocalRegistry>) -> std::sync::MutexGuard<'_, LocalRegistry> {
-        registry.lock().unwrap_or_else(|poisoned| poisoned.into_inner())
+        registry
+            .lock()
+            .unwrap_or_else(|poisoned| poisoned.into_inner())
     }
 
     fn local_wake_sender(registry: &Mutex<LocalRegistry>, stage: StageKind) -> Sender<()> {
         let mut r = Self::lock_local(registry);
-        r.wakes.entry(stage).or_insert_with(|| crossbeam_channel::bounded(1)).0.clone()
+        r.wakes
+            .entry(stage)
+            .or_insert_with(|| crossbeam_channel::bounded(1))
+            .0
+            .clone()
     }
 
     /// A publisher on `topic` whose messages hold up to `initial_len` records (more are
     /// allocated when needed), waking the topic's consumers.
-    pub fn outlet<P: Record>(&self, topic: Topic, initial_len: usize) -> Result<Outlet<P>, IpcError> {
+    pub fn outlet<P: Record>(
+        &self,
+        topic: Topic,
+        initial_len: usize,
+    ) -> Result<Outlet<P>, IpcError> {
         match &self.kind {
             BusKind::Shm { node, scope } => {
                 let service_name = topic.service_name(&scope.run_id);
@@ -265,14 +304,37 @@ impl Bus {
                 for &stage in topic.consumers() {
                     let wake_name = wake_service_name(&scope.run_id, stage);
                     let event = event_service(node, &wake_name)?;
-                    notifiers.push(event.notifier_builder().create().map_err(|e| setup("notifier", &wake_name)(format!("{e:?}")))?);
+                    notifiers.push(
+                        event
+                            .notifier_builder()
+                            .create()
+                            .map_err(|e| setup("notifier", &wake_name)(format!("{e:?}")))?,
+                    );
                 }
-                Ok(Outlet { service_name, inner: OutletInner::Shm { publisher, notifiers } })
+                Ok(Outlet {
+                    service_name,
+                    inner: OutletInner::Shm {
+                        publisher,
+                        notifiers,
+                    },
+                })
             }
             BusKind::Local(registry) => {
-                let subscribers = Arc::clone(Self::lock_local(registry).topics.entry(topic).or_default());
-                let wakes = topic.consumers().iter().map(|&s| Self::local_wake_sender(registry, s)).collect();
-                Ok(Outlet { service_name: topic.name().to_string(), inner: OutletInner::Local { subscribers, wakes, _record: std::marker::PhantomData } })
+                let subscribers =
+                    Arc::clone(Self::lock_local(registry).topics.entry(topic).or_default());
+                let wakes = topic
+                    .consumers()
+                    .iter()
+                    .map(|&s| Self::local_wake_sender(registry, s))
+                    .collect();
+                Ok(Outlet {
+                    service_name: topic.name().to_string(),
+                    inner: OutletInner::Local {
+                        subscribers,
+                        wakes,
+                        _record: std::marker::PhantomData,
+                    },
+                })
             }
         }
     }
@@ -288,13 +350,19 @@ impl Bus {
                     .buffer_size(topic.queue_depth())
                     .create()
                     .map_err(|e| setup("subscriber", &service_name)(format!("{e:?}")))?;
-                Ok(Inlet { service_name, inner: InletInner::Shm(subscriber) })
+                Ok(Inlet {
+                    service_name,
+                    inner: InletInner::Shm(subscriber),
+                })
             }
             BusKind::Local(registry) => {
                 let (tx, rx) = crossbeam_channel::bounded(topic.queue_depth());
                 let list = Arc::clone(Self::lock_local(registry).topics.entry(topic).or_default());
                 list.lock().unwrap_or_else(|p| p.into_inner()).push(tx);
-                Ok(Inlet { service_name: topic.name().to_string(), inner: InletInner::Local(rx, std::marker::PhantomData) })
+                Ok(Inlet {
+                    service_name: topic.name().to_string(),
+                    inner: InletInner::Local(rx, std::marker::PhantomData),
+                })
             }
         }
     }
@@ -305,13 +373,27 @@ impl Bus {
             BusKind::Shm { node, scope } => {
                 let wake_name = wake_service_name(&scope.run_id, stage);
                 let event = event_service(node, &wake_name)?;
-                let listener = event.listener_builder().create().map_err(|e| setup("listener", &wake_name)(format!("{e:?}")))?;
-                Ok(Wake { service_name: wake_name, inner: WakeInner::Shm(Box::new(listener)) })
+                let listener = event
+                    .listener_builder()
+                    .create()
+                    .map_err(|e| setup("listener", &wake_name)(format!("{e:?}")))?;
+                Ok(Wake {
+                    service_name: wake_name,
+                    inner: WakeInner::Shm(Box::new(listener)),
+                })
             }
             BusKind::Local(registry) => {
                 let mut r = Self::lock_local(registry);
-                let rx = r.wakes.entry(stage).or_insert_with(|| crossbeam_channel::bounded(1)).1.clone();
-                Ok(Wake { service_name: stage.name().to_string(), inner: WakeInner::Local(rx) })
+                let rx = r
+                    .wakes
+                    .entry(stage)
+                    .or_insert_with(|| crossbeam_channel::bounded(1))
+                    .1
+                    .clone();
+                Ok(Wake {
+                    service_name: stage.name().to_string(),
+                    inner: WakeInner::Local(rx),
+                })
             }
         }
     }
@@ -321,8 +403,12 @@ fn pubsub_service<P: Record>(
     node: &Node<ipc::Service>,
     topic: Topic,
     service_name: &str,
-) -> Result<iceoryx2::service::port_factory::publish_subscribe::PortFactory<ipc::Service, [P], FrameHeader>, IpcError> {
-    let name = ServiceName::new(service_name).map_err(|e| setup("service name", service_name)(format!("{e:?}")))?;
+) -> Result<
+    iceoryx2::service::port_factory::publish_subscribe::PortFactory<ipc::Service, [P], FrameHeader>,
+    IpcError,
+> {
+    let name = ServiceName::new(service_name)
+        .map_err(|e| setup("service name", service_name)(format!("{e:?}")))?;
     node.service_builder(&name)
         .publish_subscribe::<[P]>()
         .user_header::<FrameHeader>()
@@ -336,8 +422,12 @@ fn pubsub_service<P: Record>(
         .map_err(|e| setup("publish-subscribe service", service_name)(format!("{e:?}")))
 }
 
-fn event_service(node: &Node<ipc::Service>, service_name: &str) -> Result<iceoryx2::service::port_factory::event::PortFactory<ipc::Service>, IpcError> {
-    let name = ServiceName::new(service_name).map_err(|e| setup("service name", service_name)(format!("{e:?}")))?;
+fn event_service(
+    node: &Node<ipc::Service>,
+    service_name: &str,
+) -> Result<iceoryx2::service::port_factory::event::PortFactory<ipc::Service>, IpcError> {
+    let name = ServiceName::new(service_name)
+        .map_err(|e| setup("service name", service_name)(format!("{e:?}")))?;
     node.service_builder(&name)
         .event()
         .max_listeners(4)
@@ -347,8 +437,15 @@ fn event_service(node: &Node<ipc::Service>, service_name: &str) -> Result<iceory
 }
 
 enum OutletInner<P: Record> {
-    Shm { publisher: Publisher<ipc::Service, [P], FrameHeader>, notifiers: Vec<Notifier<ipc::Service>> },
-    Local { subscribers: Arc<Mutex<Vec<Sender<LocalMessage>>>>, wakes: Vec<Sender<()>>, _record: std::marker::PhantomData<P> },
+    Shm {
+        publisher: Publisher<ipc::Service, [P], FrameHeader>,
+        notifiers: Vec<Notifier<ipc::Service>>,
+    },
+    Local {
+        subscribers: Arc<Mutex<Vec<Sender<LocalMessage>>>>,
+        wakes: Vec<Sender<()>>,
+        _record: std::marker::PhantomData<P>,
+    },
 }
 
 /// Publishes messages on one topic.
@@ -363,8 +460,13 @@ impl<P: Record> Outlet<P> {
     pub fn publish(&mut self, header: &FrameHeader, parts: &[&[P]]) -> Result<usize, IpcError> {
         let len: usize = parts.iter().map(|p| p.len()).sum();
         match &mut self.inner {
-            OutletInner::Shm { publisher, notifiers } => {
-                let mut sample = publisher.loan_slice_uninit(len).map_err(|e| transfer("loan", &self.service_name)(format!("{e:?}")))?;
+            OutletInner::Shm {
+                publisher,
+                notifiers,
+            } => {
+                let mut sample = publisher
+                    .loan_slice_uninit(len)
+                    .map_err(|e| transfer("loan", &self.service_name)(format!("{e:?}")))?;
                 *sample.user_header_mut() = *header;
                 let mut offset = 0;
                 let payload = sample.payload_mut();
@@ -376,18 +478,27 @@ impl<P: Record> Outlet<P> {
                 // written into the payload's `len` slots above, so the payload is initialised.
                 #[allow(unsafe_code)]
                 let sample = unsafe { sample.assume_init() };
-                let delivered = sample.send().map_err(|e| transfer("send", &self.service_name)(format!("{e:?}")))?;
+                let delivered = sample
+                    .send()
+                    .map_err(|e| transfer("send", &self.service_name)(format!("{e:?}")))?;
                 for notifier in notifiers.iter() {
-                    notifier.notify().map_err(|e| transfer("notify", &self.service_name)(format!("{e:?}")))?;
+                    notifier
+                        .notify()
+                        .map_err(|e| transfer("notify", &self.service_name)(format!("{e:?}")))?;
                 }
                 Ok(delivered)
             }
-            OutletInner::Local { subscribers, wakes, .. } => {
+            OutletInner::Local {
+                subscribers, wakes, ..
+            } => {
                 let mut payload = Vec::with_capacity(len);
                 for part in parts {
                     payload.extend_from_slice(part);
                 }
-                let message: LocalMessage = Arc::new(LocalPayload { header: *header, payload });
+                let message: LocalMessage = Arc::new(LocalPayload {
+                    header: *header,
+                    payload,
+                });
                 let list = subscribers.lock().unwrap_or_else(|p| p.into_inner());
                 let mut delivered = 0;
                 for tx in list.iter() {
@@ -453,13 +564,16 @@ impl<P: Record> Inlet<P> {
     /// The oldest waiting message, if any.
     pub fn receive(&mut self) -> Result<Option<Received<P>>, IpcError> {
         match &mut self.inner {
-            InletInner::Shm(subscriber) => {
-                subscriber.receive().map(|s| s.map(Received::Shm)).map_err(|e| transfer("receive", &self.service_name)(format!("{e:?}")))
-            }
+            InletInner::Shm(subscriber) => subscriber
+                .receive()
+                .map(|s| s.map(Received::Shm))
+                .map_err(|e| transfer("receive", &self.service_name)(format!("{e:?}"))),
             InletInner::Local(rx, _) => match rx.try_recv() {
                 Ok(message) => match message.downcast::<LocalPayload<P>>() {
                     Ok(m) => Ok(Some(Received::Local(m))),
-                    Err(_) => Err(transfer("receive", &self.service_name)("a message of another type".to_string())),
+                    Err(_) => Err(transfer("receive", &self.service_name)(
+                        "a message of another type".to_string(),
+                    )),
                 },
                 Err(_) => Ok(None),
             },
@@ -516,22 +630,41 @@ mod tests {
     use linetrack_msgs::SegmentRecord;
 
     fn unique_scope(tag: &str) -> Scope {
-        Scope { prefix: format!("ltipc{}_", std::process::id()), run_id: format!("{tag}{}", std::process::id()) }
+        Scope {
+            prefix: format!("ltipc{}_", std::process::id()),
+            run_id: format!("{tag}{}", std::process::id()),
+        }
     }
 
     fn round_trip(publisher_bus: &Bus, subscriber_bus: &Bus) {
-        let mut inlet = subscriber_bus.inlet::<SegmentRecord>(Topic::Segments).unwrap_or_else(|e| panic!("{e}"));
-        let wake = subscriber_bus.wake(StageKind::Matcher).unwrap_or_else(|e| panic!("{e}"));
-        let mut outlet = publisher_bus.outlet::<SegmentRecord>(Topic::Segments, 4).unwrap_or_else(|e| panic!("{e}"));
-        let a = [SegmentRecord { endpoints: [1.0, 2.0, 3.0, 4.0] }];
-        let b = [SegmentRecord { endpoints: [5.0, 6.0, 7.0, 8.0] }; 9];
+        let mut inlet = subscriber_bus
+            .inlet::<SegmentRecord>(Topic::Segments)
+            .unwrap_or_else(|e| panic!("{e}"));
+        let wake = subscriber_bus
+            .wake(StageKind::Matcher)
+            .unwrap_or_else(|e| panic!("{e}"));
+        let mut outlet = publisher_bus
+            .outlet::<SegmentRecord>(Topic::Segments, 4)
+            .unwrap_or_else(|e| panic!("{e}"));
+        let a = [SegmentRecord {
+            endpoints: [1.0, 2.0, 3.0, 4.0],
+        }];
+        let b = [SegmentRecord {
+            endpoints: [5.0, 6.0, 7.0, 8.0],
+        }; 9];
         let mut header = FrameHeader::new(7, 0, 0);
         header.left_count = 1;
         // More records than the initial length: the publisher grows its slices.
-        let delivered = outlet.publish(&header, &[&a, &b]).unwrap_or_else(|e| panic!("{e}"));
+        let delivered = outlet
+            .publish(&header, &[&a, &b])
+            .unwrap_or_else(|e| panic!("{e}"));
         assert_eq!(delivered, 1);
-        wake.wait(Duration::from_secs(2)).unwrap_or_else(|e| panic!("{e}"));
-        let got = inlet.receive().unwrap_or_else(|e| panic!("{e}")).unwrap_or_else(|| panic!("no message"));
+        wake.wait(Duration::from_secs(2))
+            .unwrap_or_else(|e| panic!("{e}"));
+        let got = inlet
+            .receive()
+            .unwrap_or_else(|e| panic!("{e}"))
+            .unwrap_or_else(|| panic!("no message"));
         assert_eq!(got.header().frame_id, 7);
         assert_eq!(got.payload().len(), 10);
         assert_eq!(got.payload()[0], a[0]);
@@ -542,15 +675,20 @@ mod tests {
     #[test]
     fn local_messages_fan_out_with_payload_intact() {
         let bus = Bus::local();
-        let peer = bus.local_hub().unwrap_or_else(|| panic!("local bus has peers")).bus();
+        let peer = bus
+            .local_hub()
+            .unwrap_or_else(|| panic!("local bus has peers"))
+            .bus();
         round_trip(&bus, &peer);
     }
 
     #[test]
     fn shared_memory_messages_arrive_in_place() {
         let scope = unique_scope("rt");
-        let publisher = Bus::shared_memory(&scope, "test-publisher").unwrap_or_else(|e| panic!("{e}"));
-        let subscriber = Bus::shared_memory(&scope, "test-subscriber").unwrap_or_else(|e| panic!("{e}"));
+        let publisher =
+            Bus::shared_memory(&scope, "test-publisher").unwrap_or_else(|e| panic!("{e}"));
+        let subscriber =
+            Bus::shared_memory(&scope, "test-subscriber").unwrap_or_else(|e| panic!("{e}"));
         round_trip(&publisher, &subscriber);
     }
 
@@ -559,19 +697,27 @@ mod tests {
         let scope = unique_scope("gone");
         {
             let bus = Bus::shared_memory(&scope, "test-lifetime").unwrap_or_else(|e| panic!("{e}"));
-            let _outlet = bus.outlet::<SegmentRecord>(Topic::Segments, 4).unwrap_or_else(|e| panic!("{e}"));
+            let _outlet = bus
+                .outlet::<SegmentRecord>(Topic::Segments, 4)
+                .unwrap_or_else(|e| panic!("{e}"));
             let during = scope.resources().unwrap_or_else(|e| panic!("{e}"));
             assert!(during.nodes >= 1 && during.services >= 1, "{during:?}");
         }
-        assert_eq!(scope.resources().unwrap_or_else(|e| panic!("{e}")), Resources::default());
+        assert_eq!(
+            scope.resources().unwrap_or_else(|e| panic!("{e}")),
+            Resources::default()
+        );
     }
 
     #[test]
     fn a_wait_without_messages_times_out() {
         let bus = Bus::local();
-        let wake = bus.wake(StageKind::Matcher).unwrap_or_else(|e| panic!("{e}"));
+        let wake = bus
+            .wake(StageKind::Matcher)
+            .unwrap_or_else(|e| panic!("{e}"));
         let started = std::time::Instant::now();
-        wake.wait(Duration::from_millis(30)).unwrap_or_else(|e| panic!("{e}"));
+        wake.wait(Duration::from_millis(30))
+            .unwrap_or_else(|e| panic!("{e}"));
         assert!(started.elapsed() >= Duration::from_millis(25));
     }
 }

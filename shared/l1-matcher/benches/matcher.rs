@@ -13,10 +13,18 @@ use std::hint::black_box;
 fn bench_match(c: &mut Criterion) {
     let rig = StereoRig::default();
     let mut group = c.benchmark_group("l1_match");
-    for (config_name, config) in [("default", MatcherConfig::default()), ("paper", MatcherConfig::paper())] {
+    for (config_name, config) in [
+        ("default", MatcherConfig::default()),
+        ("paper", MatcherConfig::paper()),
+    ] {
         for size in [100usize, 300] {
             for case in [MatchCase::Stereo, MatchCase::FrameToFrame] {
-                let scene = SceneConfig { seed: 1, segments: 2 * size, max_segments: Some(size), ..Default::default() };
+                let scene = SceneConfig {
+                    seed: 1,
+                    segments: 2 * size,
+                    max_segments: Some(size),
+                    ..Default::default()
+                };
                 let pair = match case {
                     MatchCase::Stereo => stereo_pair(&rig, &scene),
                     MatchCase::FrameToFrame => frame_pair(&rig, &scene),
@@ -25,7 +33,14 @@ fn bench_match(c: &mut Criterion) {
                 let mut out = Vec::with_capacity(size);
                 let name = format!("{config_name}/{case:?}");
                 group.bench_with_input(BenchmarkId::new(name, size), &pair, |bench, pair| {
-                    bench.iter(|| matcher.match_segments(case, black_box(&pair.first.segments), black_box(&pair.second.segments), &mut out))
+                    bench.iter(|| {
+                        matcher.match_segments(
+                            case,
+                            black_box(&pair.first.segments),
+                            black_box(&pair.second.segments),
+                            &mut out,
+                        )
+                    })
                 });
             }
         }

@@ -50,8 +50,12 @@ impl GateLimits {
             angle_gate: on && gates.max_angle_deg < 90.0,
             sin_max_angle: as_f32(gates.max_angle_deg.to_radians().sin()),
             cos_max_angle: as_f32(gates.max_angle_deg.to_radians().cos()),
-            sin_min_from_horizontal: if on { gates.min_angle_from_horizontal_deg.to_radians().sin() } else { 0.0 },
-            rows_must_meet: on && gates.min_overlap > 0.0,
+            sin_min_from_horizontal: if on {
+                gates.min_angle_from_horizontal_deg.to_radians().sin()
+            } else {
+                0.0
+            },
+            rows_must_meet: on && gates.stereo_min_overlap > 0.0,
             min_disparity_px: as_f32(gates.min_disparity_px),
             max_disparity_px: as_f32(gates.max_disparity_px),
             max_displacement_px: as_f32(gates.max_displacement_px),
@@ -68,7 +72,12 @@ impl GateLimits {
 
 impl CandidateTable {
     /// Refills the table from the candidate features.
-    pub(crate) fn fill(&mut self, case: MatchCase, limits: &GateLimits, features: &[Option<SegmentFeatures>]) {
+    pub(crate) fn fill(
+        &mut self,
+        case: MatchCase,
+        limits: &GateLimits,
+        features: &[Option<SegmentFeatures>],
+    ) {
         let columns = [
             &mut self.mid_x,
             &mut self.mid_y,
@@ -96,12 +105,19 @@ impl CandidateTable {
             self.x_max.push(as_f32(f_or_zero.x_max));
             self.y_min.push(as_f32(f_or_zero.y_min));
             self.y_max.push(as_f32(f_or_zero.y_max));
-            self.usable.push(f.as_ref().is_some_and(|f| limits.usable(case, f)));
+            self.usable
+                .push(f.as_ref().is_some_and(|f| limits.usable(case, f)));
         }
     }
 
     /// Appends to `out` the index of every candidate that passes the gates for `query`.
-    pub(crate) fn admit(&mut self, case: MatchCase, limits: &GateLimits, query: &SegmentFeatures, out: &mut Vec<usize>) {
+    pub(crate) fn admit(
+        &mut self,
+        case: MatchCase,
+        limits: &GateLimits,
+        query: &SegmentFeatures,
+        out: &mut Vec<usize>,
+    ) {
         let n = self.usable.len();
         if !limits.enabled {
             out.extend((0..n).filter(|&j| self.usable[j]));
@@ -121,7 +137,8 @@ impl CandidateTable {
             mask[j] = self.usable[j]
                 & (longer <= limits.max_length_ratio * shorter)
                 & (!limits.same_polarity | (dot > 0.0))
-                & (!limits.angle_gate | (cross.abs() * limits.cos_max_angle <= dot.abs() * limits.sin_max_angle));
+                & (!limits.angle_gate
+                    | (cross.abs() * limits.cos_max_angle <= dot.abs() * limits.sin_max_angle));
         }
         match case {
             MatchCase::Stereo => {
@@ -129,13 +146,17 @@ impl CandidateTable {
                 // of the query, and (with a positive minimum overlap) the padded row
                 // extents intersect.
                 let pad = as_f32(2.0 * ROW_FOOTPRINT_PX);
-                let (lo, hi) = (q.x_min - limits.max_disparity_px, q.x_max - limits.min_disparity_px);
+                let (lo, hi) = (
+                    q.x_min - limits.max_disparity_px,
+                    q.x_max - limits.min_disparity_px,
+                );
                 let (x_min, x_max) = (&self.x_min[..n], &self.x_max[..n]);
                 let (y_min, y_max) = (&self.y_min[..n], &self.y_max[..n]);
                 for j in 0..n {
                     mask[j] &= (x_max[j] >= lo)
                         & (x_min[j] <= hi)
-                        & (!limits.rows_must_meet | ((y_min[j] < q.y_max + pad) & (y_max[j] > q.y_min - pad)));
+                        & (!limits.rows_must_meet
+                            | ((y_min[j] < q.y_max + pad) & (y_max[j] > q.y_min - pad)));
                 }
             }
             MatchCase::FrameToFrame => {
@@ -151,7 +172,12 @@ impl CandidateTable {
                 }
             }
         }
-        out.extend(mask.iter().enumerate().filter(|(_, pass)| **pass).map(|(j, _)| j));
+        out.extend(
+            mask.iter()
+                .enumerate()
+                .filter(|(_, pass)| **pass)
+                .map(|(j, _)| j),
+        );
     }
 }
 

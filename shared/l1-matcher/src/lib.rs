@@ -23,11 +23,17 @@
 #![warn(missing_docs)]
 
 mod config;
+mod consistency;
 mod gates;
 mod outliers;
+mod profiles;
 
-pub use config::{ConfigError, Gates, MatcherConfig, OutlierFilter, SecondBest, TermWeights};
+pub use config::{
+    ConfigError, Consistency, Gates, MatcherConfig, OutlierFilter, Photometric, SecondBest,
+    StereoSettings, TermWeights,
+};
 pub use linetrack_geometry::{MatchCase, Segment};
+pub use profiles::{GrayView, PROFILE_LEN, ROW_STEP, SegmentProfiles, Similarity, ViewError};
 
 use gates::{CandidateTable, GateLimits};
 use linetrack_geometry::{self as geometry, IDEAL_TERMS, SegmentFeatures};
@@ -68,6 +74,12 @@ pub struct MatchStats {
     pub conflicts: usize,
     /// Matches dropped by the flow-direction outlier filter.
     pub outliers: usize,
+    /// Stereo matches dropped because no neighbour has about their disparity.
+    pub inconsistent: usize,
+    /// Stereo matches dropped because the image content sits off the candidate's line.
+    pub misaligned: usize,
+    /// Candidates discarded by the photometric check (correlation below the minimum).
+    pub photometric_rejections: usize,
     /// Matches returned.
     pub matches: usize,
 }
@@ -87,28 +99,54 @@ pub struct L1Matcher {
     gate_limits: GateLimits,
     table: CandidateTable,
     admitted: Vec<usize>,
-    solver: Homotopy<4>,
+    solver: Homotopy<ROWS>,
     first: Vec<Option<SegmentFeatures>>,
     second: Vec<Option<SegmentFeatures>>,
     candidates: Vec<Candidate>,
-    columns: Vec<[f64; 4]>,
+    columns: Vec<[f64; ROWS]>,
     weights: Vec<f64>,
     owner: Vec<Option<usize>>,
     tentative: Vec<Match>,
     filter: outliers::FlowFilter,
+    consistency: consistency::DisparityCheck,
 }
+
+/// Rows of A: the four geometric terms and the photometric dissimilarity.
+const ROWS: usize = 5;
+
+/// The ideal column: [`IDEAL_TERMS`] and no dissimilarity.
+const IDEAL: [f64; ROWS] = [
+    IDEAL_TERMS[0],
+    IDEAL_TERMS[1],
+    IDEAL_TERMS[2],
+    IDEAL_TERMS[3],
+    0.0,
+];
+
+/// The dissimilarity of a candidate that cannot be compared (flat or clipped rows): that
+/// of an uncorrelated one.
+const UNKNOWN_DISSIMILARITY: f64 = 0.5;
 
 /// Row weights and the weighted ideal b, fixed at construction.
 #[derive(Debug, Clone, Copy)]
 struct Limits {
-    weights: [f64; 4],
-    weighted_ideal: [f64; 4],
+    weights: [f64; ROWS],
+    weighted_ideal: [f64; ROWS],
 }
 
 impl Limits {
     fn new(config: &MatcherConfig) -> Self {
-        let weights = config.term_weights.to_array();
-        Self { weights, weighted_ideal: std::array::from_fn(|r| weights[r] * IDEAL_TERMS[r]) }
+        let [angle, epipolar, overlap, length] = config.term_weights.to_array();
+        let photometric = if config.photometric.enabled {
+            config.photometric.weight
+        } else {
+            0.0
+        };
+        let weights = [angle, epipolar, overlap, length, photometric];
+        Self {
+            weights,
+            weighted_ideal: std::array::from_fn(|r| weights[r] * IDEAL[r]),
+        }
     }
 }
 
@@ -122,6 +160,7 @@ impl L1Matcher {
             table: CandidateTable::default(),
             admitted: Vec::new(),
             filter: outliers::FlowFilter::new(config.outlier_filter),
+            consistency: consistency::DisparityCheck::new(config.consistency),
             config,
             solver: Homotopy::new(),
             first: Vec::new(),
@@ -139,8 +178,8 @@ impl L1Matcher {
         &self.config
     }
 
-    /// Matches `first` against `second`, replacing the contents of `out` with the
-    /// accepted matches in increasing query order.
+    /// Matches `first` against `second` by geometry alone, replacing the contents of
+    /// `out` with the accepted matches in increasing query order.
     pub fn match_segments(
         &mut self,
         case: MatchCase,
@@ -148,7 +187,36 @@ impl L1Matcher {
         second: &[Segment],
         out: &mut Vec<Match>,
     ) -> MatchStats {
+        self.match_with_profiles(case, first, second, None, out)
+    }
+
+    /// As [`L1Matcher::match_segments`], with the photometric check of stereo candidates
+    /// when `profiles` holds the row profiles of `first` and `second` (extracted from the
+    /// two images, [`SegmentProfiles::extract`]) and the config enables it. Profiles that
+    /// do not have one entry per segment are ignored.
+    pub fn match_with_profiles(
+        &mut self,
+        case: MatchCase,
+        first: &[Segment],
+        second: &[Segment],
+        profiles: Option<(&SegmentProfiles, &SegmentProfiles)>,
+        out: &mut Vec<Match>,
+    ) -> MatchStats {
         out.clear();
+        let profiles = profiles.filter(|(a, b)| {
+            self.config.photometric.enabled
+                && case == MatchCase::Stereo
+                && a.len() == first.len()
+                && b.len() == second.len()
+        });
+        let photometric = self.config.photometric;
+        let (min_overlap, error_ratio) = match case {
+            MatchCase::Stereo => (
+                self.config.gates.stereo_min_overlap,
+                self.config.stereo.error_ratio,
+            ),
+            MatchCase::FrameToFrame => (self.config.gates.min_overlap, self.config.error_ratio),
+        };
         let mut stats = MatchStats {
             invalid_first: prepare(first, &mut self.first),
             invalid_second: prepare(second, &mut self.second),
@@ -169,19 +237,48 @@ impl L1Matcher {
             self.candidates.clear();
             self.columns.clear();
             self.admitted.clear();
-            self.table.admit(case, &self.gate_limits, query, &mut self.admitted);
+            self.table
+                .admit(case, &self.gate_limits, query, &mut self.admitted);
+            let query_rows = profiles.is_some_and(|(a, _)| a.has_profile(i));
+            let query_columns = profiles.is_some_and(|(a, _)| a.has_column_profile(i));
             for &j in &self.admitted {
-                let Some(candidate) = &self.second[j] else { continue };
+                let Some(candidate) = &self.second[j] else {
+                    continue;
+                };
                 let overlap = geometry::overlap(query, candidate, case);
-                if self.config.gates.enabled && overlap < self.config.gates.min_overlap {
+                if self.config.gates.enabled && overlap < min_overlap {
                     continue;
                 }
                 // The epipolar angle costs an atan2; skip it where its row weighs nothing.
-                let epipolar =
-                    if self.limits.weights[1] == 0.0 { 0.0 } else { geometry::epipolar_angle(query, candidate, case) };
-                let beta =
-                    [geometry::direction_angle(query, candidate), epipolar, overlap, geometry::length_ratio(query, candidate)];
-                let column: [f64; 4] = std::array::from_fn(|r| self.limits.weights[r] * beta[r]);
+                let epipolar = if self.limits.weights[1] == 0.0 {
+                    0.0
+                } else {
+                    geometry::epipolar_angle(query, candidate, case)
+                };
+                let correlation = match profiles {
+                    Some((a, b)) if query_rows => a
+                        .similarity(i, b, j, photometric.min_rows)
+                        .map(|s| s.correlation),
+                    Some((a, b)) if query_columns => a.column_similarity(i, b, j),
+                    _ => None,
+                };
+                let dissimilarity = match correlation {
+                    Some(c) if c < photometric.min_correlation => {
+                        stats.photometric_rejections += 1;
+                        continue;
+                    }
+                    Some(c) => 0.5 * (1.0 - c),
+                    None if query_rows || query_columns => UNKNOWN_DISSIMILARITY,
+                    None => 0.0,
+                };
+                let beta = [
+                    geometry::direction_angle(query, candidate),
+                    epipolar,
+                    overlap,
+                    geometry::length_ratio(query, candidate),
+                    dissimilarity,
+                ];
+                let column: [f64; ROWS] = std::array::from_fn(|r| self.limits.weights[r] * beta[r]);
                 let error = column
                     .iter()
                     .zip(&self.limits.weighted_ideal)
@@ -192,7 +289,10 @@ impl L1Matcher {
                 self.columns.push(column);
             }
             stats.candidate_pairs += self.candidates.len();
-            match self.choose() {
+            match self.choose(error_ratio) {
+                Ok(Some(m)) if self.misaligned(profiles, query_rows, i, m.train) => {
+                    stats.misaligned += 1;
+                }
                 Ok(Some(m)) => {
                     let m = Match { query: i, ..m };
                     match self.owner[m.train] {
@@ -215,22 +315,53 @@ impl L1Matcher {
         }
 
         self.tentative.sort_unstable_by_key(|m| m.query);
-        stats.outliers = self.filter.retain(case, &mut self.tentative, &self.first, &self.second);
+        if case == MatchCase::Stereo {
+            stats.inconsistent =
+                self.consistency
+                    .retain(&mut self.tentative, &self.first, &self.second);
+        }
+        if case == MatchCase::FrameToFrame || self.config.stereo.flow_filter {
+            stats.outliers =
+                self.filter
+                    .retain(case, &mut self.tentative, &self.first, &self.second);
+        }
         out.extend_from_slice(&self.tentative);
         stats.matches = out.len();
         stats
     }
 
+    /// Whether the image content of stereo candidate `j` sits farther from its line,
+    /// relative to query `i`'s, than the photometric check allows.
+    fn misaligned(
+        &self,
+        profiles: Option<(&SegmentProfiles, &SegmentProfiles)>,
+        query_rows: bool,
+        i: usize,
+        j: usize,
+    ) -> bool {
+        let limit = self.config.photometric.max_offset_px;
+        match profiles {
+            Some((a, b)) if query_rows && limit.is_finite() => a
+                .offset_px(i, b, j)
+                .is_some_and(|offset| !(offset.abs() <= limit)),
+            _ => false,
+        }
+    }
+
     /// Solves the current query's lasso and applies the ratio test.
     /// `Ok(None)`: no candidate or ambiguous.
-    fn choose(&mut self) -> Result<Option<Match>, Choice> {
+    fn choose(&mut self, error_ratio: f64) -> Result<Option<Match>, Choice> {
         if self.candidates.is_empty() {
             return Ok(None);
         }
         self.weights.clear();
         self.weights.resize(self.columns.len(), 0.0);
         let ideal = self.limits.weighted_ideal;
-        if self.solver.solve(&self.columns, &ideal, self.config.lambda, &mut self.weights).is_err() {
+        if self
+            .solver
+            .solve(&self.columns, &ideal, self.config.lambda, &mut self.weights)
+            .is_err()
+        {
             return Err(SolverFailed);
         }
         let (mut best, mut runner_up) = (None::<usize>, None::<usize>);
@@ -255,15 +386,23 @@ impl L1Matcher {
                 .filter(|(k, _)| *k != best)
                 .map(|(_, c)| c.error)
                 .fold(f64::INFINITY, f64::min),
-            SecondBest::SecondLassoWeight => runner_up.map_or(f64::INFINITY, |r| self.candidates[r].error),
+            SecondBest::SecondLassoWeight => {
+                runner_up.map_or(f64::INFINITY, |r| self.candidates[r].error)
+            }
         };
         // Two candidates with zero error are ambiguous, not a pass.
-        let distinct = second_error.is_infinite() || (second_error > 0.0 && best_error * self.config.error_ratio <= second_error);
+        let distinct = second_error.is_infinite()
+            || (second_error > 0.0 && best_error * error_ratio <= second_error);
         if !distinct {
             return Ok(None);
         }
         let l1: f64 = self.weights.iter().map(|w| w.abs()).sum();
-        Ok(Some(Match { query: 0, train: self.candidates[best].index, error: best_error, weight: self.weights[best] / l1 }))
+        Ok(Some(Match {
+            query: 0,
+            train: self.candidates[best].index,
+            error: best_error,
+            weight: self.weights[best] / l1,
+        }))
     }
 }
 

@@ -28,7 +28,11 @@ pub(crate) struct FlowFilter {
 
 impl FlowFilter {
     pub(crate) fn new(config: OutlierFilter) -> Self {
-        Self { config, angles: Vec::new(), scratch: Vec::new() }
+        Self {
+            config,
+            angles: Vec::new(),
+            scratch: Vec::new(),
+        }
     }
 
     /// Removes the outliers from `matches`; returns how many were removed.
@@ -52,11 +56,14 @@ impl FlowFilter {
             self.angles.push(angle);
         }
         self.scratch.clear();
-        self.scratch.extend(self.angles.iter().copied().filter(|a| !a.is_nan()));
+        self.scratch
+            .extend(self.angles.iter().copied().filter(|a| !a.is_nan()));
         if self.scratch.len() < self.config.min_matches.max(1) {
             return 0;
         }
-        let (sum_sin, sum_cos) = self.scratch.iter().fold((0.0, 0.0), |(s, c), a| (s + (2.0 * a).sin(), c + (2.0 * a).cos()));
+        let (sum_sin, sum_cos) = self.scratch.iter().fold((0.0, 0.0), |(s, c), a| {
+            (s + (2.0 * a).sin(), c + (2.0 * a).cos())
+        });
         let mean = 0.5 * sum_sin.atan2(sum_cos);
         for a in self.scratch.iter_mut() {
             *a = fold(*a - mean);
@@ -65,7 +72,8 @@ impl FlowFilter {
         for a in self.scratch.iter_mut() {
             *a = (*a - centre).abs();
         }
-        let sigma = (MAD_TO_SIGMA * median(&mut self.scratch)).max(self.config.min_sigma_deg.to_radians());
+        let sigma =
+            (MAD_TO_SIGMA * median(&mut self.scratch)).max(self.config.min_sigma_deg.to_radians());
         let limit = self.config.sigmas * sigma;
         let before = matches.len();
         let mut k = 0;
@@ -105,7 +113,10 @@ fn median(values: &mut [f64]) -> f64 {
     if values.len() % 2 == 1 {
         upper
     } else {
-        let lower = values[..mid].iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        let lower = values[..mid]
+            .iter()
+            .copied()
+            .fold(f64::NEG_INFINITY, f64::max);
         0.5 * (lower + upper)
     }
 }
@@ -120,7 +131,12 @@ mod tests {
     }
 
     fn m(query: usize, train: usize) -> Match {
-        Match { query, train, error: 0.0, weight: 1.0 }
+        Match {
+            query,
+            train,
+            error: 0.0,
+            weight: 1.0,
+        }
     }
 
     #[test]
@@ -153,7 +169,10 @@ mod tests {
         second.push(features(400.0, 0.0, 400.0, 30.0));
         let mut matches: Vec<Match> = (0..12).map(|k| m(k, k)).collect();
         let mut filter = FlowFilter::new(OutlierFilter::default());
-        assert_eq!(filter.retain(MatchCase::Stereo, &mut matches, &first, &second), 1);
+        assert_eq!(
+            filter.retain(MatchCase::Stereo, &mut matches, &first, &second),
+            1
+        );
         assert!(matches.iter().all(|x| x.query != 10));
         assert_eq!(matches.len(), 11);
     }
@@ -174,17 +193,29 @@ mod tests {
         second.push(features(500.0, 10.0, 520.0, 25.0));
         let mut matches: Vec<Match> = (0..9).map(|k| m(k, k)).collect();
         let mut filter = FlowFilter::new(OutlierFilter::default());
-        assert_eq!(filter.retain(MatchCase::FrameToFrame, &mut matches, &first, &second), 1);
+        assert_eq!(
+            filter.retain(MatchCase::FrameToFrame, &mut matches, &first, &second),
+            1
+        );
         assert_eq!(matches.last().map(|x| x.query), Some(7));
     }
 
     #[test]
     fn too_few_flows_are_left_alone() {
-        let first = vec![features(0.0, 0.0, 0.0, 10.0), features(50.0, 0.0, 50.0, 10.0)];
-        let second = vec![features(-10.0, 0.0, -10.0, 10.0), features(40.0, 30.0, 40.0, 40.0)];
+        let first = vec![
+            features(0.0, 0.0, 0.0, 10.0),
+            features(50.0, 0.0, 50.0, 10.0),
+        ];
+        let second = vec![
+            features(-10.0, 0.0, -10.0, 10.0),
+            features(40.0, 30.0, 40.0, 40.0),
+        ];
         let mut matches = vec![m(0, 0), m(1, 1)];
         let mut filter = FlowFilter::new(OutlierFilter::default());
-        assert_eq!(filter.retain(MatchCase::Stereo, &mut matches, &first, &second), 0);
+        assert_eq!(
+            filter.retain(MatchCase::Stereo, &mut matches, &first, &second),
+            0
+        );
         assert_eq!(matches.len(), 2);
     }
 }

@@ -27,9 +27,11 @@ fn bench_solve(c: &mut Criterion) {
         let columns = matcher_like(n);
         let mut solver = Homotopy::<4>::new();
         let mut w = vec![0.0; n];
-        group.bench_with_input(BenchmarkId::from_parameter(n), &columns, |bench, columns| {
-            bench.iter(|| solver.solve(black_box(columns), &b, 0.1, &mut w))
-        });
+        group.bench_with_input(
+            BenchmarkId::from_parameter(n),
+            &columns,
+            |bench, columns| bench.iter(|| solver.solve(black_box(columns), &b, 0.1, &mut w)),
+        );
     }
     group.finish();
 }

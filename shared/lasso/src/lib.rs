@@ -120,7 +120,11 @@ enum Event {
 impl<const R: usize> Homotopy<R> {
     /// A solver with empty scratch buffers.
     pub fn new() -> Self {
-        Self { correlation: Vec::new(), rate: Vec::new(), dependent: Vec::new() }
+        Self {
+            correlation: Vec::new(),
+            rate: Vec::new(),
+            dependent: Vec::new(),
+        }
     }
 
     /// Solves `min λ‖ω‖₁ + ½‖Aω − b‖²` for `A = [columns…]`, writing ω into `weights`
@@ -136,12 +140,18 @@ impl<const R: usize> Homotopy<R> {
             return Err(LassoError::InvalidLambda(lambda));
         }
         if weights.len() != columns.len() {
-            return Err(LassoError::LengthMismatch { columns: columns.len(), weights: weights.len() });
+            return Err(LassoError::LengthMismatch {
+                columns: columns.len(),
+                weights: weights.len(),
+            });
         }
         if !b.iter().all(|v| v.is_finite()) {
             return Err(LassoError::NonFinite { column: None });
         }
-        if let Some(bad) = columns.iter().position(|c| !c.iter().all(|v| v.is_finite())) {
+        if let Some(bad) = columns
+            .iter()
+            .position(|c| !c.iter().all(|v| v.is_finite()))
+        {
             return Err(LassoError::NonFinite { column: Some(bad) });
         }
         weights.fill(0.0);
@@ -157,7 +167,11 @@ impl<const R: usize> Homotopy<R> {
         if level <= lambda {
             return Ok(SolveStats::default());
         }
-        let mut active = ActiveSet::<R> { index: [0; R], sign: [0.0; R], len: 0 };
+        let mut active = ActiveSet::<R> {
+            index: [0; R],
+            sign: [0.0; R],
+            len: 0,
+        };
         active.push(first, self.correlation[first].signum());
         let mut just_left: Option<usize> = None;
         let max_steps = STEPS_PER_ROW * R.max(1);
@@ -184,7 +198,8 @@ impl<const R: usize> Homotopy<R> {
                 }
             }
             self.rate.clear();
-            self.rate.extend(columns.iter().map(|column| dot(column, &fit_rate)));
+            self.rate
+                .extend(columns.iter().map(|column| dot(column, &fit_rate)));
             for (j, (&a, &c)) in self.rate.iter().zip(&self.correlation).enumerate() {
                 if active.contains(j) || self.dependent.contains(&j) {
                     continue;
@@ -220,7 +235,12 @@ impl<const R: usize> Homotopy<R> {
             just_left = None;
 
             match event {
-                Event::Target => return Ok(SolveStats { steps: step, active: active.len }),
+                Event::Target => {
+                    return Ok(SolveStats {
+                        steps: step,
+                        active: active.len,
+                    });
+                }
                 Event::Leave(slot) => {
                     let j = active.index[slot];
                     weights[j] = 0.0;
@@ -242,11 +262,20 @@ impl<const R: usize> Homotopy<R> {
                         level = c;
                         active.push(j, self.correlation[j].signum());
                     }
-                    _ => return Ok(SolveStats { steps: step, active: 0 }),
+                    _ => {
+                        return Ok(SolveStats {
+                            steps: step,
+                            active: 0,
+                        });
+                    }
                 }
             }
         }
-        Err(LassoError::StepLimit { steps: max_steps, reached: level, target: lambda })
+        Err(LassoError::StepLimit {
+            steps: max_steps,
+            reached: level,
+            target: lambda,
+        })
     }
 }
 

@@ -19,12 +19,21 @@ fn correlations<const R: usize>(columns: &[[f64; R]], b: &[f64; R], w: &[f64]) -
 
 /// Largest violation of the KKT conditions: |c_j| ≤ λ for all j, c_j = λ·sign(ω_j) where
 /// ω_j ≠ 0.
-fn kkt_violation<const R: usize>(columns: &[[f64; R]], b: &[f64; R], lambda: f64, w: &[f64]) -> f64 {
+fn kkt_violation<const R: usize>(
+    columns: &[[f64; R]],
+    b: &[f64; R],
+    lambda: f64,
+    w: &[f64],
+) -> f64 {
     correlations(columns, b, w)
         .iter()
         .zip(w)
         .map(|(c, wj)| {
-            if *wj == 0.0 { (c.abs() - lambda).max(0.0) } else { (c - lambda * wj.signum()).abs() }
+            if *wj == 0.0 {
+                (c.abs() - lambda).max(0.0)
+            } else {
+                (c - lambda * wj.signum()).abs()
+            }
         })
         .fold(0.0, f64::max)
 }
@@ -68,14 +77,18 @@ fn coordinate_descent<const R: usize>(columns: &[[f64; R]], b: &[f64; R], lambda
 fn random_problem(seed: u64, n: usize, nonnegative: bool) -> (Vec<[f64; 4]>, [f64; 4]) {
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let low = if nonnegative { 0.0 } else { -2.0 };
-    let columns = (0..n).map(|_| std::array::from_fn(|_| rng.random_range(low..2.0))).collect();
+    let columns = (0..n)
+        .map(|_| std::array::from_fn(|_| rng.random_range(low..2.0)))
+        .collect();
     let b = std::array::from_fn(|_| rng.random_range(low..2.0));
     (columns, b)
 }
 
 fn solve4(columns: &[[f64; 4]], b: &[f64; 4], lambda: f64) -> (Vec<f64>, SolveStats) {
     let mut w = vec![f64::NAN; columns.len()];
-    let stats = Homotopy::<4>::new().solve(columns, b, lambda, &mut w).unwrap();
+    let stats = Homotopy::<4>::new()
+        .solve(columns, b, lambda, &mut w)
+        .unwrap();
     (w, stats)
 }
 
@@ -140,13 +153,20 @@ fn lambda_above_the_largest_correlation_gives_zero() {
     assert_eq!(w, vec![0.0, 0.0]);
     assert_eq!(stats.active, 0);
     let (w, _) = solve4(&columns, &b, 1.5);
-    assert!(w[1] > 0.0 && w[0] == 0.0, "only the most correlated column is active: {w:?}");
+    assert!(
+        w[1] > 0.0 && w[0] == 0.0,
+        "only the most correlated column is active: {w:?}"
+    );
 }
 
 #[test]
 fn orthonormal_columns_give_soft_thresholded_weights() {
     // With orthonormal columns the lasso is separable: ω_j = soft(c_j, λ).
-    let columns = [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0]];
+    let columns = [
+        [1.0, 0.0, 0.0, 0.0],
+        [0.0, 1.0, 0.0, 0.0],
+        [0.0, 0.0, 1.0, 0.0],
+    ];
     let b = [3.0, -0.5, 1.0, 7.0];
     let (w, _) = solve4(&columns, &b, 0.8);
     let expected = [2.2, 0.0, 0.2];
@@ -181,14 +201,25 @@ fn bad_input_is_refused_with_the_culprit() {
     let good = [[1.0, 0.0, 0.0, 0.0]];
     let b = [1.0, 0.0, 0.0, 0.0];
     let mut w = [0.0];
-    assert!(matches!(solver.solve(&good, &b, f64::NAN, &mut w), Err(LassoError::InvalidLambda(v)) if v.is_nan()));
-    assert!(matches!(solver.solve(&good, &b, -1.0, &mut w), Err(LassoError::InvalidLambda(_))));
+    assert!(
+        matches!(solver.solve(&good, &b, f64::NAN, &mut w), Err(LassoError::InvalidLambda(v)) if v.is_nan())
+    );
+    assert!(matches!(
+        solver.solve(&good, &b, -1.0, &mut w),
+        Err(LassoError::InvalidLambda(_))
+    ));
     assert_eq!(
         solver.solve(&good, &b, 0.1, &mut [0.0, 0.0]),
-        Err(LassoError::LengthMismatch { columns: 1, weights: 2 })
+        Err(LassoError::LengthMismatch {
+            columns: 1,
+            weights: 2
+        })
     );
     let bad = [[1.0, 0.0, 0.0, 0.0], [0.0, f64::INFINITY, 0.0, 0.0]];
-    assert_eq!(solver.solve(&bad, &b, 0.1, &mut [0.0, 0.0]), Err(LassoError::NonFinite { column: Some(1) }));
+    assert_eq!(
+        solver.solve(&bad, &b, 0.1, &mut [0.0, 0.0]),
+        Err(LassoError::NonFinite { column: Some(1) })
+    );
     assert_eq!(
         solver.solve(&good, &[f64::NAN, 0.0, 0.0, 0.0], 0.1, &mut w),
         Err(LassoError::NonFinite { column: None })
@@ -205,7 +236,6 @@ fn solver_is_reusable_across_problem_sizes() {
         assert!(kkt_violation(&columns, &b, 0.05, &w) <= KKT_TOL);
     }
 }
-
 
 #[test]
 fn a_column_that_left_can_rejoin_with_the_opposite_sign() {

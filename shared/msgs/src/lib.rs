@@ -26,7 +26,12 @@ pub enum StageKind {
 
 impl StageKind {
     /// The four processing stages, upstream first.
-    pub const PROCESSING: [StageKind; 4] = [StageKind::FrameSource, StageKind::LineDetector, StageKind::Matcher, StageKind::PoseEstimator];
+    pub const PROCESSING: [StageKind; 4] = [
+        StageKind::FrameSource,
+        StageKind::LineDetector,
+        StageKind::Matcher,
+        StageKind::PoseEstimator,
+    ];
 
     /// The stage's name: also its binary's suffix (`linetrack-<name>`) and its config key.
     pub fn name(self) -> &'static str {
@@ -46,7 +51,15 @@ impl StageKind {
 
     /// The stage with this wire code.
     pub fn from_code(code: u32) -> Option<Self> {
-        [Self::FrameSource, Self::LineDetector, Self::Matcher, Self::PoseEstimator, Self::Supervisor].get(code as usize).copied()
+        [
+            Self::FrameSource,
+            Self::LineDetector,
+            Self::Matcher,
+            Self::PoseEstimator,
+            Self::Supervisor,
+        ]
+        .get(code as usize)
+        .copied()
     }
 
     /// The wire code.
@@ -80,7 +93,14 @@ pub enum Topic {
 
 impl Topic {
     /// Every topic.
-    pub const ALL: [Topic; 6] = [Topic::Frames, Topic::Segments, Topic::Tracks, Topic::Poses, Topic::Status, Topic::Control];
+    pub const ALL: [Topic; 6] = [
+        Topic::Frames,
+        Topic::Segments,
+        Topic::Tracks,
+        Topic::Poses,
+        Topic::Status,
+        Topic::Control,
+    ];
 
     /// Short name.
     pub fn name(self) -> &'static str {
@@ -103,7 +123,13 @@ impl Topic {
             Topic::Tracks => &[PoseEstimator],
             Topic::Poses => &[Supervisor],
             Topic::Status => &[Supervisor],
-            Topic::Control => &[FrameSource, LineDetector, Matcher, PoseEstimator, Supervisor],
+            Topic::Control => &[
+                FrameSource,
+                LineDetector,
+                Matcher,
+                PoseEstimator,
+                Supervisor,
+            ],
         }
     }
 
@@ -161,7 +187,15 @@ pub enum FrameStatus {
 impl FrameStatus {
     /// The status with this wire code.
     pub fn from_code(code: u32) -> Option<Self> {
-        [Self::Ok, Self::Corrupt, Self::DroppedLate, Self::StageError, Self::DroppedBehind].get(code as usize).copied()
+        [
+            Self::Ok,
+            Self::Corrupt,
+            Self::DroppedLate,
+            Self::StageError,
+            Self::DroppedBehind,
+        ]
+        .get(code as usize)
+        .copied()
     }
 
     /// Short name used in run records.
@@ -346,7 +380,15 @@ pub enum StatusKind {
 impl StatusKind {
     /// The kind with this wire code.
     pub fn from_code(code: u32) -> Option<Self> {
-        [Self::Heartbeat, Self::Ready, Self::HandedOver, Self::SourceFinished, Self::Exiting].get(code as usize).copied()
+        [
+            Self::Heartbeat,
+            Self::Ready,
+            Self::HandedOver,
+            Self::SourceFinished,
+            Self::Exiting,
+        ]
+        .get(code as usize)
+        .copied()
     }
 }
 
@@ -389,7 +431,15 @@ pub enum Command {
 impl Command {
     /// The command with this wire code.
     pub fn from_code(code: u32) -> Option<Self> {
-        [Self::SetMatcherMode, Self::HandOver, Self::TakeOver, Self::SwapDetector, Self::Shutdown].get(code as usize).copied()
+        [
+            Self::SetMatcherMode,
+            Self::HandOver,
+            Self::TakeOver,
+            Self::SwapDetector,
+            Self::Shutdown,
+        ]
+        .get(code as usize)
+        .copied()
     }
 }
 
@@ -418,7 +468,10 @@ impl Control {
 
 /// Wall-clock time as UNIX-epoch nanoseconds (0 if the clock is before 1970).
 pub fn now_ns() -> u64 {
-    std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map(|d| d.as_nanos() as u64).unwrap_or(0)
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map(|d| d.as_nanos() as u64)
+        .unwrap_or(0)
 }
 
 #[cfg(test)]
@@ -427,30 +480,60 @@ mod tests {
 
     #[test]
     fn codes_round_trip() {
-        for stage in [StageKind::FrameSource, StageKind::LineDetector, StageKind::Matcher, StageKind::PoseEstimator, StageKind::Supervisor] {
+        for stage in [
+            StageKind::FrameSource,
+            StageKind::LineDetector,
+            StageKind::Matcher,
+            StageKind::PoseEstimator,
+            StageKind::Supervisor,
+        ] {
             assert_eq!(StageKind::from_code(stage.code()), Some(stage));
         }
         assert_eq!(StageKind::from_code(99), None);
-        for status in [FrameStatus::Ok, FrameStatus::Corrupt, FrameStatus::DroppedLate, FrameStatus::StageError, FrameStatus::DroppedBehind] {
+        for status in [
+            FrameStatus::Ok,
+            FrameStatus::Corrupt,
+            FrameStatus::DroppedLate,
+            FrameStatus::StageError,
+            FrameStatus::DroppedBehind,
+        ] {
             assert_eq!(FrameStatus::from_code(status as u32), Some(status));
         }
-        assert_eq!(Command::from_code(Command::Shutdown as u32), Some(Command::Shutdown));
-        assert_eq!(StatusKind::from_code(StatusKind::Exiting as u32), Some(StatusKind::Exiting));
+        assert_eq!(
+            Command::from_code(Command::Shutdown as u32),
+            Some(Command::Shutdown)
+        );
+        assert_eq!(
+            StatusKind::from_code(StatusKind::Exiting as u32),
+            Some(StatusKind::Exiting)
+        );
     }
 
     #[test]
     fn every_consumer_is_woken_by_name_in_its_run() {
         assert_eq!(Topic::Frames.service_name("r1"), "linetrack/r1/frames");
-        assert_eq!(wake_service_name("r1", StageKind::Matcher), "linetrack/r1/wake/matcher");
+        assert_eq!(
+            wake_service_name("r1", StageKind::Matcher),
+            "linetrack/r1/wake/matcher"
+        );
         // Every processing stage after the source consumes something.
         for stage in &StageKind::PROCESSING[1..] {
-            assert!(Topic::ALL.iter().any(|t| t.consumers().contains(stage)), "{stage} consumes nothing");
+            assert!(
+                Topic::ALL.iter().any(|t| t.consumers().contains(stage)),
+                "{stage} consumes nothing"
+            );
         }
     }
 
     #[test]
     fn control_addressing() {
-        let c = Control { command: Command::HandOver as u32, target_pid: 42, target_stage: StageKind::LineDetector.code(), value: 0, frame_id: 0 };
+        let c = Control {
+            command: Command::HandOver as u32,
+            target_pid: 42,
+            target_stage: StageKind::LineDetector.code(),
+            value: 0,
+            frame_id: 0,
+        };
         assert!(c.is_for(StageKind::LineDetector, 42));
         assert!(!c.is_for(StageKind::LineDetector, 43));
         assert!(!c.is_for(StageKind::Matcher, 42));

@@ -17,12 +17,13 @@ pub mod metrics;
 
 use linetrack_geometry::{MatchCase, Point, Segment, StereoRig};
 use linetrack_stereo_vo::{
-    LineObservation, MotionConfig, PointObservation, TriangulationLimits, disparity_weight, estimate_motion, triangulate_point,
-    triangulate_segment,
+    LineObservation, MotionConfig, PointObservation, TriangulationLimits, disparity_weight,
+    estimate_motion, triangulate_point, triangulate_segment,
 };
 use linetrack_vision::{
-    AppearanceGates, DetectorKind, FeatureMatch, FrontendConfig, GrayImage, HammingMatcher, LineDetector, LineFeatures, MatcherKind,
-    OrbExtractor, PointFeatures, SegmentMatcher, VisionError, create_detector, create_segment_matcher, match_points,
+    AppearanceGates, DetectorKind, FeatureMatch, FrontendConfig, GrayImage, HammingMatcher,
+    LineDetector, LineFeatures, MatcherKind, OrbExtractor, PointFeatures, SegmentMatcher,
+    VisionError, create_detector, create_segment_matcher, match_points,
 };
 use nalgebra::{Isometry3, Point3};
 use serde::{Deserialize, Serialize};
@@ -181,7 +182,12 @@ impl MotionTracker {
     /// Tracks one frame: `lines` matched, `stats` already holding the front end's counts and
     /// timings. ORB points come from `images` (left, right) when the config uses points and
     /// the images are given; without them the frame is tracked on its lines.
-    pub fn update(&mut self, images: Option<(&GrayImage, &GrayImage)>, lines: MatchedLines<'_>, mut stats: FrameStats) -> Result<FrameResult, OdometryError> {
+    pub fn update(
+        &mut self,
+        images: Option<(&GrayImage, &GrayImage)>,
+        lines: MatchedLines<'_>,
+        mut stats: FrameStats,
+    ) -> Result<FrameResult, OdometryError> {
         let limits = TriangulationLimits {
             min_sin_from_horizontal: self.config.min_line_angle_deg.to_radians().sin(),
             ..TriangulationLimits::default()
@@ -204,41 +210,79 @@ impl MotionTracker {
         let mut point_positions = vec![None; points_l.points.len()];
         if use_points {
             let gates = &self.config.frontend.appearance_gates;
-            match_points(&mut self.hamming, MatchCase::Stereo, &points_l, &points_r, gates, self.config.frontend.orb.min_distance_ratio, &mut matches);
+            match_points(
+                &mut self.hamming,
+                MatchCase::Stereo,
+                &points_l,
+                &points_r,
+                gates,
+                self.config.frontend.orb.min_distance_ratio,
+                &mut matches,
+            );
             for m in &matches {
-                if let Some(t) = triangulate_point(&self.rig, points_l.points[m.query], points_r.points[m.train], &limits) {
+                if let Some(t) = triangulate_point(
+                    &self.rig,
+                    points_l.points[m.query],
+                    points_r.points[m.train],
+                    &limits,
+                ) {
                     point_positions[m.query] = Some((t.position, disparity_weight(t.disparity_px)));
                 }
             }
         }
         let mut line_positions = vec![None; lines.left.len()];
         for m in lines.stereo {
-            let (Some(l), Some(r)) = (lines.left.get(m.query), lines.right.get(m.train)) else { continue };
+            let (Some(l), Some(r)) = (lines.left.get(m.query), lines.right.get(m.train)) else {
+                continue;
+            };
             if let Some((a, b)) = triangulate_segment(&self.rig, l, r, &limits) {
-                let weight = 0.5 * (disparity_weight(a.disparity_px) + disparity_weight(b.disparity_px));
+                let weight =
+                    0.5 * (disparity_weight(a.disparity_px) + disparity_weight(b.disparity_px));
                 line_positions[m.query] = Some(([a.position, b.position], weight));
             }
         }
-        stats.triangulated = [point_positions.iter().flatten().count(), line_positions.iter().flatten().count()];
+        stats.triangulated = [
+            point_positions.iter().flatten().count(),
+            line_positions.iter().flatten().count(),
+        ];
         stats.ms[2] += since(started);
 
-        let current = Reference { points: points_l, point_positions, line_positions };
+        let current = Reference {
+            points: points_l,
+            point_positions,
+            line_positions,
+        };
         let (Some(previous), Some(tracked)) = (self.reference.take(), lines.tracked) else {
             // First frame, or not matched against the previous one: start again from here.
             self.reference = Some(current);
-            return Ok(FrameResult { pose: self.pose, lost: false, reason: None, stats });
+            return Ok(FrameResult {
+                pose: self.pose,
+                lost: false,
+                reason: None,
+                stats,
+            });
         };
 
         // Previous 3-D features seen again now.
         let started = Instant::now();
-        let point_obs = if use_points { self.point_observations(&previous, &current, &mut matches) } else { Vec::new() };
+        let point_obs = if use_points {
+            self.point_observations(&previous, &current, &mut matches)
+        } else {
+            Vec::new()
+        };
         let line_obs = line_observations(&previous, lines.left, tracked);
         self.reference = Some(current);
         stats.observations = [point_obs.len(), line_obs.len()];
         stats.ms[3] += since(started);
 
         let started = Instant::now();
-        let estimate = estimate_motion(&self.rig, &point_obs, &line_obs, &self.last_motion, &self.config.motion);
+        let estimate = estimate_motion(
+            &self.rig,
+            &point_obs,
+            &line_obs,
+            &self.last_motion,
+            &self.config.motion,
+        );
         stats.ms[4] = since(started);
         match estimate {
             Ok(e) => {
@@ -247,26 +291,56 @@ impl MotionTracker {
                 stats.inliers = [e.inlier_points, e.inlier_lines];
                 stats.iterations = e.iterations;
                 stats.rms_px = e.rms_px;
-                Ok(FrameResult { pose: self.pose, lost: false, reason: None, stats })
+                Ok(FrameResult {
+                    pose: self.pose,
+                    lost: false,
+                    reason: None,
+                    stats,
+                })
             }
             Err(why) => {
                 // Predict with the last motion; this frame is the new reference.
                 self.pose *= self.last_motion.inverse();
-                Ok(FrameResult { pose: self.pose, lost: true, reason: Some(why.to_string()), stats })
+                Ok(FrameResult {
+                    pose: self.pose,
+                    lost: true,
+                    reason: Some(why.to_string()),
+                    stats,
+                })
             }
         }
     }
 
     /// Observations of `previous`'s triangulated points in `current`'s left image.
-    fn point_observations(&mut self, previous: &Reference, current: &Reference, scratch: &mut Vec<FeatureMatch>) -> Vec<PointObservation> {
+    fn point_observations(
+        &mut self,
+        previous: &Reference,
+        current: &Reference,
+        scratch: &mut Vec<FeatureMatch>,
+    ) -> Vec<PointObservation> {
         let mut points = Vec::new();
         if self.config.features == Features::PointsAndLines {
-            let gates = AppearanceGates { max_displacement_px: self.config.max_displacement_px, ..self.config.frontend.appearance_gates };
-            match_points(&mut self.hamming, MatchCase::FrameToFrame, &previous.points, &current.points, &gates, self.config.frontend.orb.min_distance_ratio, scratch);
+            let gates = AppearanceGates {
+                max_displacement_px: self.config.max_displacement_px,
+                ..self.config.frontend.appearance_gates
+            };
+            match_points(
+                &mut self.hamming,
+                MatchCase::FrameToFrame,
+                &previous.points,
+                &current.points,
+                &gates,
+                self.config.frontend.orb.min_distance_ratio,
+                scratch,
+            );
             for m in scratch.iter() {
                 if let Some(&Some((position, weight))) = previous.point_positions.get(m.query) {
                     let pixel: Point = current.points.points[m.train];
-                    points.push(PointObservation { position, pixel, weight });
+                    points.push(PointObservation {
+                        position,
+                        pixel,
+                        weight,
+                    });
                 }
             }
         }
@@ -275,10 +349,18 @@ impl MotionTracker {
 }
 
 /// Observations of `previous`'s triangulated segments among this frame's `left` segments.
-fn line_observations(previous: &Reference, left: &[Segment], tracked: &[FeatureMatch]) -> Vec<LineObservation> {
+fn line_observations(
+    previous: &Reference,
+    left: &[Segment],
+    tracked: &[FeatureMatch],
+) -> Vec<LineObservation> {
     let mut lines = Vec::new();
     for m in tracked {
-        let (Some(&Some((endpoints, weight))), Some(seen)) = (previous.line_positions.get(m.query), left.get(m.train)) else { continue };
+        let (Some(&Some((endpoints, weight))), Some(seen)) =
+            (previous.line_positions.get(m.query), left.get(m.train))
+        else {
+            continue;
+        };
         if let Some(obs) = LineObservation::new(endpoints, seen, weight) {
             lines.push(obs);
         }
@@ -318,7 +400,11 @@ impl Odometry {
     }
 
     /// Tracks one stereo frame (rectified, the rig's size).
-    pub fn track(&mut self, left: &GrayImage, right: &GrayImage) -> Result<FrameResult, OdometryError> {
+    pub fn track(
+        &mut self,
+        left: &GrayImage,
+        right: &GrayImage,
+    ) -> Result<FrameResult, OdometryError> {
         let mut stats = FrameStats::default();
         let started = Instant::now();
         let (mut lines_l, mut lines_r) = (LineFeatures::default(), LineFeatures::default());
@@ -333,12 +419,14 @@ impl Odometry {
 
         let started = Instant::now();
         let mut stereo = Vec::new();
-        self.matcher.match_lines(MatchCase::Stereo, &lines_l, &lines_r, &mut stereo);
+        self.matcher
+            .match_lines(MatchCase::Stereo, &lines_l, &lines_r, &mut stereo);
         stats.ms[2] = since(started);
         let started = Instant::now();
         let mut tracked = Vec::new();
         if let Some(previous) = &self.previous_lines {
-            self.matcher.match_lines(MatchCase::FrameToFrame, previous, &lines_l, &mut tracked);
+            self.matcher
+                .match_lines(MatchCase::FrameToFrame, previous, &lines_l, &mut tracked);
         }
         stats.ms[3] = since(started);
         let lines = MatchedLines {

@@ -14,7 +14,11 @@
 use nalgebra::Isometry3;
 
 /// Translational RPE RMSE over pairs `step` frames apart; `None` without such pairs.
-pub fn rpe_translation_rmse(estimate: &[Isometry3<f64>], truth: &[Isometry3<f64>], step: usize) -> Option<f64> {
+pub fn rpe_translation_rmse(
+    estimate: &[Isometry3<f64>],
+    truth: &[Isometry3<f64>],
+    step: usize,
+) -> Option<f64> {
     let n = estimate.len().min(truth.len());
     if step == 0 || n <= step {
         return None;
@@ -48,7 +52,10 @@ pub fn ate_rmse(estimate: &[Isometry3<f64>], truth: &[Isometry3<f64>]) -> Option
 /// Final position error over true path length, percent; `None` for a path under 1 cm.
 pub fn drift_percent(estimate: &[Isometry3<f64>], truth: &[Isometry3<f64>]) -> Option<f64> {
     let n = estimate.len().min(truth.len());
-    let path: f64 = truth[..n].windows(2).map(|w| (w[1].translation.vector - w[0].translation.vector).norm()).sum();
+    let path: f64 = truth[..n]
+        .windows(2)
+        .map(|w| (w[1].translation.vector - w[0].translation.vector).norm())
+        .sum();
     if n < 2 || path < 0.01 {
         return None;
     }
@@ -63,18 +70,26 @@ mod tests {
     use nalgebra::{Translation3, UnitQuaternion};
 
     fn walk(step: [f64; 3], turn: f64, n: usize) -> Vec<Isometry3<f64>> {
-        let delta = Isometry3::from_parts(Translation3::new(step[0], step[1], step[2]), UnitQuaternion::from_euler_angles(0.0, turn, 0.0));
-        (0..n).scan(Isometry3::identity(), |pose, _| {
-            let current = *pose;
-            *pose *= delta;
-            Some(current)
-        }).collect()
+        let delta = Isometry3::from_parts(
+            Translation3::new(step[0], step[1], step[2]),
+            UnitQuaternion::from_euler_angles(0.0, turn, 0.0),
+        );
+        (0..n)
+            .scan(Isometry3::identity(), |pose, _| {
+                let current = *pose;
+                *pose *= delta;
+                Some(current)
+            })
+            .collect()
     }
 
     #[test]
     fn identical_trajectories_have_no_error_in_any_world_frame() {
         let truth = walk([0.1, 0.0, 0.05], 0.02, 30);
-        let offset = Isometry3::from_parts(Translation3::new(5.0, -2.0, 1.0), UnitQuaternion::from_euler_angles(0.3, 0.1, -0.7));
+        let offset = Isometry3::from_parts(
+            Translation3::new(5.0, -2.0, 1.0),
+            UnitQuaternion::from_euler_angles(0.3, 0.1, -0.7),
+        );
         let estimate: Vec<_> = truth.iter().map(|p| offset * p).collect();
         assert!(rpe_translation_rmse(&estimate, &truth, 1).unwrap() < 1e-12);
         assert!(ate_rmse(&estimate, &truth).unwrap() < 1e-12);

@@ -21,10 +21,19 @@ fn run(blank: &[usize]) -> (Vec<Isometry3<f64>>, Vec<Isometry3<f64>>, Vec<bool>)
         let frame = renderer.render(k);
         let image = |pixels: &[u8], name: &str| {
             let black = vec![0u8; pixels.len()];
-            let pixels = if blank.contains(&k) { &black[..] } else { pixels };
+            let pixels = if blank.contains(&k) {
+                &black[..]
+            } else {
+                pixels
+            };
             GrayImage::from_pixels(frame.left.width, frame.left.height, pixels, name).unwrap()
         };
-        let result = vo.track(&image(&frame.left.pixels, "left"), &image(&frame.right.pixels, "right")).unwrap();
+        let result = vo
+            .track(
+                &image(&frame.left.pixels, "left"),
+                &image(&frame.right.pixels, "right"),
+            )
+            .unwrap();
         estimate.push(result.pose);
         truth.push(frame.world_from_left);
         lost.push(result.lost);
@@ -49,7 +58,12 @@ fn drift_on_a_generated_hand_held_sequence_stays_under_eight_percent() {
 fn blank_frames_are_reported_lost_and_tracking_resumes() {
     let (estimate, truth, lost) = run(&[12]);
     // Frame 12 has no features; frame 13's reference (frame 12) has none either.
-    let lost_frames: Vec<usize> = lost.iter().enumerate().filter(|(_, l)| **l).map(|(k, _)| k).collect();
+    let lost_frames: Vec<usize> = lost
+        .iter()
+        .enumerate()
+        .filter(|(_, l)| **l)
+        .map(|(k, _)| k)
+        .collect();
     assert_eq!(lost_frames, vec![12, 13]);
     // After the gap, frame-to-frame motion is right again (RPE over frames 14..).
     let rpe_after = metrics::rpe_translation_rmse(&estimate[14..], &truth[14..], 1).unwrap();

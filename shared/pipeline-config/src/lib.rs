@@ -63,7 +63,12 @@ pub struct SourceConfig {
 
 impl Default for SourceConfig {
     fn default() -> Self {
-        Self { sequence: PathBuf::from("out/sequences/pipeline"), pacing: Pacing::Realtime, rate_hz: 0.0, max_frames: 0 }
+        Self {
+            sequence: PathBuf::from("out/sequences/pipeline"),
+            pacing: Pacing::Realtime,
+            rate_hz: 0.0,
+            max_frames: 0,
+        }
     }
 }
 
@@ -141,7 +146,10 @@ impl MatcherConfig {
 
 impl Default for MatcherConfig {
     fn default() -> Self {
-        Self { mode: MatcherPolicy::Auto, fallback: FallbackConfig::default() }
+        Self {
+            mode: MatcherPolicy::Auto,
+            fallback: FallbackConfig::default(),
+        }
     }
 }
 
@@ -242,7 +250,10 @@ pub struct OutputConfig {
 
 impl Default for OutputConfig {
     fn default() -> Self {
-        Self { run_dir: PathBuf::from("out/runs/latest"), trace: true }
+        Self {
+            run_dir: PathBuf::from("out/runs/latest"),
+            trace: true,
+        }
     }
 }
 
@@ -284,20 +295,35 @@ impl Default for PipelineConfig {
 impl PipelineConfig {
     /// Parses and validates TOML text; `origin` names it in errors.
     pub fn from_toml_str(text: &str, origin: &str) -> Result<Self, ConfigError> {
-        let config: Self = toml::from_str(text).map_err(|e| ConfigError::Parse { origin: origin.to_string(), message: e.to_string() })?;
-        config.validate().map_err(|message| ConfigError::Invalid { origin: origin.to_string(), message })?;
+        let config: Self = toml::from_str(text).map_err(|e| ConfigError::Parse {
+            origin: origin.to_string(),
+            message: e.to_string(),
+        })?;
+        config.validate().map_err(|message| ConfigError::Invalid {
+            origin: origin.to_string(),
+            message,
+        })?;
         Ok(config)
     }
 
     /// Reads and validates a config file.
     pub fn from_file(path: &Path) -> Result<Self, ConfigError> {
-        let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Read { path: path.to_path_buf(), source })?;
+        let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Read {
+            path: path.to_path_buf(),
+            source,
+        })?;
         Self::from_toml_str(&text, &path.display().to_string())
     }
 
     /// The first out-of-range value, named by its key.
     pub fn validate(&self) -> Result<(), String> {
-        let positive = |key: &str, v: f64| if v.is_finite() && v > 0.0 { Ok(()) } else { Err(format!("{key} must be a positive number, got {v}")) };
+        let positive = |key: &str, v: f64| {
+            if v.is_finite() && v > 0.0 {
+                Ok(())
+            } else {
+                Err(format!("{key} must be a positive number, got {v}"))
+            }
+        };
         let b = &self.budget;
         positive("budget.end_to_end_ms", b.end_to_end_ms)?;
         positive("budget.frame_source_ms", b.frame_source_ms)?;
@@ -305,14 +331,23 @@ impl PipelineConfig {
         positive("budget.matcher_ms", b.matcher_ms)?;
         positive("budget.pose_estimator_ms", b.pose_estimator_ms)?;
         if !(self.source.rate_hz.is_finite() && self.source.rate_hz >= 0.0) {
-            return Err(format!("source.rate_hz must be >= 0 (0 = the sequence's rate), got {}", self.source.rate_hz));
+            return Err(format!(
+                "source.rate_hz must be >= 0 (0 = the sequence's rate), got {}",
+                self.source.rate_hz
+            ));
         }
         let f = &self.matcher.fallback;
         if !(0.0..=1.0).contains(&f.min_inlier_ratio) {
-            return Err(format!("matcher.fallback.min_inlier_ratio must be in [0, 1], got {}", f.min_inlier_ratio));
+            return Err(format!(
+                "matcher.fallback.min_inlier_ratio must be in [0, 1], got {}",
+                f.min_inlier_ratio
+            ));
         }
         if f.bad_frames == 0 || f.probe_every == 0 || f.recover_probes == 0 {
-            return Err("matcher.fallback.bad_frames, probe_every and recover_probes must be at least 1".to_string());
+            return Err(
+                "matcher.fallback.bad_frames, probe_every and recover_probes must be at least 1"
+                    .to_string(),
+            );
         }
         if f.recover_stereo_matches <= f.min_stereo_matches {
             return Err(format!(
@@ -328,15 +363,24 @@ impl PipelineConfig {
             ));
         }
         if s.restart_backoff_ms == 0 || s.restart_backoff_max_ms < s.restart_backoff_ms {
-            return Err("supervisor.restart_backoff_ms must be positive and at most restart_backoff_max_ms".to_string());
+            return Err(
+                "supervisor.restart_backoff_ms must be positive and at most restart_backoff_max_ms"
+                    .to_string(),
+            );
         }
-        self.odometry.frontend.validate().map_err(|e| format!("odometry.frontend: {e}"))?;
+        self.odometry
+            .frontend
+            .validate()
+            .map_err(|e| format!("odometry.frontend: {e}"))?;
         Ok(())
     }
 
     /// The odometry settings with the pipeline's detector applied.
     pub fn odometry_config(&self) -> OdometryConfig {
-        OdometryConfig { detector: self.detector, ..self.odometry.clone() }
+        OdometryConfig {
+            detector: self.detector,
+            ..self.odometry.clone()
+        }
     }
 }
 
@@ -353,19 +397,38 @@ mod tests {
 
     #[test]
     fn unknown_keys_and_bad_values_are_named() {
-        let err = PipelineConfig::from_toml_str("[budget]\nend_to_end_mz = 3\n", "x.toml").err().map(|e| e.to_string()).unwrap_or_default();
-        assert!(err.contains("x.toml") && err.contains("end_to_end_mz"), "{err}");
-        let err = PipelineConfig::from_toml_str("[budget]\nmatcher_ms = nan\n", "x.toml").err().map(|e| e.to_string()).unwrap_or_default();
+        let err = PipelineConfig::from_toml_str("[budget]\nend_to_end_mz = 3\n", "x.toml")
+            .err()
+            .map(|e| e.to_string())
+            .unwrap_or_default();
+        assert!(
+            err.contains("x.toml") && err.contains("end_to_end_mz"),
+            "{err}"
+        );
+        let err = PipelineConfig::from_toml_str("[budget]\nmatcher_ms = nan\n", "x.toml")
+            .err()
+            .map(|e| e.to_string())
+            .unwrap_or_default();
         assert!(err.contains("budget.matcher_ms"), "{err}");
-        let err = PipelineConfig::from_toml_str("[matcher.fallback]\nrecover_stereo_matches = 5\n", "x.toml").err().map(|e| e.to_string()).unwrap_or_default();
+        let err = PipelineConfig::from_toml_str(
+            "[matcher.fallback]\nrecover_stereo_matches = 5\n",
+            "x.toml",
+        )
+        .err()
+        .map(|e| e.to_string())
+        .unwrap_or_default();
         assert!(err.contains("hysteresis"), "{err}");
-        let err = PipelineConfig::from_toml_str("detector = \"sift\"\n", "x.toml").err().map(|e| e.to_string()).unwrap_or_default();
+        let err = PipelineConfig::from_toml_str("detector = \"sift\"\n", "x.toml")
+            .err()
+            .map(|e| e.to_string())
+            .unwrap_or_default();
         assert!(err.contains("sift"), "{err}");
     }
 
     #[test]
     fn odometry_follows_the_pipeline_detector() {
-        let config = PipelineConfig::from_toml_str("detector = \"fld\"\n", "x").unwrap_or_else(|e| panic!("{e}"));
+        let config = PipelineConfig::from_toml_str("detector = \"fld\"\n", "x")
+            .unwrap_or_else(|e| panic!("{e}"));
         assert_eq!(config.odometry_config().detector, DetectorKind::Fld);
     }
 }

@@ -108,7 +108,11 @@ fn clean(text: &str) -> String {
 }
 
 fn ms(v: f64) -> String {
-    if v.is_finite() { format!("{v:.3}") } else { String::new() }
+    if v.is_finite() {
+        format!("{v:.3}")
+    } else {
+        String::new()
+    }
 }
 
 /// Writes `frames.csv`.
@@ -134,7 +138,10 @@ pub fn write_frames(path: &Path, frames: &[FrameRecord]) -> Result<(), RecordErr
             u8::from(f.deadline_miss)
         );
     }
-    std::fs::write(path, out).map_err(|source| RecordError::Io { path: path.to_path_buf(), source })
+    std::fs::write(path, out).map_err(|source| RecordError::Io {
+        path: path.to_path_buf(),
+        source,
+    })
 }
 
 /// Writes `events.csv`.
@@ -143,17 +150,40 @@ pub fn write_events(path: &Path, events: &[EventRecord]) -> Result<(), RecordErr
     out.push('\n');
     for e in events {
         let frame = e.frame_id.map(|f| f.to_string()).unwrap_or_default();
-        let _ = writeln!(out, "{:.3},{},{},{frame},{}", e.time_s, clean(&e.kind), clean(&e.stage), clean(&e.detail));
+        let _ = writeln!(
+            out,
+            "{:.3},{},{},{frame},{}",
+            e.time_s,
+            clean(&e.kind),
+            clean(&e.stage),
+            clean(&e.detail)
+        );
     }
-    std::fs::write(path, out).map_err(|source| RecordError::Io { path: path.to_path_buf(), source })
+    std::fs::write(path, out).map_err(|source| RecordError::Io {
+        path: path.to_path_buf(),
+        source,
+    })
 }
 
-fn read_rows(path: &Path, header: &str, columns: usize) -> Result<Vec<(usize, Vec<String>)>, RecordError> {
-    let text = std::fs::read_to_string(path).map_err(|source| RecordError::Io { path: path.to_path_buf(), source })?;
+fn read_rows(
+    path: &Path,
+    header: &str,
+    columns: usize,
+) -> Result<Vec<(usize, Vec<String>)>, RecordError> {
+    let text = std::fs::read_to_string(path).map_err(|source| RecordError::Io {
+        path: path.to_path_buf(),
+        source,
+    })?;
     let mut lines = text.lines().enumerate();
     match lines.next() {
         Some((_, first)) if first.trim() == header => {}
-        _ => return Err(RecordError::Parse { path: path.to_path_buf(), line: 1, message: format!("expected the header {header:?}") }),
+        _ => {
+            return Err(RecordError::Parse {
+                path: path.to_path_buf(),
+                line: 1,
+                message: format!("expected the header {header:?}"),
+            });
+        }
     }
     let mut rows = Vec::new();
     for (i, line) in lines {
@@ -162,7 +192,11 @@ fn read_rows(path: &Path, header: &str, columns: usize) -> Result<Vec<(usize, Ve
         }
         let fields: Vec<String> = line.split(',').map(|s| s.trim().to_string()).collect();
         if fields.len() != columns {
-            return Err(RecordError::Parse { path: path.to_path_buf(), line: i + 1, message: format!("{} fields, expected {columns}", fields.len()) });
+            return Err(RecordError::Parse {
+                path: path.to_path_buf(),
+                line: i + 1,
+                message: format!("{} fields, expected {columns}", fields.len()),
+            });
         }
         rows.push((i + 1, fields));
     }
@@ -174,19 +208,31 @@ pub fn read_frames(path: &Path) -> Result<Vec<FrameRecord>, RecordError> {
     let rows = read_rows(path, FRAME_HEADER, 13)?;
     let mut frames = Vec::with_capacity(rows.len());
     for (line, f) in rows {
-        let bad = |what: &str, v: &str| RecordError::Parse { path: path.to_path_buf(), line, message: format!("{what}: {v:?} is not a number") };
+        let bad = |what: &str, v: &str| RecordError::Parse {
+            path: path.to_path_buf(),
+            line,
+            message: format!("{what}: {v:?} is not a number"),
+        };
         let float = |v: &str, what: &str| -> Result<f64, RecordError> {
             if v.is_empty() {
                 return Ok(f64::NAN);
             }
-            v.parse::<f64>().ok().filter(|x| x.is_finite()).ok_or_else(|| bad(what, v))
+            v.parse::<f64>()
+                .ok()
+                .filter(|x| x.is_finite())
+                .ok_or_else(|| bad(what, v))
         };
         let int = |v: &str, what: &str| v.parse::<u32>().map_err(|_| bad(what, v));
         frames.push(FrameRecord {
             frame_id: f[0].parse().map_err(|_| bad("frame_id", &f[0]))?,
             outcome: f[1].clone(),
             dropped_by: f[2].clone(),
-            stage_ms: [float(&f[3], STAGES[0])?, float(&f[4], STAGES[1])?, float(&f[5], STAGES[2])?, float(&f[6], STAGES[3])?],
+            stage_ms: [
+                float(&f[3], STAGES[0])?,
+                float(&f[4], STAGES[1])?,
+                float(&f[5], STAGES[2])?,
+                float(&f[6], STAGES[3])?,
+            ],
             end_to_end_ms: float(&f[7], "end_to_end_ms")?,
             matcher: f[8].clone(),
             detector: f[9].clone(),
@@ -207,12 +253,25 @@ pub fn read_events(path: &Path) -> Result<Vec<EventRecord>, RecordError> {
     let rows = read_rows(path, EVENT_HEADER, 5)?;
     rows.into_iter()
         .map(|(line, f)| {
-            let bad = |message: String| RecordError::Parse { path: path.to_path_buf(), line, message };
+            let bad = |message: String| RecordError::Parse {
+                path: path.to_path_buf(),
+                line,
+                message,
+            };
             Ok(EventRecord {
-                time_s: f[0].parse().map_err(|_| bad(format!("time_s {:?}", f[0])))?,
+                time_s: f[0]
+                    .parse()
+                    .map_err(|_| bad(format!("time_s {:?}", f[0])))?,
                 kind: f[1].clone(),
                 stage: f[2].clone(),
-                frame_id: if f[3].is_empty() { None } else { Some(f[3].parse().map_err(|_| bad(format!("frame_id {:?}", f[3])))?) },
+                frame_id: if f[3].is_empty() {
+                    None
+                } else {
+                    Some(
+                        f[3].parse()
+                            .map_err(|_| bad(format!("frame_id {:?}", f[3])))?,
+                    )
+                },
                 detail: f[4].clone(),
             })
         })
@@ -242,8 +301,15 @@ impl Percentiles {
             return None;
         }
         v.sort_by(f64::total_cmp);
-        let rank = |p: f64| v[(((p / 100.0) * v.len() as f64).ceil() as usize).clamp(1, v.len()) - 1];
-        Some(Self { count: v.len(), p50: rank(50.0), p90: rank(90.0), p99: rank(99.0), max: v[v.len() - 1] })
+        let rank =
+            |p: f64| v[(((p / 100.0) * v.len() as f64).ceil() as usize).clamp(1, v.len()) - 1];
+        Some(Self {
+            count: v.len(),
+            p50: rank(50.0),
+            p90: rank(90.0),
+            p99: rank(99.0),
+            max: v[v.len() - 1],
+        })
     }
 }
 
@@ -291,8 +357,27 @@ impl Report {
             drops: drops.into_iter().collect(),
             // Over the frames every stage worked on: a dropped frame's near-zero times
             // would flatter the stages.
-            stage_latency: STAGES.iter().enumerate().map(|(i, s)| (s.to_string(), Percentiles::of(frames.iter().filter(|f| f.has_pose()).map(|f| f.stage_ms[i])))).collect(),
-            end_to_end: Percentiles::of(frames.iter().filter(|f| f.has_pose()).map(|f| f.end_to_end_ms)),
+            stage_latency: STAGES
+                .iter()
+                .enumerate()
+                .map(|(i, s)| {
+                    (
+                        s.to_string(),
+                        Percentiles::of(
+                            frames
+                                .iter()
+                                .filter(|f| f.has_pose())
+                                .map(|f| f.stage_ms[i]),
+                        ),
+                    )
+                })
+                .collect(),
+            end_to_end: Percentiles::of(
+                frames
+                    .iter()
+                    .filter(|f| f.has_pose())
+                    .map(|f| f.end_to_end_ms),
+            ),
             deadline_misses: frames.iter().filter(|f| f.deadline_miss).count(),
             l1_frames: frames.iter().filter(|f| f.matcher == "l1").count(),
             fallbacks: count("fallback"),
@@ -310,14 +395,29 @@ impl Report {
     /// The report as a text table.
     pub fn to_text(&self) -> String {
         let mut out = String::new();
-        let _ = writeln!(out, "frames {}: {} tracked, {} predicted (tracking lost), {} dropped", self.frames, self.poses, self.lost, self.dropped());
+        let _ = writeln!(
+            out,
+            "frames {}: {} tracked, {} predicted (tracking lost), {} dropped",
+            self.frames,
+            self.poses,
+            self.lost,
+            self.dropped()
+        );
         for (why, n) in &self.drops {
             let _ = writeln!(out, "  dropped {why}: {n}");
         }
-        let _ = writeln!(out, "{:<16} {:>6} {:>9} {:>9} {:>9} {:>9}", "latency (ms)", "n", "p50", "p90", "p99", "max");
+        let _ = writeln!(
+            out,
+            "{:<16} {:>6} {:>9} {:>9} {:>9} {:>9}",
+            "latency (ms)", "n", "p50", "p90", "p99", "max"
+        );
         let row = |out: &mut String, name: &str, p: &Option<Percentiles>| {
             let _ = match p {
-                Some(p) => writeln!(out, "{name:<16} {:>6} {:>9.2} {:>9.2} {:>9.2} {:>9.2}", p.count, p.p50, p.p90, p.p99, p.max),
+                Some(p) => writeln!(
+                    out,
+                    "{name:<16} {:>6} {:>9.2} {:>9.2} {:>9.2} {:>9.2}",
+                    p.count, p.p50, p.p90, p.p99, p.max
+                ),
                 None => writeln!(out, "{name:<16} {:>6}", 0),
             };
         };
@@ -325,7 +425,16 @@ impl Report {
             row(&mut out, name, p);
         }
         row(&mut out, "end-to-end", &self.end_to_end);
-        let _ = writeln!(out, "deadline misses {}   l1 frames {}   fallbacks {}   recoveries {}   restarts {}   detector swaps {}", self.deadline_misses, self.l1_frames, self.fallbacks, self.recoveries, self.restarts, self.swaps);
+        let _ = writeln!(
+            out,
+            "deadline misses {}   l1 frames {}   fallbacks {}   recoveries {}   restarts {}   detector swaps {}",
+            self.deadline_misses,
+            self.l1_frames,
+            self.fallbacks,
+            self.recoveries,
+            self.restarts,
+            self.swaps
+        );
         out
     }
 }
@@ -335,13 +444,23 @@ mod tests {
     use super::*;
 
     fn frame(id: u64, outcome: &str, e2e: f64) -> FrameRecord {
-        FrameRecord { outcome: outcome.to_string(), end_to_end_ms: e2e, stage_ms: [1.0, 2.0, 3.0, 4.0], matcher: "lbd".into(), detector: "lsd".into(), ..FrameRecord::missing(id) }
+        FrameRecord {
+            outcome: outcome.to_string(),
+            end_to_end_ms: e2e,
+            stage_ms: [1.0, 2.0, 3.0, 4.0],
+            matcher: "lbd".into(),
+            detector: "lsd".into(),
+            ..FrameRecord::missing(id)
+        }
     }
 
     #[test]
     fn nearest_rank_percentiles() {
         let p = Percentiles::of((1..=100).map(f64::from)).unwrap_or_else(|| panic!("no samples"));
-        assert_eq!((p.count, p.p50, p.p90, p.p99, p.max), (100, 50.0, 90.0, 99.0, 100.0));
+        assert_eq!(
+            (p.count, p.p50, p.p90, p.p99, p.max),
+            (100, 50.0, 90.0, 99.0, 100.0)
+        );
         let one = Percentiles::of([7.0, f64::NAN]).unwrap_or_else(|| panic!("no samples"));
         assert_eq!((one.count, one.p50, one.max), (1, 7.0, 7.0));
         assert!(Percentiles::of([f64::NAN]).is_none());
@@ -354,8 +473,19 @@ mod tests {
         let mut late = frame(2, "dropped-late", f64::NAN);
         late.dropped_by = "matcher".into();
         late.deadline_miss = true;
-        let frames = vec![frame(0, "pose", 40.0), frame(1, "lost", 60.0), late, FrameRecord::missing(3)];
-        let events = vec![EventRecord { time_s: 1.5, kind: "fallback".into(), stage: "matcher".into(), frame_id: Some(1), detail: "too few matches, 3 < 12".into() }];
+        let frames = vec![
+            frame(0, "pose", 40.0),
+            frame(1, "lost", 60.0),
+            late,
+            FrameRecord::missing(3),
+        ];
+        let events = vec![EventRecord {
+            time_s: 1.5,
+            kind: "fallback".into(),
+            stage: "matcher".into(),
+            frame_id: Some(1),
+            detail: "too few matches, 3 < 12".into(),
+        }];
         write_frames(&dir.join("frames.csv"), &frames).unwrap_or_else(|e| panic!("{e}"));
         write_events(&dir.join("events.csv"), &events).unwrap_or_else(|e| panic!("{e}"));
         let back = read_frames(&dir.join("frames.csv")).unwrap_or_else(|e| panic!("{e}"));
@@ -364,16 +494,43 @@ mod tests {
         assert!(back[3].end_to_end_ms.is_nan());
         assert_eq!(back[0].end_to_end_ms, 40.0);
         let events_back = read_events(&dir.join("events.csv")).unwrap_or_else(|e| panic!("{e}"));
-        assert_eq!(events_back[0].detail, "too few matches; 3 < 12", "commas cannot break the columns");
+        assert_eq!(
+            events_back[0].detail, "too few matches; 3 < 12",
+            "commas cannot break the columns"
+        );
         let report = Report::new(&back, &events_back);
-        assert_eq!((report.frames, report.poses, report.lost, report.dropped(), report.deadline_misses, report.fallbacks), (4, 1, 1, 2, 1, 1));
+        assert_eq!(
+            (
+                report.frames,
+                report.poses,
+                report.lost,
+                report.dropped(),
+                report.deadline_misses,
+                report.fallbacks
+            ),
+            (4, 1, 1, 2, 1, 1)
+        );
         assert_eq!(report.end_to_end.map(|p| p.max), Some(60.0));
-        assert_eq!(report.stage_latency[1].1.map(|p| p.count), Some(2), "stage latency over the frames with a pose");
+        assert_eq!(
+            report.stage_latency[1].1.map(|p| p.count),
+            Some(2),
+            "stage latency over the frames with a pose"
+        );
         assert!(report.to_text().contains("dropped missing: 1"));
         // A damaged file names the line.
-        std::fs::write(dir.join("bad.csv"), format!("{FRAME_HEADER}\n0,pose,,x,,,,,,,0,0,0\n")).unwrap_or_else(|e| panic!("{e}"));
-        let err = read_frames(&dir.join("bad.csv")).err().map(|e| e.to_string()).unwrap_or_default();
-        assert!(err.contains("bad.csv:2") && err.contains("frame-source"), "{err}");
+        std::fs::write(
+            dir.join("bad.csv"),
+            format!("{FRAME_HEADER}\n0,pose,,x,,,,,,,0,0,0\n"),
+        )
+        .unwrap_or_else(|e| panic!("{e}"));
+        let err = read_frames(&dir.join("bad.csv"))
+            .err()
+            .map(|e| e.to_string())
+            .unwrap_or_default();
+        assert!(
+            err.contains("bad.csv:2") && err.contains("frame-source"),
+            "{err}"
+        );
         let _ = std::fs::remove_dir_all(&dir);
     }
 }

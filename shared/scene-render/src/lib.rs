@@ -105,17 +105,63 @@ impl Preset {
 
     /// The sequence configuration of this preset with `seed` and `frames`.
     pub fn config(self, seed: u64, frames: usize) -> SequenceConfig {
-        let illumination = IlluminationConfig { seed, ..IlluminationConfig::default() };
+        let illumination = IlluminationConfig {
+            seed,
+            ..IlluminationConfig::default()
+        };
         let (trajectory, illumination) = match self {
             Preset::Normal => (TrajectoryKind::Handheld, illumination),
-            Preset::HandheldGainJumps => (TrajectoryKind::Handheld, IlluminationConfig { gain_jump_period_s: Some(2.0), ..illumination }),
-            Preset::DroneGainJumps => (TrajectoryKind::Drone, IlluminationConfig { gain_jump_period_s: Some(2.0), ..illumination }),
-            Preset::HdrFlicker => (TrajectoryKind::Handheld, IlluminationConfig { base_gain: 1.6, flicker: Some((7.0, 0.5)), ..illumination }),
-            Preset::HdrSaturation => (TrajectoryKind::Handheld, IlluminationConfig { base_gain: 2.2, ..illumination }),
-            Preset::LightsSwitching => (TrajectoryKind::Handheld, IlluminationConfig { light_switch_period_s: Some(1.5), ..illumination }),
-            Preset::LeftRightMismatch => (TrajectoryKind::Handheld, IlluminationConfig { right_mismatch: Some((0.5, 15.0)), ..illumination }),
+            Preset::HandheldGainJumps => (
+                TrajectoryKind::Handheld,
+                IlluminationConfig {
+                    gain_jump_period_s: Some(2.0),
+                    ..illumination
+                },
+            ),
+            Preset::DroneGainJumps => (
+                TrajectoryKind::Drone,
+                IlluminationConfig {
+                    gain_jump_period_s: Some(2.0),
+                    ..illumination
+                },
+            ),
+            Preset::HdrFlicker => (
+                TrajectoryKind::Handheld,
+                IlluminationConfig {
+                    base_gain: 1.6,
+                    flicker: Some((7.0, 0.5)),
+                    ..illumination
+                },
+            ),
+            Preset::HdrSaturation => (
+                TrajectoryKind::Handheld,
+                IlluminationConfig {
+                    base_gain: 2.2,
+                    ..illumination
+                },
+            ),
+            Preset::LightsSwitching => (
+                TrajectoryKind::Handheld,
+                IlluminationConfig {
+                    light_switch_period_s: Some(1.5),
+                    ..illumination
+                },
+            ),
+            Preset::LeftRightMismatch => (
+                TrajectoryKind::Handheld,
+                IlluminationConfig {
+                    right_mismatch: Some((0.5, 15.0)),
+                    ..illumination
+                },
+            ),
         };
-        SequenceConfig { seed, frames, trajectory, illumination, ..SequenceConfig::default() }
+        SequenceConfig {
+            seed,
+            frames,
+            trajectory,
+            illumination,
+            ..SequenceConfig::default()
+        }
     }
 }
 
@@ -123,10 +169,13 @@ impl std::str::FromStr for Preset {
     type Err = String;
 
     fn from_str(s: &str) -> Result<Self, String> {
-        Self::ALL.into_iter().find(|p| p.name() == s).ok_or_else(|| {
-            let names: Vec<&str> = Self::ALL.iter().map(|p| p.name()).collect();
-            format!("unknown preset {s:?}: expected one of {}", names.join(", "))
-        })
+        Self::ALL
+            .into_iter()
+            .find(|p| p.name() == s)
+            .ok_or_else(|| {
+                let names: Vec<&str> = Self::ALL.iter().map(|p| p.name()).collect();
+                format!("unknown preset {s:?}: expected one of {}", names.join(", "))
+            })
     }
 }
 
@@ -162,7 +211,11 @@ impl SequenceRenderer {
     pub fn new(config: SequenceConfig) -> Self {
         let scene = Scene::random_room(config.seed);
         let trajectory = Trajectory::new(config.trajectory, scene.room_m, config.seed);
-        Self { config, scene, trajectory }
+        Self {
+            config,
+            scene,
+            trajectory,
+        }
     }
 
     /// Time of frame `index`, seconds.
@@ -172,7 +225,11 @@ impl SequenceRenderer {
 
     /// Pose of the right camera given the left camera's.
     pub fn right_pose(&self, world_from_left: &Isometry3<f64>) -> Isometry3<f64> {
-        world_from_left * Isometry3::from_parts(Translation3::new(self.config.rig.baseline_m, 0.0, 0.0), UnitQuaternion::identity())
+        world_from_left
+            * Isometry3::from_parts(
+                Translation3::new(self.config.rig.baseline_m, 0.0, 0.0),
+                UnitQuaternion::identity(),
+            )
     }
 
     /// Pose of the left camera at frame `index`, without rendering.
@@ -186,14 +243,44 @@ impl SequenceRenderer {
         let world_from_left = self.trajectory.pose_at(t);
         let illumination = self.config.illumination.at(t, self.scene.lights);
         let rig = &self.config.rig;
-        let noise = |camera: u64| self.config.seed.wrapping_mul(0x2545_F491_4F6C_DD1D) ^ ((index as u64) << 1 | camera);
+        let noise = |camera: u64| {
+            self.config.seed.wrapping_mul(0x2545_F491_4F6C_DD1D) ^ ((index as u64) << 1 | camera)
+        };
         let (left, right) = std::thread::scope(|scope| {
             let right = scope.spawn(|| {
-                render_view(&self.scene, &self.right_pose(&world_from_left), rig, &illumination, 1, &self.config.sensor, noise(1))
+                render_view(
+                    &self.scene,
+                    &self.right_pose(&world_from_left),
+                    rig,
+                    &illumination,
+                    1,
+                    &self.config.sensor,
+                    noise(1),
+                )
             });
-            let left = render_view(&self.scene, &world_from_left, rig, &illumination, 0, &self.config.sensor, noise(0));
-            (left, right.join().unwrap_or_else(|panic| std::panic::resume_unwind(panic)))
+            let left = render_view(
+                &self.scene,
+                &world_from_left,
+                rig,
+                &illumination,
+                0,
+                &self.config.sensor,
+                noise(0),
+            );
+            (
+                left,
+                right
+                    .join()
+                    .unwrap_or_else(|panic| std::panic::resume_unwind(panic)),
+            )
         });
-        RenderedFrame { index, timestamp_ns: (t * 1e9).round() as u64, world_from_left, left, right, illumination }
+        RenderedFrame {
+            index,
+            timestamp_ns: (t * 1e9).round() as u64,
+            world_from_left,
+            left,
+            right,
+            illumination,
+        }
     }
 }

@@ -31,19 +31,34 @@ impl Trajectory {
         let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0x7A11);
         let phase = std::array::from_fn(|_| rng.random_range(0.0..TAU));
         // Keep at least 1.5 m from the walls, where boxes and shelves stand.
-        let free = Vector3::new((room_m.x / 2.0 - 1.5).max(0.1), (room_m.y / 2.0 - 1.5).max(0.1), 0.3);
+        let free = Vector3::new(
+            (room_m.x / 2.0 - 1.5).max(0.1),
+            (room_m.y / 2.0 - 1.5).max(0.1),
+            0.3,
+        );
         let amplitude = match kind {
             TrajectoryKind::Handheld => Vector3::new(0.6, 0.5, 0.06).inf(&free),
             TrajectoryKind::Drone => Vector3::new(1.4, 1.2, 0.25).inf(&free),
         };
-        Self { kind, centre: Vector3::new(room_m.x / 2.0, room_m.y / 2.0, 1.4), amplitude, phase }
+        Self {
+            kind,
+            centre: Vector3::new(room_m.x / 2.0, room_m.y / 2.0, 1.4),
+            amplitude,
+            phase,
+        }
     }
 
     /// Pose of the left camera (x right, y down, z forward) in the world at `t` seconds.
     pub fn pose_at(&self, t: f64) -> Isometry3<f64> {
         let p = &self.phase;
         let (freq, yaw, pitch, roll, shake) = match self.kind {
-            TrajectoryKind::Handheld => ([0.11, 0.17, 0.6], 1.1 * (TAU * 0.05 * t + p[3]).sin(), 0.06, 0.03, 0.004),
+            TrajectoryKind::Handheld => (
+                [0.11, 0.17, 0.6],
+                1.1 * (TAU * 0.05 * t + p[3]).sin(),
+                0.06,
+                0.03,
+                0.004,
+            ),
             TrajectoryKind::Drone => ([0.12, 0.17, 0.2], TAU * 0.07 * t + p[3], 0.04, 0.02, 0.0),
         };
         let position = self.centre
@@ -55,11 +70,16 @@ impl Trajectory {
         let pitch = pitch * (TAU * 0.09 * t + p[1]).sin() + shake * (TAU * 2.3 * t).sin();
         let roll = roll * (TAU * 0.13 * t + p[2]).sin() + shake * (TAU * 1.7 * t + 1.0).sin();
         // Camera axes in the world when looking along +x: right = −y, down = −z, forward = +x.
-        let base = Rotation3::from_matrix_unchecked(Matrix3::new(0.0, 0.0, 1.0, -1.0, 0.0, 0.0, 0.0, -1.0, 0.0));
+        let base = Rotation3::from_matrix_unchecked(Matrix3::new(
+            0.0, 0.0, 1.0, -1.0, 0.0, 0.0, 0.0, -1.0, 0.0,
+        ));
         let turn = Rotation3::from_axis_angle(&Vector3::z_axis(), yaw)
             * Rotation3::from_axis_angle(&Vector3::y_axis(), -pitch)
             * Rotation3::from_axis_angle(&Vector3::x_axis(), roll);
-        Isometry3::from_parts(Translation3::from(position), UnitQuaternion::from_rotation_matrix(&(turn * base)))
+        Isometry3::from_parts(
+            Translation3::from(position),
+            UnitQuaternion::from_rotation_matrix(&(turn * base)),
+        )
     }
 }
 
@@ -85,7 +105,14 @@ pub struct IlluminationConfig {
 
 impl Default for IlluminationConfig {
     fn default() -> Self {
-        Self { seed: 0, base_gain: 1.0, gain_jump_period_s: None, flicker: None, light_switch_period_s: None, right_mismatch: None }
+        Self {
+            seed: 0,
+            base_gain: 1.0,
+            gain_jump_period_s: None,
+            flicker: None,
+            light_switch_period_s: None,
+            right_mismatch: None,
+        }
     }
 }
 
@@ -103,7 +130,9 @@ pub struct FrameIllumination {
 impl IlluminationConfig {
     /// A uniform draw in [lo, hi) that depends only on (seed, stream, index).
     fn draw(&self, stream: u64, index: i64, lo: f64, hi: f64) -> f64 {
-        let mut rng = ChaCha8Rng::seed_from_u64(self.seed ^ stream.wrapping_mul(0x9E37_79B9) ^ (index as u64).wrapping_mul(0x85EB_CA6B));
+        let mut rng = ChaCha8Rng::seed_from_u64(
+            self.seed ^ stream.wrapping_mul(0x9E37_79B9) ^ (index as u64).wrapping_mul(0x85EB_CA6B),
+        );
         rng.random_range(lo..hi)
     }
 
@@ -124,12 +153,20 @@ impl IlluminationConfig {
             .map(|g| match self.light_switch_period_s.filter(|p| *p > 0.0) {
                 Some(period) => {
                     let index = (t / period).floor() as i64;
-                    if index > 0 && self.draw(3 + g as u64, index, 0.0, 1.0) < 0.5 { 0.25 } else { 1.0 }
+                    if index > 0 && self.draw(3 + g as u64, index, 0.0, 1.0) < 0.5 {
+                        0.25
+                    } else {
+                        1.0
+                    }
                 }
                 None => 1.0,
             })
             .collect();
         let (right_gain, right_bias) = self.right_mismatch.unwrap_or((1.0, 0.0));
-        FrameIllumination { gain: [gain, gain * right_gain], bias: [bias, bias + right_bias], lights: levels }
+        FrameIllumination {
+            gain: [gain, gain * right_gain],
+            bias: [bias, bias + right_bias],
+            lights: levels,
+        }
     }
 }

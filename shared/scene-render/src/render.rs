@@ -17,7 +17,13 @@ use serde::{Deserialize, Serialize};
 const NEAR_M: f64 = 0.05;
 /// Anti-aliasing sample offsets (pixels) around the pixel centre, then the centre itself
 /// (used for the depth map only).
-const SAMPLES: [(f64, f64); 5] = [(-0.25, -0.25), (0.25, -0.25), (-0.25, 0.25), (0.25, 0.25), (0.0, 0.0)];
+const SAMPLES: [(f64, f64); 5] = [
+    (-0.25, -0.25),
+    (0.25, -0.25),
+    (-0.25, 0.25),
+    (0.25, 0.25),
+    (0.0, 0.0),
+];
 /// Direction towards the room's key light, for shading.
 const KEY_LIGHT: [f64; 3] = [0.3, 0.5, 0.8];
 
@@ -37,7 +43,12 @@ pub struct SensorOptions {
 
 impl Default for SensorOptions {
     fn default() -> Self {
-        Self { white_level: 200.0, blur: 0.2, read_noise: 1.2, shot_noise: 0.15 }
+        Self {
+            white_level: 200.0,
+            blur: 0.2,
+            read_noise: 1.2,
+            shot_noise: 0.15,
+        }
     }
 }
 
@@ -57,7 +68,9 @@ pub struct View {
 impl View {
     /// Depth at pixel (u, v), `None` outside the image or where nothing was hit.
     pub fn depth_at(&self, u: usize, v: usize) -> Option<f32> {
-        (u < self.width && v < self.height).then(|| self.depth_m[v * self.width + u]).filter(|d| *d > 0.0)
+        (u < self.width && v < self.height)
+            .then(|| self.depth_m[v * self.width + u])
+            .filter(|d| *d > 0.0)
     }
 }
 
@@ -93,19 +106,29 @@ pub fn render_view(
         .quads
         .iter()
         .map(|q| {
-            let corners: Vec<Point3<f64>> = q.corners().iter().map(|c| camera_from_world * c).collect();
+            let corners: Vec<Point3<f64>> =
+                q.corners().iter().map(|c| camera_from_world * c).collect();
             let all_in_front = corners.iter().all(|c| c.z > NEAR_M);
             let bbox = if all_in_front {
                 let us = corners.iter().map(|c| rig.focal_px * c.x / c.z + rig.cx_px);
                 let vs = corners.iter().map(|c| rig.focal_px * c.y / c.z + rig.cy_px);
-                let (u0, u1) = us.fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), u| (a.min(u), b.max(u)));
-                let (v0, v1) = vs.fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| (a.min(v), b.max(v)));
+                let (u0, u1) = us.fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), u| {
+                    (a.min(u), b.max(u))
+                });
+                let (v0, v1) = vs.fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
+                    (a.min(v), b.max(v))
+                });
                 let clamp_u = |x: f64| x.clamp(0.0, (width - 1) as f64) as usize;
                 let clamp_v = |y: f64| y.clamp(0.0, (height - 1) as f64) as usize;
                 if u1 < 0.0 || v1 < 0.0 || u0 > (width - 1) as f64 || v0 > (height - 1) as f64 {
                     (1, 0, 1, 0) // empty
                 } else {
-                    (clamp_u(u0.floor() - 1.0), clamp_u(u1.ceil() + 1.0), clamp_v(v0.floor() - 1.0), clamp_v(v1.ceil() + 1.0))
+                    (
+                        clamp_u(u0.floor() - 1.0),
+                        clamp_u(u1.ceil() + 1.0),
+                        clamp_v(v0.floor() - 1.0),
+                        clamp_v(v1.ceil() + 1.0),
+                    )
                 }
             } else {
                 (0, width - 1, 0, height - 1)
@@ -137,7 +160,11 @@ pub fn render_view(
         for py in v0..=v1.min(height - 1) {
             for px in u0..=u1.min(width - 1) {
                 for (k, (ox, oy)) in SAMPLES.iter().enumerate() {
-                    let dir = Vector3::new((px as f64 + ox - rig.cx_px) / rig.focal_px, (py as f64 + oy - rig.cy_px) / rig.focal_px, 1.0);
+                    let dir = Vector3::new(
+                        (px as f64 + ox - rig.cx_px) / rig.focal_px,
+                        (py as f64 + oy - rig.cy_px) / rig.focal_px,
+                        1.0,
+                    );
                     let denominator = cq.normal.dot(&dir);
                     if denominator.abs() < 1e-12 {
                         continue;
@@ -148,13 +175,18 @@ pub fn render_view(
                         continue;
                     }
                     let relative = dir * z - cq.origin;
-                    let (s, t) = (relative.dot(&cq.u) / cq.u_norm2, relative.dot(&cq.v) / cq.v_norm2);
+                    let (s, t) = (
+                        relative.dot(&cq.u) / cq.u_norm2,
+                        relative.dot(&cq.v) / cq.v_norm2,
+                    );
                     if !(0.0..=1.0).contains(&s) || !(0.0..=1.0).contains(&t) {
                         continue;
                     }
                     depth[slot] = z;
                     if k < 4 {
-                        radiance[slot] = quad.reflectance(s, t, scene.noise_seed) * light * cq.shade + quad.emission;
+                        radiance[slot] =
+                            quad.reflectance(s, t, scene.noise_seed) * light * cq.shade
+                                + quad.emission;
                     }
                 }
             }
@@ -162,7 +194,14 @@ pub fn render_view(
     }
 
     // Anti-aliased radiance, optics blur, exposure, noise, quantisation.
-    let mut image: Vec<f32> = (0..samples).map(|p| radiance[p * SAMPLES.len()..p * SAMPLES.len() + 4].iter().sum::<f32>() / 4.0).collect();
+    let mut image: Vec<f32> = (0..samples)
+        .map(|p| {
+            radiance[p * SAMPLES.len()..p * SAMPLES.len() + 4]
+                .iter()
+                .sum::<f32>()
+                / 4.0
+        })
+        .collect();
     blur_3tap(&mut image, width, height, sensor.blur);
     let mut rng = ChaCha8Rng::seed_from_u64(noise_seed);
     let (gain, bias) = (illumination.gain[camera], illumination.bias[camera]);
@@ -170,8 +209,11 @@ pub fn render_view(
         .iter()
         .map(|r| {
             let level = gain * sensor.white_level * f64::from(*r) + bias;
-            let sigma = (sensor.read_noise.powi(2) + sensor.shot_noise.powi(2) * level.max(0.0)).sqrt();
-            (level + sigma * rng.sample::<f64, _>(StandardNormal)).round().clamp(0.0, 255.0) as u8
+            let sigma =
+                (sensor.read_noise.powi(2) + sensor.shot_noise.powi(2) * level.max(0.0)).sqrt();
+            (level + sigma * rng.sample::<f64, _>(StandardNormal))
+                .round()
+                .clamp(0.0, 255.0) as u8
         })
         .collect();
     let depth_m = (0..samples)
@@ -180,7 +222,12 @@ pub fn render_view(
             if z.is_finite() { z as f32 } else { 0.0 }
         })
         .collect();
-    View { width, height, pixels, depth_m }
+    View {
+        width,
+        height,
+        pixels,
+        depth_m,
+    }
 }
 
 /// Separable blur with kernel [w, 1 − 2w, w], clamped at the borders.
@@ -193,14 +240,15 @@ fn blur_3tap(image: &mut [f32], width: usize, height: usize, w: f32) {
     for y in 0..height {
         for x in 0..width {
             let at = |xx: usize| image[y * width + xx];
-            tmp[y * width + x] = w * at(x.saturating_sub(1)) + centre * at(x) + w * at((x + 1).min(width - 1));
+            tmp[y * width + x] =
+                w * at(x.saturating_sub(1)) + centre * at(x) + w * at((x + 1).min(width - 1));
         }
     }
     for y in 0..height {
         for x in 0..width {
             let at = |yy: usize| tmp[yy * width + x];
-            image[y * width + x] = w * at(y.saturating_sub(1)) + centre * at(y) + w * at((y + 1).min(height - 1));
+            image[y * width + x] =
+                w * at(y.saturating_sub(1)) + centre * at(y) + w * at((y + 1).min(height - 1));
         }
     }
 }
-

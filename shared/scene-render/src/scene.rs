@@ -72,7 +72,12 @@ pub struct Quad {
 impl Quad {
     /// The four corners, in order around the rectangle.
     pub fn corners(&self) -> [Point3<f64>; 4] {
-        [self.origin, self.origin + self.u, self.origin + self.u + self.v, self.origin + self.v]
+        [
+            self.origin,
+            self.origin + self.u,
+            self.origin + self.u + self.v,
+            self.origin + self.v,
+        ]
     }
 
     /// Unit normal `u × v`.
@@ -84,15 +89,34 @@ impl Quad {
     pub fn reflectance(&self, s: f64, t: f64, noise_seed: u64) -> f32 {
         let (a, b) = ((s * self.u.norm()) as f32, (t * self.v.norm()) as f32);
         let value = match &self.texture {
-            Texture::Plain { level } => level + 0.04 * (value_noise(a * 1.5, b * 1.5, noise_seed) - 0.5),
-            Texture::Tiles { level, grout, size_m } => {
+            Texture::Plain { level } => {
+                level + 0.04 * (value_noise(a * 1.5, b * 1.5, noise_seed) - 0.5)
+            }
+            Texture::Tiles {
+                level,
+                grout,
+                size_m,
+            } => {
                 let grout_width = 0.012;
                 let (fa, fb) = ((a / size_m).fract() * size_m, (b / size_m).fract() * size_m);
-                if fa < grout_width || fb < grout_width { *grout } else { level + 0.06 * (value_noise(a * 4.0, b * 4.0, noise_seed) - 0.5) }
+                if fa < grout_width || fb < grout_width {
+                    *grout
+                } else {
+                    level + 0.06 * (value_noise(a * 4.0, b * 4.0, noise_seed) - 0.5)
+                }
             }
-            Texture::Stripes { a: first, b: second, period_m, along_u } => {
+            Texture::Stripes {
+                a: first,
+                b: second,
+                period_m,
+                along_u,
+            } => {
                 let x = if *along_u { b } else { a };
-                if (x / period_m).fract() < 0.5 { *first } else { *second }
+                if (x / period_m).fract() < 0.5 {
+                    *first
+                } else {
+                    *second
+                }
             }
             Texture::Poster { background, blocks } => {
                 let (fs, ft) = (s as f32, t as f32);
@@ -102,8 +126,13 @@ impl Quad {
                     .find(|[u0, v0, u1, v1, _]| fs >= *u0 && fs < *u1 && ft >= *v0 && ft < *v1)
                     .map_or(*background, |block| block[4])
             }
-            Texture::Checker { a: first, b: second, size_m } => {
-                let parity = ((a / size_m).floor() as i64 + (b / size_m).floor() as i64).rem_euclid(2);
+            Texture::Checker {
+                a: first,
+                b: second,
+                size_m,
+            } => {
+                let parity =
+                    ((a / size_m).floor() as i64 + (b / size_m).floor() as i64).rem_euclid(2);
                 if parity == 0 { *first } else { *second }
             }
         };
@@ -114,7 +143,9 @@ impl Quad {
 /// Smooth lattice noise in [0, 1].
 fn value_noise(x: f32, y: f32, seed: u64) -> f32 {
     let hash = |i: i64, j: i64| {
-        let mut h = (i as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ (j as u64).wrapping_mul(0xC2B2_AE3D_27D4_EB4F) ^ seed;
+        let mut h = (i as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15)
+            ^ (j as u64).wrapping_mul(0xC2B2_AE3D_27D4_EB4F)
+            ^ seed;
         h ^= h >> 29;
         h = h.wrapping_mul(0xBF58_476D_1CE4_E5B9);
         h ^= h >> 32;
@@ -154,7 +185,11 @@ impl Scene {
             let across_u = |f: f64| [at(f, 0.0), at(f, 1.0)];
             let across_v = |f: f64| [at(0.0, f), at(1.0, f)];
             let (len_u, len_v) = (q.u.norm(), q.v.norm());
-            let steps = |length: f64, step: f64| (1..).map(move |k| k as f64 * step).take_while(move |x| *x < length);
+            let steps = |length: f64, step: f64| {
+                (1..)
+                    .map(move |k| k as f64 * step)
+                    .take_while(move |x| *x < length)
+            };
             out.extend([across_v(0.0), across_u(1.0), across_v(1.0), across_u(0.0)]);
             match &q.texture {
                 Texture::Plain { .. } => {}
@@ -165,7 +200,9 @@ impl Scene {
                         out.extend(steps(len_v, size).map(|x| across_v((x + edge) / len_v)));
                     }
                 }
-                Texture::Stripes { period_m, along_u, .. } => {
+                Texture::Stripes {
+                    period_m, along_u, ..
+                } => {
                     let half = f64::from(*period_m) / 2.0;
                     if *along_u {
                         out.extend(steps(len_v, half).map(|x| across_v(x / len_v)));
@@ -180,7 +217,12 @@ impl Scene {
                 }
                 Texture::Poster { blocks, .. } => {
                     for [u0, v0, u1, v1, _] in blocks {
-                        let (u0, v0, u1, v1) = (f64::from(*u0), f64::from(*v0), f64::from(*u1), f64::from(*v1));
+                        let (u0, v0, u1, v1) = (
+                            f64::from(*u0),
+                            f64::from(*v0),
+                            f64::from(*u1),
+                            f64::from(*v1),
+                        );
                         let corners = [at(u0, v0), at(u1, v0), at(u1, v1), at(u0, v1)];
                         for k in 0..4 {
                             out.push([corners[k], corners[(k + 1) % 4]]);
@@ -206,42 +248,113 @@ impl Scene {
         let z = Vector3::z();
         let light_of = |px: f64| usize::from(px > w / 2.0);
         // Floor (tiles) and ceiling, normals pointing into the room.
-        quads.push(Quad { origin: Point3::new(0.0, 0.0, 0.0), u: x * w, v: y * d, texture: Texture::Tiles { level: 0.45, grout: 0.2, size_m: 0.6 }, emission: 0.0, light: 0 });
-        quads.push(Quad { origin: Point3::new(0.0, d, h), u: x * w, v: -y * d, texture: plain(0.8), emission: 0.0, light: 1 });
+        quads.push(Quad {
+            origin: Point3::new(0.0, 0.0, 0.0),
+            u: x * w,
+            v: y * d,
+            texture: Texture::Tiles {
+                level: 0.45,
+                grout: 0.2,
+                size_m: 0.6,
+            },
+            emission: 0.0,
+            light: 0,
+        });
+        quads.push(Quad {
+            origin: Point3::new(0.0, d, h),
+            u: x * w,
+            v: -y * d,
+            texture: plain(0.8),
+            emission: 0.0,
+            light: 1,
+        });
         // Walls: (origin, along-wall edge, inward normal direction).
         let walls = [
-            (Point3::new(0.0, 0.0, 0.0), x * w, y),         // y = 0, faces +y
-            (Point3::new(w, d, 0.0), -x * w, -y),           // y = d, faces −y
-            (Point3::new(0.0, d, 0.0), -y * d, x),          // x = 0, faces +x
-            (Point3::new(w, 0.0, 0.0), y * d, -x),          // x = w, faces −x
+            (Point3::new(0.0, 0.0, 0.0), x * w, y), // y = 0, faces +y
+            (Point3::new(w, d, 0.0), -x * w, -y),   // y = d, faces −y
+            (Point3::new(0.0, d, 0.0), -y * d, x),  // x = 0, faces +x
+            (Point3::new(w, 0.0, 0.0), y * d, -x),  // x = w, faces −x
         ];
         for (k, (origin, along, inward)) in walls.iter().enumerate() {
             // Surfaces are two-sided, so the wall's edge order does not matter.
             let (origin, u, v) = (*origin, *along, z * h);
-            quads.push(Quad { origin, u, v, texture: plain(level(&mut rng, 0.5, 0.7)), emission: 0.0, light: k % 2 });
+            quads.push(Quad {
+                origin,
+                u,
+                v,
+                texture: plain(level(&mut rng, 0.5, 0.7)),
+                emission: 0.0,
+                light: k % 2,
+            });
             let length = along.norm();
             let dir = along.normalize();
             // A dark baseboard along the wall's foot: a long horizontal edge.
-            quads.push(Quad { origin: origin + inward * 0.005, u: dir * length, v: z * 0.1, texture: plain(0.12), emission: 0.0, light: k % 2 });
+            quads.push(Quad {
+                origin: origin + inward * 0.005,
+                u: dir * length,
+                v: z * 0.1,
+                texture: plain(0.12),
+                emission: 0.0,
+                light: k % 2,
+            });
             // Things hung on the wall stand in front of it, each 4 mm further out than the
             // one before, so overlapping ones never share a depth.
             let mut hung = 0u32;
-            let mut place = |rng: &mut ChaCha8Rng, width: f64, height: f64, bottom: f64, texture: Texture, emission: f32, quads: &mut Vec<Quad>| {
+            let mut place = |rng: &mut ChaCha8Rng,
+                             width: f64,
+                             height: f64,
+                             bottom: f64,
+                             texture: Texture,
+                             emission: f32,
+                             quads: &mut Vec<Quad>| {
                 hung += 1;
                 let start = rng.random_range(0.3..(length - width - 0.3).max(0.31));
-                let corner = origin + dir * start + z * bottom + inward * (0.01 + 0.004 * f64::from(hung));
-                quads.push(Quad { origin: corner, u: dir * width, v: z * height, texture, emission, light: light_of(corner.x) });
+                let corner =
+                    origin + dir * start + z * bottom + inward * (0.01 + 0.004 * f64::from(hung));
+                quads.push(Quad {
+                    origin: corner,
+                    u: dir * width,
+                    v: z * height,
+                    texture,
+                    emission,
+                    light: light_of(corner.x),
+                });
             };
             match k {
                 0 => {
                     // A bright window: high radiance that saturates under gain (HDR).
                     place(&mut rng, 1.4, 1.2, 0.9, plain(0.95), 2.5, &mut quads);
-                    place(&mut rng, 1.2, 0.6, 0.3, Texture::Stripes { a: 0.85, b: 0.35, period_m: 0.06, along_u: false }, 0.0, &mut quads);
+                    place(
+                        &mut rng,
+                        1.2,
+                        0.6,
+                        0.3,
+                        Texture::Stripes {
+                            a: 0.85,
+                            b: 0.35,
+                            period_m: 0.06,
+                            along_u: false,
+                        },
+                        0.0,
+                        &mut quads,
+                    );
                 }
                 1 => {
                     let door = plain(level(&mut rng, 0.2, 0.35));
                     place(&mut rng, 0.9, 2.05, 0.0, door, 0.0, &mut quads);
-                    place(&mut rng, 0.8, 0.8, 1.1, Texture::Checker { a: 0.1, b: 0.9, size_m: 0.1 }, 0.0, &mut quads);
+                    place(
+                        &mut rng,
+                        0.8,
+                        0.8,
+                        1.1,
+                        Texture::Checker {
+                            a: 0.1,
+                            b: 0.9,
+                            size_m: 0.1,
+                        },
+                        0.0,
+                        &mut quads,
+                    );
                 }
                 _ => {
                     let door = plain(level(&mut rng, 0.15, 0.35));
@@ -251,47 +364,113 @@ impl Scene {
             for _ in 0..rng.random_range(2..5) {
                 let blocks = (0..rng.random_range(3..7))
                     .map(|_| {
-                        let (u0, v0) = (rng.random_range(0.05..0.7f32), rng.random_range(0.05..0.7f32));
-                        [u0, v0, (u0 + rng.random_range(0.1..0.3f32)).min(0.95), (v0 + rng.random_range(0.1..0.3f32)).min(0.95), rng.random_range(0.05..0.95f32)]
+                        let (u0, v0) = (
+                            rng.random_range(0.05..0.7f32),
+                            rng.random_range(0.05..0.7f32),
+                        );
+                        [
+                            u0,
+                            v0,
+                            (u0 + rng.random_range(0.1..0.3f32)).min(0.95),
+                            (v0 + rng.random_range(0.1..0.3f32)).min(0.95),
+                            rng.random_range(0.05..0.95f32),
+                        ]
                     })
                     .collect();
                 let size = rng.random_range(0.5..1.0);
-                let texture = Texture::Poster { background: level(&mut rng, 0.6, 0.9), blocks };
-                let (height, bottom) = (size * rng.random_range(0.7..1.3), rng.random_range(1.0..1.4));
+                let texture = Texture::Poster {
+                    background: level(&mut rng, 0.6, 0.9),
+                    blocks,
+                };
+                let (height, bottom) = (
+                    size * rng.random_range(0.7..1.3),
+                    rng.random_range(1.0..1.4),
+                );
                 place(&mut rng, size, height, bottom, texture, 0.0, &mut quads);
             }
         }
         // Boxes and shelves along the walls, outside the central free area.
         for _ in 0..rng.random_range(4..7) {
-            let (bw, bd, bh) = (rng.random_range(0.4..1.2), rng.random_range(0.3..0.6), rng.random_range(0.4..1.8));
+            let (bw, bd, bh) = (
+                rng.random_range(0.4..1.2),
+                rng.random_range(0.3..0.6),
+                rng.random_range(0.4..1.8),
+            );
             let near_x = rng.random_bool(0.5);
             let (cx, cy) = if near_x {
-                (if rng.random_bool(0.5) { 0.2 + bd / 2.0 } else { w - 0.2 - bd / 2.0 }, rng.random_range(1.0..d - 1.0))
+                (
+                    if rng.random_bool(0.5) {
+                        0.2 + bd / 2.0
+                    } else {
+                        w - 0.2 - bd / 2.0
+                    },
+                    rng.random_range(1.0..d - 1.0),
+                )
             } else {
-                (rng.random_range(1.0..w - 1.0), if rng.random_bool(0.5) { 0.2 + bd / 2.0 } else { d - 0.2 - bd / 2.0 })
+                (
+                    rng.random_range(1.0..w - 1.0),
+                    if rng.random_bool(0.5) {
+                        0.2 + bd / 2.0
+                    } else {
+                        d - 0.2 - bd / 2.0
+                    },
+                )
             };
             let texture = if bh > 1.2 {
-                Texture::Stripes { a: 0.7, b: 0.25, period_m: 0.35, along_u: false }
+                Texture::Stripes {
+                    a: 0.7,
+                    b: 0.25,
+                    period_m: 0.35,
+                    along_u: false,
+                }
             } else {
                 plain(level(&mut rng, 0.25, 0.75))
             };
-            push_box(&mut quads, Point3::new(cx - bw / 2.0, cy - bd / 2.0, 0.0), Vector3::new(bw, bd, bh), texture, light_of(cx));
+            push_box(
+                &mut quads,
+                Point3::new(cx - bw / 2.0, cy - bd / 2.0, 0.0),
+                Vector3::new(bw, bd, bh),
+                texture,
+                light_of(cx),
+            );
         }
-        Scene { quads, lights: 2, noise_seed: seed ^ 0x5EED, room_m: Vector3::new(w, d, h) }
+        Scene {
+            quads,
+            lights: 2,
+            noise_seed: seed ^ 0x5EED,
+            room_m: Vector3::new(w, d, h),
+        }
     }
 }
 
 /// An axis-aligned box standing on the floor: its four sides and top, normals outward.
-fn push_box(quads: &mut Vec<Quad>, min: Point3<f64>, size: Vector3<f64>, texture: Texture, light: usize) {
-    let (x, y, z) = (Vector3::x() * size.x, Vector3::y() * size.y, Vector3::z() * size.z);
+fn push_box(
+    quads: &mut Vec<Quad>,
+    min: Point3<f64>,
+    size: Vector3<f64>,
+    texture: Texture,
+    light: usize,
+) {
+    let (x, y, z) = (
+        Vector3::x() * size.x,
+        Vector3::y() * size.y,
+        Vector3::z() * size.z,
+    );
     let faces = [
-        (min, x, z),                 // front (y = min), normal −y
-        (min + y + x, -x, z),        // back, normal +y
-        (min + y, -y, z),            // left (x = min), normal −x
-        (min + x, y, z),             // right, normal +x
-        (min + z, x, y),             // top, normal +z
+        (min, x, z),          // front (y = min), normal −y
+        (min + y + x, -x, z), // back, normal +y
+        (min + y, -y, z),     // left (x = min), normal −x
+        (min + x, y, z),      // right, normal +x
+        (min + z, x, y),      // top, normal +z
     ];
     for (origin, u, v) in faces {
-        quads.push(Quad { origin, u, v, texture: texture.clone(), emission: 0.0, light });
+        quads.push(Quad {
+            origin,
+            u,
+            v,
+            texture: texture.clone(),
+            emission: 0.0,
+            light,
+        });
     }
 }

@@ -9,11 +9,13 @@ use clap::Parser;
 use linetrack_geometry::{Point, Segment};
 use linetrack_ipc::{Bus, IpcError, Outlet, Received, Scope, Shutdown};
 use linetrack_msgs::SegmentRecord;
-use linetrack_vision::{BorrowedGray, GrayImage, VisionError};
-use std::collections::VecDeque;
-use linetrack_msgs::{FrameHeader, FrameStatus, StageKind, StatusKind, StatusReport, Topic, now_ns};
+use linetrack_msgs::{
+    FrameHeader, FrameStatus, StageKind, StatusKind, StatusReport, Topic, now_ns,
+};
 use linetrack_pipeline_config::{BudgetConfig, PipelineConfig};
 use linetrack_vision::DetectorKind;
+use linetrack_vision::{BorrowedGray, GrayImage, VisionError};
+use std::collections::VecDeque;
 use std::path::PathBuf;
 use std::process::ExitCode;
 use std::time::{Duration, Instant};
@@ -61,8 +63,21 @@ pub struct StageContext {
 impl StageContext {
     /// A context for an in-process stage (single-process mode and tests).
     pub fn in_process(stage: StageKind, config: PipelineConfig, run_dir: PathBuf) -> Self {
-        let args = StageArgs { config: PathBuf::new(), run_id: "local".to_string(), run_dir, detector: None, standby: false, start_frame: 0, resume_pose: None };
-        Self { stage, config, args, pid: std::process::id() }
+        let args = StageArgs {
+            config: PathBuf::new(),
+            run_id: "local".to_string(),
+            run_dir,
+            detector: None,
+            standby: false,
+            start_frame: 0,
+            resume_pose: None,
+        };
+        Self {
+            stage,
+            config,
+            args,
+            pid: std::process::id(),
+        }
     }
 
     /// The heartbeat period.
@@ -72,7 +87,10 @@ impl StageContext {
 
     /// This stage's budget, milliseconds.
     pub fn budget_ms(&self) -> f64 {
-        self.config.budget.stage_ms(self.stage.name()).unwrap_or(f64::INFINITY)
+        self.config
+            .budget
+            .stage_ms(self.stage.name())
+            .unwrap_or(f64::INFINITY)
     }
 }
 
@@ -89,12 +107,26 @@ pub struct Reporter {
 impl Reporter {
     /// A reporter for `ctx`'s stage; `detail` travels in every report (the detector kind).
     pub fn new(bus: &Bus, ctx: &StageContext, detail: u32) -> Result<Self, IpcError> {
-        Ok(Self { outlet: bus.outlet(Topic::Status, 1)?, stage: ctx.stage, pid: ctx.pid, detail, every: ctx.heartbeat(), last: None })
+        Ok(Self {
+            outlet: bus.outlet(Topic::Status, 1)?,
+            stage: ctx.stage,
+            pid: ctx.pid,
+            detail,
+            every: ctx.heartbeat(),
+            last: None,
+        })
     }
 
     /// Sends an event.
     pub fn report(&mut self, kind: StatusKind, frame_id: u64, value: u64) {
-        let report = StatusReport { stage: self.stage.code(), pid: self.pid, kind: kind as u32, detail: self.detail, frame_id, value };
+        let report = StatusReport {
+            stage: self.stage.code(),
+            pid: self.pid,
+            kind: kind as u32,
+            detail: self.detail,
+            frame_id,
+            value,
+        };
         if let Err(e) = self.outlet.publish(&FrameHeader::default(), &[&[report]]) {
             tracing::warn!("status report lost: {e}");
         }
@@ -112,13 +144,18 @@ impl Reporter {
 
     /// How long until the next heartbeat is due.
     pub fn until_due(&self) -> Duration {
-        self.last.map_or(Duration::ZERO, |t| self.every.saturating_sub(t.elapsed()))
+        self.last
+            .map_or(Duration::ZERO, |t| self.every.saturating_sub(t.elapsed()))
     }
 }
 
 /// The budget policy for a frame a stage is about to take: `Some(status)` when it must be
 /// dropped instead. `newer_waiting` says whether a newer frame is already queued behind it.
-pub fn late_drop(header: &FrameHeader, newer_waiting: bool, budget: &BudgetConfig) -> Option<FrameStatus> {
+pub fn late_drop(
+    header: &FrameHeader,
+    newer_waiting: bool,
+    budget: &BudgetConfig,
+) -> Option<FrameStatus> {
     if !budget.drop_late {
         return None;
     }
@@ -179,17 +216,27 @@ pub fn stamp_end(header: &mut FrameHeader, stage: StageKind) {
 }
 
 /// The two images of a frame message, read in place.
-pub fn stereo_views<'a>(frame: &'a Received<u8>) -> Result<(BorrowedGray<'a>, BorrowedGray<'a>), VisionError> {
+pub fn stereo_views<'a>(
+    frame: &'a Received<u8>,
+) -> Result<(BorrowedGray<'a>, BorrowedGray<'a>), VisionError> {
     let header = frame.header();
     let (w, h) = (header.width as usize, header.height as usize);
     let pixels = frame.payload();
     let origin = |side: &str| format!("frame {} {side} image", header.frame_id);
     let half = w.saturating_mul(h);
     if pixels.len() != 2 * half {
-        return Err(VisionError::RawSize { origin: origin("stereo"), len: pixels.len(), width: w, height: 2 * h });
+        return Err(VisionError::RawSize {
+            origin: origin("stereo"),
+            len: pixels.len(),
+            width: w,
+            height: 2 * h,
+        });
     }
     let (left, right) = pixels.split_at(half);
-    Ok((GrayImage::borrow_pixels(w, h, left, &origin("left"))?, GrayImage::borrow_pixels(w, h, right, &origin("right"))?))
+    Ok((
+        GrayImage::borrow_pixels(w, h, left, &origin("left"))?,
+        GrayImage::borrow_pixels(w, h, right, &origin("right"))?,
+    ))
 }
 
 /// Frame messages held (in shared memory, not copied) until the stage's other input for
@@ -202,7 +249,10 @@ pub struct HeldFrames {
 impl HeldFrames {
     /// Holds at most `capacity` frames; the oldest is released first.
     pub fn new(capacity: usize) -> Self {
-        Self { held: VecDeque::new(), capacity: capacity.max(1) }
+        Self {
+            held: VecDeque::new(),
+            capacity: capacity.max(1),
+        }
     }
 
     /// Holds `frame` (releasing the oldest when full).
@@ -215,10 +265,22 @@ impl HeldFrames {
 
     /// Takes frame `frame_id`, releasing every older one (their turn has passed).
     pub fn take(&mut self, frame_id: u64) -> Option<Received<u8>> {
-        while self.held.front().is_some_and(|f| f.header().frame_id < frame_id) {
+        while self
+            .held
+            .front()
+            .is_some_and(|f| f.header().frame_id < frame_id)
+        {
             self.held.pop_front();
         }
-        if self.held.front().is_some_and(|f| f.header().frame_id == frame_id) { self.held.pop_front() } else { None }
+        if self
+            .held
+            .front()
+            .is_some_and(|f| f.header().frame_id == frame_id)
+        {
+            self.held.pop_front()
+        } else {
+            None
+        }
     }
 
     /// Takes the oldest held frame.
@@ -244,7 +306,17 @@ impl HeldFrames {
 
 /// Segments as records.
 pub fn to_records(segments: &[Segment]) -> Vec<SegmentRecord> {
-    segments.iter().map(|s| SegmentRecord { endpoints: [s.start.x as f32, s.start.y as f32, s.end.x as f32, s.end.y as f32] }).collect()
+    segments
+        .iter()
+        .map(|s| SegmentRecord {
+            endpoints: [
+                s.start.x as f32,
+                s.start.y as f32,
+                s.end.x as f32,
+                s.end.y as f32,
+            ],
+        })
+        .collect()
 }
 
 /// A record as a segment.
@@ -272,7 +344,10 @@ pub fn detector_from_code(code: u32) -> Option<DetectorKind> {
 
 /// The whole `main` of a stage binary: `run` gets the context, the process's bus and the
 /// shutdown flag. Errors are logged with their causes and give exit code 1.
-pub fn stage_main(stage: StageKind, run: fn(&StageContext, &Bus, &Shutdown) -> anyhow::Result<()>) -> ExitCode {
+pub fn stage_main(
+    stage: StageKind,
+    run: fn(&StageContext, &Bus, &Shutdown) -> anyhow::Result<()>,
+) -> ExitCode {
     let args = StageArgs::parse();
     match start(stage, args, run) {
         Ok(()) => ExitCode::SUCCESS,
@@ -284,15 +359,30 @@ pub fn stage_main(stage: StageKind, run: fn(&StageContext, &Bus, &Shutdown) -> a
     }
 }
 
-fn start(stage: StageKind, args: StageArgs, run: fn(&StageContext, &Bus, &Shutdown) -> anyhow::Result<()>) -> anyhow::Result<()> {
+fn start(
+    stage: StageKind,
+    args: StageArgs,
+    run: fn(&StageContext, &Bus, &Shutdown) -> anyhow::Result<()>,
+) -> anyhow::Result<()> {
     let config = PipelineConfig::from_file(&args.config)?;
     let pid = std::process::id();
-    let spans = config.output.trace.then(|| linetrack_telemetry::span_file(&args.run_dir, stage.name(), pid));
+    let spans = config
+        .output
+        .trace
+        .then(|| linetrack_telemetry::span_file(&args.run_dir, stage.name(), pid));
     linetrack_telemetry::init(stage.name(), "warn", spans.as_deref())?;
     let shutdown = Shutdown::on_signals()?;
     watch_parent(&shutdown);
-    let bus = Bus::shared_memory(&Scope::new(&args.run_id), &format!("{}-{pid}", stage.name()))?;
-    let ctx = StageContext { stage, config, args, pid };
+    let bus = Bus::shared_memory(
+        &Scope::new(&args.run_id),
+        &format!("{}-{pid}", stage.name()),
+    )?;
+    let ctx = StageContext {
+        stage,
+        config,
+        args,
+        pid,
+    };
     run(&ctx, &bus, &shutdown)
 }
 
@@ -301,15 +391,17 @@ fn start(stage: StageKind, args: StageArgs, run: fn(&StageContext, &Bus, &Shutdo
 fn watch_parent(shutdown: &Shutdown) {
     let parent = std::os::unix::process::parent_id();
     let flag = shutdown.clone();
-    let _ = std::thread::Builder::new().name("parent-watch".to_string()).spawn(move || {
-        while !flag.requested() {
-            std::thread::sleep(Duration::from_millis(250));
-            if std::os::unix::process::parent_id() != parent {
-                tracing::warn!("the supervisor (pid {parent}) is gone: shutting down");
-                flag.request();
+    let _ = std::thread::Builder::new()
+        .name("parent-watch".to_string())
+        .spawn(move || {
+            while !flag.requested() {
+                std::thread::sleep(Duration::from_millis(250));
+                if std::os::unix::process::parent_id() != parent {
+                    tracing::warn!("the supervisor (pid {parent}) is gone: shutting down");
+                    flag.request();
+                }
             }
-        }
-    });
+        });
 }
 
 #[cfg(test)]
@@ -318,23 +410,44 @@ mod tests {
 
     #[test]
     fn late_frames_are_dropped_only_under_the_policy() {
-        let budget = BudgetConfig { end_to_end_ms: 100.0, ..BudgetConfig::default() };
+        let budget = BudgetConfig {
+            end_to_end_ms: 100.0,
+            ..BudgetConfig::default()
+        };
         let fresh = FrameHeader::new(1, 0, now_ns());
         let stale = FrameHeader::new(2, 0, now_ns() - 200_000_000);
         assert_eq!(late_drop(&fresh, false, &budget), None);
-        assert_eq!(late_drop(&fresh, true, &budget), Some(FrameStatus::DroppedBehind));
-        assert_eq!(late_drop(&stale, false, &budget), Some(FrameStatus::DroppedLate));
-        let keep_all = BudgetConfig { drop_late: false, ..budget };
+        assert_eq!(
+            late_drop(&fresh, true, &budget),
+            Some(FrameStatus::DroppedBehind)
+        );
+        assert_eq!(
+            late_drop(&stale, false, &budget),
+            Some(FrameStatus::DroppedLate)
+        );
+        let keep_all = BudgetConfig {
+            drop_late: false,
+            ..budget
+        };
         assert_eq!(late_drop(&stale, true, &keep_all), None);
     }
 
     #[test]
     fn a_frame_is_processed_dropped_or_failed_and_always_published() {
         let bus = Bus::local();
-        let mut inlet = bus.inlet::<SegmentRecord>(Topic::Segments).unwrap_or_else(|e| panic!("{e}"));
-        let mut out = bus.outlet::<SegmentRecord>(Topic::Segments, 4).unwrap_or_else(|e| panic!("{e}"));
-        let budget = BudgetConfig { end_to_end_ms: 100.0, ..BudgetConfig::default() };
-        let record = SegmentRecord { endpoints: [1.0, 2.0, 3.0, 4.0] };
+        let mut inlet = bus
+            .inlet::<SegmentRecord>(Topic::Segments)
+            .unwrap_or_else(|e| panic!("{e}"));
+        let mut out = bus
+            .outlet::<SegmentRecord>(Topic::Segments, 4)
+            .unwrap_or_else(|e| panic!("{e}"));
+        let budget = BudgetConfig {
+            end_to_end_ms: 100.0,
+            ..BudgetConfig::default()
+        };
+        let record = SegmentRecord {
+            endpoints: [1.0, 2.0, 3.0, 4.0],
+        };
         let stage = StageKind::LineDetector;
         let fresh = FrameHeader::new(1, 0, now_ns());
         let stale = FrameHeader::new(2, 0, now_ns() - 500_000_000);
@@ -342,25 +455,77 @@ mod tests {
             h.left_count = 1;
             Ok(vec![record])
         };
-        process_frame(stage, fresh, false, &budget, &mut out, ok, Vec::new).unwrap_or_else(|e| panic!("{e}"));
-        process_frame(stage, stale, false, &budget, &mut out, |_| panic!("a late frame is not processed"), Vec::new).unwrap_or_else(|e| panic!("{e}"));
-        process_frame(stage, fresh, true, &budget, &mut out, |_| panic!("a frame behind is not processed"), Vec::new).unwrap_or_else(|e| panic!("{e}"));
-        process_frame(stage, fresh, false, &budget, &mut out, |_| anyhow::bail!("detector failed"), || vec![SegmentRecord::default()]).unwrap_or_else(|e| panic!("{e}"));
+        process_frame(stage, fresh, false, &budget, &mut out, ok, Vec::new)
+            .unwrap_or_else(|e| panic!("{e}"));
+        process_frame(
+            stage,
+            stale,
+            false,
+            &budget,
+            &mut out,
+            |_| panic!("a late frame is not processed"),
+            Vec::new,
+        )
+        .unwrap_or_else(|e| panic!("{e}"));
+        process_frame(
+            stage,
+            fresh,
+            true,
+            &budget,
+            &mut out,
+            |_| panic!("a frame behind is not processed"),
+            Vec::new,
+        )
+        .unwrap_or_else(|e| panic!("{e}"));
+        process_frame(
+            stage,
+            fresh,
+            false,
+            &budget,
+            &mut out,
+            |_| anyhow::bail!("detector failed"),
+            || vec![SegmentRecord::default()],
+        )
+        .unwrap_or_else(|e| panic!("{e}"));
         let got = inlet.receive_all().unwrap_or_else(|e| panic!("{e}"));
-        let summary: Vec<(FrameStatus, usize)> = got.iter().map(|m| (m.header().frame_status(), m.payload().len())).collect();
-        assert_eq!(summary, [(FrameStatus::Ok, 1), (FrameStatus::DroppedLate, 0), (FrameStatus::DroppedBehind, 0), (FrameStatus::StageError, 1)]);
+        let summary: Vec<(FrameStatus, usize)> = got
+            .iter()
+            .map(|m| (m.header().frame_status(), m.payload().len()))
+            .collect();
+        assert_eq!(
+            summary,
+            [
+                (FrameStatus::Ok, 1),
+                (FrameStatus::DroppedLate, 0),
+                (FrameStatus::DroppedBehind, 0),
+                (FrameStatus::StageError, 1)
+            ]
+        );
         let first = got[0].header();
         assert_eq!((first.left_count, got[0].payload()[0]), (1, record));
         let stamp = first.stamps[1];
-        assert!(stamp.start_ns > 0 && stamp.end_ns >= stamp.start_ns, "{stamp:?}");
-        assert!(got[1..].iter().all(|m| m.header().dropped_by == stage.code()));
+        assert!(
+            stamp.start_ns > 0 && stamp.end_ns >= stamp.start_ns,
+            "{stamp:?}"
+        );
+        assert!(
+            got[1..]
+                .iter()
+                .all(|m| m.header().dropped_by == stage.code())
+        );
     }
 
     #[test]
     fn heartbeats_are_paced() {
         let bus = Bus::local();
-        let ctx = StageContext::in_process(StageKind::Matcher, PipelineConfig::default(), PathBuf::new());
-        let mut inlet = bus.inlet::<StatusReport>(Topic::Status).unwrap_or_else(|e| panic!("{e}"));
+        let ctx = StageContext::in_process(
+            StageKind::Matcher,
+            PipelineConfig::default(),
+            PathBuf::new(),
+        );
+        let mut inlet = bus
+            .inlet::<StatusReport>(Topic::Status)
+            .unwrap_or_else(|e| panic!("{e}"));
         let mut reporter = Reporter::new(&bus, &ctx, 0).unwrap_or_else(|e| panic!("{e}"));
         reporter.beat(1);
         reporter.beat(2); // too soon: not sent

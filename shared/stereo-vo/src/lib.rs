@@ -10,7 +10,9 @@
 pub mod motion;
 pub mod triangulate;
 
-pub use motion::{LineObservation, MotionConfig, MotionError, MotionEstimate, PointObservation, estimate_motion};
+pub use motion::{
+    LineObservation, MotionConfig, MotionError, MotionEstimate, PointObservation, estimate_motion,
+};
 pub use triangulate::{Triangulated, TriangulationLimits, triangulate_point, triangulate_segment};
 
 /// Weight of an observation triangulated from disparity `d` pixels: `d² / (d² + d_ref²)`

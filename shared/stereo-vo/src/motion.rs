@@ -9,7 +9,10 @@
 //! `[I₃ | −[p']×]`.
 
 use linetrack_geometry::{Point, Segment, StereoRig};
-use nalgebra::{Isometry3, Matrix2x3, Matrix3, Matrix6, Point3, SMatrix, Translation3, UnitQuaternion, Vector2, Vector3, Vector6};
+use nalgebra::{
+    Isometry3, Matrix2x3, Matrix3, Matrix6, Point3, SMatrix, Translation3, UnitQuaternion, Vector2,
+    Vector3, Vector6,
+};
 use serde::{Deserialize, Serialize};
 
 /// A 3-D point of the previous frame and where it is seen now.
@@ -41,7 +44,11 @@ impl LineObservation {
         let (a, b) = (seen.start, seen.end);
         let line = Vector3::new(a.y - b.y, b.x - a.x, a.x * b.y - b.x * a.y);
         let norm = line.xy().norm();
-        (norm > 1e-9 && line.iter().all(|v| v.is_finite())).then(|| Self { endpoints, line: line / norm, weight })
+        (norm > 1e-9 && line.iter().all(|v| v.is_finite())).then(|| Self {
+            endpoints,
+            line: line / norm,
+            weight,
+        })
     }
 }
 
@@ -66,7 +73,14 @@ pub struct MotionConfig {
 
 impl Default for MotionConfig {
     fn default() -> Self {
-        Self { max_iterations: 20, min_step: 1e-9, huber_px: 1.0, outlier_px: 3.0, min_inliers: 12, min_relative_eigenvalue: 1e-9 }
+        Self {
+            max_iterations: 20,
+            min_step: 1e-9,
+            huber_px: 1.0,
+            outlier_px: 3.0,
+            min_inliers: 12,
+            min_relative_eigenvalue: 1e-9,
+        }
     }
 }
 
@@ -111,28 +125,48 @@ fn project(rig: &StereoRig, p: &Point3<f64>) -> Option<(Vector2<f64>, Matrix2x3<
     }
     let (f, z) = (rig.focal_px, p.z);
     let pixel = Vector2::new(f * p.x / z + rig.cx_px, f * p.y / z + rig.cy_px);
-    let jacobian = Matrix2x3::new(f / z, 0.0, -f * p.x / (z * z), 0.0, f / z, -f * p.y / (z * z));
+    let jacobian = Matrix2x3::new(
+        f / z,
+        0.0,
+        -f * p.x / (z * z),
+        0.0,
+        f / z,
+        -f * p.y / (z * z),
+    );
     Some((pixel, jacobian))
 }
 
 /// `∂p'/∂δ = [I | −[p']×]` for the left-multiplied update.
 fn transform_jacobian(p: &Point3<f64>) -> SMatrix<f64, 3, 6> {
     let mut j = SMatrix::<f64, 3, 6>::zeros();
-    j.fixed_view_mut::<3, 3>(0, 0).copy_from(&Matrix3::identity());
-    j.fixed_view_mut::<3, 3>(0, 3).copy_from(&(-p.coords.cross_matrix()));
+    j.fixed_view_mut::<3, 3>(0, 0)
+        .copy_from(&Matrix3::identity());
+    j.fixed_view_mut::<3, 3>(0, 3)
+        .copy_from(&(-p.coords.cross_matrix()));
     j
 }
 
 /// Residuals and Jacobians of one point observation under `t`: 2 rows.
-pub fn point_residual(rig: &StereoRig, t: &Isometry3<f64>, obs: &PointObservation) -> Option<(Vector2<f64>, SMatrix<f64, 2, 6>)> {
+pub fn point_residual(
+    rig: &StereoRig,
+    t: &Isometry3<f64>,
+    obs: &PointObservation,
+) -> Option<(Vector2<f64>, SMatrix<f64, 2, 6>)> {
     let p = t * obs.position;
     let (pixel, dpi) = project(rig, &p)?;
-    Some((pixel - Vector2::new(obs.pixel.x, obs.pixel.y), dpi * transform_jacobian(&p)))
+    Some((
+        pixel - Vector2::new(obs.pixel.x, obs.pixel.y),
+        dpi * transform_jacobian(&p),
+    ))
 }
 
 /// Residuals (signed endpoint-to-line distances, pixels) and Jacobians of one line
 /// observation under `t`: 2 rows.
-pub fn line_residual(rig: &StereoRig, t: &Isometry3<f64>, obs: &LineObservation) -> Option<(Vector2<f64>, SMatrix<f64, 2, 6>)> {
+pub fn line_residual(
+    rig: &StereoRig,
+    t: &Isometry3<f64>,
+    obs: &LineObservation,
+) -> Option<(Vector2<f64>, SMatrix<f64, 2, 6>)> {
     let mut r = Vector2::zeros();
     let mut j = SMatrix::<f64, 2, 6>::zeros();
     let normal = obs.line.xy().transpose();
@@ -183,10 +217,14 @@ fn optimise(
         let (low, high) = (eigen.min(), eigen.max());
         let relative = if high > 0.0 { low / high } else { 0.0 };
         if !(relative >= config.min_relative_eigenvalue) {
-            return Err(MotionError::Degenerate { relative_eigenvalue: relative });
+            return Err(MotionError::Degenerate {
+                relative_eigenvalue: relative,
+            });
         }
         let Some(step) = h.cholesky().map(|c| -c.solve(&g)) else {
-            return Err(MotionError::Degenerate { relative_eigenvalue: relative });
+            return Err(MotionError::Degenerate {
+                relative_eigenvalue: relative,
+            });
         };
         let update = Isometry3::from_parts(
             Translation3::from(step.fixed_rows::<3>(0).into_owned()),
@@ -210,20 +248,45 @@ pub fn estimate_motion(
 ) -> Result<MotionEstimate, MotionError> {
     let total = points.len() + lines.len();
     if total < config.min_inliers {
-        return Err(MotionError::TooFewInliers { inliers: total, needed: config.min_inliers });
+        return Err(MotionError::TooFewInliers {
+            inliers: total,
+            needed: config.min_inliers,
+        });
     }
     let all_points = vec![true; points.len()];
     let all_lines = vec![true; lines.len()];
-    let (first, iterations_1) = optimise(rig, points, lines, &Active { points: &all_points, lines: &all_lines }, *initial, config)?;
+    let (first, iterations_1) = optimise(
+        rig,
+        points,
+        lines,
+        &Active {
+            points: &all_points,
+            lines: &all_lines,
+        },
+        *initial,
+        config,
+    )?;
     let within = |r: Option<Vector2<f64>>| r.is_some_and(|r| r.amax() <= config.outlier_px);
-    let inlier_points: Vec<bool> = points.iter().map(|o| within(point_residual(rig, &first, o).map(|(r, _)| r))).collect();
-    let inlier_lines: Vec<bool> = lines.iter().map(|o| within(line_residual(rig, &first, o).map(|(r, _)| r))).collect();
+    let inlier_points: Vec<bool> = points
+        .iter()
+        .map(|o| within(point_residual(rig, &first, o).map(|(r, _)| r)))
+        .collect();
+    let inlier_lines: Vec<bool> = lines
+        .iter()
+        .map(|o| within(line_residual(rig, &first, o).map(|(r, _)| r)))
+        .collect();
     let count = |v: &[bool]| v.iter().filter(|b| **b).count();
     let (n_points, n_lines) = (count(&inlier_points), count(&inlier_lines));
     if n_points + n_lines < config.min_inliers {
-        return Err(MotionError::TooFewInliers { inliers: n_points + n_lines, needed: config.min_inliers });
+        return Err(MotionError::TooFewInliers {
+            inliers: n_points + n_lines,
+            needed: config.min_inliers,
+        });
     }
-    let active = Active { points: &inlier_points, lines: &inlier_lines };
+    let active = Active {
+        points: &inlier_points,
+        lines: &inlier_lines,
+    };
     let (motion, iterations_2) = optimise(rig, points, lines, &active, first, config)?;
     let mut sum = 0.0;
     let mut n = 0usize;

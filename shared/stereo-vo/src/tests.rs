@@ -15,22 +15,34 @@ fn rig() -> StereoRig {
 fn perturbed(t: &Isometry3<f64>, axis: usize, h: f64) -> Isometry3<f64> {
     let mut delta = [0.0; 6];
     delta[axis] = h;
-    let update = Isometry3::from_parts(Translation3::new(delta[0], delta[1], delta[2]), UnitQuaternion::from_scaled_axis(Vector3::new(delta[3], delta[4], delta[5])));
+    let update = Isometry3::from_parts(
+        Translation3::new(delta[0], delta[1], delta[2]),
+        UnitQuaternion::from_scaled_axis(Vector3::new(delta[3], delta[4], delta[5])),
+    );
     update * t
 }
 
 /// Central differences of `f` with respect to the six update parameters.
-fn numeric_jacobian(t: &Isometry3<f64>, f: impl Fn(&Isometry3<f64>) -> Vector2<f64>) -> SMatrix<f64, 2, 6> {
+fn numeric_jacobian(
+    t: &Isometry3<f64>,
+    f: impl Fn(&Isometry3<f64>) -> Vector2<f64>,
+) -> SMatrix<f64, 2, 6> {
     let h = 1e-6;
     let mut j = SMatrix::<f64, 2, 6>::zeros();
     for axis in 0..6 {
-        j.set_column(axis, &((f(&perturbed(t, axis, h)) - f(&perturbed(t, axis, -h))) / (2.0 * h)));
+        j.set_column(
+            axis,
+            &((f(&perturbed(t, axis, h)) - f(&perturbed(t, axis, -h))) / (2.0 * h)),
+        );
     }
     j
 }
 
 fn pose(rx: f64, ry: f64, rz: f64, tx: f64, ty: f64, tz: f64) -> Isometry3<f64> {
-    Isometry3::from_parts(Translation3::new(tx, ty, tz), UnitQuaternion::from_euler_angles(rx, ry, rz))
+    Isometry3::from_parts(
+        Translation3::new(tx, ty, tz),
+        UnitQuaternion::from_euler_angles(rx, ry, rz),
+    )
 }
 
 proptest! {
@@ -58,23 +70,46 @@ proptest! {
 #[test]
 fn line_residuals_are_signed_pixel_distances() {
     // The line v = 100; a point projecting to v = 103 is 3 px from it.
-    let line = LineObservation::new([Point3::new(0.0, 0.0, 1.0); 2], &Segment::from_coords(0.0, 100.0, 50.0, 100.0), 1.0).unwrap();
+    let line = LineObservation::new(
+        [Point3::new(0.0, 0.0, 1.0); 2],
+        &Segment::from_coords(0.0, 100.0, 50.0, 100.0),
+        1.0,
+    )
+    .unwrap();
     let endpoint = Point3::new(0.0, (103.0 - 240.0) / 458.0 * 2.0, 2.0);
-    let line = LineObservation { endpoints: [endpoint, endpoint], ..line };
+    let line = LineObservation {
+        endpoints: [endpoint, endpoint],
+        ..line
+    };
     let (r, _) = motion::line_residual(&rig(), &Isometry3::identity(), &line).unwrap();
     assert!((r[0].abs() - 3.0).abs() < 1e-9);
 }
 
 /// A random scene seen from the previous frame, observed after `truth` with noise; a share
 /// of the observations replaced by random pixels.
-fn correspondences(seed: u64, truth: &Isometry3<f64>, n_points: usize, n_lines: usize, outliers: f64) -> (Vec<PointObservation>, Vec<LineObservation>) {
+fn correspondences(
+    seed: u64,
+    truth: &Isometry3<f64>,
+    n_points: usize,
+    n_lines: usize,
+    outliers: f64,
+) -> (Vec<PointObservation>, Vec<LineObservation>) {
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let rig = rig();
     let noise = 0.5;
-    let project = |p: &Point3<f64>| Point::new(rig.focal_px * p.x / p.z + rig.cx_px, rig.focal_px * p.y / p.z + rig.cy_px);
+    let project = |p: &Point3<f64>| {
+        Point::new(
+            rig.focal_px * p.x / p.z + rig.cx_px,
+            rig.focal_px * p.y / p.z + rig.cy_px,
+        )
+    };
     let random_point = |rng: &mut ChaCha8Rng| {
         let z = rng.random_range(2.0..10.0);
-        Point3::new(rng.random_range(-0.7..0.7) * z, rng.random_range(-0.5..0.5) * z, z)
+        Point3::new(
+            rng.random_range(-0.7..0.7) * z,
+            rng.random_range(-0.5..0.5) * z,
+            z,
+        )
     };
     let mut points = Vec::new();
     while points.len() < n_points {
@@ -83,18 +118,39 @@ fn correspondences(seed: u64, truth: &Isometry3<f64>, n_points: usize, n_lines: 
         let pixel = if rng.random_bool(outliers) {
             Point::new(rng.random_range(0.0..752.0), rng.random_range(0.0..480.0))
         } else {
-            Point::new(seen.x + noise * rng.random_range(-1.0..1.0), seen.y + noise * rng.random_range(-1.0..1.0))
+            Point::new(
+                seen.x + noise * rng.random_range(-1.0..1.0),
+                seen.y + noise * rng.random_range(-1.0..1.0),
+            )
         };
-        points.push(PointObservation { position: x, pixel, weight: 1.0 });
+        points.push(PointObservation {
+            position: x,
+            pixel,
+            weight: 1.0,
+        });
     }
     let mut lines = Vec::new();
     while lines.len() < n_lines {
         let a = random_point(&mut rng);
-        let b = a + Vector3::new(rng.random_range(-0.5..0.5), rng.random_range(-0.5..0.5), rng.random_range(-0.3..0.3));
+        let b = a + Vector3::new(
+            rng.random_range(-0.5..0.5),
+            rng.random_range(-0.5..0.5),
+            rng.random_range(-0.3..0.3),
+        );
         let (pa, pb) = (project(&(truth * a)), project(&(truth * b)));
-        let jitter = |p: Point, rng: &mut ChaCha8Rng| Point::new(p.x + noise * rng.random_range(-1.0..1.0), p.y + noise * rng.random_range(-1.0..1.0));
+        let jitter = |p: Point, rng: &mut ChaCha8Rng| {
+            Point::new(
+                p.x + noise * rng.random_range(-1.0..1.0),
+                p.y + noise * rng.random_range(-1.0..1.0),
+            )
+        };
         let seen = if rng.random_bool(outliers) {
-            Segment::from_coords(rng.random_range(0.0..752.0), rng.random_range(0.0..480.0), rng.random_range(0.0..752.0), rng.random_range(0.0..480.0))
+            Segment::from_coords(
+                rng.random_range(0.0..752.0),
+                rng.random_range(0.0..480.0),
+                rng.random_range(0.0..752.0),
+                rng.random_range(0.0..480.0),
+            )
         } else {
             Segment::new(jitter(pa, &mut rng), jitter(pb, &mut rng))
         };
@@ -108,7 +164,10 @@ fn correspondences(seed: u64, truth: &Isometry3<f64>, n_points: usize, n_lines: 
 fn assert_close(estimate: &Isometry3<f64>, truth: &Isometry3<f64>, max_m: f64, max_deg: f64) {
     let dt = (estimate.translation.vector - truth.translation.vector).norm();
     let dr = estimate.rotation.angle_to(&truth.rotation).to_degrees();
-    assert!(dt <= max_m && dr <= max_deg, "translation error {dt} m, rotation error {dr}°");
+    assert!(
+        dt <= max_m && dr <= max_deg,
+        "translation error {dt} m, rotation error {dr}°"
+    );
 }
 
 #[test]
@@ -117,13 +176,22 @@ fn recovers_motion_from_points_lines_and_both_with_outliers() {
     for (name, n_points, n_lines) in [("points", 150, 0), ("lines", 0, 80), ("both", 100, 50)] {
         for seed in 0..5 {
             let (points, lines) = correspondences(seed, &truth, n_points, n_lines, 0.2);
-            let estimate = estimate_motion(&rig(), &points, &lines, &Isometry3::identity(), &MotionConfig::default())
-                .unwrap_or_else(|e| panic!("{name}, seed {seed}: {e}"));
+            let estimate = estimate_motion(
+                &rig(),
+                &points,
+                &lines,
+                &Isometry3::identity(),
+                &MotionConfig::default(),
+            )
+            .unwrap_or_else(|e| panic!("{name}, seed {seed}: {e}"));
             assert_close(&estimate.motion, &truth, 0.01, 0.2);
             // About 80 % are inliers; the outlier filter keeps most of those and few others.
             let inliers = estimate.inlier_points + estimate.inlier_lines;
             let total = n_points + n_lines;
-            assert!(inliers as f64 >= 0.7 * total as f64 && inliers as f64 <= 0.9 * total as f64, "{name}: {inliers} of {total}");
+            assert!(
+                inliers as f64 >= 0.7 * total as f64 && inliers as f64 <= 0.9 * total as f64,
+                "{name}: {inliers} of {total}"
+            );
             assert!(estimate.rms_px < 1.0, "{name}: rms {}", estimate.rms_px);
         }
     }
@@ -133,17 +201,48 @@ fn recovers_motion_from_points_lines_and_both_with_outliers() {
 fn too_few_observations_or_a_degenerate_set_is_reported_as_lost() {
     let truth = pose(0.0, 0.0, 0.0, 0.05, 0.0, 0.1);
     let (points, _) = correspondences(1, &truth, 5, 0, 0.0);
-    assert!(matches!(estimate_motion(&rig(), &points, &[], &Isometry3::identity(), &MotionConfig::default()), Err(MotionError::TooFewInliers { inliers: 5, .. })));
+    assert!(matches!(
+        estimate_motion(
+            &rig(),
+            &points,
+            &[],
+            &Isometry3::identity(),
+            &MotionConfig::default()
+        ),
+        Err(MotionError::TooFewInliers { inliers: 5, .. })
+    ));
     // Thirty observations of one single 3-D point constrain two degrees of freedom.
     let (one, _) = correspondences(2, &truth, 1, 0, 0.0);
     let same = vec![one[0]; 30];
-    assert!(matches!(estimate_motion(&rig(), &same, &[], &Isometry3::identity(), &MotionConfig::default()), Err(MotionError::Degenerate { .. })));
+    assert!(matches!(
+        estimate_motion(
+            &rig(),
+            &same,
+            &[],
+            &Isometry3::identity(),
+            &MotionConfig::default()
+        ),
+        Err(MotionError::Degenerate { .. })
+    ));
     // Mostly garbage: too few inliers survive the first pass.
     let (noise, _) = correspondences(3, &truth, 60, 0, 0.95);
-    assert!(estimate_motion(&rig(), &noise, &[], &Isometry3::identity(), &MotionConfig::default()).is_err());
+    assert!(
+        estimate_motion(
+            &rig(),
+            &noise,
+            &[],
+            &Isometry3::identity(),
+            &MotionConfig::default()
+        )
+        .is_err()
+    );
 }
 
 #[test]
 fn disparity_weight_grows_with_disparity() {
-    assert!(disparity_weight(1.0) < 0.1 && disparity_weight(4.0) == 0.5 && disparity_weight(40.0) > 0.99);
+    assert!(
+        disparity_weight(1.0) < 0.1
+            && disparity_weight(4.0) == 0.5
+            && disparity_weight(40.0) > 0.99
+    );
 }

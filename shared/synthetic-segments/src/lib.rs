@@ -120,12 +120,20 @@ pub struct Score {
 impl Score {
     /// correct / accepted (1 when nothing was accepted).
     pub fn precision(&self) -> f64 {
-        if self.accepted == 0 { 1.0 } else { self.correct as f64 / self.accepted as f64 }
+        if self.accepted == 0 {
+            1.0
+        } else {
+            self.correct as f64 / self.accepted as f64
+        }
     }
 
     /// correct / matchable (1 when nothing was matchable).
     pub fn recall(&self) -> f64 {
-        if self.matchable == 0 { 1.0 } else { self.correct as f64 / self.matchable as f64 }
+        if self.matchable == 0 {
+            1.0
+        } else {
+            self.correct as f64 / self.matchable as f64
+        }
     }
 }
 
@@ -148,7 +156,11 @@ impl SegmentPair {
             .iter()
             .filter(|l| l.is_some() && self.second.labels.contains(l))
             .count();
-        Score { accepted, correct, matchable }
+        Score {
+            accepted,
+            correct,
+            matchable,
+        }
     }
 }
 
@@ -162,7 +174,10 @@ pub fn stereo_pair(rig: &StereoRig, config: &SceneConfig) -> SegmentPair {
     let mut rng = ChaCha8Rng::seed_from_u64(config.seed);
     let scene = random_scene(rig, config, &mut rng);
     let left = Isometry3::identity();
-    let right = Isometry3::from_parts(Translation3::new(-rig.baseline_m, 0.0, 0.0), UnitQuaternion::identity());
+    let right = Isometry3::from_parts(
+        Translation3::new(-rig.baseline_m, 0.0, 0.0),
+        UnitQuaternion::identity(),
+    );
     SegmentPair {
         first: observe(&scene, &left, rig, config, &mut rng),
         second: observe(&scene, &right, rig, config, &mut rng),
@@ -188,7 +203,11 @@ pub fn frame_pair(rig: &StereoRig, config: &SceneConfig) -> SegmentPair {
 
 fn random_unit(rng: &mut ChaCha8Rng) -> Vector3<f64> {
     loop {
-        let v = Vector3::new(rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0));
+        let v = Vector3::new(
+            rng.random_range(-1.0..1.0),
+            rng.random_range(-1.0..1.0),
+            rng.random_range(-1.0..1.0),
+        );
         let n = v.norm();
         if n > 0.1 && n <= 1.0 {
             return v / n;
@@ -213,7 +232,11 @@ fn random_scene(rig: &StereoRig, config: &SceneConfig, rng: &mut ChaCha8Rng) -> 
         let z = rng.random_range(near..far);
         let u = rng.random_range(0.0..rig.width_px as f64);
         let v = rng.random_range(0.0..rig.height_px as f64);
-        Point3::new((u - rig.cx_px) * z / rig.focal_px, (v - rig.cy_px) * z / rig.focal_px, z)
+        Point3::new(
+            (u - rig.cx_px) * z / rig.focal_px,
+            (v - rig.cy_px) * z / rig.focal_px,
+            z,
+        )
     };
     let mut segments = Vec::new();
     for _ in 0..config.segments {
@@ -225,7 +248,10 @@ fn random_scene(rig: &StereoRig, config: &SceneConfig, rng: &mut ChaCha8Rng) -> 
         let mid = random_midpoint(rng);
         let dir = scene_direction(rng);
         // Spread the copies across the direction, within the plane facing the camera.
-        let across = dir.cross(&Vector3::z()).try_normalize(1e-9).unwrap_or_else(Vector3::x);
+        let across = dir
+            .cross(&Vector3::z())
+            .try_normalize(1e-9)
+            .unwrap_or_else(Vector3::x);
         let half = dir * rng.random_range(short..long) * 0.5;
         for k in 0..config.group_size {
             let offset = across * (k as f64 * config.group_spacing_m);
@@ -265,7 +291,10 @@ fn observe(
             let cut = rng.random_range(0.3..0.7);
             let gap = rng.random_range(2.0..6.0) / seg.length();
             let at = |t: f64| seg.start + (seg.end - seg.start) * t;
-            for piece in [Segment::new(seg.start, at(cut - gap / 2.0)), Segment::new(at(cut + gap / 2.0), seg.end)] {
+            for piece in [
+                Segment::new(seg.start, at(cut - gap / 2.0)),
+                Segment::new(at(cut + gap / 2.0), seg.end),
+            ] {
                 push_noisy(&mut out, piece, Some(id), config, rng);
             }
         } else {
@@ -283,11 +312,22 @@ fn observe(
     shuffle_and_cap(out, config.max_segments, rng)
 }
 
-fn push_noisy(out: &mut LabelledSegments, seg: Segment, label: Option<usize>, config: &SceneConfig, rng: &mut ChaCha8Rng) {
+fn push_noisy(
+    out: &mut LabelledSegments,
+    seg: Segment,
+    label: Option<usize>,
+    config: &SceneConfig,
+    rng: &mut ChaCha8Rng,
+) {
     let sigma = config.endpoint_noise_px;
-    let mut jitter = |p: Point| Point::new(p.x + sigma * gaussian(rng), p.y + sigma * gaussian(rng));
+    let mut jitter =
+        |p: Point| Point::new(p.x + sigma * gaussian(rng), p.y + sigma * gaussian(rng));
     let noisy = Segment::new(jitter(seg.start), jitter(seg.end));
-    let noisy = if config.random_endpoint_order && rng.random_bool(0.5) { noisy.reversed() } else { noisy };
+    let noisy = if config.random_endpoint_order && rng.random_bool(0.5) {
+        noisy.reversed()
+    } else {
+        noisy
+    };
     out.segments.push(noisy);
     out.labels.push(label);
 }
@@ -300,7 +340,11 @@ fn truncate(seg: &Segment, max_fraction: f64, rng: &mut ChaCha8Rng) -> Segment {
 }
 
 /// Random order (Fisher–Yates), then the longest `cap` segments if capped.
-fn shuffle_and_cap(mut set: LabelledSegments, cap: Option<usize>, rng: &mut ChaCha8Rng) -> LabelledSegments {
+fn shuffle_and_cap(
+    mut set: LabelledSegments,
+    cap: Option<usize>,
+    rng: &mut ChaCha8Rng,
+) -> LabelledSegments {
     let n = set.segments.len();
     for k in (1..n).rev() {
         let other = rng.random_range(0..=k);
@@ -309,7 +353,11 @@ fn shuffle_and_cap(mut set: LabelledSegments, cap: Option<usize>, rng: &mut ChaC
     }
     if let Some(cap) = cap.filter(|&c| c < n) {
         let mut order: Vec<usize> = (0..n).collect();
-        order.sort_by(|&a, &b| set.segments[b].length().total_cmp(&set.segments[a].length()));
+        order.sort_by(|&a, &b| {
+            set.segments[b]
+                .length()
+                .total_cmp(&set.segments[a].length())
+        });
         order.truncate(cap);
         order.sort_unstable();
         set = LabelledSegments {
@@ -332,7 +380,12 @@ fn project_clipped(a: &Point3<f64>, b: &Point3<f64>, rig: &StereoRig) -> Option<
         let cut = a + (b - a) * t;
         if a.z < NEAR_PLANE_M { a = cut } else { b = cut }
     }
-    let project = |p: &Point3<f64>| Point::new(rig.focal_px * p.x / p.z + rig.cx_px, rig.focal_px * p.y / p.z + rig.cy_px);
+    let project = |p: &Point3<f64>| {
+        Point::new(
+            rig.focal_px * p.x / p.z + rig.cx_px,
+            rig.focal_px * p.y / p.z + rig.cy_px,
+        )
+    };
     Segment::new(project(&a), project(&b)).clipped_to(rig.width_px as f64, rig.height_px as f64)
 }
 
@@ -343,9 +396,15 @@ mod tests {
     #[test]
     fn same_seed_same_scene_other_seed_other_scene() {
         let rig = StereoRig::default();
-        let config = SceneConfig { seed: 3, ..Default::default() };
+        let config = SceneConfig {
+            seed: 3,
+            ..Default::default()
+        };
         assert_eq!(stereo_pair(&rig, &config), stereo_pair(&rig, &config));
-        assert_ne!(stereo_pair(&rig, &config), stereo_pair(&rig, &SceneConfig { seed: 4, ..config }));
+        assert_ne!(
+            stereo_pair(&rig, &config),
+            stereo_pair(&rig, &SceneConfig { seed: 4, ..config })
+        );
     }
 
     #[test]
@@ -362,10 +421,16 @@ mod tests {
         let pair = stereo_pair(&rig, &config);
         let mut checked = 0;
         for (i, label) in pair.first.labels.iter().enumerate() {
-            let Some(j) = pair.second.labels.iter().position(|l| l == label) else { continue };
+            let Some(j) = pair.second.labels.iter().position(|l| l == label) else {
+                continue;
+            };
             let (l, r) = (pair.first.segments[i], pair.second.segments[j]);
             // Unclipped segments: the same rows, shifted left in the right image.
-            let inside = |s: &Segment| [s.start, s.end].iter().all(|p| p.x > 1.0 && p.x < 751.0 && p.y > 1.0 && p.y < 479.0);
+            let inside = |s: &Segment| {
+                [s.start, s.end]
+                    .iter()
+                    .all(|p| p.x > 1.0 && p.x < 751.0 && p.y > 1.0 && p.y < 479.0)
+            };
             if inside(&l) && inside(&r) {
                 assert!((l.start.y - r.start.y).abs() < 1e-9 && (l.end.y - r.end.y).abs() < 1e-9);
                 assert!(l.start.x > r.start.x && l.end.x > r.end.x);
@@ -379,12 +444,25 @@ mod tests {
     fn score_counts_correct_wrong_and_matchable() {
         let seg = Segment::from_coords(0.0, 0.0, 1.0, 1.0);
         let pair = SegmentPair {
-            first: LabelledSegments { segments: vec![seg; 3], labels: vec![Some(1), Some(2), None] },
-            second: LabelledSegments { segments: vec![seg; 2], labels: vec![Some(2), Some(1)] },
+            first: LabelledSegments {
+                segments: vec![seg; 3],
+                labels: vec![Some(1), Some(2), None],
+            },
+            second: LabelledSegments {
+                segments: vec![seg; 2],
+                labels: vec![Some(2), Some(1)],
+            },
             rig: StereoRig::default(),
         };
         let score = pair.score([(0, 1), (1, 1), (2, 0), (7, 0)]);
-        assert_eq!(score, Score { accepted: 4, correct: 1, matchable: 2 });
+        assert_eq!(
+            score,
+            Score {
+                accepted: 4,
+                correct: 1,
+                matchable: 2
+            }
+        );
         assert_eq!(score.precision(), 0.25);
         assert_eq!(score.recall(), 0.5);
     }
@@ -393,10 +471,26 @@ mod tests {
     fn cap_keeps_the_longest() {
         let rig = StereoRig::default();
         let all = stereo_pair(&rig, &SceneConfig::default());
-        let capped = stereo_pair(&rig, &SceneConfig { max_segments: Some(40), ..Default::default() });
+        let capped = stereo_pair(
+            &rig,
+            &SceneConfig {
+                max_segments: Some(40),
+                ..Default::default()
+            },
+        );
         assert_eq!(capped.first.segments.len(), 40);
-        let shortest_kept = capped.first.segments.iter().map(Segment::length).fold(f64::INFINITY, f64::min);
-        let longer_in_all = all.first.segments.iter().filter(|s| s.length() > shortest_kept).count();
+        let shortest_kept = capped
+            .first
+            .segments
+            .iter()
+            .map(Segment::length)
+            .fold(f64::INFINITY, f64::min);
+        let longer_in_all = all
+            .first
+            .segments
+            .iter()
+            .filter(|s| s.length() > shortest_kept)
+            .count();
         assert!(longer_in_all <= 40);
     }
 }

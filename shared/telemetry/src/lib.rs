@@ -13,9 +13,9 @@ use std::io::{BufRead, BufReader, BufWriter, Write};
 use std::path::{Path, PathBuf};
 use std::sync::Mutex;
 use std::time::{SystemTime, UNIX_EPOCH};
+use tracing::Subscriber;
 use tracing::field::{Field, Visit};
 use tracing::span::{Attributes, Id};
-use tracing::Subscriber;
 use tracing_subscriber::layer::{Context, SubscriberExt};
 use tracing_subscriber::registry::LookupSpan;
 use tracing_subscriber::util::SubscriberInitExt;
@@ -57,7 +57,10 @@ pub struct SpanEvent {
 }
 
 fn epoch_us() -> u64 {
-    SystemTime::now().duration_since(UNIX_EPOCH).map(|d| d.as_micros() as u64).unwrap_or(0)
+    SystemTime::now()
+        .duration_since(UNIX_EPOCH)
+        .map(|d| d.as_micros() as u64)
+        .unwrap_or(0)
 }
 
 struct Timing {
@@ -94,10 +97,20 @@ impl SpanRecorder {
     /// Records the spans of process `process` into `path` (created or truncated).
     pub fn create(path: &Path, process: &str) -> Result<Self, TelemetryError> {
         if let Some(dir) = path.parent() {
-            std::fs::create_dir_all(dir).map_err(|source| TelemetryError::Io { path: dir.to_path_buf(), source })?;
+            std::fs::create_dir_all(dir).map_err(|source| TelemetryError::Io {
+                path: dir.to_path_buf(),
+                source,
+            })?;
         }
-        let file = File::create(path).map_err(|source| TelemetryError::Io { path: path.to_path_buf(), source })?;
-        Ok(Self { process: process.to_string(), pid: std::process::id(), out: Mutex::new(BufWriter::new(file)) })
+        let file = File::create(path).map_err(|source| TelemetryError::Io {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        Ok(Self {
+            process: process.to_string(),
+            pid: std::process::id(),
+            out: Mutex::new(BufWriter::new(file)),
+        })
     }
 }
 
@@ -113,16 +126,25 @@ impl<S: Subscriber + for<'a> LookupSpan<'a>> Layer<S> for SpanRecorder {
         let mut visitor = FrameIdVisitor(None);
         attrs.record(&mut visitor);
         if let Some(span) = ctx.span(id) {
-            span.extensions_mut().insert(Timing { start_us: epoch_us(), frame_id: visitor.0 });
+            span.extensions_mut().insert(Timing {
+                start_us: epoch_us(),
+                frame_id: visitor.0,
+            });
         }
     }
 
     fn on_close(&self, id: Id, ctx: Context<'_, S>) {
         let Some(span) = ctx.span(&id) else { return };
         let extensions = span.extensions();
-        let Some(timing) = extensions.get::<Timing>() else { return };
+        let Some(timing) = extensions.get::<Timing>() else {
+            return;
+        };
         // A span without its own frame id inherits its parent's.
-        let frame_id = timing.frame_id.or_else(|| span.scope().skip(1).find_map(|p| p.extensions().get::<Timing>().and_then(|t| t.frame_id)));
+        let frame_id = timing.frame_id.or_else(|| {
+            span.scope()
+                .skip(1)
+                .find_map(|p| p.extensions().get::<Timing>().and_then(|t| t.frame_id))
+        });
         let event = SpanEvent {
             name: span.name().to_string(),
             process: self.process.clone(),
@@ -141,15 +163,26 @@ impl<S: Subscriber + for<'a> LookupSpan<'a>> Layer<S> for SpanRecorder {
 
 /// Installs the process's `tracing` subscriber: logs to stderr at `default_filter` (or
 /// `RUST_LOG`), and spans to `span_file` when given.
-pub fn init(process: &str, default_filter: &str, span_file: Option<&Path>) -> Result<(), TelemetryError> {
-    let filter = EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new(default_filter));
-    let logs = tracing_subscriber::fmt::layer().with_writer(std::io::stderr).with_target(false).with_filter(filter);
+pub fn init(
+    process: &str,
+    default_filter: &str,
+    span_file: Option<&Path>,
+) -> Result<(), TelemetryError> {
+    let filter =
+        EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new(default_filter));
+    let logs = tracing_subscriber::fmt::layer()
+        .with_writer(std::io::stderr)
+        .with_target(false)
+        .with_filter(filter);
     let recorder = match span_file {
         Some(path) => Some(SpanRecorder::create(path, process)?),
         None => None,
     };
-    tracing_subscriber::registry().with(logs).with(recorder).try_init().map_err(|_| TelemetryError::AlreadyInitialised)
-
+    tracing_subscriber::registry()
+        .with(logs)
+        .with(recorder)
+        .try_init()
+        .map_err(|_| TelemetryError::AlreadyInitialised)
 }
 
 /// The span file of process `process` (pid `pid`) in `run_dir`.
@@ -168,12 +201,22 @@ pub fn read_spans(run_dir: &Path) -> Result<(Vec<SpanEvent>, usize), TelemetryEr
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok((events, 0)),
         Err(source) => return Err(TelemetryError::Io { path: dir, source }),
     };
-    let mut paths: Vec<PathBuf> = entries.flatten().map(|e| e.path()).filter(|p| p.extension().is_some_and(|x| x == "jsonl")).collect();
+    let mut paths: Vec<PathBuf> = entries
+        .flatten()
+        .map(|e| e.path())
+        .filter(|p| p.extension().is_some_and(|x| x == "jsonl"))
+        .collect();
     paths.sort();
     for path in paths {
-        let file = File::open(&path).map_err(|source| TelemetryError::Io { path: path.clone(), source })?;
+        let file = File::open(&path).map_err(|source| TelemetryError::Io {
+            path: path.clone(),
+            source,
+        })?;
         for line in BufReader::new(file).lines() {
-            let line = line.map_err(|source| TelemetryError::Io { path: path.clone(), source })?;
+            let line = line.map_err(|source| TelemetryError::Io {
+                path: path.clone(),
+                source,
+            })?;
             match serde_json::from_str::<SpanEvent>(&line) {
                 Ok(event) => events.push(event),
                 Err(_) => skipped += 1,
@@ -200,8 +243,14 @@ pub fn write_chrome_trace(events: &[SpanEvent], path: &Path) -> Result<usize, Te
         trace.push(serde_json::json!({"ph": "X", "cat": e.process, "name": e.name, "pid": e.pid, "tid": e.tid, "ts": e.ts_us, "dur": e.dur_us, "args": args}));
     }
     let json = serde_json::json!({"traceEvents": trace, "displayTimeUnit": "ms"});
-    let file = File::create(path).map_err(|source| TelemetryError::Io { path: path.to_path_buf(), source })?;
-    serde_json::to_writer(BufWriter::new(file), &json).map_err(|e| TelemetryError::Io { path: path.to_path_buf(), source: e.into() })?;
+    let file = File::create(path).map_err(|source| TelemetryError::Io {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    serde_json::to_writer(BufWriter::new(file), &json).map_err(|e| TelemetryError::Io {
+        path: path.to_path_buf(),
+        source: e.into(),
+    })?;
     Ok(events.len())
 }
 
@@ -232,21 +281,46 @@ mod tests {
             std::thread::sleep(std::time::Duration::from_millis(2));
         });
         // A torn last line, as from a killed process.
-        std::fs::OpenOptions::new().append(true).open(&path).and_then(|mut f| f.write_all(b"{\"name\":\"tru")).unwrap_or_else(|e| panic!("{e}"));
+        std::fs::OpenOptions::new()
+            .append(true)
+            .open(&path)
+            .and_then(|mut f| f.write_all(b"{\"name\":\"tru"))
+            .unwrap_or_else(|e| panic!("{e}"));
         let (events, skipped) = read_spans(&dir).unwrap_or_else(|e| panic!("{e}"));
         assert_eq!(skipped, 1);
         assert_eq!(events.len(), 2);
-        let describe = events.iter().find(|e| e.name == "describe").unwrap_or_else(|| panic!("no describe span"));
-        assert_eq!(describe.frame_id, Some(17), "inherits the frame of its parent");
+        let describe = events
+            .iter()
+            .find(|e| e.name == "describe")
+            .unwrap_or_else(|| panic!("no describe span"));
+        assert_eq!(
+            describe.frame_id,
+            Some(17),
+            "inherits the frame of its parent"
+        );
         assert!(describe.dur_us >= 2000);
-        let outer = events.iter().find(|e| e.name == "match").unwrap_or_else(|| panic!("no match span"));
+        let outer = events
+            .iter()
+            .find(|e| e.name == "match")
+            .unwrap_or_else(|| panic!("no match span"));
         assert!(outer.ts_us <= describe.ts_us && outer.dur_us >= describe.dur_us);
         assert_eq!(merge_traces(&dir).unwrap_or_else(|e| panic!("{e}")), 2);
-        let trace: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(dir.join("trace.json")).unwrap_or_default()).unwrap_or_default();
+        let trace: serde_json::Value = serde_json::from_str(
+            &std::fs::read_to_string(dir.join("trace.json")).unwrap_or_default(),
+        )
+        .unwrap_or_default();
         let events = trace["traceEvents"].as_array().cloned().unwrap_or_default();
         let name = format!("matcher ({})", std::process::id());
-        assert!(events.iter().any(|e| e["ph"] == "M" && e["args"]["name"] == name.as_str()));
-        assert!(events.iter().any(|e| e["ph"] == "X" && e["name"] == "describe" && e["args"]["frame_id"] == 17));
+        assert!(
+            events
+                .iter()
+                .any(|e| e["ph"] == "M" && e["args"]["name"] == name.as_str())
+        );
+        assert!(
+            events
+                .iter()
+                .any(|e| e["ph"] == "X" && e["name"] == "describe" && e["args"]["frame_id"] == 17)
+        );
         let _ = std::fs::remove_dir_all(&dir);
     }
 }

@@ -25,12 +25,42 @@ fn default_euroc_dir() -> PathBuf {
 pub fn euroc_dir() -> Result<PathBuf, String> {
     let (dir, how) = match std::env::var_os(EUROC_ENV) {
         Some(value) => (PathBuf::from(value), format!("${EUROC_ENV}")),
-        None => (default_euroc_dir(), format!("the default location (set ${EUROC_ENV} to override)")),
+        None => (
+            default_euroc_dir(),
+            format!("the default location (set ${EUROC_ENV} to override)"),
+        ),
     };
     if dir.join("mav0/cam0/data.csv").is_file() {
         Ok(dir)
     } else {
-        Err(format!("EuRoC excerpt not found at {} ({how}): no mav0/cam0/data.csv there", dir.display()))
+        Err(format!(
+            "EuRoC excerpt not found at {} ({how}): no mav0/cam0/data.csv there",
+            dir.display()
+        ))
+    }
+}
+
+/// Environment variable naming the Middlebury folder (the one holding the scene folders).
+pub const MIDDLEBURY_ENV: &str = "LINETRACK_MIDDLEBURY_DIR";
+
+/// The Middlebury stereo pairs' folder (`$LINETRACK_MIDDLEBURY_DIR`, else
+/// `../shared/data/middlebury` beside the workspace), or a message naming where it was
+/// looked for.
+pub fn middlebury_dir() -> Result<PathBuf, String> {
+    let (dir, how) = match std::env::var_os(MIDDLEBURY_ENV) {
+        Some(value) => (PathBuf::from(value), format!("${MIDDLEBURY_ENV}")),
+        None => (
+            Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data/middlebury"),
+            format!("the default location (set ${MIDDLEBURY_ENV} to override)"),
+        ),
+    };
+    if dir.is_dir() {
+        Ok(dir)
+    } else {
+        Err(format!(
+            "Middlebury pairs not found at {} ({how})",
+            dir.display()
+        ))
     }
 }
 
@@ -38,7 +68,8 @@ pub fn euroc_dir() -> Result<PathBuf, String> {
 pub fn euroc_stereo_pair(index: usize) -> Result<(PathBuf, PathBuf), String> {
     let dir = euroc_dir()?;
     let csv_path = dir.join("mav0/cam0/data.csv");
-    let csv = std::fs::read_to_string(&csv_path).map_err(|e| format!("{}: {e}", csv_path.display()))?;
+    let csv =
+        std::fs::read_to_string(&csv_path).map_err(|e| format!("{}: {e}", csv_path.display()))?;
     let name = csv
         .lines()
         .filter(|l| !l.starts_with('#') && !l.trim().is_empty())
@@ -46,7 +77,10 @@ pub fn euroc_stereo_pair(index: usize) -> Result<(PathBuf, PathBuf), String> {
         .and_then(|l| l.split(',').nth(1))
         .map(str::trim)
         .ok_or_else(|| format!("{}: no frame {index}", csv_path.display()))?;
-    Ok((dir.join("mav0/cam0/data").join(name), dir.join("mav0/cam1/data").join(name)))
+    Ok((
+        dir.join("mav0/cam0/data").join(name),
+        dir.join("mav0/cam1/data").join(name),
+    ))
 }
 
 /// A generated grayscale test card, row-major: a dark background with bright and mid-grey
@@ -59,7 +93,10 @@ pub fn test_card(width: usize, height: usize) -> Vec<u8> {
         for x in 0..width {
             // Faint texture so descriptors have something to see besides the edges.
             let texture = ((x * 7 + y * 13) % 17) as u8;
-            let inside = shapes.iter().rev().find(|(shape, _)| contains(shape, x as f64 + 0.5, y as f64 + 0.5));
+            let inside = shapes
+                .iter()
+                .rev()
+                .find(|(shape, _)| contains(shape, x as f64 + 0.5, y as f64 + 0.5));
             pixels[y * width + x] = match inside {
                 Some((_, level)) => level.saturating_add(texture),
                 None => 30 + texture,
@@ -86,14 +123,29 @@ type Quad = [(f64, f64); 4];
 /// Convex quadrilaterals (corners clockwise in image coordinates) and their grey level.
 fn test_card_shapes(width: usize, height: usize) -> Vec<(Quad, u8)> {
     let (w, h) = (width as f64, height as f64);
-    let rect = |x0: f64, y0: f64, x1: f64, y1: f64| [(x0 * w, y0 * h), (x1 * w, y0 * h), (x1 * w, y1 * h), (x0 * w, y1 * h)];
+    let rect = |x0: f64, y0: f64, x1: f64, y1: f64| {
+        [
+            (x0 * w, y0 * h),
+            (x1 * w, y0 * h),
+            (x1 * w, y1 * h),
+            (x0 * w, y1 * h),
+        ]
+    };
     vec![
         (rect(0.08, 0.10, 0.30, 0.80), 200),
         (rect(0.40, 0.15, 0.55, 0.45), 140),
         (rect(0.62, 0.55, 0.92, 0.90), 220),
         (rect(0.36, 0.60, 0.52, 0.92), 110),
         // A slanted parallelogram.
-        ([(0.62 * w, 0.08 * h), (0.80 * w, 0.08 * h), (0.90 * w, 0.45 * h), (0.72 * w, 0.45 * h)], 170),
+        (
+            [
+                (0.62 * w, 0.08 * h),
+                (0.80 * w, 0.08 * h),
+                (0.90 * w, 0.45 * h),
+                (0.72 * w, 0.45 * h),
+            ],
+            170,
+        ),
     ]
 }
 
@@ -121,7 +173,8 @@ pub fn shift_left(pixels: &[u8], width: usize, shift: usize) -> Vec<u8> {
 /// `linetrack-<owner>-<pid>-<name>`, with anything left there by an earlier run removed.
 /// Nothing is created: the code under test may want to create it itself.
 pub fn scratch_path(owner: &str, name: &str) -> PathBuf {
-    let path = std::env::temp_dir().join(format!("linetrack-{owner}-{}-{name}", std::process::id()));
+    let path =
+        std::env::temp_dir().join(format!("linetrack-{owner}-{}-{name}", std::process::id()));
     // An earlier run's leftovers: a folder, or a file where a test put one.
     let _ = std::fs::remove_dir_all(&path).or_else(|_| std::fs::remove_file(&path));
     path

@@ -4,7 +4,11 @@
 //!
 //! - `detect/{lsd,fld}`: one image;
 //! - `lbd/describe`: LBD descriptors of one image's 100 segments;
-//! - `match/{lbd,l1}/{stereo,frame-to-frame}`: matching two images' segments;
+//! - `match/{lbd,l1}/{stereo,frame-to-frame}`: matching two images' segments (ℓ1 stereo
+//!   with its photometric check, the profiles already taken);
+//! - `l1/describe`: the ℓ1 matcher's intensity profiles of one image's segments;
+//! - `l1/stereo-whole`: the whole ℓ1 stereo call with its photometric check, image access
+//!   included: profiles of both images + matching;
 //! - `orb/extract`: 600 ORB points of one image, `orb/match/stereo`.
 //!
 //! Monocular tracking of a frame = detect + describe + frame-to-frame match; stereo =
@@ -16,14 +20,18 @@
 use criterion::{Criterion, criterion_group, criterion_main};
 use linetrack_geometry::MatchCase;
 use linetrack_vision::{
-    DetectorKind, FrontendConfig, GrayImage, HammingMatcher, LineFeatures, MatcherKind, OrbExtractor, PointFeatures, create_detector,
-    create_segment_matcher, match_points,
+    DetectorKind, FrontendConfig, GrayImage, HammingMatcher, LineFeatures, MatcherKind,
+    OrbExtractor, PointFeatures, create_detector, create_segment_matcher, match_points,
 };
 use std::hint::black_box;
 
 fn load(index: usize) -> (GrayImage, GrayImage) {
-    let (l, r) = linetrack_test_data::euroc_stereo_pair(index).expect("EuRoC excerpt (set LINETRACK_EUROC_DIR)");
-    (GrayImage::load(&l).expect("left image"), GrayImage::load(&r).expect("right image"))
+    let (l, r) = linetrack_test_data::euroc_stereo_pair(index)
+        .expect("EuRoC excerpt (set LINETRACK_EUROC_DIR)");
+    (
+        GrayImage::load(&l).expect("left image"),
+        GrayImage::load(&r).expect("right image"),
+    )
 }
 
 fn bench_frontend(c: &mut Criterion) {
@@ -35,7 +43,9 @@ fn bench_frontend(c: &mut Criterion) {
     for kind in DetectorKind::ALL {
         let mut detector = create_detector(kind, &config).expect("detector");
         let mut out = Vec::new();
-        group.bench_function(format!("detect/{}", kind.name()), |b| b.iter(|| detector.detect(black_box(&left), &mut out)));
+        group.bench_function(format!("detect/{}", kind.name()), |b| {
+            b.iter(|| detector.detect(black_box(&left), &mut out))
+        });
     }
 
     // Segments of the three images, detected once with LSD (the matchers' input).
@@ -48,27 +58,67 @@ fn bench_frontend(c: &mut Criterion) {
     let (mut l0, mut r0, mut l1) = (features(&left), features(&right), features(&next));
 
     let mut lbd = create_segment_matcher(MatcherKind::Lbd, &config).expect("lbd");
-    group.bench_function("lbd/describe", |b| b.iter(|| lbd.describe(black_box(&left), &mut l0)));
+    group.bench_function("lbd/describe", |b| {
+        b.iter(|| lbd.describe(black_box(&left), &mut l0))
+    });
     lbd.describe(&left, &mut l0).expect("lbd");
     lbd.describe(&right, &mut r0).expect("lbd");
     lbd.describe(&next, &mut l1).expect("lbd");
     let mut out = Vec::new();
-    for (case, name, second) in [(MatchCase::Stereo, "stereo", &r0), (MatchCase::FrameToFrame, "frame-to-frame", &l1)] {
-        group.bench_function(format!("match/lbd/{name}"), |b| b.iter(|| lbd.match_lines(case, black_box(&l0), black_box(second), &mut out)));
+    for (case, name, second) in [
+        (MatchCase::Stereo, "stereo", &r0),
+        (MatchCase::FrameToFrame, "frame-to-frame", &l1),
+    ] {
+        group.bench_function(format!("match/lbd/{name}"), |b| {
+            b.iter(|| lbd.match_lines(case, black_box(&l0), black_box(second), &mut out))
+        });
     }
     let mut l1_matcher = create_segment_matcher(MatcherKind::L1, &config).expect("l1");
-    for (case, name, second) in [(MatchCase::Stereo, "stereo", &r0), (MatchCase::FrameToFrame, "frame-to-frame", &l1)] {
-        group.bench_function(format!("match/l1/{name}"), |b| b.iter(|| l1_matcher.match_lines(case, black_box(&l0), black_box(second), &mut out)));
+    let segments_only = |f: &LineFeatures| LineFeatures {
+        segments: f.segments.clone(),
+        ..LineFeatures::default()
+    };
+    let (mut g0, mut h0, g1) = (segments_only(&l0), segments_only(&r0), segments_only(&l1));
+    group.bench_function("l1/describe", |b| {
+        b.iter(|| l1_matcher.describe(black_box(&left), &mut g0))
+    });
+    group.bench_function("l1/stereo-whole", |b| {
+        b.iter(|| {
+            l1_matcher.describe(black_box(&left), &mut g0)?;
+            l1_matcher.describe(black_box(&right), &mut h0)?;
+            l1_matcher.match_lines(MatchCase::Stereo, &g0, &h0, &mut out);
+            Ok::<_, linetrack_vision::VisionError>(out.len())
+        })
+    });
+    for (case, name, second) in [
+        (MatchCase::Stereo, "stereo", &h0),
+        (MatchCase::FrameToFrame, "frame-to-frame", &g1),
+    ] {
+        group.bench_function(format!("match/l1/{name}"), |b| {
+            b.iter(|| l1_matcher.match_lines(case, black_box(&g0), black_box(second), &mut out))
+        });
     }
 
     let mut orb = OrbExtractor::new(&config.orb).expect("orb");
     let (mut p_left, mut p_right) = (PointFeatures::default(), PointFeatures::default());
-    group.bench_function("orb/extract", |b| b.iter(|| orb.extract(black_box(&left), &mut p_left)));
+    group.bench_function("orb/extract", |b| {
+        b.iter(|| orb.extract(black_box(&left), &mut p_left))
+    });
     orb.extract(&left, &mut p_left).expect("orb");
     orb.extract(&right, &mut p_right).expect("orb");
     let mut hamming = HammingMatcher::new();
     group.bench_function("orb/match/stereo", |b| {
-        b.iter(|| match_points(&mut hamming, MatchCase::Stereo, &p_left, &p_right, &config.appearance_gates, config.orb.min_distance_ratio, &mut out))
+        b.iter(|| {
+            match_points(
+                &mut hamming,
+                MatchCase::Stereo,
+                &p_left,
+                &p_right,
+                &config.appearance_gates,
+                config.orb.min_distance_ratio,
+                &mut out,
+            )
+        })
     });
     group.finish();
 }

@@ -59,7 +59,10 @@ pub struct LineOptions {
 
 impl Default for LineOptions {
     fn default() -> Self {
-        Self { max_segments: 100, min_length_px: 15.0 }
+        Self {
+            max_segments: 100,
+            min_length_px: 15.0,
+        }
     }
 }
 
@@ -154,7 +157,9 @@ pub struct LbdOptions {
 
 impl Default for LbdOptions {
     fn default() -> Self {
-        Self { min_distance_ratio: 1.25 }
+        Self {
+            min_distance_ratio: 1.0 / 0.75,
+        }
     }
 }
 
@@ -179,7 +184,14 @@ pub struct OrbOptions {
 
 impl Default for OrbOptions {
     fn default() -> Self {
-        Self { features: 600, scale_factor: 1.2, levels: 8, edge_threshold: 31, fast_threshold: 20, min_distance_ratio: 2.0 }
+        Self {
+            features: 600,
+            scale_factor: 1.2,
+            levels: 8,
+            edge_threshold: 31,
+            fast_threshold: 20,
+            min_distance_ratio: 2.0,
+        }
     }
 }
 
@@ -191,8 +203,11 @@ pub struct AppearanceGates {
     pub min_disparity_px: f64,
     /// Stereo: largest disparity, pixels.
     pub max_disparity_px: f64,
-    /// Stereo points: largest row difference, pixels (segments must share rows).
+    /// Stereo points: largest row difference, pixels.
     pub max_row_difference_px: f64,
+    /// Stereo segments: smallest overlap of the two row extents over their union (the
+    /// row gate); segments must share rows in any case.
+    pub min_row_overlap: f64,
     /// Frame to frame: largest motion of a point or segment midpoint (beyond half the
     /// longer segment), pixels.
     pub max_displacement_px: f64,
@@ -200,7 +215,13 @@ pub struct AppearanceGates {
 
 impl Default for AppearanceGates {
     fn default() -> Self {
-        Self { min_disparity_px: -2.0, max_disparity_px: 150.0, max_row_difference_px: 3.0, max_displacement_px: 40.0 }
+        Self {
+            min_disparity_px: -2.0,
+            max_disparity_px: 150.0,
+            max_row_difference_px: 3.0,
+            min_row_overlap: 0.0,
+            max_displacement_px: 40.0,
+        }
     }
 }
 
@@ -213,53 +234,103 @@ impl FrontendConfig {
     /// Reads, parses and validates a TOML file.
     pub fn from_file(path: &Path) -> Result<Self, VisionError> {
         let origin = path.display().to_string();
-        let text = std::fs::read_to_string(path)
-            .map_err(|e| VisionError::Config { origin: origin.clone(), message: format!("cannot read: {e}") })?;
+        let text = std::fs::read_to_string(path).map_err(|e| VisionError::Config {
+            origin: origin.clone(),
+            message: format!("cannot read: {e}"),
+        })?;
         Self::parse(&text, &origin)
     }
 
     fn parse(text: &str, origin: &str) -> Result<Self, VisionError> {
-        let config: Self =
-            toml::from_str(text).map_err(|e| VisionError::Config { origin: origin.to_string(), message: e.to_string() })?;
-        config.validate().map_err(|message| VisionError::Config { origin: origin.to_string(), message })?;
+        let config: Self = toml::from_str(text).map_err(|e| VisionError::Config {
+            origin: origin.to_string(),
+            message: e.to_string(),
+        })?;
+        config.validate().map_err(|message| VisionError::Config {
+            origin: origin.to_string(),
+            message,
+        })?;
         Ok(config)
     }
 
     /// Checks the ranges; the message names the first bad field.
     pub fn validate(&self) -> Result<(), String> {
-        let bad = |field: &str, value: String, expected: &str| Err(format!("field `{field}` = {value}: {expected}"));
+        let bad = |field: &str, value: String, expected: &str| {
+            Err(format!("field `{field}` = {value}: {expected}"))
+        };
         if !(self.lines.min_length_px >= 0.0 && self.lines.min_length_px.is_finite()) {
-            return bad("lines.min_length_px", self.lines.min_length_px.to_string(), "a finite number >= 0");
+            return bad(
+                "lines.min_length_px",
+                self.lines.min_length_px.to_string(),
+                "a finite number >= 0",
+            );
         }
         if !(self.lsd.scale > 0.0 && self.lsd.scale <= 1.0) {
             return bad("lsd.scale", self.lsd.scale.to_string(), "in (0, 1]");
         }
         if !(self.lsd.angle_tolerance_deg > 0.0 && self.lsd.angle_tolerance_deg < 180.0) {
-            return bad("lsd.angle_tolerance_deg", self.lsd.angle_tolerance_deg.to_string(), "in (0, 180)");
+            return bad(
+                "lsd.angle_tolerance_deg",
+                self.lsd.angle_tolerance_deg.to_string(),
+                "in (0, 180)",
+            );
         }
         if self.lsd.bins < 1 {
             return bad("lsd.bins", self.lsd.bins.to_string(), ">= 1");
         }
         if ![3, 5, 7].contains(&self.fld.canny_aperture) {
-            return bad("fld.canny_aperture", self.fld.canny_aperture.to_string(), "3, 5 or 7");
+            return bad(
+                "fld.canny_aperture",
+                self.fld.canny_aperture.to_string(),
+                "3, 5 or 7",
+            );
         }
         if self.fld.length_threshold_px < 0 {
-            return bad("fld.length_threshold_px", self.fld.length_threshold_px.to_string(), ">= 0");
+            return bad(
+                "fld.length_threshold_px",
+                self.fld.length_threshold_px.to_string(),
+                ">= 0",
+            );
         }
-        for (field, ratio) in [("lbd.min_distance_ratio", self.lbd.min_distance_ratio), ("orb.min_distance_ratio", self.orb.min_distance_ratio)] {
+        for (field, ratio) in [
+            ("lbd.min_distance_ratio", self.lbd.min_distance_ratio),
+            ("orb.min_distance_ratio", self.orb.min_distance_ratio),
+        ] {
             if !(ratio >= 1.0 && ratio.is_finite()) {
                 return bad(field, ratio.to_string(), "a finite number >= 1");
             }
         }
         if self.orb.features < 1 || self.orb.levels < 1 || !(self.orb.scale_factor > 1.0) {
-            return bad("orb", format!("{:?}", self.orb), "features >= 1, levels >= 1, scale_factor > 1");
+            return bad(
+                "orb",
+                format!("{:?}", self.orb),
+                "features >= 1, levels >= 1, scale_factor > 1",
+            );
         }
         let g = &self.appearance_gates;
-        if g.min_disparity_px.is_nan() || g.max_disparity_px.is_nan() || g.min_disparity_px > g.max_disparity_px {
-            return bad("appearance_gates.min_disparity_px", g.min_disparity_px.to_string(), "<= max_disparity_px");
+        if g.min_disparity_px.is_nan()
+            || g.max_disparity_px.is_nan()
+            || g.min_disparity_px > g.max_disparity_px
+        {
+            return bad(
+                "appearance_gates.min_disparity_px",
+                g.min_disparity_px.to_string(),
+                "<= max_disparity_px",
+            );
         }
         if !(g.max_row_difference_px >= 0.0) || !(g.max_displacement_px >= 0.0) {
-            return bad("appearance_gates", format!("{g:?}"), "row difference and displacement >= 0");
+            return bad(
+                "appearance_gates",
+                format!("{g:?}"),
+                "row difference and displacement >= 0",
+            );
+        }
+        if !(0.0..=1.0).contains(&g.min_row_overlap) {
+            return bad(
+                "appearance_gates.min_row_overlap",
+                g.min_row_overlap.to_string(),
+                "a fraction in [0, 1]",
+            );
         }
         self.l1.validate().map_err(|e| format!("[l1] {e}"))
     }

@@ -1,6 +1,9 @@
 //! Line segment detection: LSD and FLD behind one trait.
 
-use crate::{FldOptions, FrontendConfig, GrayImage, LineOptions, LsdOptions, LsdRefine, OpenCvContext, VisionError};
+use crate::{
+    FldOptions, FrontendConfig, GrayImage, LineOptions, LsdOptions, LsdRefine, OpenCvContext,
+    VisionError,
+};
 use linetrack_geometry::Segment;
 use opencv::core::{Ptr, Vec4f, Vector};
 use opencv::imgproc::{self, LineSegmentDetector, LineSegmentDetectorTrait};
@@ -58,7 +61,10 @@ impl FromStr for DetectorKind {
 }
 
 /// Builds the detector `kind` with its options from `config`.
-pub fn create_detector(kind: DetectorKind, config: &FrontendConfig) -> Result<Box<dyn LineDetector>, VisionError> {
+pub fn create_detector(
+    kind: DetectorKind,
+    config: &FrontendConfig,
+) -> Result<Box<dyn LineDetector>, VisionError> {
     Ok(match kind {
         DetectorKind::Lsd => Box::new(LsdDetector::new(&config.lsd, config.lines)?),
         DetectorKind::Fld => Box::new(FldDetector::new(&config.fld, config.lines)?),
@@ -91,7 +97,11 @@ impl LsdDetector {
             options.bins,
         )
         .context("creating the LSD detector")?;
-        Ok(Self { lsd, lines: Vector::new(), keep })
+        Ok(Self {
+            lsd,
+            lines: Vector::new(),
+            keep,
+        })
     }
 }
 
@@ -103,8 +113,19 @@ impl LineDetector for LsdDetector {
     fn detect(&mut self, image: &GrayImage, out: &mut Vec<Segment>) -> Result<(), VisionError> {
         let lsd = &mut self.lsd;
         detect_with(image, &mut self.lines, self.keep, out, |lines| {
-            let (mut no_width, mut no_precision, mut no_nfa) = (opencv::core::no_array(), opencv::core::no_array(), opencv::core::no_array());
-            lsd.detect(image.mat(), lines, &mut no_width, &mut no_precision, &mut no_nfa).context("LSD detection")
+            let (mut no_width, mut no_precision, mut no_nfa) = (
+                opencv::core::no_array(),
+                opencv::core::no_array(),
+                opencv::core::no_array(),
+            );
+            lsd.detect(
+                image.mat(),
+                lines,
+                &mut no_width,
+                &mut no_precision,
+                &mut no_nfa,
+            )
+            .context("LSD detection")
         })
     }
 }
@@ -128,7 +149,11 @@ impl FldDetector {
             options.merge,
         )
         .context("creating the FLD detector")?;
-        Ok(Self { fld, lines: Vector::new(), keep })
+        Ok(Self {
+            fld,
+            lines: Vector::new(),
+            keep,
+        })
     }
 }
 
@@ -139,7 +164,9 @@ impl LineDetector for FldDetector {
 
     fn detect(&mut self, image: &GrayImage, out: &mut Vec<Segment>) -> Result<(), VisionError> {
         let fld = &mut self.fld;
-        detect_with(image, &mut self.lines, self.keep, out, |lines| fld.detect(image.mat(), lines).context("FLD detection"))
+        detect_with(image, &mut self.lines, self.keep, out, |lines| {
+            fld.detect(image.mat(), lines).context("FLD detection")
+        })
     }
 }
 
@@ -167,12 +194,24 @@ fn detect_with(
 /// Converts OpenCV's `(x0, y0, x1, y1)` lines into `out`: clipped to [0, max_x] × [0, max_y],
 /// at least `min_length_px` long, longest first, at most `max_segments`. Reuses `out`'s
 /// allocation.
-pub fn keep_longest(lines: &Vector<Vec4f>, keep: LineOptions, (max_x, max_y): (f64, f64), out: &mut Vec<Segment>) {
+pub fn keep_longest(
+    lines: &Vector<Vec4f>,
+    keep: LineOptions,
+    (max_x, max_y): (f64, f64),
+    out: &mut Vec<Segment>,
+) {
     out.clear();
     out.extend(
         lines
             .iter()
-            .map(|l| Segment::from_coords(f64::from(l[0]), f64::from(l[1]), f64::from(l[2]), f64::from(l[3])))
+            .map(|l| {
+                Segment::from_coords(
+                    f64::from(l[0]),
+                    f64::from(l[1]),
+                    f64::from(l[2]),
+                    f64::from(l[3]),
+                )
+            })
             .filter_map(|s| s.clipped_to(max_x, max_y))
             .filter(|s| s.is_finite() && s.length() >= keep.min_length_px),
     );

@@ -25,7 +25,12 @@ impl BinaryDescriptors {
     }
 
     /// Copies row `source_row` of an OpenCV CV_8U descriptor matrix into row `row`.
-    pub(crate) fn set_from_mat(&mut self, row: usize, mat: &Mat, source_row: i32) -> Result<(), VisionError> {
+    pub(crate) fn set_from_mat(
+        &mut self,
+        row: usize,
+        mat: &Mat,
+        source_row: i32,
+    ) -> Result<(), VisionError> {
         let data = mat.row(source_row).context("reading a descriptor row")?;
         let bytes = data.data_bytes().context("reading descriptor bytes")?;
         if bytes.len() != self.row_bytes || row >= self.present.len() {
@@ -48,7 +53,11 @@ impl BinaryDescriptors {
 
     /// Descriptor of feature `k`, if it has one.
     pub fn row(&self, k: usize) -> Option<&[u8]> {
-        self.present.get(k).copied().unwrap_or(false).then(|| &self.bytes[k * self.row_bytes..(k + 1) * self.row_bytes])
+        self.present
+            .get(k)
+            .copied()
+            .unwrap_or(false)
+            .then(|| &self.bytes[k * self.row_bytes..(k + 1) * self.row_bytes])
     }
 
     /// Features that have a descriptor.
@@ -126,7 +135,9 @@ impl HammingMatcher {
         }
         self.best_query_of_train.clear();
         self.best_query_of_train.extend((0..n).map(|j| {
-            (0..m).filter(|&i| self.distances[i * n + j] != NO_PAIR).min_by_key(|&i| self.distances[i * n + j])
+            (0..m)
+                .filter(|&i| self.distances[i * n + j] != NO_PAIR)
+                .min_by_key(|&i| self.distances[i * n + j])
         }));
         for i in 0..m {
             let row = &self.distances[i * n..(i + 1) * n];
@@ -141,9 +152,14 @@ impl HammingMatcher {
                 }
             }
             let Some(j) = best else { continue };
-            let distinct = second_d == NO_PAIR || (second_d > best_d && f64::from(second_d) >= min_ratio * f64::from(best_d));
+            let distinct = second_d == NO_PAIR
+                || (second_d > best_d && f64::from(second_d) >= min_ratio * f64::from(best_d));
             if distinct && self.best_query_of_train[j] == Some(i) {
-                out.push(FeatureMatch { query: i, train: j, distance: f64::from(best_d) });
+                out.push(FeatureMatch {
+                    query: i,
+                    train: j,
+                    distance: f64::from(best_d),
+                });
             }
         }
     }

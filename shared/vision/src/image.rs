@@ -2,7 +2,7 @@
 
 use crate::{OpenCvContext, VisionError};
 use opencv::core::{self, Mat, MatTraitConst, MatTraitConstManual, Vector};
-use opencv::imgcodecs;
+use opencv::{imgcodecs, imgproc};
 use std::path::Path;
 
 /// An 8-bit, single-channel, non-empty image, with where it came from for error messages.
@@ -14,51 +14,93 @@ pub struct GrayImage {
 
 impl Clone for GrayImage {
     fn clone(&self) -> Self {
-        Self { mat: self.mat.clone(), origin: self.origin.clone() }
+        Self {
+            mat: self.mat.clone(),
+            origin: self.origin.clone(),
+        }
     }
 }
 
 impl GrayImage {
     /// Reads and decodes an image file; every error names the file.
     pub fn load(path: &Path) -> Result<Self, VisionError> {
-        let bytes = std::fs::read(path).map_err(|reason| VisionError::Read { path: path.to_path_buf(), reason })?;
+        let bytes = std::fs::read(path).map_err(|reason| VisionError::Read {
+            path: path.to_path_buf(),
+            reason,
+        })?;
         Self::decode(&bytes, &path.display().to_string())
     }
 
-    /// Decodes an encoded image (PNG, JPEG, …) held in memory.
+    /// Decodes an encoded image (PNG, JPEG, …) held in memory. Colour images (BGR or BGRA)
+    /// are converted to grey once, by OpenCV's luminance weights (0.299 R + 0.587 G +
+    /// 0.114 B); 16-bit images are scaled to 8 bits over their full range (value × 255 /
+    /// 65535). Other pixel formats (float, two channels) are refused naming what was found.
     pub fn decode(bytes: &[u8], origin: &str) -> Result<Self, VisionError> {
         if bytes.is_empty() {
-            return Err(VisionError::Empty { origin: origin.to_string() });
+            return Err(VisionError::Empty {
+                origin: origin.to_string(),
+            });
         }
         let buffer = Vector::<u8>::from_slice(bytes);
         // OpenCV reports some corrupt inputs as exceptions and others as an empty Mat.
-        let mat = imgcodecs::imdecode(&buffer, imgcodecs::IMREAD_UNCHANGED)
-            .map_err(|_| VisionError::Decode { origin: origin.to_string() })?;
+        let mat = imgcodecs::imdecode(&buffer, imgcodecs::IMREAD_UNCHANGED).map_err(|_| {
+            VisionError::Decode {
+                origin: origin.to_string(),
+            }
+        })?;
         if mat.empty() {
-            return Err(VisionError::Decode { origin: origin.to_string() });
+            return Err(VisionError::Decode {
+                origin: origin.to_string(),
+            });
         }
-        Self::from_mat(mat, origin)
+        Self::from_mat(to_gray8(mat)?, origin)
     }
 
     /// Wraps a Mat after checking it is 8-bit, single-channel and not empty.
     pub fn from_mat(mat: Mat, origin: &str) -> Result<Self, VisionError> {
         if mat.empty() || mat.rows() == 0 || mat.cols() == 0 {
-            return Err(VisionError::Empty { origin: origin.to_string() });
+            return Err(VisionError::Empty {
+                origin: origin.to_string(),
+            });
         }
         if mat.channels() != 1 || mat.depth() != core::CV_8U {
-            let depth = core::depth_to_string(mat.depth()).ok().unwrap_or_else(|| "unknown depth".to_string());
-            return Err(VisionError::Format { origin: origin.to_string(), channels: mat.channels(), depth });
+            let depth = core::depth_to_string(mat.depth())
+                .ok()
+                .unwrap_or_else(|| "unknown depth".to_string());
+            return Err(VisionError::Format {
+                origin: origin.to_string(),
+                channels: mat.channels(),
+                depth,
+            });
         }
-        Ok(Self { mat, origin: origin.to_string() })
+        Ok(Self {
+            mat,
+            origin: origin.to_string(),
+        })
     }
 
     /// An image from row-major 8-bit pixels.
-    pub fn from_pixels(width: usize, height: usize, pixels: &[u8], origin: &str) -> Result<Self, VisionError> {
+    pub fn from_pixels(
+        width: usize,
+        height: usize,
+        pixels: &[u8],
+        origin: &str,
+    ) -> Result<Self, VisionError> {
         if width == 0 || height == 0 || pixels.len() != width * height {
-            return Err(VisionError::RawSize { origin: origin.to_string(), len: pixels.len(), width, height });
+            return Err(VisionError::RawSize {
+                origin: origin.to_string(),
+                len: pixels.len(),
+                width,
+                height,
+            });
         }
         let flat = Mat::from_slice(pixels).context("wrapping pixels")?;
-        let rows = i32::try_from(height).map_err(|_| VisionError::RawSize { origin: origin.to_string(), len: pixels.len(), width, height })?;
+        let rows = i32::try_from(height).map_err(|_| VisionError::RawSize {
+            origin: origin.to_string(),
+            len: pixels.len(),
+            width,
+            height,
+        })?;
         let shaped = flat.reshape(1, rows).context("shaping pixels")?;
         let mut owned = Mat::default();
         shaped.copy_to(&mut owned).context("copying pixels")?;
@@ -67,21 +109,47 @@ impl GrayImage {
 
     /// A view of row-major 8-bit pixels that the image does not own (a shared-memory
     /// sample, say): read in place, never copied. The view cannot outlive `pixels`.
-    pub fn borrow_pixels<'a>(width: usize, height: usize, pixels: &'a [u8], origin: &str) -> Result<BorrowedGray<'a>, VisionError> {
-        let bad_size = || VisionError::RawSize { origin: origin.to_string(), len: pixels.len(), width, height };
-        if width == 0 || height == 0 || pixels.len() != width.checked_mul(height).ok_or_else(bad_size)? {
+    pub fn borrow_pixels<'a>(
+        width: usize,
+        height: usize,
+        pixels: &'a [u8],
+        origin: &str,
+    ) -> Result<BorrowedGray<'a>, VisionError> {
+        let bad_size = || VisionError::RawSize {
+            origin: origin.to_string(),
+            len: pixels.len(),
+            width,
+            height,
+        };
+        if width == 0
+            || height == 0
+            || pixels.len() != width.checked_mul(height).ok_or_else(bad_size)?
+        {
             return Err(bad_size());
         }
-        let (rows, cols) = (i32::try_from(height).map_err(|_| bad_size())?, i32::try_from(width).map_err(|_| bad_size())?);
+        let (rows, cols) = (
+            i32::try_from(height).map_err(|_| bad_size())?,
+            i32::try_from(width).map_err(|_| bad_size())?,
+        );
         // SAFETY: the Mat header points at `pixels`, which hold exactly rows × cols bytes
         // (checked above) and outlive the returned view (its lifetime is `'a`). A header
         // built on foreign data has no reference count, so dropping it never frees
         // `pixels`. The view hands out only `&GrayImage`, through which OpenCV is given
         // the Mat as input only; a clone copies the pixels into a Mat of its own.
         #[allow(unsafe_code)]
-        let mat = unsafe { Mat::new_rows_cols_with_data_unsafe_def(rows, cols, core::CV_8UC1, pixels.as_ptr().cast::<std::ffi::c_void>().cast_mut()) }
-            .context("wrapping borrowed pixels")?;
-        Ok(BorrowedGray { image: Self::from_mat(mat, origin)?, _pixels: std::marker::PhantomData })
+        let mat = unsafe {
+            Mat::new_rows_cols_with_data_unsafe_def(
+                rows,
+                cols,
+                core::CV_8UC1,
+                pixels.as_ptr().cast::<std::ffi::c_void>().cast_mut(),
+            )
+        }
+        .context("wrapping borrowed pixels")?;
+        Ok(BorrowedGray {
+            image: Self::from_mat(mat, origin)?,
+            _pixels: std::marker::PhantomData,
+        })
     }
 
     /// The underlying OpenCV matrix (CV_8UC1).
@@ -123,6 +191,30 @@ impl GrayImage {
     }
 }
 
+/// `mat` as 8-bit grey: colour converted by luminance, 16 bits scaled to 8; anything else
+/// (float pixels, two channels) is returned unchanged for [`GrayImage::from_mat`] to refuse.
+fn to_gray8(mat: Mat) -> Result<Mat, VisionError> {
+    let eight_bit = match mat.depth() {
+        core::CV_8U => mat,
+        core::CV_16U => {
+            let mut scaled = Mat::default();
+            mat.convert_to(&mut scaled, core::CV_8U, 255.0 / 65535.0, 0.0)
+                .context("scaling a 16-bit image to 8 bits")?;
+            scaled
+        }
+        _ => return Ok(mat),
+    };
+    let code = match eight_bit.channels() {
+        3 => imgproc::COLOR_BGR2GRAY,
+        4 => imgproc::COLOR_BGRA2GRAY,
+        _ => return Ok(eight_bit),
+    };
+    let mut gray = Mat::default();
+    imgproc::cvt_color_def(&eight_bit, &mut gray, code)
+        .context("converting a colour image to grey")?;
+    Ok(gray)
+}
+
 /// A [`GrayImage`] reading pixels it does not own; see [`GrayImage::borrow_pixels`].
 #[derive(Debug)]
 pub struct BorrowedGray<'a> {
@@ -142,13 +234,23 @@ impl std::ops::Deref for BorrowedGray<'_> {
 /// [0, 255], rounding to the nearest level.
 pub fn perturb(image: &GrayImage, gain: f64, bias: f64) -> Result<GrayImage, VisionError> {
     if !(gain.is_finite() && gain >= 0.0) {
-        return Err(VisionError::Perturbation(format!("gain must be finite and >= 0, got {gain}")));
+        return Err(VisionError::Perturbation(format!(
+            "gain must be finite and >= 0, got {gain}"
+        )));
     }
     if !bias.is_finite() {
-        return Err(VisionError::Perturbation(format!("bias must be finite, got {bias}")));
+        return Err(VisionError::Perturbation(format!(
+            "bias must be finite, got {bias}"
+        )));
     }
     let mut out = Mat::default();
     // convert_to with the same depth saturates, which is the clamp.
-    image.mat.convert_to(&mut out, -1, gain, bias).context("applying gain and bias")?;
-    Ok(GrayImage { mat: out, origin: format!("{} (gain {gain}, bias {bias})", image.origin) })
+    image
+        .mat
+        .convert_to(&mut out, -1, gain, bias)
+        .context("applying gain and bias")?;
+    Ok(GrayImage {
+        mat: out,
+        origin: format!("{} (gain {gain}, bias {bias})", image.origin),
+    })
 }

@@ -18,13 +18,23 @@ pub struct LbdExtractor {
 impl LbdExtractor {
     /// An extractor with OpenCV's default LBD parameters.
     pub fn new() -> Result<Self, VisionError> {
-        let descriptor = BinaryDescriptor::create_binary_descriptor().context("creating the LBD descriptor")?;
-        Ok(Self { descriptor, keylines: Vector::new(), raw: Mat::default() })
+        let descriptor =
+            BinaryDescriptor::create_binary_descriptor().context("creating the LBD descriptor")?;
+        Ok(Self {
+            descriptor,
+            keylines: Vector::new(),
+            raw: Mat::default(),
+        })
     }
 
     /// Fills `out` with one descriptor per segment (row k for `segments[k]`). Segments that
     /// are degenerate or leave the image after clipping get no descriptor.
-    pub fn compute(&mut self, image: &GrayImage, segments: &[Segment], out: &mut BinaryDescriptors) -> Result<(), VisionError> {
+    pub fn compute(
+        &mut self,
+        image: &GrayImage,
+        segments: &[Segment],
+        out: &mut BinaryDescriptors,
+    ) -> Result<(), VisionError> {
         out.reset(segments.len(), LBD_BYTES);
         self.keylines.clear();
         let (w, h) = (image.width() as f32, image.height() as f32);
@@ -41,10 +51,18 @@ impl LbdExtractor {
             .context("computing LBD descriptors")?;
         // OpenCV may drop keylines; each descriptor row belongs to the keyline at the same
         // position, whose class_id is the segment index.
-        let rows = self.raw.rows().min(i32::try_from(self.keylines.len()).unwrap_or(i32::MAX));
+        let rows = self
+            .raw
+            .rows()
+            .min(i32::try_from(self.keylines.len()).unwrap_or(i32::MAX));
         for row in 0..rows {
-            let keyline = self.keylines.get(row as usize).context("reading a keyline")?;
-            let Ok(segment_index) = usize::try_from(keyline.class_id) else { continue };
+            let keyline = self
+                .keylines
+                .get(row as usize)
+                .context("reading a keyline")?;
+            let Ok(segment_index) = usize::try_from(keyline.class_id) else {
+                continue;
+            };
             out.set_from_mat(segment_index, &self.raw, row)?;
         }
         Ok(())
@@ -57,7 +75,10 @@ fn keyline_for(segment: &Segment, index: usize, width: f32, height: f32) -> Opti
         return None;
     }
     let clamp = |v: f64, max: f32| (v as f32).clamp(0.0, max - 1.0);
-    let (sx, sy) = (clamp(segment.start.x, width), clamp(segment.start.y, height));
+    let (sx, sy) = (
+        clamp(segment.start.x, width),
+        clamp(segment.start.y, height),
+    );
     let (ex, ey) = (clamp(segment.end.x, width), clamp(segment.end.y, height));
     let (dx, dy) = (ex - sx, ey - sy);
     let length = (dx * dx + dy * dy).sqrt();

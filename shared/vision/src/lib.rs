@@ -23,12 +23,21 @@ mod matchers;
 mod orb;
 mod pair;
 
-pub use config::{AppearanceGates, FldOptions, FrontendConfig, LbdOptions, LineOptions, LsdOptions, LsdRefine, OrbOptions};
-pub use detect::{DetectorKind, FldDetector, LineDetector, LsdDetector, MIN_IMAGE_SIDE_PX, create_detector, keep_longest};
+pub use config::{
+    AppearanceGates, FldOptions, FrontendConfig, LbdOptions, LineOptions, LsdOptions, LsdRefine,
+    OrbOptions,
+};
+pub use detect::{
+    DetectorKind, FldDetector, LineDetector, LsdDetector, MIN_IMAGE_SIDE_PX, create_detector,
+    keep_longest,
+};
 pub use hamming::{BinaryDescriptors, FeatureMatch, HammingMatcher};
 pub use image::{BorrowedGray, GrayImage, perturb};
 pub use lbd::LbdExtractor;
-pub use matchers::{L1SegmentMatcher, LbdSegmentMatcher, LineFeatures, MatcherKind, SegmentMatcher, create_segment_matcher};
+pub use matchers::{
+    L1SegmentMatcher, LbdSegmentMatcher, LineFeatures, MatcherKind, SegmentMatcher,
+    create_segment_matcher,
+};
 pub use orb::{OrbExtractor, PointFeatures, match_points};
 pub use pair::{LinePairMatcher, PairResult, PairTimings};
 
@@ -58,7 +67,9 @@ pub enum VisionError {
         origin: String,
     },
     /// Not an 8-bit single-channel image.
-    #[error("{origin}: expected an 8-bit single-channel (grayscale) image, found {channels} channel(s) of {depth}")]
+    #[error(
+        "{origin}: expected an 8-bit single-channel (grayscale) image, found {channels} channel(s) of {depth}"
+    )]
     Format {
         /// The file or other origin.
         origin: String,
@@ -68,7 +79,9 @@ pub enum VisionError {
         depth: String,
     },
     /// Two images that must have the same size do not.
-    #[error("{first} is {first_size:?} (w×h) but {second} is {second_size:?}: the two images must have the same size")]
+    #[error(
+        "{first} is {first_size:?} (w×h) but {second} is {second_size:?}: the two images must have the same size"
+    )]
     SizeMismatch {
         /// The first image.
         first: String,

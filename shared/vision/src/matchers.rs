@@ -1,8 +1,11 @@
 //! Segment matchers behind one trait: LBD (appearance) and ℓ1 (geometry).
 
-use crate::{AppearanceGates, BinaryDescriptors, FeatureMatch, FrontendConfig, GrayImage, HammingMatcher, LbdExtractor, LbdOptions, VisionError};
+use crate::{
+    AppearanceGates, BinaryDescriptors, FeatureMatch, FrontendConfig, GrayImage, HammingMatcher,
+    LbdExtractor, LbdOptions, VisionError,
+};
 use linetrack_geometry::{self as geometry, MatchCase, Segment, SegmentFeatures};
-use linetrack_l1_matcher::{L1Matcher, Match};
+use linetrack_l1_matcher::{GrayView, L1Matcher, Match, SegmentProfiles};
 use serde::{Deserialize, Serialize};
 use std::str::FromStr;
 
@@ -13,6 +16,9 @@ pub struct LineFeatures {
     pub segments: Vec<Segment>,
     /// Appearance descriptors (LBD); empty for the geometric matcher.
     pub descriptors: BinaryDescriptors,
+    /// Intensity profiles across the segments (the geometric matcher's photometric
+    /// check); empty for LBD.
+    pub profiles: SegmentProfiles,
 }
 
 /// A segment matcher.
@@ -20,11 +26,23 @@ pub trait SegmentMatcher: Send {
     /// Short name: `lbd` or `l1`.
     fn name(&self) -> &'static str;
 
-    /// Computes what matching needs from the image (LBD descriptors; nothing for ℓ1).
-    fn describe(&mut self, image: &GrayImage, features: &mut LineFeatures) -> Result<(), VisionError>;
+    /// Computes what matching needs from the image: LBD descriptors, or the ℓ1 matcher's
+    /// intensity profiles. Each matcher fills only its own field of `features`, so one set
+    /// of features can be described by both.
+    fn describe(
+        &mut self,
+        image: &GrayImage,
+        features: &mut LineFeatures,
+    ) -> Result<(), VisionError>;
 
     /// Replaces `out` with the matches between the two images' segments.
-    fn match_lines(&mut self, case: MatchCase, first: &LineFeatures, second: &LineFeatures, out: &mut Vec<FeatureMatch>);
+    fn match_lines(
+        &mut self,
+        case: MatchCase,
+        first: &LineFeatures,
+        second: &LineFeatures,
+        out: &mut Vec<FeatureMatch>,
+    );
 }
 
 /// The segment matchers that can be chosen by name.
@@ -62,7 +80,10 @@ impl FromStr for MatcherKind {
 }
 
 /// Builds the matcher `kind` from `config`.
-pub fn create_segment_matcher(kind: MatcherKind, config: &FrontendConfig) -> Result<Box<dyn SegmentMatcher>, VisionError> {
+pub fn create_segment_matcher(
+    kind: MatcherKind,
+    config: &FrontendConfig,
+) -> Result<Box<dyn SegmentMatcher>, VisionError> {
     Ok(match kind {
         MatcherKind::Lbd => Box::new(LbdSegmentMatcher::new(config.lbd, config.appearance_gates)?),
         MatcherKind::L1 => Box::new(L1SegmentMatcher::new(config)?),
@@ -83,7 +104,14 @@ pub struct LbdSegmentMatcher {
 impl LbdSegmentMatcher {
     /// An LBD matcher.
     pub fn new(options: LbdOptions, gates: AppearanceGates) -> Result<Self, VisionError> {
-        Ok(Self { extractor: LbdExtractor::new()?, hamming: HammingMatcher::new(), options, gates, first: Vec::new(), second: Vec::new() })
+        Ok(Self {
+            extractor: LbdExtractor::new()?,
+            hamming: HammingMatcher::new(),
+            options,
+            gates,
+            first: Vec::new(),
+            second: Vec::new(),
+        })
     }
 }
 
@@ -92,11 +120,22 @@ impl SegmentMatcher for LbdSegmentMatcher {
         "lbd"
     }
 
-    fn describe(&mut self, image: &GrayImage, features: &mut LineFeatures) -> Result<(), VisionError> {
-        self.extractor.compute(image, &features.segments, &mut features.descriptors)
+    fn describe(
+        &mut self,
+        image: &GrayImage,
+        features: &mut LineFeatures,
+    ) -> Result<(), VisionError> {
+        self.extractor
+            .compute(image, &features.segments, &mut features.descriptors)
     }
 
-    fn match_lines(&mut self, case: MatchCase, first: &LineFeatures, second: &LineFeatures, out: &mut Vec<FeatureMatch>) {
+    fn match_lines(
+        &mut self,
+        case: MatchCase,
+        first: &LineFeatures,
+        second: &LineFeatures,
+        out: &mut Vec<FeatureMatch>,
+    ) {
         let features = |set: &LineFeatures, into: &mut Vec<Option<SegmentFeatures>>| {
             into.clear();
             into.extend(set.segments.iter().map(|s| SegmentFeatures::new(s).ok()));
@@ -106,20 +145,36 @@ impl SegmentMatcher for LbdSegmentMatcher {
         let gates = self.gates;
         let (a_all, b_all) = (&self.first, &self.second);
         let admit = |i: usize, j: usize| {
-            let (Some(a), Some(b)) = (&a_all[i], &b_all[j]) else { return false };
+            let (Some(a), Some(b)) = (&a_all[i], &b_all[j]) else {
+                return false;
+            };
             match case {
                 MatchCase::Stereo => {
-                    geometry::overlap(a, b, MatchCase::Stereo) > 0.0
+                    shares_rows(a, b, gates.min_row_overlap)
                         && b.x_max >= a.x_min - gates.max_disparity_px
                         && b.x_min <= a.x_max - gates.min_disparity_px
                 }
                 MatchCase::FrameToFrame => {
-                    (a.mid - b.mid).norm() <= gates.max_displacement_px + 0.5 * a.length.max(b.length)
+                    (a.mid - b.mid).norm()
+                        <= gates.max_displacement_px + 0.5 * a.length.max(b.length)
                 }
             }
         };
-        self.hamming.match_mutual(&first.descriptors, &second.descriptors, self.options.min_distance_ratio, admit, out);
+        self.hamming.match_mutual(
+            &first.descriptors,
+            &second.descriptors,
+            self.options.min_distance_ratio,
+            admit,
+            out,
+        );
     }
+}
+
+/// The row gate of stereo segments: their row extents overlap, by at least `min_overlap`
+/// of their union.
+fn shares_rows(a: &SegmentFeatures, b: &SegmentFeatures, min_overlap: f64) -> bool {
+    let overlap = geometry::overlap(a, b, MatchCase::Stereo);
+    overlap > 0.0 && overlap >= min_overlap
 }
 
 /// The geometric ℓ1 matcher behind the common trait.
@@ -131,9 +186,14 @@ pub struct L1SegmentMatcher {
 impl L1SegmentMatcher {
     /// An ℓ1 matcher with `config.l1`.
     pub fn new(config: &FrontendConfig) -> Result<Self, VisionError> {
-        let matcher = L1Matcher::new(config.l1.clone())
-            .map_err(|e| VisionError::Config { origin: "[l1]".to_string(), message: e.to_string() })?;
-        Ok(Self { matcher, scratch: Vec::new() })
+        let matcher = L1Matcher::new(config.l1.clone()).map_err(|e| VisionError::Config {
+            origin: "[l1]".to_string(),
+            message: e.to_string(),
+        })?;
+        Ok(Self {
+            matcher,
+            scratch: Vec::new(),
+        })
     }
 }
 
@@ -142,14 +202,53 @@ impl SegmentMatcher for L1SegmentMatcher {
         "l1"
     }
 
-    fn describe(&mut self, _image: &GrayImage, features: &mut LineFeatures) -> Result<(), VisionError> {
-        features.descriptors.reset(0, 0);
+    fn describe(
+        &mut self,
+        image: &GrayImage,
+        features: &mut LineFeatures,
+    ) -> Result<(), VisionError> {
+        let photometric = self.matcher.config().photometric;
+        let (width, height) = (image.width() as usize, image.height() as usize);
+        let view = match image.pixels() {
+            Some(pixels) if photometric.enabled => GrayView::new(pixels, width, height, width)
+                .map_err(|e| VisionError::RawSize {
+                    origin: image.origin().to_string(),
+                    len: e.len,
+                    width,
+                    height,
+                })?,
+            _ => {
+                features.profiles.clear();
+                return Ok(());
+            }
+        };
+        features.profiles.extract(
+            view,
+            &features.segments,
+            photometric.min_angle_from_horizontal_deg,
+        );
         Ok(())
     }
 
-    fn match_lines(&mut self, case: MatchCase, first: &LineFeatures, second: &LineFeatures, out: &mut Vec<FeatureMatch>) {
-        self.matcher.match_segments(case, &first.segments, &second.segments, &mut self.scratch);
+    fn match_lines(
+        &mut self,
+        case: MatchCase,
+        first: &LineFeatures,
+        second: &LineFeatures,
+        out: &mut Vec<FeatureMatch>,
+    ) {
+        self.matcher.match_with_profiles(
+            case,
+            &first.segments,
+            &second.segments,
+            Some((&first.profiles, &second.profiles)),
+            &mut self.scratch,
+        );
         out.clear();
-        out.extend(self.scratch.iter().map(|m| FeatureMatch { query: m.query, train: m.train, distance: m.error }));
+        out.extend(self.scratch.iter().map(|m| FeatureMatch {
+            query: m.query,
+            train: m.train,
+            distance: m.error,
+        }));
     }
 }

@@ -1,6 +1,9 @@
 //! ORB points (OpenCV features2d) and their stereo / frame-to-frame matching.
 
-use crate::{AppearanceGates, BinaryDescriptors, FeatureMatch, GrayImage, HammingMatcher, OpenCvContext, OrbOptions, VisionError};
+use crate::{
+    AppearanceGates, BinaryDescriptors, FeatureMatch, GrayImage, HammingMatcher, OpenCvContext,
+    OrbOptions, VisionError,
+};
 use linetrack_geometry::{MatchCase, Point};
 use opencv::core::{KeyPoint, KeyPointTraitConst, Mat, MatTraitConst, Ptr, Vector};
 use opencv::features2d::{Feature2DTrait, ORB, ORB_ScoreType};
@@ -36,21 +39,43 @@ impl OrbExtractor {
             options.fast_threshold,
         )
         .context("creating the ORB extractor")?;
-        Ok(Self { orb, keypoints: Vector::new(), raw: Mat::default() })
+        Ok(Self {
+            orb,
+            keypoints: Vector::new(),
+            raw: Mat::default(),
+        })
     }
 
     /// Detects and describes points in `image` into `out`.
-    pub fn extract(&mut self, image: &GrayImage, out: &mut PointFeatures) -> Result<(), VisionError> {
+    pub fn extract(
+        &mut self,
+        image: &GrayImage,
+        out: &mut PointFeatures,
+    ) -> Result<(), VisionError> {
         self.keypoints.clear();
         let no_mask = Mat::default();
         self.orb
-            .detect_and_compute(image.mat(), &no_mask, &mut self.keypoints, &mut self.raw, false)
+            .detect_and_compute(
+                image.mat(),
+                &no_mask,
+                &mut self.keypoints,
+                &mut self.raw,
+                false,
+            )
             .context("ORB detection")?;
         out.points.clear();
-        out.points.extend(self.keypoints.iter().map(|k| Point::new(f64::from(k.pt().x), f64::from(k.pt().y))));
+        out.points.extend(
+            self.keypoints
+                .iter()
+                .map(|k| Point::new(f64::from(k.pt().x), f64::from(k.pt().y))),
+        );
         let row_bytes = usize::try_from(self.raw.cols()).unwrap_or(0);
         out.descriptors.reset(out.points.len(), row_bytes);
-        for k in 0..out.points.len().min(usize::try_from(self.raw.rows()).unwrap_or(0)) {
+        for k in 0..out
+            .points
+            .len()
+            .min(usize::try_from(self.raw.rows()).unwrap_or(0))
+        {
             out.descriptors.set_from_mat(k, &self.raw, k as i32)?;
         }
         Ok(())
@@ -80,5 +105,11 @@ pub fn match_points(
             MatchCase::FrameToFrame => (a - b).norm() <= gates.max_displacement_px,
         }
     };
-    hamming.match_mutual(&first.descriptors, &second.descriptors, min_ratio, admit, out);
+    hamming.match_mutual(
+        &first.descriptors,
+        &second.descriptors,
+        min_ratio,
+        admit,
+        out,
+    );
 }

@@ -1,7 +1,10 @@
 //! Detector × matcher on an image pair, timed per step: what the tools and the
 //! evaluation run for one stereo pair or one pair of consecutive frames.
 
-use crate::{DetectorKind, FeatureMatch, FrontendConfig, GrayImage, LineDetector, LineFeatures, MatcherKind, SegmentMatcher, VisionError};
+use crate::{
+    DetectorKind, FeatureMatch, FrontendConfig, GrayImage, LineDetector, LineFeatures, MatcherKind,
+    SegmentMatcher, VisionError,
+};
 use crate::{create_detector, create_segment_matcher};
 use linetrack_geometry::MatchCase;
 use serde::Serialize;
@@ -46,8 +49,15 @@ fn timed<T>(ms: &mut f64, step: impl FnOnce() -> T) -> T {
 
 impl LinePairMatcher {
     /// `detector` + `matcher` with their options from `config`.
-    pub fn new(detector: DetectorKind, matcher: MatcherKind, config: &FrontendConfig) -> Result<Self, VisionError> {
-        Ok(Self { detector: create_detector(detector, config)?, matcher: create_segment_matcher(matcher, config)? })
+    pub fn new(
+        detector: DetectorKind,
+        matcher: MatcherKind,
+        config: &FrontendConfig,
+    ) -> Result<Self, VisionError> {
+        Ok(Self {
+            detector: create_detector(detector, config)?,
+            matcher: create_segment_matcher(matcher, config)?,
+        })
     }
 
     /// `lsd+l1` and the like.
@@ -57,21 +67,45 @@ impl LinePairMatcher {
 
     /// Matches already detected and described features (e.g. the left images of two
     /// frames, each from its own stereo run); returns the milliseconds it took.
-    pub fn match_features(&mut self, case: MatchCase, first: &LineFeatures, second: &LineFeatures, out: &mut Vec<crate::FeatureMatch>) -> f64 {
+    pub fn match_features(
+        &mut self,
+        case: MatchCase,
+        first: &LineFeatures,
+        second: &LineFeatures,
+        out: &mut Vec<crate::FeatureMatch>,
+    ) -> f64 {
         let mut ms = 0.0;
-        timed(&mut ms, || self.matcher.match_lines(case, first, second, out));
+        timed(&mut ms, || {
+            self.matcher.match_lines(case, first, second, out)
+        });
         ms
     }
 
     /// Detects, describes and matches `first` against `second`.
-    pub fn run(&mut self, case: MatchCase, first: &GrayImage, second: &GrayImage) -> Result<PairResult, VisionError> {
+    pub fn run(
+        &mut self,
+        case: MatchCase,
+        first: &GrayImage,
+        second: &GrayImage,
+    ) -> Result<PairResult, VisionError> {
         let mut out = PairResult::default();
         let t = &mut out.timings;
-        timed(&mut t.detect_ms[0], || self.detector.detect(first, &mut out.first.segments))?;
-        timed(&mut t.detect_ms[1], || self.detector.detect(second, &mut out.second.segments))?;
-        timed(&mut t.describe_ms[0], || self.matcher.describe(first, &mut out.first))?;
-        timed(&mut t.describe_ms[1], || self.matcher.describe(second, &mut out.second))?;
-        timed(&mut t.match_ms, || self.matcher.match_lines(case, &out.first, &out.second, &mut out.matches));
+        timed(&mut t.detect_ms[0], || {
+            self.detector.detect(first, &mut out.first.segments)
+        })?;
+        timed(&mut t.detect_ms[1], || {
+            self.detector.detect(second, &mut out.second.segments)
+        })?;
+        timed(&mut t.describe_ms[0], || {
+            self.matcher.describe(first, &mut out.first)
+        })?;
+        timed(&mut t.describe_ms[1], || {
+            self.matcher.describe(second, &mut out.second)
+        })?;
+        timed(&mut t.match_ms, || {
+            self.matcher
+                .match_lines(case, &out.first, &out.second, &mut out.matches)
+        });
         Ok(out)
     }
 }

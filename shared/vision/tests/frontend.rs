@@ -21,8 +21,17 @@ fn detect_all(kind: DetectorKind, image: &GrayImage) -> Vec<Segment> {
 }
 
 /// Detects, describes and matches two images with `detector` + `matcher`.
-fn match_images(detector: DetectorKind, matcher: MatcherKind, case: MatchCase, a: &GrayImage, b: &GrayImage) -> (LineFeatures, LineFeatures, Vec<FeatureMatch>) {
-    let result = LinePairMatcher::new(detector, matcher, &FrontendConfig::default()).unwrap().run(case, a, b).unwrap();
+fn match_images(
+    detector: DetectorKind,
+    matcher: MatcherKind,
+    case: MatchCase,
+    a: &GrayImage,
+    b: &GrayImage,
+) -> (LineFeatures, LineFeatures, Vec<FeatureMatch>) {
+    let result = LinePairMatcher::new(detector, matcher, &FrontendConfig::default())
+        .unwrap()
+        .run(case, a, b)
+        .unwrap();
     (result.first, result.second, result.matches)
 }
 
@@ -32,7 +41,11 @@ fn features(s: &Segment) -> SegmentFeatures {
 
 fn card(shift: usize) -> GrayImage {
     let pixels = test_card(W, H);
-    let pixels = if shift == 0 { pixels } else { shift_left(&pixels, W, shift) };
+    let pixels = if shift == 0 {
+        pixels
+    } else {
+        shift_left(&pixels, W, shift)
+    };
     GrayImage::from_pixels(W, H, &pixels, &format!("test card shifted {shift} px")).unwrap()
 }
 
@@ -50,13 +63,23 @@ fn detectors_find_the_test_card_edges_and_nothing_else() {
             truth.iter().any(|e| {
                 let edge = features(&Segment::from_coords(e[0], e[1], e[2], e[3]));
                 let f = features(s);
-                let distance = |p: linetrack_geometry::Point| linetrack_geometry::cross(&edge.dir, &(p - edge.mid)).abs();
-                direction_angle(&edge, &f).to_degrees() < 2.0 && distance(s.start) < 2.0 && distance(s.end) < 2.0
+                let distance = |p: linetrack_geometry::Point| {
+                    linetrack_geometry::cross(&edge.dir, &(p - edge.mid)).abs()
+                };
+                direction_angle(&edge, &f).to_degrees() < 2.0
+                    && distance(s.start) < 2.0
+                    && distance(s.end) < 2.0
             })
         };
         let long: Vec<&Segment> = segments.iter().filter(|s| s.length() > 40.0).collect();
         let stray: Vec<&&Segment> = long.iter().filter(|s| !on_an_edge(s)).collect();
-        assert!(stray.is_empty(), "{}: {} of {} long segments off every edge: {stray:?}", kind.name(), stray.len(), long.len());
+        assert!(
+            stray.is_empty(),
+            "{}: {} of {} long segments off every edge: {stray:?}",
+            kind.name(),
+            stray.len(),
+            long.len()
+        );
         // And most true edges are found: a long detection runs along at least 17 of the 20.
         let found = truth
             .iter()
@@ -70,14 +93,25 @@ fn detectors_find_the_test_card_edges_and_nothing_else() {
                 })
             })
             .count();
-        assert!(found >= 17, "{}: found {found} of {} edges", kind.name(), truth.len());
+        assert!(
+            found >= 17,
+            "{}: found {found} of {} edges",
+            kind.name(),
+            truth.len()
+        );
     }
 }
 
 #[test]
 fn detections_are_capped_longest_first_and_above_the_minimum_length() {
     let image = card(0);
-    let config = FrontendConfig { lines: LineOptions { max_segments: 7, min_length_px: 30.0 }, ..Default::default() };
+    let config = FrontendConfig {
+        lines: LineOptions {
+            max_segments: 7,
+            min_length_px: 30.0,
+        },
+        ..Default::default()
+    };
     for kind in DetectorKind::ALL {
         let mut detector = create_detector(kind, &config).unwrap();
         let mut out = Vec::new();
@@ -87,7 +121,17 @@ fn detections_are_capped_longest_first_and_above_the_minimum_length() {
         assert!(out.iter().all(|s| s.length() >= 30.0));
         // The kept ones are the longest of an uncapped run.
         let all = detect_all(kind, &image);
-        assert!((out[6].length() - all.iter().map(Segment::length).filter(|l| *l >= 30.0).nth(6).unwrap()).abs() < 1e-9);
+        assert!(
+            (out[6].length()
+                - all
+                    .iter()
+                    .map(Segment::length)
+                    .filter(|l| *l >= 30.0)
+                    .nth(6)
+                    .unwrap())
+            .abs()
+                < 1e-9
+        );
     }
 }
 
@@ -97,17 +141,30 @@ fn stereo_matches_on_a_shifted_test_card_have_the_true_disparity() {
     let (left, right) = (card(0), card(DISPARITY));
     for detector in DetectorKind::ALL {
         for matcher in MatcherKind::ALL {
-            let (fa, fb, matches) = match_images(detector, matcher, MatchCase::Stereo, &left, &right);
+            let (fa, fb, matches) =
+                match_images(detector, matcher, MatchCase::Stereo, &left, &right);
             let right_shift = matches
                 .iter()
                 .filter(|m| {
-                    let (a, b) = (features(&fa.segments[m.query]), features(&fb.segments[m.train]));
-                    (a.mid.x - b.mid.x - DISPARITY as f64).abs() <= 1.5 && (a.mid.y - b.mid.y).abs() <= 1.5
+                    let (a, b) = (
+                        features(&fa.segments[m.query]),
+                        features(&fb.segments[m.train]),
+                    );
+                    (a.mid.x - b.mid.x - DISPARITY as f64).abs() <= 1.5
+                        && (a.mid.y - b.mid.y).abs() <= 1.5
                 })
                 .count();
             let label = format!("{}+{}", detector.name(), matcher.name());
-            assert!(matches.len() >= 8, "{label}: only {} matches", matches.len());
-            assert!(right_shift as f64 >= 0.9 * matches.len() as f64, "{label}: {right_shift} of {} at the true disparity", matches.len());
+            assert!(
+                matches.len() >= 8,
+                "{label}: only {} matches",
+                matches.len()
+            );
+            assert!(
+                right_shift as f64 >= 0.9 * matches.len() as f64,
+                "{label}: {right_shift} of {} at the true disparity",
+                matches.len()
+            );
         }
     }
 }
@@ -122,7 +179,15 @@ fn orb_points_match_at_the_true_disparity() {
     orb.extract(&right, &mut b).unwrap();
     assert!(a.points.len() > 50 && a.descriptors.count_present() == a.points.len());
     let mut out = Vec::new();
-    match_points(&mut HammingMatcher::new(), MatchCase::Stereo, &a, &b, &AppearanceGates::default(), options.min_distance_ratio, &mut out);
+    match_points(
+        &mut HammingMatcher::new(),
+        MatchCase::Stereo,
+        &a,
+        &b,
+        &AppearanceGates::default(),
+        options.min_distance_ratio,
+        &mut out,
+    );
     assert!(out.len() >= 20, "{} matches", out.len());
     // Keypoints found on coarser pyramid levels are quantised to that level's pixels
     // (1.2³ ≈ 1.7 px at level 3), hence the tolerance.
@@ -133,7 +198,11 @@ fn orb_points_match_at_the_true_disparity() {
             ((p.x - q.x) - 9.0).abs() <= 2.5 && (p.y - q.y).abs() <= 2.5
         })
         .count();
-    assert!(exact as f64 >= 0.9 * out.len() as f64, "{exact} of {}", out.len());
+    assert!(
+        exact as f64 >= 0.9 * out.len() as f64,
+        "{exact} of {}",
+        out.len()
+    );
 }
 
 // ---------------------------------------------------------------- real images
@@ -146,7 +215,11 @@ fn real_data_both_detectors_fill_their_cap_on_a_euroc_frame() {
     for kind in DetectorKind::ALL {
         let segments = detect_all(kind, &image);
         assert_eq!(segments.len(), 100, "{}", kind.name());
-        let inside = |s: &Segment| [s.start, s.end].iter().all(|p| (0.0..=751.0).contains(&p.x) && (0.0..=479.0).contains(&p.y));
+        let inside = |s: &Segment| {
+            [s.start, s.end]
+                .iter()
+                .all(|p| (0.0..=751.0).contains(&p.x) && (0.0..=479.0).contains(&p.y))
+        };
         assert!(segments.iter().all(|s| s.length() >= 15.0 && inside(s)));
     }
 }
@@ -157,21 +230,36 @@ fn real_data_frame_to_frame_matches_of_a_still_camera_do_not_move() {
     // (matches / static ones): LSD+LBD 83/83, LSD+L1 69/69, FLD+LBD 87/86, FLD+L1 76/75.
     let (first, _) = euroc_stereo_pair(0).unwrap_or_else(|e| panic!("{e}"));
     let (second, _) = euroc_stereo_pair(1).unwrap_or_else(|e| panic!("{e}"));
-    let (a, b) = (GrayImage::load(&first).unwrap(), GrayImage::load(&second).unwrap());
+    let (a, b) = (
+        GrayImage::load(&first).unwrap(),
+        GrayImage::load(&second).unwrap(),
+    );
     for detector in DetectorKind::ALL {
         for matcher in MatcherKind::ALL {
-            let (fa, fb, matches) = match_images(detector, matcher, MatchCase::FrameToFrame, &a, &b);
+            let (fa, fb, matches) =
+                match_images(detector, matcher, MatchCase::FrameToFrame, &a, &b);
             let still = matches
                 .iter()
                 .filter(|m| {
-                    let (p, q) = (features(&fa.segments[m.query]), features(&fb.segments[m.train]));
-                    linetrack_geometry::cross(&p.dir, &(q.mid - p.mid)).abs() < 2.0 && direction_angle(&p, &q).to_degrees() < 3.0
+                    let (p, q) = (
+                        features(&fa.segments[m.query]),
+                        features(&fb.segments[m.train]),
+                    );
+                    linetrack_geometry::cross(&p.dir, &(q.mid - p.mid)).abs() < 2.0
+                        && direction_angle(&p, &q).to_degrees() < 3.0
                 })
                 .count();
             let label = format!("{}+{}", detector.name(), matcher.name());
-            eprintln!("{label} frame to frame: {} matches, {still} still", matches.len());
+            eprintln!(
+                "{label} frame to frame: {} matches, {still} still",
+                matches.len()
+            );
             assert!(matches.len() >= 55, "{label}: {} matches", matches.len());
-            assert!(still as f64 >= 0.95 * matches.len() as f64, "{label}: {still} of {} still", matches.len());
+            assert!(
+                still as f64 >= 0.95 * matches.len() as f64,
+                "{label}: {still} of {} still",
+                matches.len()
+            );
         }
     }
 }
@@ -184,18 +272,40 @@ fn real_data_stereo_matches_point_the_right_way() {
     let (l, r) = euroc_stereo_pair(0).unwrap_or_else(|e| panic!("{e}"));
     let (left, right) = (GrayImage::load(&l).unwrap(), GrayImage::load(&r).unwrap());
     for matcher in MatcherKind::ALL {
-        let (fa, fb, matches) = match_images(DetectorKind::Lsd, matcher, MatchCase::Stereo, &left, &right);
+        let (fa, fb, matches) =
+            match_images(DetectorKind::Lsd, matcher, MatchCase::Stereo, &left, &right);
         let sane = matches
             .iter()
             .filter(|m| {
-                let (p, q) = (features(&fa.segments[m.query]), features(&fb.segments[m.train]));
+                let (p, q) = (
+                    features(&fa.segments[m.query]),
+                    features(&fb.segments[m.train]),
+                );
                 direction_angle(&p, &q).to_degrees() < 5.0 && p.mid.x - q.mid.x > -2.0
             })
             .count();
-        assert!(matches.len() >= 15, "{}: {} matches", matcher.name(), matches.len());
-        eprintln!("lsd+{} stereo: {} matches, {sane} sane", matcher.name(), matches.len());
-        let share = if matcher == MatcherKind::Lbd { 0.8 } else { 0.6 };
-        assert!(sane as f64 >= share * matches.len() as f64, "{}: {sane} of {}", matcher.name(), matches.len());
+        assert!(
+            matches.len() >= 15,
+            "{}: {} matches",
+            matcher.name(),
+            matches.len()
+        );
+        eprintln!(
+            "lsd+{} stereo: {} matches, {sane} sane",
+            matcher.name(),
+            matches.len()
+        );
+        let share = if matcher == MatcherKind::Lbd {
+            0.8
+        } else {
+            0.6
+        };
+        assert!(
+            sane as f64 >= share * matches.len() as f64,
+            "{}: {sane} of {}",
+            matcher.name(),
+            matches.len()
+        );
     }
 }
 
@@ -223,24 +333,34 @@ fn error_text(result: Result<GrayImage, VisionError>) -> String {
 fn bad_image_files_are_refused_naming_the_file() {
     let missing = linetrack_test_data::scratch_path("vision", "missing.png");
     let text = error_text(GrayImage::load(&missing));
-    assert!(text.contains(missing.to_str().unwrap()) && text.contains("cannot read"), "{text}");
+    assert!(
+        text.contains(missing.to_str().unwrap()) && text.contains("cannot read"),
+        "{text}"
+    );
 
     let empty = linetrack_test_data::scratch_path("vision", "empty.png");
     std::fs::write(&empty, b"").unwrap();
     let text = error_text(GrayImage::load(&empty));
-    assert!(text.contains(empty.to_str().unwrap()) && text.contains("empty"), "{text}");
+    assert!(
+        text.contains(empty.to_str().unwrap()) && text.contains("empty"),
+        "{text}"
+    );
 
     let corrupt = linetrack_test_data::scratch_path("vision", "corrupt.png");
     std::fs::write(&corrupt, b"\x89PNG\r\n\x1a\nthis is not really a png").unwrap();
     let text = error_text(GrayImage::load(&corrupt));
-    assert!(text.contains(corrupt.to_str().unwrap()) && text.contains("not a decodable image"), "{text}");
+    assert!(
+        text.contains(corrupt.to_str().unwrap()) && text.contains("not a decodable image"),
+        "{text}"
+    );
 
     // A truncated real PNG.
-    let whole = std::fs::read(euroc_stereo_pair(0).map(|p| p.0).unwrap_or_default()).unwrap_or_else(|_| {
-        let mut buffer = Vector::<u8>::new();
-        imgcodecs::imencode(".png", card(0).mat(), &mut buffer, &Vector::new()).unwrap();
-        buffer.as_slice().to_vec()
-    });
+    let whole = std::fs::read(euroc_stereo_pair(0).map(|p| p.0).unwrap_or_default())
+        .unwrap_or_else(|_| {
+            let mut buffer = Vector::<u8>::new();
+            imgcodecs::imencode(".png", card(0).mat(), &mut buffer, &Vector::new()).unwrap();
+            buffer.as_slice().to_vec()
+        });
     let truncated = linetrack_test_data::scratch_path("vision", "truncated.png");
     std::fs::write(&truncated, &whole[..whole.len() / 3]).unwrap();
     let text = error_text(GrayImage::load(&truncated));
@@ -252,17 +372,66 @@ fn bad_image_files_are_refused_naming_the_file() {
 }
 
 #[test]
-fn colour_and_sixteen_bit_images_are_refused_with_what_was_found() {
-    for (name, mat_type, expect) in [("colour.png", opencv::core::CV_8UC3, "3 channel"), ("deep.png", opencv::core::CV_16UC1, "CV_16U")] {
-        let mat = Mat::new_rows_cols_with_default(20, 30, mat_type, Scalar::all(100.0)).unwrap();
+fn colour_and_sixteen_bit_images_are_converted_to_grey_once() {
+    // BGR (30, 100, 200): grey = 0.114·30 + 0.587·100 + 0.299·200 = 121.9 → 122.
+    // 16-bit 40000: 40000 · 255 / 65535 = 155.6 → 156.
+    for (name, mat_type, value, grey) in [
+        (
+            "colour.png",
+            opencv::core::CV_8UC3,
+            Scalar::new(30.0, 100.0, 200.0, 0.0),
+            122u8,
+        ),
+        (
+            "colour-alpha.png",
+            opencv::core::CV_8UC4,
+            Scalar::new(30.0, 100.0, 200.0, 255.0),
+            122,
+        ),
+        (
+            "deep.png",
+            opencv::core::CV_16UC1,
+            Scalar::all(40000.0),
+            156,
+        ),
+        (
+            "deep-colour.png",
+            opencv::core::CV_16UC3,
+            Scalar::all(40000.0),
+            156,
+        ),
+    ] {
+        let mat = Mat::new_rows_cols_with_default(20, 30, mat_type, value).unwrap();
         let mut bytes = Vector::<u8>::new();
         imgcodecs::imencode(".png", &mat, &mut bytes, &Vector::new()).unwrap();
         let path = linetrack_test_data::scratch_path("vision", name);
         std::fs::write(&path, bytes.as_slice()).unwrap();
-        let text = error_text(GrayImage::load(&path));
-        assert!(text.contains(path.to_str().unwrap()) && text.contains(expect), "{text}");
+        let image = GrayImage::load(&path).unwrap();
+        assert_eq!((image.width(), image.height()), (30, 20), "{name}");
+        let pixels = image.pixels().unwrap();
+        assert!(
+            pixels.iter().all(|&p| p == grey),
+            "{name}: {:?}",
+            &pixels[..4]
+        );
         let _ = std::fs::remove_file(path);
     }
+}
+
+#[test]
+fn float_images_are_refused_with_what_was_found() {
+    let mat =
+        Mat::new_rows_cols_with_default(20, 30, opencv::core::CV_32FC1, Scalar::all(0.5)).unwrap();
+    let mut bytes = Vector::<u8>::new();
+    imgcodecs::imencode(".tiff", &mat, &mut bytes, &Vector::new()).unwrap();
+    let path = linetrack_test_data::scratch_path("vision", "float.tiff");
+    std::fs::write(&path, bytes.as_slice()).unwrap();
+    let text = error_text(GrayImage::load(&path));
+    assert!(
+        text.contains(path.to_str().unwrap()) && text.contains("CV_32F"),
+        "{text}"
+    );
+    let _ = std::fs::remove_file(path);
 }
 
 #[test]
@@ -283,7 +452,8 @@ fn detectors_and_matchers_survive_blank_and_tiny_images() {
     for image in [&blank, &tiny] {
         for detector in DetectorKind::ALL {
             for matcher in MatcherKind::ALL {
-                let (fa, _, matches) = match_images(detector, matcher, MatchCase::Stereo, image, image);
+                let (fa, _, matches) =
+                    match_images(detector, matcher, MatchCase::Stereo, image, image);
                 assert!(fa.segments.len() <= 100 && matches.len() <= fa.segments.len());
             }
         }
@@ -312,15 +482,29 @@ fn lbd_skips_segments_outside_the_image_and_degenerate_ones() {
 #[test]
 fn shipped_frontend_config_matches_the_defaults_and_names_are_checked() {
     let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../configs/frontend.toml");
-    assert_eq!(FrontendConfig::from_file(&path).unwrap(), FrontendConfig::default());
-    let err = FrontendConfig::from_toml_str("detector = \"hough\"").unwrap_err().to_string();
+    assert_eq!(
+        FrontendConfig::from_file(&path).unwrap(),
+        FrontendConfig::default()
+    );
+    let err = FrontendConfig::from_toml_str("detector = \"hough\"")
+        .unwrap_err()
+        .to_string();
     assert!(err.contains("hough"), "{err}");
-    let err = FrontendConfig::from_toml_str("[fld]\ncanny_aperture = 4").unwrap_err().to_string();
+    let err = FrontendConfig::from_toml_str("[fld]\ncanny_aperture = 4")
+        .unwrap_err()
+        .to_string();
     assert!(err.contains("fld.canny_aperture"), "{err}");
-    let err = FrontendConfig::from_toml_str("[l1]\nlambda = -1.0").unwrap_err().to_string();
+    let err = FrontendConfig::from_toml_str("[l1]\nlambda = -1.0")
+        .unwrap_err()
+        .to_string();
     assert!(err.contains("lambda"), "{err}");
     assert_eq!("FLD".parse::<DetectorKind>(), Ok(DetectorKind::Fld));
-    assert!("sift".parse::<MatcherKind>().unwrap_err().contains("lbd, l1"));
+    assert!(
+        "sift"
+            .parse::<MatcherKind>()
+            .unwrap_err()
+            .contains("lbd, l1")
+    );
 }
 
 // ---------------------------------------------------------------- borrowed pixels
@@ -340,6 +524,8 @@ fn borrowed_pixels_are_read_in_place_and_detect_like_owned_ones() {
     assert!(!from_owned.is_empty());
     assert_eq!(from_view, from_owned);
     // A wrong length names the image.
-    let err = GrayImage::borrow_pixels(w, h + 1, &pixels, "short buffer").unwrap_err().to_string();
+    let err = GrayImage::borrow_pixels(w, h + 1, &pixels, "short buffer")
+        .unwrap_err()
+        .to_string();
     assert!(err.contains("short buffer"), "{err}");
 }

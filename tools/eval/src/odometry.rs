@@ -37,7 +37,12 @@ pub fn run(
     frames: usize,
     illumination: crate::tracking::Illumination<'_>,
 ) -> anyhow::Result<OdometryRun> {
-    let config = OdometryConfig { detector: DetectorKind::Lsd, matcher, features, ..OdometryConfig::default() };
+    let config = OdometryConfig {
+        detector: DetectorKind::Lsd,
+        matcher,
+        features,
+        ..OdometryConfig::default()
+    };
     let mut odometry = Odometry::new(config, sequence.rig)?;
     let start_ns = sequence.frames.first().map_or(0, |f| f.timestamp_ns);
     let mut run = OdometryRun::default();
@@ -47,7 +52,10 @@ pub fn run(
         let (left, right) = match illumination {
             Some(at) => {
                 let (gain, bias) = at((frame.timestamp_ns - start_ns) as f64 * 1e-9);
-                (perturb(&frame.left, gain, bias)?, perturb(&frame.right, gain, bias)?)
+                (
+                    perturb(&frame.left, gain, bias)?,
+                    perturb(&frame.right, gain, bias)?,
+                )
             }
             None => (frame.left, frame.right),
         };
@@ -56,7 +64,11 @@ pub fn run(
         run.estimate.push(result.pose);
         truth.push(frame.pose);
     }
-    if let Some(truth) = truth.into_iter().collect::<Option<Vec<_>>>().filter(|t| !t.is_empty()) {
+    if let Some(truth) = truth
+        .into_iter()
+        .collect::<Option<Vec<_>>>()
+        .filter(|t| !t.is_empty())
+    {
         let first = truth[0].inverse();
         let truth: Vec<_> = truth.iter().map(|p| first * p).collect();
         run.rpe_m = metrics::rpe_translation_rmse(&run.estimate, &truth, 1);

@@ -12,10 +12,12 @@
 //! with fewer than three samples is not judged. Sequences without depth maps (the real
 //! EuRoC excerpt) report counts only.
 
-use linetrack_datasets::depth::{DepthMap, read_depth_png};
 use linetrack_datasets::StereoSequence;
+use linetrack_datasets::depth::{DepthMap, read_depth_png};
 use linetrack_geometry::{MatchCase, Point, Segment, StereoRig};
-use linetrack_vision::{DetectorKind, FeatureMatch, FrontendConfig, GrayImage, LinePairMatcher, MatcherKind, perturb};
+use linetrack_vision::{
+    DetectorKind, FeatureMatch, FrontendConfig, GrayImage, LinePairMatcher, MatcherKind, perturb,
+};
 use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion};
 use std::path::Path;
 
@@ -62,7 +64,10 @@ impl TrackingResult {
         let matches: usize = counts.iter().map(|c| c.matches).sum();
         let judged: usize = counts.iter().map(|c| c.judged).sum();
         let inliers: usize = counts.iter().map(|c| c.inliers).sum();
-        (matches as f64 / n, (judged > 0).then(|| inliers as f64 / judged as f64))
+        (
+            matches as f64 / n,
+            (judged > 0).then(|| inliers as f64 / judged as f64),
+        )
     }
 }
 
@@ -80,7 +85,13 @@ fn left_depth(dataset: &Path, timestamp_ns: u64) -> Option<DepthMap> {
 }
 
 /// The match's error in pixels (median over samples), or None if it cannot be judged.
-fn match_error(rig: &StereoRig, depth: &DepthMap, second_from_first: &Isometry3<f64>, a: &Segment, b: &Segment) -> Option<f64> {
+fn match_error(
+    rig: &StereoRig,
+    depth: &DepthMap,
+    second_from_first: &Isometry3<f64>,
+    a: &Segment,
+    b: &Segment,
+) -> Option<f64> {
     let d = b.end - b.start;
     let length = d.norm();
     if !(length > 0.0) {
@@ -97,14 +108,23 @@ fn match_error(rig: &StereoRig, depth: &DepthMap, second_from_first: &Isometry3<
             if x < 0 || y < 0 {
                 continue;
             }
-            let Some(z) = depth.at(x as usize, y as usize) else { continue };
+            let Some(z) = depth.at(x as usize, y as usize) else {
+                continue;
+            };
             let z = f64::from(z);
-            let point = Point3::new((q.x - rig.cx_px) * z / rig.focal_px, (q.y - rig.cy_px) * z / rig.focal_px, z);
+            let point = Point3::new(
+                (q.x - rig.cx_px) * z / rig.focal_px,
+                (q.y - rig.cy_px) * z / rig.focal_px,
+                z,
+            );
             let moved = second_from_first * point;
             if moved.z <= 0.05 {
                 continue;
             }
-            let pixel = Point::new(rig.focal_px * moved.x / moved.z + rig.cx_px, rig.focal_px * moved.y / moved.z + rig.cy_px);
+            let pixel = Point::new(
+                rig.focal_px * moved.x / moved.z + rig.cx_px,
+                rig.focal_px * moved.y / moved.z + rig.cy_px,
+            );
             let e = line_distance(pixel);
             best = Some(best.map_or(e, |b: f64| b.min(e)));
         }
@@ -113,7 +133,11 @@ fn match_error(rig: &StereoRig, depth: &DepthMap, second_from_first: &Isometry3<
     (errors.len() >= 3).then(|| median(&errors))
 }
 
-fn judge(counts: &mut FrameCount, matches: &[FeatureMatch], judge_one: impl Fn(&FeatureMatch) -> Option<f64>) {
+fn judge(
+    counts: &mut FrameCount,
+    matches: &[FeatureMatch],
+    judge_one: impl Fn(&FeatureMatch) -> Option<f64>,
+) {
     counts.matches = matches.len();
     for m in matches {
         if let Some(e) = judge_one(m) {
@@ -128,14 +152,17 @@ fn judge(counts: &mut FrameCount, matches: &[FeatureMatch], judge_one: impl Fn(&
 pub fn evaluate(
     dataset: &Path,
     sequence: &StereoSequence,
+    config: &FrontendConfig,
     combination: (DetectorKind, MatcherKind),
     frames: usize,
     illumination: Illumination<'_>,
 ) -> anyhow::Result<TrackingResult> {
-    let config = FrontendConfig::default();
-    let mut pair = LinePairMatcher::new(combination.0, combination.1, &config)?;
+    let mut pair = LinePairMatcher::new(combination.0, combination.1, config)?;
     let rig = sequence.rig;
-    let baseline = Isometry3::from_parts(Translation3::new(-rig.baseline_m, 0.0, 0.0), UnitQuaternion::identity());
+    let baseline = Isometry3::from_parts(
+        Translation3::new(-rig.baseline_m, 0.0, 0.0),
+        UnitQuaternion::identity(),
+    );
     let mut result = TrackingResult::default();
     let n = frames.min(sequence.frames.len());
     let start_ns = sequence.frames.first().map_or(0, |f| f.timestamp_ns);
@@ -144,14 +171,21 @@ pub fn evaluate(
         match illumination {
             Some(at) => {
                 let (gain, bias) = at((f.timestamp_ns - start_ns) as f64 * 1e-9);
-                Ok((perturb(&f.left, gain, bias)?, perturb(&f.right, gain, bias)?))
+                Ok((
+                    perturb(&f.left, gain, bias)?,
+                    perturb(&f.right, gain, bias)?,
+                ))
             }
             None => Ok((f.left, f.right)),
         }
     };
     // Each frame is detected and described once, in its stereo run; the frame-to-frame
     // pass matches the left features of consecutive stereo runs.
-    let mut previous: Option<(linetrack_vision::LineFeatures, Option<DepthMap>, Option<Isometry3<f64>>)> = None;
+    let mut previous: Option<(
+        linetrack_vision::LineFeatures,
+        Option<DepthMap>,
+        Option<Isometry3<f64>>,
+    )> = None;
     let mut f2f_matches = Vec::new();
     for k in 0..n {
         let entry = &sequence.frames[k];
@@ -161,21 +195,39 @@ pub fn evaluate(
         let mut counts = FrameCount::default();
         judge(&mut counts, &stereo.matches, |m| {
             let depth = depth.as_ref()?;
-            match_error(&rig, depth, &baseline, &stereo.first.segments[m.query], &stereo.second.segments[m.train])
+            match_error(
+                &rig,
+                depth,
+                &baseline,
+                &stereo.first.segments[m.query],
+                &stereo.second.segments[m.train],
+            )
         });
         result.stereo.push(counts);
         let t = stereo.timings;
-        let stereo_ms = t.detect_ms[0] + t.detect_ms[1] + t.describe_ms[0] + t.describe_ms[1] + t.match_ms;
+        let stereo_ms =
+            t.detect_ms[0] + t.detect_ms[1] + t.describe_ms[0] + t.describe_ms[1] + t.match_ms;
         let mono_ms = t.detect_ms[0] + t.describe_ms[0];
         if let Some((prev_left, prev_depth, prev_pose)) = previous.take() {
-            let f2f_ms = pair.match_features(MatchCase::FrameToFrame, &prev_left, &stereo.first, &mut f2f_matches);
+            let f2f_ms = pair.match_features(
+                MatchCase::FrameToFrame,
+                &prev_left,
+                &stereo.first,
+                &mut f2f_matches,
+            );
             let relative = match (prev_pose, entry.pose) {
                 (Some(a), Some(b)) => Some(b.inverse() * a),
                 _ => None,
             };
             let mut counts = FrameCount::default();
             judge(&mut counts, &f2f_matches, |m| {
-                match_error(&rig, prev_depth.as_ref()?, relative.as_ref()?, &prev_left.segments[m.query], &stereo.first.segments[m.train])
+                match_error(
+                    &rig,
+                    prev_depth.as_ref()?,
+                    relative.as_ref()?,
+                    &prev_left.segments[m.query],
+                    &stereo.first.segments[m.train],
+                )
             });
             result.frame_to_frame.push(counts);
             // Tracking a frame = its own detection and description plus matching it to the
@@ -196,9 +248,23 @@ mod tests {
     fn the_inlier_judge_measures_pixels_on_a_known_plane() {
         // A fronto-parallel wall 2 m away; the second camera is 10 cm to the right, so the
         // true disparity is f·b/z = 400·0.1/2 = 20 px.
-        let rig = StereoRig { focal_px: 400.0, cx_px: 100.0, cy_px: 80.0, baseline_m: 0.1, width_px: 200, height_px: 160 };
-        let depth = DepthMap { width: 200, height: 160, metres: vec![2.0; 200 * 160] };
-        let right_from_left = Isometry3::from_parts(Translation3::new(-0.1, 0.0, 0.0), UnitQuaternion::identity());
+        let rig = StereoRig {
+            focal_px: 400.0,
+            cx_px: 100.0,
+            cy_px: 80.0,
+            baseline_m: 0.1,
+            width_px: 200,
+            height_px: 160,
+        };
+        let depth = DepthMap {
+            width: 200,
+            height: 160,
+            metres: vec![2.0; 200 * 160],
+        };
+        let right_from_left = Isometry3::from_parts(
+            Translation3::new(-0.1, 0.0, 0.0),
+            UnitQuaternion::identity(),
+        );
         let left = Segment::from_coords(120.0, 20.0, 130.0, 140.0);
         let exact = Segment::from_coords(100.0, 20.0, 110.0, 140.0);
         let error = match_error(&rig, &depth, &right_from_left, &left, &exact).unwrap();
@@ -208,7 +274,14 @@ mod tests {
         let error = match_error(&rig, &depth, &right_from_left, &left, &shifted).unwrap();
         assert!((error - 36.0 / 145f64.sqrt()).abs() < 1e-6, "{error}");
         // No depth: not judged.
-        let empty = DepthMap { width: 200, height: 160, metres: vec![0.0; 200 * 160] };
-        assert_eq!(match_error(&rig, &empty, &right_from_left, &left, &exact), None);
+        let empty = DepthMap {
+            width: 200,
+            height: 160,
+            metres: vec![0.0; 200 * 160],
+        };
+        assert_eq!(
+            match_error(&rig, &empty, &right_from_left, &left, &exact),
+            None
+        );
     }
 }

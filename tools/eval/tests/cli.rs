@@ -9,10 +9,25 @@ use std::process::Command;
 
 fn run_report(dir: &Path, extra: &[&str]) -> String {
     let (sequences, output) = (dir.join("sequences"), dir.join("report"));
-    let mut args = vec!["--quick", "--frames", "4", "--sequences", sequences.to_str().unwrap(), "--output", output.to_str().unwrap()];
+    let mut args = vec![
+        "--quick",
+        "--frames",
+        "4",
+        "--sequences",
+        sequences.to_str().unwrap(),
+        "--output",
+        output.to_str().unwrap(),
+    ];
     args.extend(extra);
-    let result = Command::new(env!("CARGO_BIN_EXE_linetrack-eval")).args(&args).output().unwrap();
-    assert!(result.status.success(), "{}", String::from_utf8_lossy(&result.stderr));
+    let result = Command::new(env!("CARGO_BIN_EXE_linetrack-eval"))
+        .args(&args)
+        .output()
+        .unwrap();
+    assert!(
+        result.status.success(),
+        "{}",
+        String::from_utf8_lossy(&result.stderr)
+    );
     let report = std::fs::read_to_string(output.join("report.md")).unwrap();
     for line in report.lines().filter(|l| l.starts_with("![")) {
         let name = line.split('(').nth(1).unwrap().trim_end_matches(')');
@@ -24,15 +39,28 @@ fn run_report(dir: &Path, extra: &[&str]) -> String {
 
 /// The cells of the Table I row for `sequence` and `case`.
 fn table1_row(report: &str, sequence: &str, case: &str) -> Vec<String> {
-    let row = report.lines().find(|l| l.starts_with(&format!("| {sequence} | {case} |"))).unwrap_or_else(|| panic!("no row {sequence} {case}"));
-    row.split('|').map(str::trim).filter(|c| !c.is_empty()).skip(2).map(String::from).collect()
+    let row = report
+        .lines()
+        .find(|l| l.starts_with(&format!("| {sequence} | {case} |")))
+        .unwrap_or_else(|| panic!("no row {sequence} {case}"));
+    row.split('|')
+        .map(str::trim)
+        .filter(|c| !c.is_empty())
+        .skip(2)
+        .map(String::from)
+        .collect()
 }
 
 #[test]
 fn quick_report_has_every_table_row_and_plot() {
     let dir = linetrack_test_data::scratch_path("eval", "quick");
     let report = run_report(&dir, &["--no-euroc"]);
-    for heading in ["## Table I", "## Table II", "## Table III", "RPE over pose pairs"] {
+    for heading in [
+        "## Table I",
+        "## Table II",
+        "## Table III",
+        "RPE over pose pairs",
+    ] {
         assert!(report.contains(heading), "missing {heading}");
     }
     for sequence in ["normal", "hdr-flicker", "left-right-mismatch"] {
@@ -43,10 +71,25 @@ fn quick_report_has_every_table_row_and_plot() {
             let ratio: f64 = cells[0].split(" / ").nth(1).unwrap().parse().unwrap();
             assert!(ratio > 0.8, "{sequence} {case}: {}", cells[0]);
         }
-        assert!(report.lines().any(|l| l.starts_with(&format!("| {sequence} |")) && l.contains(" mm / ")), "Table II row for {sequence}");
+        assert!(
+            report
+                .lines()
+                .any(|l| l.starts_with(&format!("| {sequence} |")) && l.contains(" mm / ")),
+            "Table II row for {sequence}"
+        );
     }
-    assert!(report.contains("| normal* |"), "the simulated illumination row");
-    assert_eq!(report.lines().filter(|l| l.starts_with("| LSD+") || l.starts_with("| FLD+")).count(), 4, "Table III rows");
+    assert!(
+        report.contains("| normal* |"),
+        "the simulated illumination row"
+    );
+    assert_eq!(
+        report
+            .lines()
+            .filter(|l| l.starts_with("| LSD+") || l.starts_with("| FLD+"))
+            .count(),
+        4,
+        "Table III rows"
+    );
     let _ = std::fs::remove_dir_all(dir);
 }
 
@@ -56,7 +99,10 @@ fn real_data_quick_report_includes_the_euroc_excerpt() {
     let dir = linetrack_test_data::scratch_path("eval", "euroc");
     let report = run_report(&dir, &["--euroc", euroc.to_str().unwrap()]);
     let cells = table1_row(&report, "EuRoC V1_01_easy_micro", "frame to frame");
-    assert!(cells.iter().all(|c| c.ends_with("/ –")), "no depth, so no inlier ratio: {cells:?}");
+    assert!(
+        cells.iter().all(|c| c.ends_with("/ –")),
+        "no depth, so no inlier ratio: {cells:?}"
+    );
     assert!(report.contains("| EuRoC V1_01_easy_micro* |"));
     let _ = std::fs::remove_dir_all(dir);
 }

@@ -158,24 +158,46 @@ pub fn run(args: &RunArgs) -> anyhow::Result<PathBuf> {
     linetrack_telemetry::init("supervisor", "info", None)?;
     let config = effective_config(args)?;
     let sequence = &config.source.sequence;
-    if args.dataset.is_none() && !sequence.join("mav0/cam0/data.csv").is_file() && sequence.ends_with("out/sequences/pipeline") {
-        eprintln!("generating the default sequence ({DEFAULT_FRAMES} frames, preset normal) in {} (first run only)", sequence.display());
+    if args.dataset.is_none()
+        && !sequence.join("mav0/cam0/data.csv").is_file()
+        && sequence.ends_with("out/sequences/pipeline")
+    {
+        eprintln!(
+            "generating the default sequence ({DEFAULT_FRAMES} frames, preset normal) in {} (first run only)",
+            sequence.display()
+        );
         linetrack_synth::generate(Preset::Normal, 1, DEFAULT_FRAMES, sequence)?;
     }
-    let mode = if args.single_process { Mode::Threads } else { Mode::Processes };
+    let mode = if args.single_process {
+        Mode::Threads
+    } else {
+        Mode::Processes
+    };
     println!(
         "linetrack: {} on {} ({}, {}), detector {}, matcher {}",
-        if args.single_process { "single process" } else { "one process per stage" },
+        if args.single_process {
+            "single process"
+        } else {
+            "one process per stage"
+        },
         sequence.display(),
         match config.source.pacing {
             Pacing::Realtime => "realtime",
             Pacing::Fastest => "fastest",
         },
-        if config.source.max_frames > 0 { format!("{} frames", config.source.max_frames) } else { "all frames".to_string() },
+        if config.source.max_frames > 0 {
+            format!("{} frames", config.source.max_frames)
+        } else {
+            "all frames".to_string()
+        },
         config.detector.name(),
         config.matcher.mode_name(),
     );
-    let options = RunOptions { mode, bin_dir: None, live_status: !args.quiet };
+    let options = RunOptions {
+        mode,
+        bin_dir: None,
+        live_status: !args.quiet,
+    };
     let outcome = linetrack_supervisor::run(&config, &options, &Shutdown::on_signals()?)?;
     println!();
     print!("{}", report(&outcome.run_dir, 5.0)?);
@@ -187,23 +209,62 @@ pub fn run(args: &RunArgs) -> anyhow::Result<PathBuf> {
 
 /// `linetrack report`: the text, after writing `latency-histogram.png` into the run folder.
 pub fn report(run_dir: &Path, bin_ms: f64) -> anyhow::Result<String> {
-    let frames = read_frames(&run_dir.join("frames.csv")).with_context(|| format!("{} holds no finished run", run_dir.display()))?;
+    let frames = read_frames(&run_dir.join("frames.csv"))
+        .with_context(|| format!("{} holds no finished run", run_dir.display()))?;
     let events = read_events(&run_dir.join("events.csv"))?;
     let report = Report::new(&frames, &events);
-    let mut series: Vec<(String, Vec<f64>)> = STAGES.iter().enumerate().map(|(i, s)| (s.to_string(), frames.iter().filter(|f| f.has_pose()).map(|f| f.stage_ms[i]).collect())).collect();
-    series.push(("end-to-end".to_string(), frames.iter().filter(|f| f.has_pose()).map(|f| f.end_to_end_ms).collect()));
-    let budget = PipelineConfig::from_file(&run_dir.join("pipeline.toml")).map(|c| c.budget.end_to_end_ms).ok();
+    let mut series: Vec<(String, Vec<f64>)> = STAGES
+        .iter()
+        .enumerate()
+        .map(|(i, s)| {
+            (
+                s.to_string(),
+                frames
+                    .iter()
+                    .filter(|f| f.has_pose())
+                    .map(|f| f.stage_ms[i])
+                    .collect(),
+            )
+        })
+        .collect();
+    series.push((
+        "end-to-end".to_string(),
+        frames
+            .iter()
+            .filter(|f| f.has_pose())
+            .map(|f| f.end_to_end_ms)
+            .collect(),
+    ));
+    let budget = PipelineConfig::from_file(&run_dir.join("pipeline.toml"))
+        .map(|c| c.budget.end_to_end_ms)
+        .ok();
     let png = run_dir.join("latency-histogram.png");
-    linetrack_plot::histogram(&png, "latency per frame (dashed: end-to-end budget)", "milliseconds", &series, bin_ms, budget.as_slice())?;
+    linetrack_plot::histogram(
+        &png,
+        "latency per frame (dashed: end-to-end budget)",
+        "milliseconds",
+        &series,
+        bin_ms,
+        budget.as_slice(),
+    )?;
     let mut text = format!("run {}\n{}", run_dir.display(), report.to_text());
     for e in events.iter().filter(|e| e.kind != "stale-cleanup") {
-        let at = e.frame_id.map(|f| format!(" frame {f}")).unwrap_or_default();
-        text.push_str(&format!("  {:7.2} s {} [{}]{at}: {}\n", e.time_s, e.kind, e.stage, e.detail));
+        let at = e
+            .frame_id
+            .map(|f| format!(" frame {f}"))
+            .unwrap_or_default();
+        text.push_str(&format!(
+            "  {:7.2} s {} [{}]{at}: {}\n",
+            e.time_s, e.kind, e.stage, e.detail
+        ));
     }
     let trace = run_dir.join("trace.json");
     text.push_str(&format!("histogram: {}\n", png.display()));
     if trace.is_file() {
-        text.push_str(&format!("trace (open in ui.perfetto.dev or chrome://tracing): {}\n", trace.display()));
+        text.push_str(&format!(
+            "trace (open in ui.perfetto.dev or chrome://tracing): {}\n",
+            trace.display()
+        ));
     }
     Ok(text)
 }
@@ -211,7 +272,13 @@ pub fn report(run_dir: &Path, bin_ms: f64) -> anyhow::Result<String> {
 /// Reads a running pipeline's `status.json`.
 pub fn live_status(run_dir: &Path) -> anyhow::Result<LiveStatus> {
     let path = run_dir.join("status.json");
-    let text = std::fs::read_to_string(&path).with_context(|| format!("no running pipeline in {} (cannot read {})", run_dir.display(), path.display()))?;
+    let text = std::fs::read_to_string(&path).with_context(|| {
+        format!(
+            "no running pipeline in {} (cannot read {})",
+            run_dir.display(),
+            path.display()
+        )
+    })?;
     serde_json::from_str(&text).with_context(|| format!("{} is damaged", path.display()))
 }
 
@@ -227,7 +294,10 @@ pub fn ctl(args: &CtlArgs) -> anyhow::Result<()> {
                 println!("detector is already {}", detector.name());
                 return Ok(());
             }
-            let scope = Scope { prefix: status.ipc_prefix.clone(), run_id: status.run_id.clone() };
+            let scope = Scope {
+                prefix: status.ipc_prefix.clone(),
+                run_id: status.run_id.clone(),
+            };
             let bus = Bus::shared_memory(&scope, &format!("ctl-{}", std::process::id()))?;
             let mut control = bus.outlet::<Control>(Topic::Control, 1)?;
             let request = Control {
@@ -238,7 +308,12 @@ pub fn ctl(args: &CtlArgs) -> anyhow::Result<()> {
                 frame_id: 0,
             };
             control.publish(&FrameHeader::default(), &[&[request]])?;
-            println!("asked the supervisor (pid {}) to swap {} -> {}", status.supervisor_pid, status.detector, detector.name());
+            println!(
+                "asked the supervisor (pid {}) to swap {} -> {}",
+                status.supervisor_pid,
+                status.detector,
+                detector.name()
+            );
             let deadline = Instant::now() + Duration::from_secs_f64(timeout.max(0.1));
             // Keep the request's publisher alive until the swap shows in the run's status.
             while Instant::now() < deadline {

@@ -8,7 +8,11 @@ use std::path::Path;
 
 /// Draws the first view left, the second right; correct matches share a colour, wrong
 /// ones are red, unmatched segments grey.
-pub(crate) fn matches_side_by_side(pair: &SegmentPair, matches: &[Match], path: &Path) -> anyhow::Result<()> {
+pub(crate) fn matches_side_by_side(
+    pair: &SegmentPair,
+    matches: &[Match],
+    path: &Path,
+) -> anyhow::Result<()> {
     let mut picture = SideBySide::blank(pair.rig.width_px, pair.rig.height_px);
     for s in &pair.first.segments {
         picture.segment(Side::First, s, UNMATCHED, 1);
@@ -18,9 +22,15 @@ pub(crate) fn matches_side_by_side(pair: &SegmentPair, matches: &[Match], path: 
     }
     for (k, m) in matches.iter().enumerate() {
         let truth = pair.first.labels[m.query];
-        let colour = if truth.is_some() && truth == pair.second.labels[m.train] { palette(k) } else { WRONG };
+        let colour = if truth.is_some() && truth == pair.second.labels[m.train] {
+            palette(k)
+        } else {
+            WRONG
+        };
         picture.segment(Side::First, &pair.first.segments[m.query], colour, 2);
         picture.segment(Side::Second, &pair.second.segments[m.train], colour, 2);
     }
-    picture.save(path).with_context(|| format!("cannot write {}", path.display()))
+    picture
+        .save(path)
+        .with_context(|| format!("cannot write {}", path.display()))
 }

@@ -21,7 +21,10 @@ fn dataset_or_default(dataset: Option<&Path>, text: &mut String) -> anyhow::Resu
     }
     let dir = PathBuf::from(DEFAULT_SEQUENCE);
     if !dir.join("mav0/cam0/data.csv").is_file() {
-        eprintln!("generating the default sequence ({DEFAULT_FRAMES} frames, preset normal) in {} (first run only)", dir.display());
+        eprintln!(
+            "generating the default sequence ({DEFAULT_FRAMES} frames, preset normal) in {} (first run only)",
+            dir.display()
+        );
         let summary = linetrack_synth::generate(Preset::Normal, 1, DEFAULT_FRAMES, &dir)?;
         writeln!(text, "{summary}")?;
     }
@@ -30,15 +33,29 @@ fn dataset_or_default(dataset: Option<&Path>, text: &mut String) -> anyhow::Resu
 
 /// Runs LSD or FLD with LBD and ℓ1 on frame `index` (stereo) and `index → index + 1`
 /// (frame to frame); writes one picture per combination into `output`.
-pub fn run(dataset: Option<&Path>, index: usize, detector: DetectorKind, output: &Path) -> anyhow::Result<String> {
+pub fn run(
+    dataset: Option<&Path>,
+    index: usize,
+    detector: DetectorKind,
+    output: &Path,
+) -> anyhow::Result<String> {
     let mut text = String::new();
     let dir = dataset_or_default(dataset, &mut text)?;
-    let sequence = StereoSequence::open(&dir).with_context(|| format!("cannot open dataset {}", dir.display()))?;
+    let sequence = StereoSequence::open(&dir)
+        .with_context(|| format!("cannot open dataset {}", dir.display()))?;
     if sequence.frames.len() < 2 || index + 1 >= sequence.frames.len() {
-        anyhow::bail!("{}: frame {index} and the next are needed, the sequence has {} frames", dir.display(), sequence.frames.len());
+        anyhow::bail!(
+            "{}: frame {index} and the next are needed, the sequence has {} frames",
+            dir.display(),
+            sequence.frames.len()
+        );
     }
-    let frame = sequence.load_frame(index).map_err(|e| anyhow::anyhow!("{e}"))?;
-    let next = sequence.load_frame(index + 1).map_err(|e| anyhow::anyhow!("{e}"))?;
+    let frame = sequence
+        .load_frame(index)
+        .map_err(|e| anyhow::anyhow!("{e}"))?;
+    let next = sequence
+        .load_frame(index + 1)
+        .map_err(|e| anyhow::anyhow!("{e}"))?;
     let rig = sequence.rig;
     writeln!(
         text,
@@ -49,11 +66,22 @@ pub fn run(dataset: Option<&Path>, index: usize, detector: DetectorKind, output:
         rig.height_px,
         rig.focal_px,
         rig.baseline_m,
-        if sequence.is_rectified_on_load() { ", rectified on load" } else { "" }
+        if sequence.is_rectified_on_load() {
+            ", rectified on load"
+        } else {
+            ""
+        }
     )?;
     let config = FrontendConfig::default();
-    let pairs: [(MatchCase, &str, &GrayImage, &GrayImage); 2] =
-        [(MatchCase::Stereo, "stereo", &frame.left, &frame.right), (MatchCase::FrameToFrame, "frame-to-frame", &frame.left, &next.left)];
+    let pairs: [(MatchCase, &str, &GrayImage, &GrayImage); 2] = [
+        (MatchCase::Stereo, "stereo", &frame.left, &frame.right),
+        (
+            MatchCase::FrameToFrame,
+            "frame-to-frame",
+            &frame.left,
+            &next.left,
+        ),
+    ];
     let mut pictures = Vec::new();
     for matcher in MatcherKind::ALL {
         let mut pair = LinePairMatcher::new(detector, matcher, &config)?;
@@ -74,7 +102,10 @@ pub fn run(dataset: Option<&Path>, index: usize, detector: DetectorKind, output:
                 t.describe_ms[1],
                 t.match_ms
             )?;
-            let path = output.join(format!("images-{case_name}-{}.png", pair.name().replace('+', "-")));
+            let path = output.join(format!(
+                "images-{case_name}-{}.png",
+                pair.name().replace('+', "-")
+            ));
             linetrack_draw::segment_matches(
                 (rig.width_px, rig.height_px),
                 [first.pixels(), second.pixels()],

@@ -17,7 +17,9 @@ use anyhow::Context;
 use clap::{Parser, ValueEnum};
 use linetrack_geometry::MatchCase;
 use linetrack_l1_matcher::{L1Matcher, Match, MatchStats, MatcherConfig};
-use linetrack_synthetic_segments::{SceneConfig, Score, SegmentPair, StereoRig, frame_pair, stereo_pair};
+use linetrack_synthetic_segments::{
+    SceneConfig, Score, SegmentPair, StereoRig, frame_pair, stereo_pair,
+};
 use serde::Serialize;
 use std::fmt::Write as _;
 use std::path::PathBuf;
@@ -119,10 +121,14 @@ pub fn run(args: &Args) -> anyhow::Result<String> {
         CaseArg::FrameToFrame => &[MatchCase::FrameToFrame],
         CaseArg::Both => &[MatchCase::Stereo, MatchCase::FrameToFrame],
     };
-    std::fs::create_dir_all(&args.output).with_context(|| format!("cannot create output folder {}", args.output.display()))?;
+    std::fs::create_dir_all(&args.output)
+        .with_context(|| format!("cannot create output folder {}", args.output.display()))?;
 
     let mut text = String::new();
-    let config_name = args.config.as_ref().map_or("built-in defaults".to_string(), |p| p.display().to_string());
+    let config_name = args
+        .config
+        .as_ref()
+        .map_or("built-in defaults".to_string(), |p| p.display().to_string());
     writeln!(
         text,
         "linetrack ℓ1 match demo: generated scene seed {}, {} segments per image, {:.1} px noise, config {config_name}",
@@ -137,7 +143,12 @@ pub fn run(args: &Args) -> anyhow::Result<String> {
         };
         let mut matches = Vec::new();
         let started = Instant::now();
-        let stats = matcher.match_segments(case, &pair.first.segments, &pair.second.segments, &mut matches);
+        let stats = matcher.match_segments(
+            case,
+            &pair.first.segments,
+            &pair.second.segments,
+            &mut matches,
+        );
         let milliseconds = started.elapsed().as_secs_f64() * 1e3;
         let score = pair.score(matches.iter().map(|m| (m.query, m.train)));
         let name = case_name(case);
@@ -163,7 +174,9 @@ pub fn run(args: &Args) -> anyhow::Result<String> {
         )?;
         if args.list {
             for m in &matches {
-                let truth = if pair.first.labels[m.query].is_some() && pair.first.labels[m.query] == pair.second.labels[m.train] {
+                let truth = if pair.first.labels[m.query].is_some()
+                    && pair.first.labels[m.query] == pair.second.labels[m.train]
+                {
                     "correct"
                 } else {
                     "WRONG"
@@ -178,15 +191,31 @@ pub fn run(args: &Args) -> anyhow::Result<String> {
         let png = args.output.join(format!("{name}.png"));
         draw::matches_side_by_side(&pair, &matches, &png)?;
         pictures.push(png);
-        results_json.push(serde_json::to_value(CaseResult { case, pair: &pair, matches: &matches, stats, score, milliseconds })?);
+        results_json.push(serde_json::to_value(CaseResult {
+            case,
+            pair: &pair,
+            matches: &matches,
+            stats,
+            score,
+            milliseconds,
+        })?);
     }
     let json_path = args.output.join("matches.json");
     std::fs::write(&json_path, serde_json::to_string_pretty(&results_json)?)
         .with_context(|| format!("cannot write {}", json_path.display()))?;
-    let shown: Vec<String> = pictures.iter().chain([&json_path]).map(|p| p.display().to_string()).collect();
+    let shown: Vec<String> = pictures
+        .iter()
+        .chain([&json_path])
+        .map(|p| p.display().to_string())
+        .collect();
     writeln!(text, "wrote {}", shown.join(", "))?;
     if !args.no_images {
-        text.push_str(&images::run(args.dataset.as_deref(), args.frame, args.detector, &args.output)?);
+        text.push_str(&images::run(
+            args.dataset.as_deref(),
+            args.frame,
+            args.detector,
+            &args.output,
+        )?);
     }
     Ok(text)
 }

@@ -9,8 +9,8 @@ use clap::{Parser, ValueEnum};
 use linetrack_draw::{Side, SideBySide, palette, segment_matches};
 use linetrack_geometry::{MatchCase, Point, Segment};
 use linetrack_vision::{
-    DetectorKind, FeatureMatch, FrontendConfig, GrayImage, HammingMatcher, LineFeatures, LinePairMatcher, MatcherKind, OrbExtractor,
-    PairTimings, PointFeatures, match_points, perturb,
+    DetectorKind, FeatureMatch, FrontendConfig, GrayImage, HammingMatcher, LineFeatures,
+    LinePairMatcher, MatcherKind, OrbExtractor, PairTimings, PointFeatures, match_points, perturb,
 };
 use serde::Serialize;
 use std::fmt::Write as _;
@@ -37,8 +37,9 @@ OUTPUT: <output>/matches.png (first image left, second right; a match has one co
 both, unmatched segments are grey), <output>/matches.json (everything), <output>/matches.csv
 (one row per match), and one summary line on stdout.
 
-Images must be 8-bit grayscale and the same size. They are used as given: rectify stereo
-pairs first for best stereo results."
+Images may be grey or colour (converted to grey once, by luminance), 8- or 16-bit (scaled to
+8 bits), and must be the same size. They are used as given: rectify stereo pairs first for
+best stereo results."
 )]
 pub struct Args {
     /// First image (left, or frame k).
@@ -171,16 +172,33 @@ pub fn run(args: &Args) -> anyhow::Result<String> {
         orb.extract(&first, &mut a)?;
         orb.extract(&second, &mut b)?;
         let gates = &config.appearance_gates;
-        match_points(&mut HammingMatcher::new(), args.mode.case(), &a, &b, gates, config.orb.min_distance_ratio, &mut point_matches);
+        match_points(
+            &mut HammingMatcher::new(),
+            args.mode.case(),
+            &a,
+            &b,
+            gates,
+            config.orb.min_distance_ratio,
+            &mut point_matches,
+        );
         timings.points = Some(ms_since(started));
         point_sets = Some((a, b));
     }
 
-    std::fs::create_dir_all(&args.output).with_context(|| format!("cannot create output folder {}", args.output.display()))?;
+    std::fs::create_dir_all(&args.output)
+        .with_context(|| format!("cannot create output folder {}", args.output.display()))?;
     let picture_path = args.output.join("matches.png");
-    draw(&first, &second, lines_a, lines_b, matches, point_sets.as_ref(), &point_matches)
-        .save(&picture_path)
-        .with_context(|| format!("cannot write {}", picture_path.display()))?;
+    draw(
+        &first,
+        &second,
+        lines_a,
+        lines_b,
+        matches,
+        point_sets.as_ref(),
+        &point_matches,
+    )
+    .save(&picture_path)
+    .with_context(|| format!("cannot write {}", picture_path.display()))?;
     let report = Report {
         first_image: args.first.display().to_string(),
         second_image: args.second.display().to_string(),
@@ -192,11 +210,21 @@ pub fn run(args: &Args) -> anyhow::Result<String> {
         first_segments: &lines_a.segments,
         second_segments: &lines_b.segments,
         matches,
-        points: point_sets.as_ref().map(|(a, b)| PointsReport { first: &a.points, second: &b.points, matches: &point_matches }),
+        points: point_sets.as_ref().map(|(a, b)| PointsReport {
+            first: &a.points,
+            second: &b.points,
+            matches: &point_matches,
+        }),
         milliseconds: &timings,
     };
-    write_file(&args.output.join("matches.json"), &serde_json::to_string_pretty(&report)?)?;
-    write_file(&args.output.join("matches.csv"), &matches_csv(&lines_a.segments, &lines_b.segments, matches))?;
+    write_file(
+        &args.output.join("matches.json"),
+        &serde_json::to_string_pretty(&report)?,
+    )?;
+    write_file(
+        &args.output.join("matches.csv"),
+        &matches_csv(&lines_a.segments, &lines_b.segments, matches),
+    )?;
 
     let mut line = format!(
         "{}+{} {}: {}|{} segments, {} matches | load {:.1} ms, detect {:.1}+{:.1} ms, describe {:.1}+{:.1} ms, match {:.2} ms",
@@ -214,7 +242,13 @@ pub fn run(args: &Args) -> anyhow::Result<String> {
         timings.lines.match_ms
     );
     if let (Some((a, b)), Some(ms)) = (&point_sets, timings.points) {
-        write!(line, " | orb {}|{} points, {} matches, {ms:.1} ms", a.points.len(), b.points.len(), point_matches.len())?;
+        write!(
+            line,
+            " | orb {}|{} points, {} matches, {ms:.1} ms",
+            a.points.len(),
+            b.points.len(),
+            point_matches.len()
+        )?;
     }
     if args.gain.is_some() || args.bias.is_some() {
         write!(line, " | second image × {gain} + {bias}")?;
@@ -228,13 +262,25 @@ fn write_file(path: &Path, text: &str) -> anyhow::Result<()> {
 
 /// One row per match: indices, distance, and both segments' endpoints.
 fn matches_csv(first: &[Segment], second: &[Segment], matches: &[FeatureMatch]) -> String {
-    let mut csv = String::from("query,train,distance,x0_first,y0_first,x1_first,y1_first,x0_second,y0_second,x1_second,y1_second\n");
+    let mut csv = String::from(
+        "query,train,distance,x0_first,y0_first,x1_first,y1_first,x0_second,y0_second,x1_second,y1_second\n",
+    );
     for m in matches {
         let (a, b) = (first[m.query], second[m.train]);
         let _ = writeln!(
             csv,
             "{},{},{},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3}",
-            m.query, m.train, m.distance, a.start.x, a.start.y, a.end.x, a.end.y, b.start.x, b.start.y, b.end.x, b.end.y
+            m.query,
+            m.train,
+            m.distance,
+            a.start.x,
+            a.start.y,
+            a.end.x,
+            a.end.y,
+            b.start.x,
+            b.start.y,
+            b.end.x,
+            b.end.y
         );
     }
     csv
@@ -258,8 +304,18 @@ fn draw(
     );
     if let Some((a, b)) = points {
         for (k, m) in point_matches.iter().enumerate() {
-            picture.point(Side::First, a.points[m.query], palette(k + matches.len()), 3);
-            picture.point(Side::Second, b.points[m.train], palette(k + matches.len()), 3);
+            picture.point(
+                Side::First,
+                a.points[m.query],
+                palette(k + matches.len()),
+                3,
+            );
+            picture.point(
+                Side::Second,
+                b.points[m.train],
+                palette(k + matches.len()),
+                3,
+            );
         }
     }
     picture

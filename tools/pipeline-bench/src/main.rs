@@ -53,14 +53,22 @@ fn echo(run_id: &str, hub: Option<linetrack_ipc::LocalHub>, count: usize) -> any
     let mut frames = bus.inlet::<u8>(Topic::Frames)?;
     let mut pongs = bus.outlet::<PoseRecord>(Topic::Poses, 1)?;
     let wake = bus.wake(StageKind::LineDetector)?;
-    pongs.publish(&FrameHeader::new(u64::MAX, 0, 0), &[&[PoseRecord::default()]])?; // ready
+    pongs.publish(
+        &FrameHeader::new(u64::MAX, 0, 0),
+        &[&[PoseRecord::default()]],
+    )?; // ready
     let mut seen = 0;
     let deadline = Instant::now() + Duration::from_secs(120);
     while seen < count && Instant::now() < deadline {
         wake.wait(Duration::from_millis(100))?;
         while let Some(frame) = frames.receive()? {
             // Read the images where they are: one byte per cache line.
-            let checksum: u64 = frame.payload().iter().step_by(64).map(|&b| u64::from(b)).sum();
+            let checksum: u64 = frame
+                .payload()
+                .iter()
+                .step_by(64)
+                .map(|&b| u64::from(b))
+                .sum();
             let mut header = *frame.header();
             header.sequence_ns = checksum;
             pongs.publish(&header, &[&[PoseRecord::default()]])?;
@@ -79,13 +87,21 @@ struct Pinger {
 
 impl Pinger {
     fn new(bus: &Bus) -> anyhow::Result<Self> {
-        Ok(Self { frames: bus.outlet::<u8>(Topic::Frames, 2 * WIDTH * HEIGHT)?, pongs: bus.inlet::<PoseRecord>(Topic::Poses)?, wake: bus.wake(StageKind::Supervisor)? })
+        Ok(Self {
+            frames: bus.outlet::<u8>(Topic::Frames, 2 * WIDTH * HEIGHT)?,
+            pongs: bus.inlet::<PoseRecord>(Topic::Poses)?,
+            wake: bus.wake(StageKind::Supervisor)?,
+        })
     }
 }
 
 /// One-way latencies (half round trips), microseconds.
 fn ping(pinger: Pinger, round_trips: usize) -> anyhow::Result<Vec<f64>> {
-    let Pinger { mut frames, mut pongs, wake } = pinger;
+    let Pinger {
+        mut frames,
+        mut pongs,
+        wake,
+    } = pinger;
     let deadline = Instant::now() + Duration::from_secs(30);
     // Wait for the peer's ready message.
     loop {
@@ -97,7 +113,9 @@ fn ping(pinger: Pinger, round_trips: usize) -> anyhow::Result<Vec<f64>> {
             bail!("the echo peer did not start");
         }
     }
-    let pixels: Vec<u8> = (0..2 * WIDTH * HEIGHT).map(|i| (i * 31 % 251) as u8).collect();
+    let pixels: Vec<u8> = (0..2 * WIDTH * HEIGHT)
+        .map(|i| (i * 31 % 251) as u8)
+        .collect();
     let (left, right) = pixels.split_at(WIDTH * HEIGHT);
     let mut one_way = Vec::with_capacity(round_trips);
     for k in 0..round_trips + 20 {
@@ -116,7 +134,11 @@ fn ping(pinger: Pinger, round_trips: usize) -> anyhow::Result<Vec<f64>> {
             }
         };
         let rtt = sent.elapsed();
-        anyhow::ensure!(back.header().frame_id == k as u64, "echo of frame {} for {k}", back.header().frame_id);
+        anyhow::ensure!(
+            back.header().frame_id == k as u64,
+            "echo of frame {} for {k}",
+            back.header().frame_id
+        );
         if k >= 20 {
             // The first round trips warm up caches and page mappings.
             one_way.push(rtt.as_secs_f64() * 1e6 / 2.0);
@@ -130,7 +152,16 @@ fn hop_shm(round_trips: usize) -> anyhow::Result<Vec<f64>> {
     let bus = Bus::shared_memory(&Scope::new(&run_id), "bench-ping")?;
     let pinger = Pinger::new(&bus)?;
     let exe = std::env::current_exe()?;
-    let mut peer = Command::new(exe).args(["--echo", &run_id, "--round-trips", &(round_trips + 20).to_string()]).stdout(Stdio::null()).spawn().context("starting the echo peer")?;
+    let mut peer = Command::new(exe)
+        .args([
+            "--echo",
+            &run_id,
+            "--round-trips",
+            &(round_trips + 20).to_string(),
+        ])
+        .stdout(Stdio::null())
+        .spawn()
+        .context("starting the echo peer")?;
     let result = ping(pinger, round_trips);
     let _ = peer.wait();
     result
@@ -142,12 +173,17 @@ fn hop_local(round_trips: usize) -> anyhow::Result<Vec<f64>> {
     let pinger = Pinger::new(&bus)?;
     let peer = std::thread::spawn(move || echo("local", Some(hub), round_trips + 20));
     let result = ping(pinger, round_trips);
-    peer.join().map_err(|_| anyhow::anyhow!("echo thread panicked"))??;
+    peer.join()
+        .map_err(|_| anyhow::anyhow!("echo thread panicked"))??;
     result
 }
 
 fn row(out: &mut String, name: &str, p: &Percentiles, unit: &str) {
-    let _ = writeln!(out, "| {name} | {} | {:.1} | {:.1} | {:.1} | {:.1} {unit} |", p.count, p.p50, p.p90, p.p99, p.max);
+    let _ = writeln!(
+        out,
+        "| {name} | {} | {:.1} | {:.1} | {:.1} | {:.1} {unit} |",
+        p.count, p.p50, p.p90, p.p99, p.max
+    );
 }
 
 fn main() -> ExitCode {
@@ -172,17 +208,32 @@ fn main() -> ExitCode {
 
 fn bench(args: &Args) -> anyhow::Result<()> {
     let mut out = String::new();
-    let _ = writeln!(out, "## One hop of a {WIDTH}×{HEIGHT} stereo frame ({} KiB), one way (half the round trip), µs\n", 2 * WIDTH * HEIGHT / 1024);
-    let _ = writeln!(out, "| transport | n | p50 | p90 | p99 | max |\n|---|---|---|---|---|---|");
+    let _ = writeln!(
+        out,
+        "## One hop of a {WIDTH}×{HEIGHT} stereo frame ({} KiB), one way (half the round trip), µs\n",
+        2 * WIDTH * HEIGHT / 1024
+    );
+    let _ = writeln!(
+        out,
+        "| transport | n | p50 | p90 | p99 | max |\n|---|---|---|---|---|---|"
+    );
     eprintln!("hop cost: {} round trips per transport", args.round_trips);
     let shm = Percentiles::of(hop_shm(args.round_trips)?).context("no shared-memory samples")?;
     let local = Percentiles::of(hop_local(args.round_trips)?).context("no local samples")?;
     row(&mut out, "iceoryx2 shared memory, two processes", &shm, "");
     row(&mut out, "crossbeam channels, two threads", &local, "");
-    let _ = writeln!(out, "\nshared memory / channels, medians: {:.2}\n", shm.p50 / local.p50);
+    let _ = writeln!(
+        out,
+        "\nshared memory / channels, medians: {:.2}\n",
+        shm.p50 / local.p50
+    );
 
     if !args.sequence.join("mav0/cam0/data.csv").is_file() {
-        eprintln!("generating {} ({} frames)", args.sequence.display(), args.frames.max(100));
+        eprintln!(
+            "generating {} ({} frames)",
+            args.sequence.display(),
+            args.frames.max(100)
+        );
         linetrack_synth::generate(Preset::Normal, 1, args.frames.max(100), &args.sequence)?;
     }
     let mut e2e: [Vec<f64>; 2] = [Vec::new(), Vec::new()];
@@ -195,9 +246,20 @@ fn bench(args: &Args) -> anyhow::Result<()> {
             config.source.max_frames = args.frames;
             config.source.pacing = Pacing::Realtime;
             config.output.trace = false;
-            config.output.run_dir = args.output.join(format!("run-{}-{repeat}", if m == 0 { "processes" } else { "threads" }));
+            config.output.run_dir = args.output.join(format!(
+                "run-{}-{repeat}",
+                if m == 0 { "processes" } else { "threads" }
+            ));
             eprintln!("pipeline run {}/{}: {:?}", repeat + 1, args.repeats, mode);
-            let outcome = linetrack_supervisor::run(&config, &RunOptions { mode, bin_dir: None, live_status: false }, &Shutdown::default())?;
+            let outcome = linetrack_supervisor::run(
+                &config,
+                &RunOptions {
+                    mode,
+                    bin_dir: None,
+                    live_status: false,
+                },
+                &Shutdown::default(),
+            )?;
             let frames = read_frames(&outcome.run_dir.join("frames.csv"))?;
             for f in &frames {
                 if f.has_pose() {
@@ -216,21 +278,43 @@ fn bench(args: &Args) -> anyhow::Result<()> {
         "## End to end, {} frames × {} runs per mode, {WIDTH}×{HEIGHT} stereo at 20 Hz (generated `normal`), LSD + LBD, points and lines, ms\n",
         args.frames, args.repeats
     );
-    let _ = writeln!(out, "| mode | stage | n | p50 | p90 | p99 | max |\n|---|---|---|---|---|---|---|");
-    let names = ["one process per stage (iceoryx2)", "one process, threads (channels)"];
+    let _ = writeln!(
+        out,
+        "| mode | stage | n | p50 | p90 | p99 | max |\n|---|---|---|---|---|---|---|"
+    );
+    let names = [
+        "one process per stage (iceoryx2)",
+        "one process, threads (channels)",
+    ];
     let mut medians = [f64::NAN; 2];
     for m in 0..2 {
         for (i, name) in linetrack_run_record::STAGES.iter().enumerate() {
             if let Some(p) = Percentiles::of(stage[m][i].iter().copied()) {
-                let _ = writeln!(out, "| {} | {name} | {} | {:.2} | {:.2} | {:.2} | {:.2} |", names[m], p.count, p.p50, p.p90, p.p99, p.max);
+                let _ = writeln!(
+                    out,
+                    "| {} | {name} | {} | {:.2} | {:.2} | {:.2} | {:.2} |",
+                    names[m], p.count, p.p50, p.p90, p.p99, p.max
+                );
             }
         }
         let p = Percentiles::of(e2e[m].iter().copied()).context("no frame reached the end")?;
         medians[m] = p.p50;
-        let _ = writeln!(out, "| {} | **end to end** | {} | {:.2} | {:.2} | {:.2} | {:.2} |", names[m], p.count, p.p50, p.p90, p.p99, p.max);
+        let _ = writeln!(
+            out,
+            "| {} | **end to end** | {} | {:.2} | {:.2} | {:.2} | {:.2} |",
+            names[m], p.count, p.p50, p.p90, p.p99, p.max
+        );
     }
-    let _ = writeln!(out, "\nframes dropped by policy: processes {}, threads {}", drops[0], drops[1]);
-    let _ = writeln!(out, "end-to-end median, processes / threads: {:.3}", medians[0] / medians[1]);
+    let _ = writeln!(
+        out,
+        "\nframes dropped by policy: processes {}, threads {}",
+        drops[0], drops[1]
+    );
+    let _ = writeln!(
+        out,
+        "end-to-end median, processes / threads: {:.3}",
+        medians[0] / medians[1]
+    );
     print!("{out}");
     std::fs::create_dir_all(&args.output)?;
     std::fs::write(args.output.join("pipeline-bench.md"), &out)?;

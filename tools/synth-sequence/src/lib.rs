@@ -55,7 +55,13 @@ pub struct Args {
 
 /// Writes the sequence; returns the summary to print.
 pub fn run(args: &Args) -> anyhow::Result<String> {
-    let output = args.output.clone().unwrap_or_else(|| PathBuf::from(format!("out/sequences/{}-{}", args.preset.name(), args.seed)));
+    let output = args.output.clone().unwrap_or_else(|| {
+        PathBuf::from(format!(
+            "out/sequences/{}-{}",
+            args.preset.name(),
+            args.seed
+        ))
+    });
     generate(args.preset, args.seed, args.frames, &output)
 }
 
@@ -65,37 +71,72 @@ pub fn generate(preset: Preset, seed: u64, frames: usize, output: &Path) -> anyh
     if frames == 0 {
         anyhow::bail!("--frames must be at least 1");
     }
-    let args = Args { preset, seed, frames, output: Some(output.to_path_buf()) };
+    let args = Args {
+        preset,
+        seed,
+        frames,
+        output: Some(output.to_path_buf()),
+    };
     let output = output.to_path_buf();
     let config = args.preset.config(args.seed, args.frames);
     let renderer = SequenceRenderer::new(config.clone());
     let mut writer = EurocWriter::create(&output, &config.rig, config.rate_hz)?;
     let scene_dir = output.join("mav0/scene");
-    std::fs::create_dir_all(&scene_dir).with_context(|| format!("cannot create {}", scene_dir.display()))?;
-    write(&scene_dir.join("config.json"), &serde_json::to_string_pretty(&config)?)?;
+    std::fs::create_dir_all(&scene_dir)
+        .with_context(|| format!("cannot create {}", scene_dir.display()))?;
+    write(
+        &scene_dir.join("config.json"),
+        &serde_json::to_string_pretty(&config)?,
+    )?;
     let mut segments = String::from("# x0,y0,z0,x1,y1,z1 [m], world frame (z up)\n");
     for [a, b] in renderer.scene.segments() {
-        writeln!(segments, "{:.6},{:.6},{:.6},{:.6},{:.6},{:.6}", a.x, a.y, a.z, b.x, b.y, b.z)?;
+        writeln!(
+            segments,
+            "{:.6},{:.6},{:.6},{:.6},{:.6},{:.6}",
+            a.x, a.y, a.z, b.x, b.y, b.z
+        )?;
     }
     write(&scene_dir.join("segments3d.csv"), &segments)?;
 
-    let mut illumination = String::from("#timestamp [ns],gain_left,bias_left,gain_right,bias_right,light_levels…\n");
+    let mut illumination =
+        String::from("#timestamp [ns],gain_left,bias_left,gain_right,bias_right,light_levels…\n");
     let sheet_frames = sheet_indices(args.frames);
     let mut sheet = Vec::new();
     let started = Instant::now();
     let mut progress = Progress::new(args.frames);
     for index in 0..args.frames {
         let frame = renderer.render(index);
-        let depth = |view: &linetrack_scene_render::View| DepthMap { width: view.width, height: view.height, metres: view.depth_m.clone() };
+        let depth = |view: &linetrack_scene_render::View| DepthMap {
+            width: view.width,
+            height: view.height,
+            metres: view.depth_m.clone(),
+        };
         writer.write_frame(
             frame.timestamp_ns,
-            [(&frame.left.pixels, frame.left.width, frame.left.height), (&frame.right.pixels, frame.right.width, frame.right.height)],
+            [
+                (&frame.left.pixels, frame.left.width, frame.left.height),
+                (&frame.right.pixels, frame.right.width, frame.right.height),
+            ],
             [&depth(&frame.left), &depth(&frame.right)],
             &frame.world_from_left,
         )?;
-        let lights: Vec<String> = frame.illumination.lights.iter().map(|l| format!("{l:.2}")).collect();
+        let lights: Vec<String> = frame
+            .illumination
+            .lights
+            .iter()
+            .map(|l| format!("{l:.2}"))
+            .collect();
         let il = &frame.illumination;
-        writeln!(illumination, "{},{:.4},{:.3},{:.4},{:.3},{}", frame.timestamp_ns, il.gain[0], il.bias[0], il.gain[1], il.bias[1], lights.join(","))?;
+        writeln!(
+            illumination,
+            "{},{:.4},{:.3},{:.4},{:.3},{}",
+            frame.timestamp_ns,
+            il.gain[0],
+            il.bias[0],
+            il.gain[1],
+            il.bias[1],
+            lights.join(",")
+        )?;
         if sheet_frames.contains(&index) {
             sheet.push(half_size(&frame));
         }
@@ -104,7 +145,9 @@ pub fn generate(preset: Preset, seed: u64, frames: usize, output: &Path) -> anyh
     writer.finish()?;
     write(&scene_dir.join("illumination.csv"), &illumination)?;
     let sheet_path = output.join("contact-sheet.png");
-    contact_sheet(&sheet, config.rig.width_px / 2, config.rig.height_px / 2).save(&sheet_path).with_context(|| format!("cannot write {}", sheet_path.display()))?;
+    contact_sheet(&sheet, config.rig.width_px / 2, config.rig.height_px / 2)
+        .save(&sheet_path)
+        .with_context(|| format!("cannot write {}", sheet_path.display()))?;
     Ok(format!(
         "wrote {} stereo frames ({}, seed {}) to {} in {:.1} s; contact sheet {}",
         args.frames,
@@ -123,7 +166,15 @@ fn write(path: &Path, text: &str) -> anyhow::Result<()> {
 /// Up to six evenly spread frame indices.
 fn sheet_indices(frames: usize) -> Vec<usize> {
     let n = frames.min(6);
-    (0..n).map(|k| if n == 1 { 0 } else { k * (frames - 1) / (n - 1) }).collect()
+    (0..n)
+        .map(|k| {
+            if n == 1 {
+                0
+            } else {
+                k * (frames - 1) / (n - 1)
+            }
+        })
+        .collect()
 }
 
 /// The left image at half size (2×2 mean).
@@ -132,7 +183,10 @@ fn half_size(frame: &RenderedFrame) -> image::GrayImage {
     let (w, h) = (view.width / 2, view.height / 2);
     image::GrayImage::from_fn(w as u32, h as u32, |x, y| {
         let (x, y) = (2 * x as usize, 2 * y as usize);
-        let sum: u32 = [(0, 0), (1, 0), (0, 1), (1, 1)].iter().map(|(dx, dy)| u32::from(view.pixels[(y + dy) * view.width + x + dx])).sum();
+        let sum: u32 = [(0, 0), (1, 0), (0, 1), (1, 1)]
+            .iter()
+            .map(|(dx, dy)| u32::from(view.pixels[(y + dy) * view.width + x + dx]))
+            .sum();
         image::Luma([(sum / 4) as u8])
     })
 }
@@ -141,7 +195,11 @@ fn half_size(frame: &RenderedFrame) -> image::GrayImage {
 fn contact_sheet(images: &[image::GrayImage], w: u32, h: u32) -> image::GrayImage {
     let gap = 4;
     let (cols, rows) = (3u32, images.len().div_ceil(3).max(1) as u32);
-    let mut sheet = image::GrayImage::from_pixel(cols * (w + gap) - gap, rows * (h + gap) - gap, image::Luma([0]));
+    let mut sheet = image::GrayImage::from_pixel(
+        cols * (w + gap) - gap,
+        rows * (h + gap) - gap,
+        image::Luma([0]),
+    );
     for (k, tile) in images.iter().enumerate() {
         let (cx, cy) = ((k as u32 % cols) * (w + gap), (k as u32 / cols) * (h + gap));
         image::imageops::overlay(&mut sheet, tile, i64::from(cx), i64::from(cy));
@@ -158,13 +216,21 @@ struct Progress {
 
 impl Progress {
     fn new(total: usize) -> Self {
-        Self { total, live: std::io::stderr().is_terminal(), last_tenth: 0 }
+        Self {
+            total,
+            live: std::io::stderr().is_terminal(),
+            last_tenth: 0,
+        }
     }
 
     fn update(&mut self, done: usize, started: Instant) {
         let elapsed = started.elapsed().as_secs_f64();
         let left = elapsed / done as f64 * (self.total - done) as f64;
-        let line = format!("rendering frame {done}/{} ({:.0} %), {elapsed:.1} s elapsed, ~{left:.0} s left", self.total, 100.0 * done as f64 / self.total as f64);
+        let line = format!(
+            "rendering frame {done}/{} ({:.0} %), {elapsed:.1} s elapsed, ~{left:.0} s left",
+            self.total,
+            100.0 * done as f64 / self.total as f64
+        );
         let mut stderr = std::io::stderr();
         if self.live {
             let _ = write!(stderr, "\r{line}");

@@ -10,16 +10,38 @@ use linetrack_scene_render::{Preset, SequenceRenderer};
 use std::process::{Command, Output};
 
 fn synth(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_linetrack-synth")).args(args).output().expect("the binary starts")
+    Command::new(env!("CARGO_BIN_EXE_linetrack-synth"))
+        .args(args)
+        .output()
+        .expect("the binary starts")
 }
 
 #[test]
 fn a_generated_sequence_loads_back_with_its_exact_ground_truth() {
     let out = linetrack_test_data::scratch_path("synth", "mismatch");
-    let result = synth(&["--preset", "left-right-mismatch", "--seed", "4", "--frames", "3", "--output", out.to_str().unwrap()]);
-    assert!(result.status.success(), "{}", String::from_utf8_lossy(&result.stderr));
-    assert!(String::from_utf8_lossy(&result.stdout).contains("wrote 3 stereo frames (left-right-mismatch, seed 4)"));
-    assert!(String::from_utf8_lossy(&result.stderr).contains("rendering frame 3/3"), "progress is reported");
+    let result = synth(&[
+        "--preset",
+        "left-right-mismatch",
+        "--seed",
+        "4",
+        "--frames",
+        "3",
+        "--output",
+        out.to_str().unwrap(),
+    ]);
+    assert!(
+        result.status.success(),
+        "{}",
+        String::from_utf8_lossy(&result.stderr)
+    );
+    assert!(
+        String::from_utf8_lossy(&result.stdout)
+            .contains("wrote 3 stereo frames (left-right-mismatch, seed 4)")
+    );
+    assert!(
+        String::from_utf8_lossy(&result.stderr).contains("rendering frame 3/3"),
+        "progress is reported"
+    );
 
     let renderer = SequenceRenderer::new(Preset::LeftRightMismatch.config(4, 3));
     let seq = StereoSequence::open(&out).unwrap();
@@ -29,28 +51,63 @@ fn a_generated_sequence_loads_back_with_its_exact_ground_truth() {
     let frame = renderer.render(2);
     let loaded = seq.load_frame(2).unwrap();
     assert_eq!(loaded.left.pixels().unwrap(), frame.left.pixels.as_slice());
-    assert_eq!(loaded.right.pixels().unwrap(), frame.right.pixels.as_slice());
+    assert_eq!(
+        loaded.right.pixels().unwrap(),
+        frame.right.pixels.as_slice()
+    );
     let pose = loaded.pose.unwrap();
     assert!((pose.translation.vector - frame.world_from_left.translation.vector).norm() < 1e-6);
     assert!(pose.rotation.angle_to(&frame.world_from_left.rotation) < 1e-6);
 
-    let depth = read_depth_png(&out.join(format!("mav0/depth0/data/{}.png", frame.timestamp_ns))).unwrap();
-    let worst = depth.metres.iter().zip(&frame.left.depth_m).filter(|(_, d)| **d > 0.0 && **d < 13.0).map(|(a, b)| (a - b).abs()).fold(0.0f32, f32::max);
+    let depth =
+        read_depth_png(&out.join(format!("mav0/depth0/data/{}.png", frame.timestamp_ns))).unwrap();
+    let worst = depth
+        .metres
+        .iter()
+        .zip(&frame.left.depth_m)
+        .filter(|(_, d)| **d > 0.0 && **d < 13.0)
+        .map(|(a, b)| (a - b).abs())
+        .fold(0.0f32, f32::max);
     assert!(worst <= 0.5 / 5000.0 + 1e-6, "depth PNG off by {worst} m");
 
     let illumination = std::fs::read_to_string(out.join("mav0/scene/illumination.csv")).unwrap();
-    let row: Vec<f64> = illumination.lines().nth(1).unwrap().split(',').map(|v| v.parse().unwrap()).collect();
+    let row: Vec<f64> = illumination
+        .lines()
+        .nth(1)
+        .unwrap()
+        .split(',')
+        .map(|v| v.parse().unwrap())
+        .collect();
     assert_eq!((row[1], row[2], row[3], row[4]), (1.0, 0.0, 0.5, 15.0));
     let segments = std::fs::read_to_string(out.join("mav0/scene/segments3d.csv")).unwrap();
-    assert_eq!(segments.lines().count() - 1, renderer.scene.segments().len());
+    assert_eq!(
+        segments.lines().count() - 1,
+        renderer.scene.segments().len()
+    );
     let sheet = image::open(out.join("contact-sheet.png")).unwrap();
     assert_eq!(sheet.width(), 3 * 376 + 2 * 4);
 
     // The same seed again: the same bytes.
     let again = linetrack_test_data::scratch_path("synth", "mismatch-again");
-    assert!(synth(&["--preset", "left-right-mismatch", "--seed", "4", "--frames", "3", "--output", again.to_str().unwrap()]).status.success());
+    assert!(
+        synth(&[
+            "--preset",
+            "left-right-mismatch",
+            "--seed",
+            "4",
+            "--frames",
+            "3",
+            "--output",
+            again.to_str().unwrap()
+        ])
+        .status
+        .success()
+    );
     let name = format!("mav0/cam1/data/{}.png", frame.timestamp_ns);
-    assert_eq!(std::fs::read(out.join(&name)).unwrap(), std::fs::read(again.join(&name)).unwrap());
+    assert_eq!(
+        std::fs::read(out.join(&name)).unwrap(),
+        std::fs::read(again.join(&name)).unwrap()
+    );
     for dir in [out, again] {
         let _ = std::fs::remove_dir_all(dir);
     }
@@ -61,7 +118,14 @@ fn bad_options_fail_with_a_clear_message() {
     let unknown = synth(&["--preset", "disco"]);
     assert!(!unknown.status.success());
     assert!(String::from_utf8_lossy(&unknown.stderr).contains("expected one of normal"));
-    let none = synth(&["--frames", "0", "--output", linetrack_test_data::scratch_path("synth", "zero").to_str().unwrap()]);
+    let none = synth(&[
+        "--frames",
+        "0",
+        "--output",
+        linetrack_test_data::scratch_path("synth", "zero")
+            .to_str()
+            .unwrap(),
+    ]);
     assert!(!none.status.success() && String::from_utf8_lossy(&none.stderr).contains("--frames"));
     let blocked = linetrack_test_data::scratch_path("synth", "blocked");
     std::fs::write(&blocked, b"a file where the folder should go").unwrap();

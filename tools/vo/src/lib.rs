@@ -6,8 +6,8 @@
 
 use anyhow::Context;
 use clap::Parser;
-use linetrack_datasets::tum::{self, StampedPose};
 use linetrack_datasets::StereoSequence;
+use linetrack_datasets::tum::{self, StampedPose};
 use linetrack_odometry::{Features, Odometry, OdometryConfig, metrics};
 use linetrack_scene_render::IlluminationConfig;
 use linetrack_vision::{DetectorKind, MatcherKind, perturb};
@@ -64,17 +64,35 @@ pub struct Args {
 
 /// Runs the odometry; returns the summary.
 pub fn run(args: &Args) -> anyhow::Result<String> {
-    let sequence = StereoSequence::open(&args.dataset).with_context(|| format!("cannot open dataset {}", args.dataset.display()))?;
-    let features = if args.lines_only { Features::LinesOnly } else { Features::PointsAndLines };
-    let config = OdometryConfig { detector: args.detector, matcher: args.matcher, features, min_line_angle_deg: args.min_line_angle_deg, ..OdometryConfig::default() };
+    let sequence = StereoSequence::open(&args.dataset)
+        .with_context(|| format!("cannot open dataset {}", args.dataset.display()))?;
+    let features = if args.lines_only {
+        Features::LinesOnly
+    } else {
+        Features::PointsAndLines
+    };
+    let config = OdometryConfig {
+        detector: args.detector,
+        matcher: args.matcher,
+        features,
+        min_line_angle_deg: args.min_line_angle_deg,
+        ..OdometryConfig::default()
+    };
     let mut odometry = Odometry::new(config, sequence.rig)?;
     let total = args.frames.unwrap_or(usize::MAX).min(sequence.frames.len());
     let start_ns = sequence.frames.first().map_or(0, |f| f.timestamp_ns);
     let name = sequence.name.clone();
-    let illumination = IlluminationConfig { seed: args.seed, gain_jump_period_s: args.gain_jumps, ..IlluminationConfig::default() };
-    std::fs::create_dir_all(&args.output).with_context(|| format!("cannot create {}", args.output.display()))?;
+    let illumination = IlluminationConfig {
+        seed: args.seed,
+        gain_jump_period_s: args.gain_jumps,
+        ..IlluminationConfig::default()
+    };
+    std::fs::create_dir_all(&args.output)
+        .with_context(|| format!("cannot create {}", args.output.display()))?;
 
-    let mut csv = String::from("index,timestamp_ns,lost,points_left,points_right,segments_left,segments_right,triangulated_points,triangulated_segments,observed_points,observed_segments,inlier_points,inlier_segments,iterations,rms_px,detect_ms,describe_ms,stereo_ms,f2f_ms,motion_ms,reason\n");
+    let mut csv = String::from(
+        "index,timestamp_ns,lost,points_left,points_right,segments_left,segments_right,triangulated_points,triangulated_segments,observed_points,observed_segments,inlier_points,inlier_segments,iterations,rms_px,detect_ms,describe_ms,stereo_ms,f2f_ms,motion_ms,reason\n",
+    );
     let (mut estimate, mut truth, mut stamps) = (Vec::new(), Vec::new(), Vec::new());
     let (mut lost, mut skipped, mut busy_ms) = (0usize, Vec::new(), 0.0);
     let started = Instant::now();
@@ -92,7 +110,10 @@ pub fn run(args: &Args) -> anyhow::Result<String> {
         let t = (frame.timestamp_ns - start_ns) as f64 * 1e-9;
         let (left, right) = if illumination.gain_jump_period_s.is_some() {
             let il = illumination.at(t, 0);
-            (perturb(&frame.left, il.gain[0], il.bias[0])?, perturb(&frame.right, il.gain[1], il.bias[1])?)
+            (
+                perturb(&frame.left, il.gain[0], il.bias[0])?,
+                perturb(&frame.right, il.gain[1], il.bias[1])?,
+            )
         } else {
             (frame.left, frame.right)
         };
@@ -104,9 +125,27 @@ pub fn run(args: &Args) -> anyhow::Result<String> {
         writeln!(
             csv,
             "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{:.3},{:.2},{:.2},{:.2},{:.2},{:.2},{}",
-            frame.index, frame.timestamp_ns, u8::from(result.lost), s.points[0], s.points[1], s.segments[0], s.segments[1],
-            s.triangulated[0], s.triangulated[1], s.observations[0], s.observations[1], s.inliers[0], s.inliers[1], s.iterations,
-            s.rms_px, s.ms[0], s.ms[1], s.ms[2], s.ms[3], s.ms[4], result.reason.unwrap_or_default().replace(',', ";")
+            frame.index,
+            frame.timestamp_ns,
+            u8::from(result.lost),
+            s.points[0],
+            s.points[1],
+            s.segments[0],
+            s.segments[1],
+            s.triangulated[0],
+            s.triangulated[1],
+            s.observations[0],
+            s.observations[1],
+            s.inliers[0],
+            s.inliers[1],
+            s.iterations,
+            s.rms_px,
+            s.ms[0],
+            s.ms[1],
+            s.ms[2],
+            s.ms[3],
+            s.ms[4],
+            result.reason.unwrap_or_default().replace(',', ";")
         )?;
         estimate.push(result.pose);
         stamps.push(frame.timestamp_ns as f64 * 1e-9);
@@ -121,8 +160,18 @@ pub fn run(args: &Args) -> anyhow::Result<String> {
     if live {
         eprintln!();
     }
-    std::fs::write(args.output.join("frames.csv"), &csv).with_context(|| format!("cannot write {}", args.output.display()))?;
-    let stamped = |poses: &[Isometry3<f64>]| -> Vec<StampedPose> { stamps.iter().zip(poses).map(|(t, p)| StampedPose { timestamp_s: *t, pose: *p }).collect() };
+    std::fs::write(args.output.join("frames.csv"), &csv)
+        .with_context(|| format!("cannot write {}", args.output.display()))?;
+    let stamped = |poses: &[Isometry3<f64>]| -> Vec<StampedPose> {
+        stamps
+            .iter()
+            .zip(poses)
+            .map(|(t, p)| StampedPose {
+                timestamp_s: *t,
+                pose: *p,
+            })
+            .collect()
+    };
     tum::write(&args.output.join("trajectory.txt"), &stamped(&estimate))?;
 
     let mut summary = format!(
@@ -132,11 +181,17 @@ pub fn run(args: &Args) -> anyhow::Result<String> {
         busy_ms / estimate.len().max(1) as f64,
         started.elapsed().as_secs_f64()
     );
-    if let Some(truth) = truth.iter().copied().collect::<Option<Vec<_>>>().filter(|t| !t.is_empty()) {
+    if let Some(truth) = truth
+        .iter()
+        .copied()
+        .collect::<Option<Vec<_>>>()
+        .filter(|t| !t.is_empty())
+    {
         let first = truth[0].inverse();
         let truth: Vec<Isometry3<f64>> = truth.iter().map(|p| first * p).collect();
         tum::write(&args.output.join("groundtruth.txt"), &stamped(&truth))?;
-        let fmt = |v: Option<f64>, unit: &str| v.map_or("n/a".to_string(), |v| format!("{v:.4}{unit}"));
+        let fmt =
+            |v: Option<f64>, unit: &str| v.map_or("n/a".to_string(), |v| format!("{v:.4}{unit}"));
         write!(
             summary,
             " | RPE {} per frame, ATE {}, drift {}",

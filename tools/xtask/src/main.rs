@@ -16,7 +16,12 @@ use std::process::{Command, ExitCode};
 
 /// Debian packages the workspace builds against: OpenCV with its contrib modules
 /// (LSD, FLD, LBD, ORB) and libclang for the `opencv` crate's binding generator.
-const SYSTEM_PACKAGES: &[&str] = &["libopencv-dev", "libopencv-contrib-dev", "clang", "libclang-dev"];
+const SYSTEM_PACKAGES: &[&str] = &[
+    "libopencv-dev",
+    "libopencv-contrib-dev",
+    "clang",
+    "libclang-dev",
+];
 
 const USAGE: &str = "usage: cargo xtask <demo|match-demo|test|setup> [ARGS…]
   demo        run the pipeline: `linetrack run ARGS…` (try `cargo xtask demo --help`)
@@ -46,30 +51,68 @@ fn run() -> anyhow::Result<ExitCode> {
         "demo" => {
             install_system_packages()?;
             // The supervisor starts the stage binaries from its own folder: build them all.
-            let built = cargo(&["build", "--release", "--quiet", "--workspace", "--bins"], &[])?;
+            let built = cargo(
+                &["build", "--release", "--quiet", "--workspace", "--bins"],
+                &[],
+            )?;
             if built != ExitCode::SUCCESS {
                 return Ok(built);
             }
-            let target = std::env::var_os("CARGO_TARGET_DIR").map_or_else(|| std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../target"), std::path::PathBuf::from);
+            let target = std::env::var_os("CARGO_TARGET_DIR").map_or_else(
+                || std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../target"),
+                std::path::PathBuf::from,
+            );
             let mut linetrack_args = vec!["run".to_string()];
             linetrack_args.extend(rest);
-            let status = Command::new(target.join("release/linetrack")).args(&linetrack_args).status().context("cannot start linetrack")?;
-            Ok(if status.success() { ExitCode::SUCCESS } else { ExitCode::FAILURE })
+            let status = Command::new(target.join("release/linetrack"))
+                .args(&linetrack_args)
+                .status()
+                .context("cannot start linetrack")?;
+            Ok(if status.success() {
+                ExitCode::SUCCESS
+            } else {
+                ExitCode::FAILURE
+            })
         }
         "match-demo" => {
             install_system_packages()?;
-            cargo(&["run", "--release", "--quiet", "--package", "linetrack-match-demo", "--"], &rest)
+            cargo(
+                &[
+                    "run",
+                    "--release",
+                    "--quiet",
+                    "--package",
+                    "linetrack-match-demo",
+                    "--",
+                ],
+                &rest,
+            )
         }
         "test" => {
             install_system_packages()?;
             // The end-to-end tests start the real stage processes.
-            let built = cargo(&["build", "--workspace", "--bins", "--profile", "test-release"], &[])?;
+            let built = cargo(
+                &[
+                    "build",
+                    "--workspace",
+                    "--bins",
+                    "--profile",
+                    "test-release",
+                ],
+                &[],
+            )?;
             if built != ExitCode::SUCCESS {
                 return Ok(built);
             }
             let with_real_data = real_data_present();
             if has_nextest() {
-                let mut fixed = vec!["nextest", "run", "--workspace", "--cargo-profile", "test-release"];
+                let mut fixed = vec![
+                    "nextest",
+                    "run",
+                    "--workspace",
+                    "--cargo-profile",
+                    "test-release",
+                ];
                 if !with_real_data {
                     fixed.extend(["-E", "not test(/real_data/)"]);
                 }
@@ -78,9 +121,16 @@ fn run() -> anyhow::Result<ExitCode> {
                 eprintln!("xtask: cargo-nextest not found, running `cargo test` instead");
                 let mut extra = rest.clone();
                 if !with_real_data {
-                    extra.extend(["--".to_string(), "--skip".to_string(), "real_data".to_string()]);
+                    extra.extend([
+                        "--".to_string(),
+                        "--skip".to_string(),
+                        "real_data".to_string(),
+                    ]);
                 }
-                cargo(&["test", "--workspace", "--profile", "test-release"], &extra)
+                cargo(
+                    &["test", "--workspace", "--profile", "test-release"],
+                    &extra,
+                )
             }
         }
         "-h" | "--help" | "help" => {
@@ -91,23 +141,40 @@ fn run() -> anyhow::Result<ExitCode> {
     }
 }
 
-/// Environment variable naming the EuRoC excerpt (the folder holding `mav0/`).
-const EUROC_ENV: &str = "LINETRACK_EUROC_DIR";
+/// The real data the `real_data_*` tests read: what it is, the environment variable that
+/// names its folder, the default folder beside the workspace, and a file that must be in it.
+const REAL_DATA: &[(&str, &str, &str, &str)] = &[
+    (
+        "EuRoC excerpt",
+        "LINETRACK_EUROC_DIR",
+        "../shared/data/euroc/V1_01_easy_micro",
+        "mav0/cam0/data.csv",
+    ),
+    (
+        "Middlebury pairs",
+        "LINETRACK_MIDDLEBURY_DIR",
+        "../shared/data/middlebury",
+        "2001-2003/Tsukuba/imL.png",
+    ),
+];
 
-/// Whether the EuRoC excerpt the `real_data_*` tests read is on this machine: at
-/// `$LINETRACK_EUROC_DIR`, else at `../shared/data/euroc/V1_01_easy_micro` beside the
-/// workspace. When it is not, says so: those tests are left out and counted as skipped.
+/// Whether every real data set the `real_data_*` tests read is on this machine (each at its
+/// environment variable, else beside the workspace). When one is not, says so: those
+/// tests are left out and counted as skipped.
 fn real_data_present() -> bool {
     let workspace = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
-    let dir = std::env::var_os(EUROC_ENV)
-        .map(std::path::PathBuf::from)
-        .unwrap_or_else(|| workspace.join("../shared/data/euroc/V1_01_easy_micro"));
-    let present = dir.join("mav0/cam0/data.csv").is_file();
-    if !present {
-        eprintln!(
-            "xtask: EuRoC excerpt not found at {} (set {EUROC_ENV}); the real_data tests are left out and reported as skipped",
-            dir.display()
-        );
+    let mut present = true;
+    for (what, env, default, marker) in REAL_DATA {
+        let dir = std::env::var_os(env)
+            .map(std::path::PathBuf::from)
+            .unwrap_or_else(|| workspace.join(default));
+        if !dir.join(marker).is_file() {
+            eprintln!(
+                "xtask: {what} not found at {} (set {env}); the real_data tests are left out and reported as skipped",
+                dir.display()
+            );
+            present = false;
+        }
     }
     present
 }
@@ -115,7 +182,11 @@ fn real_data_present() -> bool {
 /// Runs cargo with `fixed` then `extra` arguments; returns its exit code.
 fn cargo(fixed: &[&str], extra: &[String]) -> anyhow::Result<ExitCode> {
     let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".to_string());
-    let status = Command::new(&cargo).args(fixed).args(extra).status().with_context(|| format!("cannot start {cargo}"))?;
+    let status = Command::new(&cargo)
+        .args(fixed)
+        .args(extra)
+        .status()
+        .with_context(|| format!("cannot start {cargo}"))?;
     Ok(match status.code() {
         Some(0) => ExitCode::SUCCESS,
         Some(code) => ExitCode::from(u8::try_from(code).unwrap_or(1)),
@@ -125,23 +196,40 @@ fn cargo(fixed: &[&str], extra: &[String]) -> anyhow::Result<ExitCode> {
 
 fn has_nextest() -> bool {
     let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".to_string());
-    Command::new(cargo).args(["nextest", "--version"]).output().is_ok_and(|o| o.status.success())
+    Command::new(cargo)
+        .args(["nextest", "--version"])
+        .output()
+        .is_ok_and(|o| o.status.success())
 }
 
 /// Installs the missing ones of [`SYSTEM_PACKAGES`] with apt-get (through sudo when not
 /// root). Does nothing when all are installed.
 fn install_system_packages() -> anyhow::Result<()> {
-    let missing: Vec<&str> = SYSTEM_PACKAGES.iter().copied().filter(|p| !is_installed(p)).collect();
+    let missing: Vec<&str> = SYSTEM_PACKAGES
+        .iter()
+        .copied()
+        .filter(|p| !is_installed(p))
+        .collect();
     if missing.is_empty() {
         return Ok(());
     }
     eprintln!("xtask: installing system packages: {}", missing.join(" "));
     if Command::new("apt-get").arg("--version").output().is_err() {
-        bail!("apt-get is not available; install these packages with your system's package manager: {}", missing.join(" "));
+        bail!(
+            "apt-get is not available; install these packages with your system's package manager: {}",
+            missing.join(" ")
+        );
     }
-    let as_root = Command::new("id").arg("-u").output().is_ok_and(|o| o.stdout.starts_with(b"0"));
+    let as_root = Command::new("id")
+        .arg("-u")
+        .output()
+        .is_ok_and(|o| o.stdout.starts_with(b"0"));
     let run_apt = |apt_args: &[&str]| -> anyhow::Result<()> {
-        let mut command = if as_root { Command::new("apt-get") } else { Command::new("sudo") };
+        let mut command = if as_root {
+            Command::new("apt-get")
+        } else {
+            Command::new("sudo")
+        };
         if !as_root {
             command.arg("apt-get");
         }
@@ -161,7 +249,10 @@ fn install_system_packages() -> anyhow::Result<()> {
     run_apt(&install)?;
     let still_missing: Vec<&str> = missing.into_iter().filter(|p| !is_installed(p)).collect();
     if !still_missing.is_empty() {
-        bail!("apt-get finished but these packages are still not installed: {}", still_missing.join(" "));
+        bail!(
+            "apt-get finished but these packages are still not installed: {}",
+            still_missing.join(" ")
+        );
     }
     Ok(())
 }
@@ -170,5 +261,8 @@ fn is_installed(package: &str) -> bool {
     Command::new("dpkg-query")
         .args(["-W", "-f=${Status}", package])
         .output()
-        .is_ok_and(|o| o.status.success() && String::from_utf8_lossy(&o.stdout).contains("install ok installed"))
+        .is_ok_and(|o| {
+            o.status.success()
+                && String::from_utf8_lossy(&o.stdout).contains("install ok installed")
+        })
 }
