@@ -56,6 +56,13 @@ pub struct OdometryConfig {
     /// Frame to frame: largest image motion of a feature, pixels (wider than the stereo
     /// front end's default: the camera moves between frames).
     pub max_displacement_px: f64,
+    /// Frame to frame once a motion is known: previous features with a 3-D position are
+    /// searched for within this of where the last motion (constant velocity) projects
+    /// them, pixels.
+    pub predicted_window_px: f64,
+    /// Frame to frame, ORB points: the second-best Hamming distance must be at least this
+    /// times the best (the stereo ratio is the front end's `orb.min_distance_ratio`).
+    pub frame_to_frame_ratio: f64,
     /// Segments closer than this to horizontal are not triangulated, degrees: an
     /// endpoint's disparity is read off the right segment's line at the same row, so its
     /// error grows as 1 / tan(angle).
@@ -71,8 +78,60 @@ impl Default for OdometryConfig {
             frontend: FrontendConfig::default(),
             motion: MotionConfig::default(),
             max_displacement_px: 60.0,
+            predicted_window_px: 30.0,
+            frame_to_frame_ratio: 2.0,
             min_line_angle_deg: 10.0,
         }
+    }
+}
+
+impl OdometryConfig {
+    /// Reads a TOML file of these settings (missing keys take their defaults) and checks it;
+    /// errors name the file and the field.
+    pub fn from_file(path: &std::path::Path) -> Result<Self, String> {
+        let origin = path.display();
+        let text =
+            std::fs::read_to_string(path).map_err(|e| format!("{origin}: cannot read: {e}"))?;
+        let config: Self = toml::from_str(&text).map_err(|e| format!("{origin}: {e}"))?;
+        config.validate().map_err(|e| format!("{origin}: {e}"))?;
+        Ok(config)
+    }
+
+    /// Checks the ranges; the message names the first bad field.
+    pub fn validate(&self) -> Result<(), String> {
+        self.frontend
+            .validate()
+            .map_err(|e| format!("frontend: {e}"))?;
+        let positive = [
+            ("max_displacement_px", self.max_displacement_px),
+            ("predicted_window_px", self.predicted_window_px),
+            ("frame_to_frame_ratio", self.frame_to_frame_ratio),
+            ("motion.huber_px", self.motion.huber_px),
+            ("motion.outlier_px", self.motion.outlier_px),
+            ("motion.ransac_threshold_px", self.motion.ransac_threshold_px),
+        ];
+        for (field, value) in positive {
+            if !(value > 0.0 && value.is_finite()) {
+                return Err(format!("field `{field}` = {value}: expected a finite number > 0"));
+            }
+        }
+        if !(self.min_line_angle_deg >= 0.0 && self.min_line_angle_deg < 90.0) {
+            return Err(format!(
+                "field `min_line_angle_deg` = {}: expected a number in [0, 90)",
+                self.min_line_angle_deg
+            ));
+        }
+        let m = &self.motion;
+        if !(m.min_relative_eigenvalue >= 0.0 && m.min_relative_eigenvalue < 1.0) {
+            return Err(format!(
+                "field `motion.min_relative_eigenvalue` = {}: expected a number in [0, 1)",
+                m.min_relative_eigenvalue
+            ));
+        }
+        if m.max_iterations == 0 {
+            return Err("field `motion.max_iterations` = 0: expected at least 1".to_string());
+        }
+        Ok(())
     }
 }
 
@@ -93,6 +152,11 @@ pub struct FrameStats {
     pub iterations: usize,
     /// Final RMS residual of the inliers, pixels.
     pub rms_px: f64,
+    /// Conditioning of the final normal matrix (smallest over largest eigenvalue).
+    pub conditioning: f64,
+    /// How far the estimate departs from the prediction (the last motion): translation,
+    /// metres, and rotation, degrees.
+    pub departure: [f64; 2],
     /// Milliseconds: detection, description, stereo matching + triangulation, frame-to-frame
     /// matching, motion estimation.
     pub ms: [f64; 5],
@@ -146,6 +210,8 @@ pub struct MotionTracker {
     reference: Option<Reference>,
     pose: Isometry3<f64>,
     last_motion: Isometry3<f64>,
+    /// Whether `last_motion` was measured (not the identity of a fresh start).
+    motion_known: bool,
 }
 
 impl MotionTracker {
@@ -157,6 +223,7 @@ impl MotionTracker {
             reference: None,
             pose: Isometry3::identity(),
             last_motion: Isometry3::identity(),
+            motion_known: false,
             config,
             rig,
         })
@@ -166,6 +233,7 @@ impl MotionTracker {
     pub fn resume_from(&mut self, pose: Isometry3<f64>, motion: Isometry3<f64>) {
         self.pose = pose;
         self.last_motion = motion;
+        self.motion_known = true;
         self.reference = None;
     }
 
@@ -177,6 +245,38 @@ impl MotionTracker {
     /// The last frame-to-frame motion.
     pub fn last_motion(&self) -> Isometry3<f64> {
         self.last_motion
+    }
+
+    /// How far from its previous position a feature is searched for in the next frame:
+    /// the predicted window once a motion is known, else the full displacement.
+    pub fn search_radius_px(&self) -> f64 {
+        if self.motion_known {
+            self.config.predicted_window_px
+        } else {
+            self.config.max_displacement_px
+        }
+    }
+
+    /// Where the previous frame's left segments are expected in the next frame: each
+    /// triangulated one is moved by the last motion (constant velocity) and projected;
+    /// the others stay where they were. `previous` are the segments given to the last
+    /// [`MotionTracker::update`].
+    pub fn predict_segments(&self, previous: &[Segment]) -> Vec<Segment> {
+        let positions = self.reference.as_ref().map(|r| &r.line_positions);
+        previous
+            .iter()
+            .enumerate()
+            .map(|(k, segment)| {
+                let Some(Some(([a, b], _))) = positions.and_then(|p| p.get(k)) else {
+                    return *segment;
+                };
+                let project = |p: &Point3<f64>| self.rig.project_left(&(self.last_motion * p));
+                match (project(a), project(b)) {
+                    (Some(a), Some(b)) => Segment::new(a, b),
+                    _ => *segment,
+                }
+            })
+            .collect()
     }
 
     /// Tracks one frame: `lines` matched, `stats` already holding the front end's counts and
@@ -226,7 +326,10 @@ impl MotionTracker {
                     points_r.points[m.train],
                     &limits,
                 ) {
-                    point_positions[m.query] = Some((t.position, disparity_weight(t.disparity_px)));
+                    let weight = disparity_weight(t.disparity_px)
+                        * self.level_weight(&points_l, m.query)
+                        * self.level_weight(&points_r, m.train);
+                    point_positions[m.query] = Some((t.position, weight));
                 }
             }
         }
@@ -286,11 +389,19 @@ impl MotionTracker {
         stats.ms[4] = since(started);
         match estimate {
             Ok(e) => {
+                let prediction = self.last_motion;
                 self.last_motion = e.motion;
+                self.motion_known = true;
                 self.pose *= e.motion.inverse();
                 stats.inliers = [e.inlier_points, e.inlier_lines];
                 stats.iterations = e.iterations;
                 stats.rms_px = e.rms_px;
+                stats.conditioning = e.relative_eigenvalue;
+                let change = prediction.inverse() * e.motion;
+                stats.departure = [
+                    change.translation.vector.norm(),
+                    change.rotation.angle().to_degrees(),
+                ];
                 Ok(FrameResult {
                     pose: self.pose,
                     lost: false,
@@ -311,7 +422,15 @@ impl MotionTracker {
         }
     }
 
-    /// Observations of `previous`'s triangulated points in `current`'s left image.
+    /// Weight of point `k` for its pyramid level: the inverse variance of its position,
+    /// `scale_factor^(−2·level)` (1 at full resolution).
+    fn level_weight(&self, features: &PointFeatures, k: usize) -> f64 {
+        let level = features.levels.get(k).copied().unwrap_or(0);
+        f64::from(self.config.frontend.orb.scale_factor).powi(-2 * i32::from(level))
+    }
+
+    /// Observations of `previous`'s triangulated points in `current`'s left image, searched
+    /// for around where the last motion moves them.
     fn point_observations(
         &mut self,
         previous: &Reference,
@@ -321,16 +440,22 @@ impl MotionTracker {
         let mut points = Vec::new();
         if self.config.features == Features::PointsAndLines {
             let gates = AppearanceGates {
-                max_displacement_px: self.config.max_displacement_px,
+                max_displacement_px: self.search_radius_px(),
                 ..self.config.frontend.appearance_gates
             };
+            let mut predicted = previous.points.clone();
+            for (point, position) in predicted.points.iter_mut().zip(&previous.point_positions) {
+                if let Some(p) = position.and_then(|(x, _)| self.rig.project_left(&(self.last_motion * x))) {
+                    *point = p;
+                }
+            }
             match_points(
                 &mut self.hamming,
                 MatchCase::FrameToFrame,
-                &previous.points,
+                &predicted,
                 &current.points,
                 &gates,
-                self.config.frontend.orb.min_distance_ratio,
+                self.config.frame_to_frame_ratio,
                 scratch,
             );
             for m in scratch.iter() {
@@ -339,7 +464,7 @@ impl MotionTracker {
                     points.push(PointObservation {
                         position,
                         pixel,
-                        weight,
+                        weight: weight * self.level_weight(&current.points, m.train),
                     });
                 }
             }
@@ -424,7 +549,10 @@ impl Odometry {
         stats.ms[2] = since(started);
         let started = Instant::now();
         let mut tracked = Vec::new();
-        if let Some(previous) = &self.previous_lines {
+        if let Some(previous) = &mut self.previous_lines {
+            // Search around where the last motion moves the previous segments (within
+            // the matcher's own frame-to-frame window).
+            previous.segments = self.tracker.predict_segments(&previous.segments);
             self.matcher
                 .match_lines(MatchCase::FrameToFrame, previous, &lines_l, &mut tracked);
         }

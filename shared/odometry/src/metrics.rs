@@ -6,12 +6,18 @@
 //! - **ATE** (absolute trajectory error) after aligning both trajectories at their first
 //!   pose (no scale, no least-squares alignment: odometry starts where the truth starts):
 //!   RMSE of ‖trans(Q₀⁻¹ Q_i) − trans(P₀⁻¹ P_i)‖, metres.
+//! - **ATE, SE(3)-aligned** (evo's `-a`): the estimate's positions rigidly moved (rotation
+//!   and translation, no scale) to fit the truth's in least squares (Horn / Umeyama), then
+//!   the RMSE of the position differences.
 //! - **Drift per metre**: final position error (first-pose aligned) over the length of the
-//!   true path, percent.
+//!   true path, percent; not given for a path under 1 m, where it means nothing.
+//! - [`Summary`] gathers them with the zero-motion baseline (the ATE of a trajectory that
+//!   never moves), which a parked-vehicle excerpt needs: there, "no motion" can beat any
+//!   estimator.
 //!
 //! `P` is the estimate, `Q` the ground truth, both camera poses in their worlds.
 
-use nalgebra::Isometry3;
+use nalgebra::{Isometry3, Matrix3, Vector3};
 
 /// Translational RPE RMSE over pairs `step` frames apart; `None` without such pairs.
 pub fn rpe_translation_rmse(
@@ -49,14 +55,90 @@ pub fn ate_rmse(estimate: &[Isometry3<f64>], truth: &[Isometry3<f64>]) -> Option
     Some((sum / n as f64).sqrt())
 }
 
-/// Final position error over true path length, percent; `None` for a path under 1 cm.
-pub fn drift_percent(estimate: &[Isometry3<f64>], truth: &[Isometry3<f64>]) -> Option<f64> {
+/// Paths shorter than this get no drift figure, metres.
+pub const MIN_DRIFT_PATH_M: f64 = 1.0;
+
+/// ATE RMSE after the best rigid alignment (rotation and translation, no scale) of the
+/// estimate's positions to the truth's; `None` with fewer than 3 poses.
+pub fn ate_rmse_aligned(estimate: &[Isometry3<f64>], truth: &[Isometry3<f64>]) -> Option<f64> {
     let n = estimate.len().min(truth.len());
-    let path: f64 = truth[..n]
+    if n < 3 {
+        return None;
+    }
+    let p: Vec<Vector3<f64>> = estimate[..n].iter().map(|x| x.translation.vector).collect();
+    let q: Vec<Vector3<f64>> = truth[..n].iter().map(|x| x.translation.vector).collect();
+    let mean = |v: &[Vector3<f64>]| v.iter().sum::<Vector3<f64>>() / n as f64;
+    let (p_mean, q_mean) = (mean(&p), mean(&q));
+    let cross: Matrix3<f64> = p
+        .iter()
+        .zip(&q)
+        .map(|(a, b)| (b - q_mean) * (a - p_mean).transpose())
+        .sum();
+    let svd = cross.svd(true, true);
+    let (u, v_t) = (svd.u?, svd.v_t?);
+    let mut flip = Matrix3::identity();
+    if (u * v_t).determinant() < 0.0 {
+        flip[(2, 2)] = -1.0;
+    }
+    let rotation = u * flip * v_t;
+    let sum: f64 = p
+        .iter()
+        .zip(&q)
+        .map(|(a, b)| (rotation * (a - p_mean) + q_mean - b).norm_squared())
+        .sum();
+    Some((sum / n as f64).sqrt())
+}
+
+/// Length of the true path, metres.
+pub fn path_length(truth: &[Isometry3<f64>]) -> f64 {
+    truth
         .windows(2)
         .map(|w| (w[1].translation.vector - w[0].translation.vector).norm())
-        .sum();
-    if n < 2 || path < 0.01 {
+        .sum()
+}
+
+/// Every metric of one run against its ground truth.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct Summary {
+    /// Poses compared.
+    pub poses: usize,
+    /// Length of the true path, metres.
+    pub path_m: f64,
+    /// Translational RPE RMSE over consecutive frames, metres.
+    pub rpe_m: Option<f64>,
+    /// ATE RMSE, first-pose aligned, metres.
+    pub ate_m: Option<f64>,
+    /// ATE RMSE, SE(3)-aligned, metres.
+    pub ate_aligned_m: Option<f64>,
+    /// Final error over path length, percent (none under [`MIN_DRIFT_PATH_M`]).
+    pub drift_percent: Option<f64>,
+    /// ATE RMSE of a trajectory that stays at the first pose, metres.
+    pub zero_motion_ate_m: Option<f64>,
+}
+
+impl Summary {
+    /// The metrics of `estimate` against `truth`.
+    pub fn new(estimate: &[Isometry3<f64>], truth: &[Isometry3<f64>]) -> Self {
+        let n = estimate.len().min(truth.len());
+        let still = vec![truth.first().copied().unwrap_or_else(Isometry3::identity); n];
+        Self {
+            poses: n,
+            path_m: path_length(&truth[..n]),
+            rpe_m: rpe_translation_rmse(estimate, truth, 1),
+            ate_m: ate_rmse(estimate, truth),
+            ate_aligned_m: ate_rmse_aligned(estimate, truth),
+            drift_percent: drift_percent(estimate, truth),
+            zero_motion_ate_m: ate_rmse(&still, truth),
+        }
+    }
+}
+
+/// Final position error over true path length, percent; `None` for a path under
+/// [`MIN_DRIFT_PATH_M`].
+pub fn drift_percent(estimate: &[Isometry3<f64>], truth: &[Isometry3<f64>]) -> Option<f64> {
+    let n = estimate.len().min(truth.len());
+    let path = path_length(&truth[..n]);
+    if n < 2 || path < MIN_DRIFT_PATH_M {
         return None;
     }
     let q = (truth[0].inverse() * truth[n - 1]).translation.vector;
@@ -107,5 +189,32 @@ mod tests {
         let expected = ((0..11).map(|k| (0.01 * k as f64).powi(2)).sum::<f64>() / 11.0).sqrt();
         assert!((ate_rmse(&estimate, &truth).unwrap() - expected).abs() < 1e-12);
         assert!(rpe_translation_rmse(&estimate, &truth, 20).is_none());
+    }
+
+    #[test]
+    fn aligned_ate_removes_a_rigid_offset_but_not_a_shape_error() {
+        let truth = walk([0.1, 0.0, 0.05], 0.05, 40);
+        let offset = Isometry3::from_parts(
+            Translation3::new(0.3, -0.2, 0.1),
+            UnitQuaternion::from_euler_angles(0.0, 0.2, 0.0),
+        );
+        // A rigidly moved copy: the origin-aligned ATE sees the offset, the aligned one not.
+        let moved: Vec<_> = truth.iter().map(|p| offset * p).collect();
+        assert!(ate_rmse_aligned(&moved, &truth).unwrap() < 1e-9);
+        // A copy 10 % too long keeps an error after alignment.
+        let stretched = walk([0.11, 0.0, 0.055], 0.05, 40);
+        let aligned = ate_rmse_aligned(&stretched, &truth).unwrap();
+        assert!(aligned > 0.01 && aligned < ate_rmse(&stretched, &truth).unwrap());
+    }
+
+    #[test]
+    fn summary_gives_no_drift_under_a_metre_and_a_zero_motion_baseline() {
+        let parked = walk([0.001, 0.0, 0.0], 0.0, 50);
+        let summary = Summary::new(&parked, &parked);
+        assert!(summary.drift_percent.is_none() && (summary.path_m - 0.049).abs() < 1e-9);
+        // Staying put is off by the distance travelled so far: RMS of 0…49 mm.
+        let expected = ((0..50).map(|k| (0.001 * k as f64).powi(2)).sum::<f64>() / 50.0).sqrt();
+        assert!((summary.zero_motion_ate_m.unwrap() - expected).abs() < 1e-12);
+        assert_eq!(summary.ate_m, Some(0.0));
     }
 }

@@ -369,9 +369,8 @@ impl PipelineConfig {
             );
         }
         self.odometry
-            .frontend
             .validate()
-            .map_err(|e| format!("odometry.frontend: {e}"))?;
+            .map_err(|e| format!("odometry.{e}"))?;
         Ok(())
     }
 

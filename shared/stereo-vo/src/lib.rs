@@ -8,6 +8,7 @@
 #![warn(missing_docs)]
 
 pub mod motion;
+pub mod robust;
 pub mod triangulate;
 
 pub use motion::{

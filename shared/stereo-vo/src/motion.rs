@@ -8,11 +8,9 @@
 //! δ = (ρ, φ) ∈ ℝ⁶, for which the Jacobian of a transformed point `p' = T·X` is
 //! `[I₃ | −[p']×]`.
 
+use crate::robust::{apply_update, robust_start};
 use linetrack_geometry::{Point, Segment, StereoRig};
-use nalgebra::{
-    Isometry3, Matrix2x3, Matrix3, Matrix6, Point3, SMatrix, Translation3, UnitQuaternion, Vector2,
-    Vector3, Vector6,
-};
+use nalgebra::{Isometry3, Matrix2x3, Matrix3, Matrix6, Point3, SMatrix, Vector2, Vector3, Vector6};
 use serde::{Deserialize, Serialize};
 
 /// A 3-D point of the previous frame and where it is seen now.
@@ -69,6 +67,12 @@ pub struct MotionConfig {
     /// Smallest eigenvalue of the normal matrix relative to the largest below this:
     /// the motion is not constrained (degenerate), the frame is lost.
     pub min_relative_eigenvalue: f64,
+    /// Robust start: minimal sets drawn at most (0: start Gauss–Newton from the prediction
+    /// on every observation, as PL-StVO does).
+    pub ransac_draws: usize,
+    /// Robust start: an observation whose residual norm under a hypothesis is within this
+    /// is one of its inliers, pixels.
+    pub ransac_threshold_px: f64,
 }
 
 impl Default for MotionConfig {
@@ -80,6 +84,8 @@ impl Default for MotionConfig {
             outlier_px: 3.0,
             min_inliers: 12,
             min_relative_eigenvalue: 1e-9,
+            ransac_draws: 200,
+            ransac_threshold_px: 2.0,
         }
     }
 }
@@ -97,6 +103,8 @@ pub struct MotionEstimate {
     pub iterations: usize,
     /// RMS residual of the inliers at the end, pixels.
     pub rms_px: f64,
+    /// Conditioning of the final normal matrix: its smallest eigenvalue over its largest.
+    pub relative_eigenvalue: f64,
 }
 
 /// Why no motion could be estimated (the frame is reported as lost).
@@ -185,7 +193,8 @@ struct Active<'a> {
     lines: &'a [bool],
 }
 
-/// One Gauss–Newton pass from `t`; returns the final pose and iterations.
+/// One Gauss–Newton pass from `t`; returns the final pose, the iterations and the
+/// conditioning of the last normal matrix (smallest over largest eigenvalue).
 fn optimise(
     rig: &StereoRig,
     points: &[PointObservation],
@@ -193,7 +202,7 @@ fn optimise(
     active: &Active<'_>,
     mut t: Isometry3<f64>,
     config: &MotionConfig,
-) -> Result<(Isometry3<f64>, usize), MotionError> {
+) -> Result<(Isometry3<f64>, usize, f64), MotionError> {
     let robust = |r: f64| 1.0 / (1.0 + (r / config.huber_px).powi(2)).sqrt();
     for iteration in 1..=config.max_iterations {
         let mut h = Matrix6::zeros();
@@ -226,16 +235,12 @@ fn optimise(
                 relative_eigenvalue: relative,
             });
         };
-        let update = Isometry3::from_parts(
-            Translation3::from(step.fixed_rows::<3>(0).into_owned()),
-            UnitQuaternion::from_scaled_axis(step.fixed_rows::<3>(3).into_owned()),
-        );
-        t = update * t;
-        if step.norm() < config.min_step {
-            return Ok((t, iteration));
+        t = apply_update(&step, t);
+        if step.norm() < config.min_step || iteration == config.max_iterations {
+            return Ok((t, iteration, relative));
         }
     }
-    Ok((t, config.max_iterations))
+    Ok((t, 0, 1.0))
 }
 
 /// Estimates the motion from `initial` (e.g. identity, or the previous motion).
@@ -253,17 +258,37 @@ pub fn estimate_motion(
             needed: config.min_inliers,
         });
     }
-    let all_points = vec![true; points.len()];
-    let all_lines = vec![true; lines.len()];
-    let (first, iterations_1) = optimise(
+    // Where the first pass starts, and on which observations.
+    let (start, start_points, start_lines) = if config.ransac_draws > 0 {
+        let found = robust_start(
+            rig,
+            points,
+            lines,
+            initial,
+            config.ransac_draws,
+            config.ransac_threshold_px,
+        );
+        let inliers = found.inliers.iter().filter(|b| **b).count();
+        if inliers < config.min_inliers {
+            return Err(MotionError::TooFewInliers {
+                inliers,
+                needed: config.min_inliers,
+            });
+        }
+        let (p, l) = found.inliers.split_at(points.len());
+        (found.motion, p.to_vec(), l.to_vec())
+    } else {
+        (*initial, vec![true; points.len()], vec![true; lines.len()])
+    };
+    let (first, iterations_1, _) = optimise(
         rig,
         points,
         lines,
         &Active {
-            points: &all_points,
-            lines: &all_lines,
+            points: &start_points,
+            lines: &start_lines,
         },
-        *initial,
+        start,
         config,
     )?;
     let within = |r: Option<Vector2<f64>>| r.is_some_and(|r| r.amax() <= config.outlier_px);
@@ -287,7 +312,7 @@ pub fn estimate_motion(
         points: &inlier_points,
         lines: &inlier_lines,
     };
-    let (motion, iterations_2) = optimise(rig, points, lines, &active, first, config)?;
+    let (motion, iterations_2, relative_eigenvalue) = optimise(rig, points, lines, &active, first, config)?;
     let mut sum = 0.0;
     let mut n = 0usize;
     for (obs, _) in points.iter().zip(&inlier_points).filter(|(_, on)| **on) {
@@ -308,5 +333,6 @@ pub fn estimate_motion(
         inlier_lines: n_lines,
         iterations: iterations_1 + iterations_2,
         rms_px: if n > 0 { (sum / n as f64).sqrt() } else { 0.0 },
+        relative_eigenvalue,
     })
 }

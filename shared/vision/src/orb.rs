@@ -13,6 +13,9 @@ use opencv::features2d::{Feature2DTrait, ORB, ORB_ScoreType};
 pub struct PointFeatures {
     /// Keypoint positions, pixels.
     pub points: Vec<Point>,
+    /// Pyramid level each point was detected at (0: full resolution); its position is
+    /// quantised to that level's pixel, `scale_factor^level` full-resolution pixels.
+    pub levels: Vec<u8>,
     /// ORB descriptors.
     pub descriptors: BinaryDescriptors,
 }
@@ -68,6 +71,12 @@ impl OrbExtractor {
             self.keypoints
                 .iter()
                 .map(|k| Point::new(f64::from(k.pt().x), f64::from(k.pt().y))),
+        );
+        out.levels.clear();
+        out.levels.extend(
+            self.keypoints
+                .iter()
+                .map(|k| u8::try_from(k.octave().max(0)).unwrap_or(u8::MAX)),
         );
         let row_bytes = usize::try_from(self.raw.cols()).unwrap_or(0);
         out.descriptors.reset(out.points.len(), row_bytes);

@@ -8,10 +8,11 @@ use anyhow::Context;
 use clap::Parser;
 use linetrack_datasets::StereoSequence;
 use linetrack_datasets::tum::{self, StampedPose};
-use linetrack_odometry::{Features, Odometry, OdometryConfig, metrics};
+use linetrack_odometry::{FrameResult, Features, Odometry, OdometryConfig, metrics};
 use linetrack_scene_render::IlluminationConfig;
 use linetrack_vision::{DetectorKind, MatcherKind, perturb};
 use nalgebra::Isometry3;
+use serde::Serialize;
 use std::fmt::Write as _;
 use std::io::IsTerminal;
 use std::path::PathBuf;
@@ -30,11 +31,17 @@ use std::time::Instant;
 
 OUTPUT (<output>/): trajectory.txt (TUM: t tx ty tz qx qy qz qw, left camera, world = first
 camera), groundtruth.txt (the same frame, when the dataset has ground truth), frames.csv (one
-row per frame: lost, features, matches, inliers, iterations, milliseconds per step)."
+row per frame: lost, features, matches, inliers, iterations, conditioning, departure from the
+prediction, milliseconds per step), metrics.json (the run's settings, lost frames and, with
+ground truth: path length, RPE, ATE origin- and SE(3)-aligned, drift, zero-motion ATE)."
 )]
 pub struct Args {
     /// Dataset folder: EuRoC (holding mav0/), a KITTI odometry sequence, or linetrack-synth output.
     pub dataset: PathBuf,
+    /// Odometry settings (TOML: the keys of the `[odometry]` section of
+    /// configs/pipeline.toml; missing keys take their defaults). Flags below override it.
+    #[arg(long)]
+    pub config: Option<PathBuf>,
     /// Line detector.
     #[arg(long, default_value = "lsd")]
     pub detector: DetectorKind,
@@ -55,11 +62,89 @@ pub struct Args {
     #[arg(long)]
     pub frames: Option<usize>,
     /// Segments closer than this to horizontal are not triangulated, degrees.
-    #[arg(long, default_value_t = 10.0)]
-    pub min_line_angle_deg: f64,
+    /// (default 10, or the config's).
+    #[arg(long)]
+    pub min_line_angle_deg: Option<f64>,
     /// Output folder.
     #[arg(long, default_value = "out/vo")]
     pub output: PathBuf,
+}
+
+/// One row of frames.csv.
+#[derive(Debug, Serialize)]
+struct FrameRow {
+    index: usize,
+    timestamp_ns: u64,
+    lost: u8,
+    points_left: usize,
+    points_right: usize,
+    segments_left: usize,
+    segments_right: usize,
+    triangulated_points: usize,
+    triangulated_segments: usize,
+    observed_points: usize,
+    observed_segments: usize,
+    inlier_points: usize,
+    inlier_segments: usize,
+    iterations: usize,
+    rms_px: f64,
+    conditioning: f64,
+    departure_m: f64,
+    departure_deg: f64,
+    detect_ms: f64,
+    describe_ms: f64,
+    stereo_ms: f64,
+    f2f_ms: f64,
+    motion_ms: f64,
+    reason: String,
+}
+
+impl FrameRow {
+    fn new(index: usize, timestamp_ns: u64, result: &FrameResult) -> Self {
+        let s = &result.stats;
+        Self {
+            index,
+            timestamp_ns,
+            lost: u8::from(result.lost),
+            points_left: s.points[0],
+            points_right: s.points[1],
+            segments_left: s.segments[0],
+            segments_right: s.segments[1],
+            triangulated_points: s.triangulated[0],
+            triangulated_segments: s.triangulated[1],
+            observed_points: s.observations[0],
+            observed_segments: s.observations[1],
+            inlier_points: s.inliers[0],
+            inlier_segments: s.inliers[1],
+            iterations: s.iterations,
+            rms_px: s.rms_px,
+            conditioning: s.conditioning,
+            departure_m: s.departure[0],
+            departure_deg: s.departure[1],
+            detect_ms: s.ms[0],
+            describe_ms: s.ms[1],
+            stereo_ms: s.ms[2],
+            f2f_ms: s.ms[3],
+            motion_ms: s.ms[4],
+            reason: result.reason.clone().unwrap_or_default(),
+        }
+    }
+}
+
+/// metrics.json: what was run and how well it did.
+#[derive(Debug, Serialize)]
+struct RunRecord {
+    dataset: String,
+    detector: &'static str,
+    matcher: &'static str,
+    lines_only: bool,
+    gain_jumps_s: Option<f64>,
+    seed: u64,
+    frames: usize,
+    skipped: usize,
+    lost: usize,
+    tracking_ms_per_frame: f64,
+    metrics: Option<metrics::Summary>,
 }
 
 /// Runs the odometry; returns the summary.
@@ -71,12 +156,16 @@ pub fn run(args: &Args) -> anyhow::Result<String> {
     } else {
         Features::PointsAndLines
     };
+    let base = match &args.config {
+        Some(path) => OdometryConfig::from_file(path).map_err(anyhow::Error::msg)?,
+        None => OdometryConfig::default(),
+    };
     let config = OdometryConfig {
         detector: args.detector,
         matcher: args.matcher,
         features,
-        min_line_angle_deg: args.min_line_angle_deg,
-        ..OdometryConfig::default()
+        min_line_angle_deg: args.min_line_angle_deg.unwrap_or(base.min_line_angle_deg),
+        ..base
     };
     let mut odometry = Odometry::new(config, sequence.rig)?;
     let total = args.frames.unwrap_or(usize::MAX).min(sequence.frames.len());
@@ -90,9 +179,9 @@ pub fn run(args: &Args) -> anyhow::Result<String> {
     std::fs::create_dir_all(&args.output)
         .with_context(|| format!("cannot create {}", args.output.display()))?;
 
-    let mut csv = String::from(
-        "index,timestamp_ns,lost,points_left,points_right,segments_left,segments_right,triangulated_points,triangulated_segments,observed_points,observed_segments,inlier_points,inlier_segments,iterations,rms_px,detect_ms,describe_ms,stereo_ms,f2f_ms,motion_ms,reason\n",
-    );
+    let frames_path = args.output.join("frames.csv");
+    let mut csv = csv::Writer::from_path(&frames_path)
+        .with_context(|| format!("cannot write {}", frames_path.display()))?;
     let (mut estimate, mut truth, mut stamps) = (Vec::new(), Vec::new(), Vec::new());
     let (mut lost, mut skipped, mut busy_ms) = (0usize, Vec::new(), 0.0);
     let started = Instant::now();
@@ -121,32 +210,8 @@ pub fn run(args: &Args) -> anyhow::Result<String> {
         let result = odometry.track(&left, &right)?;
         busy_ms += tick.elapsed().as_secs_f64() * 1e3;
         lost += usize::from(result.lost);
-        let s = &result.stats;
-        writeln!(
-            csv,
-            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{:.3},{:.2},{:.2},{:.2},{:.2},{:.2},{}",
-            frame.index,
-            frame.timestamp_ns,
-            u8::from(result.lost),
-            s.points[0],
-            s.points[1],
-            s.segments[0],
-            s.segments[1],
-            s.triangulated[0],
-            s.triangulated[1],
-            s.observations[0],
-            s.observations[1],
-            s.inliers[0],
-            s.inliers[1],
-            s.iterations,
-            s.rms_px,
-            s.ms[0],
-            s.ms[1],
-            s.ms[2],
-            s.ms[3],
-            s.ms[4],
-            result.reason.unwrap_or_default().replace(',', ";")
-        )?;
+        csv.serialize(FrameRow::new(frame.index, frame.timestamp_ns, &result))
+            .with_context(|| format!("cannot write {}", frames_path.display()))?;
         estimate.push(result.pose);
         stamps.push(frame.timestamp_ns as f64 * 1e-9);
         truth.push(frame.pose);
@@ -160,8 +225,8 @@ pub fn run(args: &Args) -> anyhow::Result<String> {
     if live {
         eprintln!();
     }
-    std::fs::write(args.output.join("frames.csv"), &csv)
-        .with_context(|| format!("cannot write {}", args.output.display()))?;
+    csv.flush()
+        .with_context(|| format!("cannot write {}", frames_path.display()))?;
     let stamped = |poses: &[Isometry3<f64>]| -> Vec<StampedPose> {
         stamps
             .iter()
@@ -174,6 +239,19 @@ pub fn run(args: &Args) -> anyhow::Result<String> {
     };
     tum::write(&args.output.join("trajectory.txt"), &stamped(&estimate))?;
 
+    let mut record = RunRecord {
+        dataset: args.dataset.display().to_string(),
+        detector: args.detector.name(),
+        matcher: args.matcher.name(),
+        lines_only: args.lines_only,
+        gain_jumps_s: args.gain_jumps,
+        seed: args.seed,
+        frames: estimate.len(),
+        skipped: skipped.len(),
+        lost,
+        tracking_ms_per_frame: busy_ms / estimate.len().max(1) as f64,
+        metrics: None,
+    };
     let mut summary = format!(
         "{name}: {} frames ({} skipped), {lost} lost, {:.1} ms/frame tracking, {:.1} s in all",
         estimate.len(),
@@ -190,16 +268,25 @@ pub fn run(args: &Args) -> anyhow::Result<String> {
         let first = truth[0].inverse();
         let truth: Vec<Isometry3<f64>> = truth.iter().map(|p| first * p).collect();
         tum::write(&args.output.join("groundtruth.txt"), &stamped(&truth))?;
+        let m = metrics::Summary::new(&estimate, &truth);
         let fmt =
             |v: Option<f64>, unit: &str| v.map_or("n/a".to_string(), |v| format!("{v:.4}{unit}"));
         write!(
             summary,
-            " | RPE {} per frame, ATE {}, drift {}",
-            fmt(metrics::rpe_translation_rmse(&estimate, &truth, 1), " m"),
-            fmt(metrics::ate_rmse(&estimate, &truth), " m"),
-            fmt(metrics::drift_percent(&estimate, &truth), " %")
+            " | path {:.2} m, RPE {} per frame, ATE {} (SE(3)-aligned {}), drift {}; \
+             staying put would score ATE {}",
+            m.path_m,
+            fmt(m.rpe_m, " m"),
+            fmt(m.ate_m, " m"),
+            fmt(m.ate_aligned_m, " m"),
+            fmt(m.drift_percent, " %"),
+            fmt(m.zero_motion_ate_m, " m"),
         )?;
+        record.metrics = Some(m);
     }
+    let json_path = args.output.join("metrics.json");
+    std::fs::write(&json_path, serde_json::to_string_pretty(&record)?)
+        .with_context(|| format!("cannot write {}", json_path.display()))?;
     write!(summary, " | wrote {}", args.output.display())?;
     Ok(summary)
 }
