@@ -457,6 +457,10 @@ fn real_data_kitti_raw_drive_loads_with_rig_times_and_oxts_ground_truth() {
         .windows(2)
         .map(|w| (w[1].translation.vector - w[0].translation.vector).norm())
         .sum();
+    eprintln!(
+        "path {path_m:.2} m, last position {:?}",
+        poses[107].translation.vector.as_slice()
+    );
     assert!((105.0..109.0).contains(&path_m), "path {path_m} m");
     // The car drives forward: the camera's +z.
     assert!(poses[107].translation.z > 100.0, "{}", poses[107]);
@@ -479,7 +483,7 @@ fn real_data_kitti_raw_oxts_conversion_agrees_with_the_independent_one() {
         rotation_deg = rotation_deg.max(pose.rotation.angle_to(&expected.rotation).to_degrees());
     }
     eprintln!(
-        "OXTS conversion vs poses_cam0_rect_from_oxts.txt: max {:.4} mm, {:.6}°",
+        "OXTS conversion vs poses_cam0_rect_from_oxts.txt: max {:.4} mm, {:.2e}°",
         translation_m * 1e3,
         rotation_deg
     );

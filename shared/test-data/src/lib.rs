@@ -23,7 +23,7 @@ pub fn euroc_dir() -> Result<PathBuf, String> {
         "EuRoC excerpt",
         EUROC_ENV,
         "shared/data/euroc/V1_01_easy_micro",
-        "mav0/cam0/data.csv",
+        Some("mav0/cam0/data.csv"),
     )
 }
 
@@ -33,9 +33,9 @@ pub const MIDDLEBURY_ENV: &str = "LINETRACK_MIDDLEBURY_DIR";
 /// Environment variable naming the KITTI raw drive folder (the one holding `image_00/`).
 pub const KITTI_RAW_ENV: &str = "LINETRACK_KITTI_RAW_DIR";
 
-/// `$env`, else `default` (relative to `<workspace>/..`), when `marker` exists inside it;
-/// else a message naming `what` and where it was looked for.
-fn locate(what: &str, env: &str, default: &str, marker: &str) -> Result<PathBuf, String> {
+/// `$env`, else `default` (relative to `<workspace>/..`), when it is a folder holding
+/// `marker` (if given); else a message naming `what` and where it was looked for.
+fn locate(what: &str, env: &str, default: &str, marker: Option<&str>) -> Result<PathBuf, String> {
     let (dir, how) = match std::env::var_os(env) {
         Some(value) => (PathBuf::from(value), format!("${env}")),
         None => (
@@ -45,13 +45,14 @@ fn locate(what: &str, env: &str, default: &str, marker: &str) -> Result<PathBuf,
             format!("the default location (set ${env} to override)"),
         ),
     };
-    if dir.join(marker).exists() {
-        Ok(dir)
-    } else {
-        Err(format!(
-            "{what} not found at {} ({how}): no {marker} there",
+    match marker {
+        None if dir.is_dir() => Ok(dir),
+        Some(file) if dir.join(file).is_file() => Ok(dir),
+        None => Err(format!("{what} not found at {} ({how})", dir.display())),
+        Some(file) => Err(format!(
+            "{what} not found at {} ({how}): no {file} there",
             dir.display()
-        ))
+        )),
     }
 }
 
@@ -63,7 +64,7 @@ pub fn middlebury_dir() -> Result<PathBuf, String> {
         "Middlebury pairs",
         MIDDLEBURY_ENV,
         "shared/data/middlebury",
-        ".",
+        None,
     )
 }
 
@@ -76,7 +77,7 @@ pub fn kitti_raw_dir() -> Result<PathBuf, String> {
         "KITTI raw drive",
         KITTI_RAW_ENV,
         "shared/data/kitti-raw/2011_09_26/2011_09_26_drive_0001_sync",
-        "image_00/timestamps.txt",
+        Some("image_00/timestamps.txt"),
     )
 }
 
