@@ -65,7 +65,7 @@ pub fn read_euroc_camera(path: &Path) -> Result<PinholeCamera, DatasetError> {
 }
 
 /// A 4×4 row-major rigid transform, checked.
-fn isometry_from_rows(m: &[f64]) -> Option<Isometry3<f64>> {
+pub(crate) fn isometry_from_rows(m: &[f64]) -> Option<Isometry3<f64>> {
     if m.len() != 16 || m.iter().any(|v| !v.is_finite()) || m[12..16] != [0.0, 0.0, 0.0, 1.0] {
         return None;
     }

@@ -4,6 +4,9 @@
 //!   `data/<ns>.png`, `sensor.yaml`; ground truth from `state_groundtruth_estimate0`).
 //! - [`StereoSequence::open_kitti`]: KITTI odometry (`image_0|image_1/`, `calib.txt`,
 //!   `times.txt`, `poses/NN.txt`).
+//! - [`StereoSequence::open_kitti_raw`]: KITTI raw, one synchronised drive
+//!   (`<date>/<drive>_sync/image_00|image_01/`, `timestamps.txt`, calibration files in
+//!   `<date>/`; ground truth converted from the OXTS GPS/IMU fixes in `oxts/`).
 //! - [`list_middlebury`]: Middlebury stereo pairs with ground-truth disparity (single
 //!   rectified pairs, no sequence), for scoring stereo matching on real images.
 //! - [`tum`]: TUM-format trajectories (`t tx ty tz qx qy qz qw`), read and written.
@@ -22,6 +25,7 @@ mod calib;
 pub mod depth;
 mod euroc;
 mod kitti;
+mod kitti_raw;
 mod middlebury;
 mod sequence;
 pub mod tum;
@@ -29,6 +33,7 @@ mod writer;
 
 pub use calib::{PinholeCamera, Rectifier};
 pub use euroc::read_euroc_camera;
+pub use kitti::read_kitti_poses;
 pub use middlebury::{DisparityMap, LoadedPair, MiddleburyPair, list_middlebury};
 pub use sequence::{FrameEntry, FrameError, StereoFrame, StereoSequence, StereoStream};
 pub use writer::EurocWriter;

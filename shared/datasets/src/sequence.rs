@@ -90,18 +90,23 @@ impl StereoSequence {
         }
     }
 
-    /// Opens `dir` as EuRoC when it holds `mav0/`, else as KITTI when it holds `calib.txt`.
+    /// Opens `dir` as EuRoC when it holds `mav0/`, as KITTI odometry when it holds
+    /// `calib.txt`, as a KITTI raw drive when it holds `image_00/` and its parent
+    /// `calib_cam_to_cam.txt`.
     pub fn open(dir: &Path) -> Result<Self, DatasetError> {
         if dir.join("mav0").is_dir() {
             Self::open_euroc(dir)
         } else if dir.join("calib.txt").is_file() {
             Self::open_kitti(dir, None)
+        } else if crate::kitti_raw::is_kitti_raw(dir) {
+            Self::open_kitti_raw(dir)
         } else {
             Err(DatasetError::Io {
                 path: dir.to_path_buf(),
                 reason: std::io::Error::new(
                     std::io::ErrorKind::NotFound,
-                    "not a dataset folder: expected mav0/ (EuRoC) or calib.txt (KITTI odometry sequence)",
+                    "not a dataset folder: expected mav0/ (EuRoC), calib.txt (KITTI odometry sequence) \
+                     or image_00/ with ../calib_cam_to_cam.txt (KITTI raw drive)",
                 ),
             })
         }

@@ -4,7 +4,8 @@
 //! environment variable [`EUROC_ENV`], else at `../shared/data/euroc/V1_01_easy_micro`
 //! beside the workspace (where CI has it). A test that needs it and cannot find it fails
 //! with a message saying where it looked; `cargo xtask test` leaves such tests out, and
-//! says so, on machines without the folder.
+//! says so, on machines without the folder. The Middlebury pairs and the KITTI raw drive
+//! are found the same way ([`middlebury_dir`], [`kitti_raw_dir`]).
 #![warn(missing_docs)]
 
 use std::path::{Path, PathBuf};
@@ -16,52 +17,68 @@ pub const EUROC_ENV: &str = "LINETRACK_EUROC_DIR";
 /// leave them out (`cargo nextest run -E 'test(/real_data/)'`).
 pub const REAL_DATA_TAG: &str = "real_data";
 
-/// The default location, relative to this crate: `<workspace>/../shared/data/euroc/…`.
-fn default_euroc_dir() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data/euroc/V1_01_easy_micro")
-}
-
 /// The EuRoC excerpt folder, or a message naming where it was looked for.
 pub fn euroc_dir() -> Result<PathBuf, String> {
-    let (dir, how) = match std::env::var_os(EUROC_ENV) {
-        Some(value) => (PathBuf::from(value), format!("${EUROC_ENV}")),
-        None => (
-            default_euroc_dir(),
-            format!("the default location (set ${EUROC_ENV} to override)"),
-        ),
-    };
-    if dir.join("mav0/cam0/data.csv").is_file() {
-        Ok(dir)
-    } else {
-        Err(format!(
-            "EuRoC excerpt not found at {} ({how}): no mav0/cam0/data.csv there",
-            dir.display()
-        ))
-    }
+    locate(
+        "EuRoC excerpt",
+        EUROC_ENV,
+        "shared/data/euroc/V1_01_easy_micro",
+        Some("mav0/cam0/data.csv"),
+    )
 }
 
 /// Environment variable naming the Middlebury folder (the one holding the scene folders).
 pub const MIDDLEBURY_ENV: &str = "LINETRACK_MIDDLEBURY_DIR";
 
+/// Environment variable naming the KITTI raw drive folder (the one holding `image_00/`).
+pub const KITTI_RAW_ENV: &str = "LINETRACK_KITTI_RAW_DIR";
+
+/// `$env`, else `default` (relative to `<workspace>/..`), when it is a folder holding
+/// `marker` (if given); else a message naming `what` and where it was looked for.
+fn locate(what: &str, env: &str, default: &str, marker: Option<&str>) -> Result<PathBuf, String> {
+    let (dir, how) = match std::env::var_os(env) {
+        Some(value) => (PathBuf::from(value), format!("${env}")),
+        None => (
+            Path::new(env!("CARGO_MANIFEST_DIR"))
+                .join("../../..")
+                .join(default),
+            format!("the default location (set ${env} to override)"),
+        ),
+    };
+    match marker {
+        None if dir.is_dir() => Ok(dir),
+        Some(file) if dir.join(file).is_file() => Ok(dir),
+        None => Err(format!("{what} not found at {} ({how})", dir.display())),
+        Some(file) => Err(format!(
+            "{what} not found at {} ({how}): no {file} there",
+            dir.display()
+        )),
+    }
+}
+
 /// The Middlebury stereo pairs' folder (`$LINETRACK_MIDDLEBURY_DIR`, else
 /// `../shared/data/middlebury` beside the workspace), or a message naming where it was
 /// looked for.
 pub fn middlebury_dir() -> Result<PathBuf, String> {
-    let (dir, how) = match std::env::var_os(MIDDLEBURY_ENV) {
-        Some(value) => (PathBuf::from(value), format!("${MIDDLEBURY_ENV}")),
-        None => (
-            Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data/middlebury"),
-            format!("the default location (set ${MIDDLEBURY_ENV} to override)"),
-        ),
-    };
-    if dir.is_dir() {
-        Ok(dir)
-    } else {
-        Err(format!(
-            "Middlebury pairs not found at {} ({how})",
-            dir.display()
-        ))
-    }
+    locate(
+        "Middlebury pairs",
+        MIDDLEBURY_ENV,
+        "shared/data/middlebury",
+        None,
+    )
+}
+
+/// The KITTI raw drive 2011_09_26_drive_0001 (`$LINETRACK_KITTI_RAW_DIR`, else
+/// `../shared/data/kitti-raw/2011_09_26/2011_09_26_drive_0001_sync` beside the workspace;
+/// its calibration files are in the parent folder), or a message naming where it was
+/// looked for.
+pub fn kitti_raw_dir() -> Result<PathBuf, String> {
+    locate(
+        "KITTI raw drive",
+        KITTI_RAW_ENV,
+        "shared/data/kitti-raw/2011_09_26/2011_09_26_drive_0001_sync",
+        Some("image_00/timestamps.txt"),
+    )
 }
 
 /// Left and right image files of the `index`-th frame listed in `cam0/data.csv`.

@@ -156,6 +156,12 @@ const REAL_DATA: &[(&str, &str, &str, &str)] = &[
         "../shared/data/middlebury",
         "2001-2003/Tsukuba/imL.png",
     ),
+    (
+        "KITTI raw drive",
+        "LINETRACK_KITTI_RAW_DIR",
+        "../shared/data/kitti-raw/2011_09_26/2011_09_26_drive_0001_sync",
+        "image_00/timestamps.txt",
+    ),
 ];
 
 /// Whether every real data set the `real_data_*` tests read is on this machine (each at its
