@@ -180,15 +180,15 @@ mod tests {
 
     #[test]
     fn a_constant_step_error_shows_in_each_metric() {
-        // Truth moves 10 cm a frame, the estimate 11 cm: RPE 1 cm, drift 10 %.
-        let truth = walk([0.1, 0.0, 0.0], 0.0, 11);
-        let estimate = walk([0.11, 0.0, 0.0], 0.0, 11);
+        // Truth moves 10 cm a frame (2 m in all), the estimate 11 cm: RPE 1 cm, drift 10 %.
+        let truth = walk([0.1, 0.0, 0.0], 0.0, 21);
+        let estimate = walk([0.11, 0.0, 0.0], 0.0, 21);
         assert!((rpe_translation_rmse(&estimate, &truth, 1).unwrap() - 0.01).abs() < 1e-12);
         assert!((drift_percent(&estimate, &truth).unwrap() - 10.0).abs() < 1e-9);
-        // ATE: errors 0, 1, …, 10 cm → RMSE sqrt(Σk²/11) cm.
-        let expected = ((0..11).map(|k| (0.01 * k as f64).powi(2)).sum::<f64>() / 11.0).sqrt();
+        // ATE: errors 0, 1, …, 20 cm → RMSE sqrt(Σk²/21) cm.
+        let expected = ((0..21).map(|k| (0.01 * k as f64).powi(2)).sum::<f64>() / 21.0).sqrt();
         assert!((ate_rmse(&estimate, &truth).unwrap() - expected).abs() < 1e-12);
-        assert!(rpe_translation_rmse(&estimate, &truth, 20).is_none());
+        assert!(rpe_translation_rmse(&estimate, &truth, 30).is_none());
     }
 
     #[test]

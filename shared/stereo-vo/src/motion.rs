@@ -10,7 +10,9 @@
 
 use crate::robust::{apply_update, robust_start};
 use linetrack_geometry::{Point, Segment, StereoRig};
-use nalgebra::{Isometry3, Matrix2x3, Matrix3, Matrix6, Point3, SMatrix, Vector2, Vector3, Vector6};
+use nalgebra::{
+    Isometry3, Matrix2x3, Matrix3, Matrix6, Point3, SMatrix, Vector2, Vector3, Vector6,
+};
 use serde::{Deserialize, Serialize};
 
 /// A 3-D point of the previous frame and where it is seen now.
@@ -65,7 +67,9 @@ pub struct MotionConfig {
     /// Fewer inlier observations (points + lines) than this: the frame is lost.
     pub min_inliers: usize,
     /// Smallest eigenvalue of the normal matrix relative to the largest below this:
-    /// the motion is not constrained (degenerate), the frame is lost.
+    /// the motion is not constrained (degenerate), the frame is lost. Translations are
+    /// measured in units of the observations' median depth for this, so the figure does
+    /// not depend on the scene's scale.
     pub min_relative_eigenvalue: f64,
     /// Robust start: minimal sets drawn at most (0: start Gauss–Newton from the prediction
     /// on every observation, as PL-StVO does).
@@ -82,8 +86,8 @@ impl Default for MotionConfig {
             min_step: 1e-9,
             huber_px: 1.0,
             outlier_px: 3.0,
-            min_inliers: 12,
-            min_relative_eigenvalue: 1e-9,
+            min_inliers: 8,
+            min_relative_eigenvalue: 1e-5,
             ransac_draws: 200,
             ransac_threshold_px: 2.0,
         }
@@ -103,7 +107,8 @@ pub struct MotionEstimate {
     pub iterations: usize,
     /// RMS residual of the inliers at the end, pixels.
     pub rms_px: f64,
-    /// Conditioning of the final normal matrix: its smallest eigenvalue over its largest.
+    /// Conditioning of the final normal matrix (translations in units of the median
+    /// depth): its smallest eigenvalue over its largest.
     pub relative_eigenvalue: f64,
 }
 
@@ -201,8 +206,12 @@ fn optimise(
     lines: &[LineObservation],
     active: &Active<'_>,
     mut t: Isometry3<f64>,
+    depth_m: f64,
     config: &MotionConfig,
 ) -> Result<(Isometry3<f64>, usize, f64), MotionError> {
+    // Conditioning is judged with translations in units of the scene's depth, so that it
+    // does not depend on the scene's scale (a metre matters less at 30 m than at 2 m).
+    let scale = Matrix6::from_diagonal(&Vector6::new(depth_m, depth_m, depth_m, 1.0, 1.0, 1.0));
     let robust = |r: f64| 1.0 / (1.0 + (r / config.huber_px).powi(2)).sqrt();
     for iteration in 1..=config.max_iterations {
         let mut h = Matrix6::zeros();
@@ -222,7 +231,7 @@ fn optimise(
                 accumulate(r, j, obs.weight);
             }
         }
-        let eigen = h.symmetric_eigenvalues();
+        let eigen = (scale * h * scale).symmetric_eigenvalues();
         let (low, high) = (eigen.min(), eigen.max());
         let relative = if high > 0.0 { low / high } else { 0.0 };
         if !(relative >= config.min_relative_eigenvalue) {
@@ -243,6 +252,21 @@ fn optimise(
     Ok((t, 0, 1.0))
 }
 
+/// Median depth of the observed 3-D points and segment endpoints, metres (1 without any).
+fn median_depth(points: &[PointObservation], lines: &[LineObservation]) -> f64 {
+    let mut depths: Vec<f64> = points
+        .iter()
+        .map(|p| p.position.z)
+        .chain(lines.iter().flat_map(|l| l.endpoints.map(|e| e.z)))
+        .filter(|z| z.is_finite() && *z > 0.0)
+        .collect();
+    if depths.is_empty() {
+        return 1.0;
+    }
+    let middle = depths.len() / 2;
+    *depths.select_nth_unstable_by(middle, f64::total_cmp).1
+}
+
 /// Estimates the motion from `initial` (e.g. identity, or the previous motion).
 pub fn estimate_motion(
     rig: &StereoRig,
@@ -258,6 +282,7 @@ pub fn estimate_motion(
             needed: config.min_inliers,
         });
     }
+    let depth_m = median_depth(points, lines);
     // Where the first pass starts, and on which observations.
     let (start, start_points, start_lines) = if config.ransac_draws > 0 {
         let found = robust_start(
@@ -289,16 +314,19 @@ pub fn estimate_motion(
             lines: &start_lines,
         },
         start,
+        depth_m,
         config,
     )?;
-    let within = |r: Option<Vector2<f64>>| r.is_some_and(|r| r.amax() <= config.outlier_px);
+    let within = |r: Option<Vector2<f64>>, weight: f64| {
+        r.is_some_and(|r| r.amax() * weight.sqrt() <= config.outlier_px)
+    };
     let inlier_points: Vec<bool> = points
         .iter()
-        .map(|o| within(point_residual(rig, &first, o).map(|(r, _)| r)))
+        .map(|o| within(point_residual(rig, &first, o).map(|(r, _)| r), o.weight))
         .collect();
     let inlier_lines: Vec<bool> = lines
         .iter()
-        .map(|o| within(line_residual(rig, &first, o).map(|(r, _)| r)))
+        .map(|o| within(line_residual(rig, &first, o).map(|(r, _)| r), o.weight))
         .collect();
     let count = |v: &[bool]| v.iter().filter(|b| **b).count();
     let (n_points, n_lines) = (count(&inlier_points), count(&inlier_lines));
@@ -312,7 +340,8 @@ pub fn estimate_motion(
         points: &inlier_points,
         lines: &inlier_lines,
     };
-    let (motion, iterations_2, relative_eigenvalue) = optimise(rig, points, lines, &active, first, config)?;
+    let (motion, iterations_2, relative_eigenvalue) =
+        optimise(rig, points, lines, &active, first, depth_m, config)?;
     let mut sum = 0.0;
     let mut n = 0usize;
     for (obs, _) in points.iter().zip(&inlier_points).filter(|(_, on)| **on) {

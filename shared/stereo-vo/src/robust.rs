@@ -30,6 +30,22 @@ pub(crate) fn residual(
     }
 }
 
+/// Squared residual norm of observation `k` scaled by its weight (residuals in units of
+/// their expected noise); infinite when it cannot be projected.
+pub(crate) fn weighted_error2(
+    rig: &StereoRig,
+    t: &Isometry3<f64>,
+    points: &[PointObservation],
+    lines: &[LineObservation],
+    k: usize,
+) -> f64 {
+    let weight = match points.get(k) {
+        Some(p) => p.weight,
+        None => lines.get(k - points.len()).map_or(0.0, |l| l.weight),
+    };
+    residual(rig, t, points, lines, k).map_or(f64::INFINITY, |(r, _)| weight * r.norm_squared())
+}
+
 /// Applies the left-multiplied update `δ = (ρ, φ)`.
 pub(crate) fn apply_update(step: &Vector6<f64>, t: Isometry3<f64>) -> Isometry3<f64> {
     Isometry3::from_parts(
@@ -82,7 +98,7 @@ fn score(
     let mut cost = 0.0;
     let mut inliers = 0;
     for k in 0..points.len() + lines.len() {
-        let e2 = residual(rig, t, points, lines, k).map_or(f64::INFINITY, |(r, _)| r.norm_squared());
+        let e2 = weighted_error2(rig, t, points, lines, k);
         if e2 <= tau2 {
             inliers += 1;
             cost += e2;
@@ -132,7 +148,7 @@ pub fn robust_start(
     threshold_px: f64,
 ) -> RobustStart {
     let n = points.len() + lines.len();
-    let mut rng = ChaCha8Rng::seed_from_u64(0x5eed_0f_1a7e);
+    let mut rng = ChaCha8Rng::seed_from_u64(0x005e_ed0f_1a7e);
     let (mut best_cost, inliers) = score(rig, points, lines, prediction, threshold_px);
     let mut best = *prediction;
     let mut needed = draws_needed(inliers, n, max_draws);
@@ -159,7 +175,7 @@ pub fn robust_start(
     }
     let tau2 = threshold_px * threshold_px;
     let inliers = (0..n)
-        .map(|k| residual(rig, &best, points, lines, k).is_some_and(|(r, _)| r.norm_squared() <= tau2))
+        .map(|k| weighted_error2(rig, &best, points, lines, k) <= tau2)
         .collect();
     RobustStart {
         motion: best,

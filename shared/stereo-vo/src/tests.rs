@@ -246,3 +246,49 @@ fn disparity_weight_grows_with_disparity() {
             && disparity_weight(40.0) > 0.99
     );
 }
+
+#[test]
+fn a_consistent_group_of_mismatches_is_outvoted_by_the_robust_start() {
+    // 60 % of the observations follow the true motion; 40 % agree with each other on
+    // another one, 2.5 cm and 0.5° away (mismatches one stripe off on a repetitive
+    // structure do), a few pixels from the truth, and the prediction lies on their side.
+    // The robust start, fitting minimal sets, finds the majority.
+    let truth = pose(0.0, 0.005, 0.0, 0.04, 0.0, 0.02);
+    let wrong = pose(0.0, 0.0137, 0.0, 0.065, 0.0, 0.02);
+    let (mut points, mut lines) = correspondences(7, &truth, 60, 30, 0.0);
+    let (group_points, group_lines) = correspondences(8, &wrong, 40, 20, 0.0);
+    points.extend(group_points);
+    lines.extend(group_lines);
+    let prediction = wrong;
+    let robust = estimate_motion(
+        &rig(),
+        &points,
+        &lines,
+        &prediction,
+        &MotionConfig::default(),
+    )
+    .unwrap();
+    let robust_off = (robust.motion.translation.vector - truth.translation.vector).norm();
+    eprintln!("robust start: {robust_off} m off");
+    assert!(robust_off < 0.003, "{robust_off} m off");
+    // The group's members sit 2–6 px off the majority's motion: most are outliers.
+    let group_kept = robust.inlier_points + robust.inlier_lines;
+    assert!(group_kept < 90 + 30, "{group_kept} inliers of 90 + 60");
+}
+
+#[test]
+fn robust_start_is_reproducible_and_finds_the_inliers() {
+    let truth = pose(0.01, -0.02, 0.0, 0.05, 0.01, 0.1);
+    let (points, lines) = correspondences(11, &truth, 80, 40, 0.3);
+    let first = robust::robust_start(&rig(), &points, &lines, &Isometry3::identity(), 200, 2.0);
+    let again = robust::robust_start(&rig(), &points, &lines, &Isometry3::identity(), 200, 2.0);
+    assert_eq!(first, again);
+    assert_close(&first.motion, &truth, 0.02, 0.5);
+    let share = first.inliers.iter().filter(|b| **b).count() as f64 / 120.0;
+    assert!((0.6..=0.8).contains(&share), "inlier share {share}");
+    assert!(
+        first.draws < 200,
+        "stopped adaptively: {} draws",
+        first.draws
+    );
+}

@@ -38,7 +38,7 @@ pub use matchers::{
     L1SegmentMatcher, LbdSegmentMatcher, LineFeatures, MatcherKind, SegmentMatcher,
     create_segment_matcher,
 };
-pub use orb::{OrbExtractor, PointFeatures, match_points};
+pub use orb::{OrbExtractor, PointFeatures, match_points, refine_stereo_column};
 pub use pair::{LinePairMatcher, PairResult, PairTimings};
 
 use std::path::PathBuf;

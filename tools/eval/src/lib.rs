@@ -55,6 +55,17 @@ pub struct Args {
     /// workspace, if present).
     #[arg(long)]
     pub middlebury: Option<PathBuf>,
+    /// The KITTI raw drive for the real-motion rows (default: the one beside the workspace,
+    /// if present).
+    #[arg(long)]
+    pub kitti_raw: Option<PathBuf>,
+    /// Leave the KITTI raw drive out.
+    #[arg(long)]
+    pub no_kitti_raw: bool,
+    /// Seeds per generated preset in Table II, reported as median and worst (default: 3,
+    /// or 1 with --quick). Table I and the starred rows use seed 1.
+    #[arg(long)]
+    pub seeds: Option<u64>,
     /// Leave the Middlebury stereo section out.
     #[arg(long)]
     pub no_middlebury: bool,
@@ -79,6 +90,69 @@ struct Entry {
     frames: usize,
     /// Whether the starred (simulated illumination) row is run for it.
     perturb: bool,
+    /// The same preset with further seeds (Table II only).
+    more_seeds: Vec<StereoSequence>,
+}
+
+/// Opens `<sequences>/<preset>-<frames>[-seed<k>]`, generating it first when missing.
+fn generated(
+    args: &Args,
+    preset: Preset,
+    seed: u64,
+    frames: usize,
+) -> anyhow::Result<(PathBuf, StereoSequence)> {
+    let suffix = if seed == 1 {
+        String::new()
+    } else {
+        format!("-seed{seed}")
+    };
+    let dir = args
+        .sequences
+        .join(format!("{}-{frames}{suffix}", preset.name()));
+    if !dir.join("mav0/cam0/data.csv").is_file() {
+        eprintln!(
+            "generating {} seed {seed} ({frames} frames) in {}",
+            preset.name(),
+            dir.display()
+        );
+        linetrack_synth::generate(preset, seed, frames, &dir)?;
+    }
+    let sequence =
+        StereoSequence::open(&dir).with_context(|| format!("cannot open {}", dir.display()))?;
+    Ok((dir, sequence))
+}
+
+/// A real sequence found beside the workspace or given on the command line.
+fn real_entry(
+    name: &str,
+    given: &Option<PathBuf>,
+    found: Result<PathBuf, String>,
+    quick_frames: usize,
+    args: &Args,
+) -> anyhow::Result<Option<Entry>> {
+    let dir = match (given, found) {
+        (Some(dir), _) => dir.clone(),
+        (None, Ok(dir)) => dir,
+        (None, Err(why)) => {
+            eprintln!("{why}; {name} is left out");
+            return Ok(None);
+        }
+    };
+    let sequence =
+        StereoSequence::open(&dir).with_context(|| format!("cannot open {}", dir.display()))?;
+    let frames = if args.quick {
+        quick_frames.min(sequence.frames.len())
+    } else {
+        sequence.frames.len()
+    };
+    Ok(Some(Entry {
+        name: format!("{name} {}", sequence.name),
+        dir,
+        sequence,
+        frames,
+        perturb: true,
+        more_seeds: Vec::new(),
+    }))
 }
 
 fn prepare(args: &Args, frames: usize) -> anyhow::Result<Vec<Entry>> {
@@ -98,52 +172,39 @@ fn prepare(args: &Args, frames: usize) -> anyhow::Result<Vec<Entry>> {
             Preset::LeftRightMismatch,
         ]
     };
+    let seeds = args.seeds.unwrap_or(if args.quick { 1 } else { 3 }).max(1);
     let mut entries = Vec::new();
     for preset in presets {
-        let dir = args.sequences.join(format!("{}-{frames}", preset.name()));
-        if !dir.join("mav0/cam0/data.csv").is_file() {
-            eprintln!(
-                "generating {} ({frames} frames) in {}",
-                preset.name(),
-                dir.display()
-            );
-            linetrack_synth::generate(*preset, 1, frames, &dir)?;
-        }
-        let sequence =
-            StereoSequence::open(&dir).with_context(|| format!("cannot open {}", dir.display()))?;
+        let (dir, sequence) = generated(args, *preset, 1, frames)?;
+        let more_seeds = (2..=seeds)
+            .map(|seed| Ok(generated(args, *preset, seed, frames)?.1))
+            .collect::<anyhow::Result<_>>()?;
         entries.push(Entry {
             name: preset.name().to_string(),
             dir,
             sequence,
             frames,
             perturb: *preset == Preset::Normal,
+            more_seeds,
         });
     }
     if !args.no_euroc {
-        let euroc = match &args.euroc {
-            Some(dir) => Some(dir.clone()),
-            None => linetrack_test_data::euroc_dir().ok(),
-        };
-        if let Some(dir) = euroc {
-            let sequence = StereoSequence::open(&dir)
-                .with_context(|| format!("cannot open {}", dir.display()))?;
-            let frames = if args.quick {
-                10
-            } else {
-                sequence.frames.len()
-            };
-            entries.push(Entry {
-                name: format!("EuRoC {}", sequence.name),
-                dir,
-                sequence,
-                frames,
-                perturb: true,
-            });
-        } else {
-            eprintln!(
-                "EuRoC excerpt not found (give --euroc DIR); evaluating generated sequences only"
-            );
-        }
+        entries.extend(real_entry(
+            "EuRoC",
+            &args.euroc,
+            linetrack_test_data::euroc_dir(),
+            10,
+            args,
+        )?);
+    }
+    if !args.no_kitti_raw {
+        entries.extend(real_entry(
+            "KITTI raw",
+            &args.kitti_raw,
+            linetrack_test_data::kitti_raw_dir(),
+            10,
+            args,
+        )?);
     }
     Ok(entries)
 }
@@ -238,6 +299,7 @@ fn middlebury_section(
 pub fn run(args: &Args) -> anyhow::Result<String> {
     let started = Instant::now();
     let frames = args.frames.unwrap_or(if args.quick { 8 } else { 200 });
+    let seeds = args.seeds.unwrap_or(if args.quick { 1 } else { 3 }).max(1);
     let period = args
         .jump_period_s
         .unwrap_or(if args.quick { 0.15 } else { 2.0 });
@@ -265,6 +327,7 @@ pub fn run(args: &Args) -> anyhow::Result<String> {
     let mut table2 =
         String::from("| sequence | P+L, LBD | P+L, ℓ1 | L, LBD | L, ℓ1 |\n|---|---|---|---|---|\n");
     let mut plots = Vec::new();
+    let mut baselines = String::new();
     for entry in &entries {
         eprintln!("tracking: {} ({} frames)", entry.name, entry.frames);
         let results: Vec<TrackingResult> = COMBINATIONS
@@ -392,14 +455,33 @@ pub fn run(args: &Args) -> anyhow::Result<String> {
                     entry.frames,
                     illumination,
                 )?;
-                let mut text = match (run.rpe_m, run.ate_m) {
-                    (Some(rpe), Some(ate)) => format!("{:.1} mm / {:.1} cm", rpe * 1e3, ate * 1e2),
-                    _ => "no ground truth".to_string(),
-                };
-                if run.lost > 0 {
-                    write!(text, " (**{} lost**)", run.lost)?;
+                if illumination.is_none()
+                    && let Some(m) = &run.metrics
+                    && trajectories.is_empty()
+                    && entry.name.starts_with(char::is_uppercase)
+                {
+                    writeln!(
+                        baselines,
+                        "- {}: path {:.2} m; staying put (zero motion) scores ATE {:.1} cm.",
+                        entry.name,
+                        m.path_m,
+                        m.zero_motion_ate_m.unwrap_or(f64::NAN) * 1e2
+                    )?;
                 }
-                cells.push(text);
+                let mut runs = vec![run];
+                if illumination.is_none() {
+                    for sequence in &entry.more_seeds {
+                        runs.push(odometry::run(
+                            sequence,
+                            features,
+                            matcher,
+                            entry.frames,
+                            None,
+                        )?);
+                    }
+                }
+                cells.push(odometry::cell(&runs));
+                let run = &runs[0];
                 if trajectories.is_empty()
                     && let Some(truth) = &run.truth
                 {
@@ -465,25 +547,37 @@ pub fn run(args: &Args) -> anyhow::Result<String> {
         .filter_map(|p| p.file_name())
         .map(|n| format!("![{0}]({0})", n.to_string_lossy()))
         .collect();
+    let real: Vec<&str> = entries
+        .iter()
+        .filter(|e| e.name.starts_with(char::is_uppercase))
+        .map(|e| e.name.as_str())
+        .collect();
+    let real_names = if real.is_empty() {
+        String::new()
+    } else {
+        format!(
+            "; real sequences (rectified on load where needed): {}",
+            real.join(", ")
+        )
+    };
     let report = format!(
         "# linetrack evaluation\n\n\
          Settings: {frames} frames per generated sequence (seed 1, 20 Hz, 752×480, 11 cm baseline){}; starred rows add simulated \
          illumination changes (a gain α ~ U(0.5, 2.5) and bias β ~ U(0, 20) drawn every {period} s, applied to both images). \
          Command: `linetrack-eval{}`. Run time: {:.0} s.\n\n\
          ## Table I — tracking\n\nMean matches per frame / inlier ratio, for each detector + matcher. {}\n\n{table1}\n\
-         ## Table II — visual odometry\n\nTranslational RPE RMSE per frame (step 1) / ATE RMSE, LSD segments; P+L = ORB points and \
-         segments, L = segments only. A lost frame keeps the last motion as a prediction and is counted in bold.\n\n{table2}\n\
+         ## Table II — visual odometry\n\nTranslational RPE RMSE per frame (step 1) / ATE RMSE / drift, LSD segments; P+L = ORB \
+         points and segments, L = segments only. Generated presets: {seeds} seed(s), the median ATE and its drift, then the worst \
+         ATE and the worst drift. A lost frame keeps the last motion as a prediction; lost frames are counted in bold (summed over \
+         seeds).\n\n{table2}\n{baselines}\n\
          Definitions (as the TUM benchmark tools): RPE over pose pairs one frame apart, E_i = (Q_i⁻¹Q_{{i+1}})⁻¹(P_i⁻¹P_{{i+1}}), RMSE \
          of ‖trans(E_i)‖; ATE after aligning both trajectories at their first pose (no scale, no least-squares fit), RMSE of \
-         ‖trans(Q₀⁻¹Q_i) − trans(P₀⁻¹P_i)‖. P: estimate, Q: ground truth.\n\n\
+         ‖trans(Q₀⁻¹Q_i) − trans(P₀⁻¹P_i)‖; drift: final position error over the true path length, not given under 1 m. P: \
+         estimate, Q: ground truth.\n\n\
          ## Table III — cost\n\nMedian milliseconds per frame over all frames and sequences of Table I, this machine. Mono = detect + \
          describe one image + frame-to-frame match; stereo = both images + stereo match + frame-to-frame match, processed one after \
          the other.\n\n{table3}\n## Plots\n\n{}\n",
-        if entries.iter().any(|e| e.name.starts_with("EuRoC")) {
-            " and the real EuRoC excerpt (rectified on load)"
-        } else {
-            ""
-        },
+        real_names,
         if args.quick { " --quick" } else { "" },
         started.elapsed().as_secs_f64(),
         "Inlier: the segment, carried into the other image by ground-truth depth and pose, lies within 1 px of the matched segment's \

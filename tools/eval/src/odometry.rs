@@ -23,10 +23,54 @@ pub struct OdometryRun {
     pub truth: Option<Vec<Isometry3<f64>>>,
     /// Frames lost.
     pub lost: usize,
-    /// Translational RPE RMSE per frame, metres.
-    pub rpe_m: Option<f64>,
-    /// ATE RMSE, metres.
-    pub ate_m: Option<f64>,
+    /// Every metric, when there is ground truth.
+    pub metrics: Option<metrics::Summary>,
+}
+
+/// One Table II cell: RPE / ATE / drift of a single run, or, over several seeds, the median
+/// and worst ATE and drift; lost frames (summed) in bold.
+pub fn cell(runs: &[OdometryRun]) -> String {
+    let summaries: Vec<&metrics::Summary> =
+        runs.iter().filter_map(|r| r.metrics.as_ref()).collect();
+    let drift = |s: &metrics::Summary| {
+        s.drift_percent
+            .map_or("–".to_string(), |d| format!("{d:.2} %"))
+    };
+    let mut text = match summaries.as_slice() {
+        [] => "no ground truth".to_string(),
+        [one] => format!(
+            "{:.1} mm / {:.1} cm / {}",
+            one.rpe_m.unwrap_or(f64::NAN) * 1e3,
+            one.ate_m.unwrap_or(f64::NAN) * 1e2,
+            drift(one)
+        ),
+        many => {
+            let mut by_ate = many.to_vec();
+            by_ate.sort_by(|a, b| {
+                a.ate_m
+                    .unwrap_or(f64::NAN)
+                    .total_cmp(&b.ate_m.unwrap_or(f64::NAN))
+            });
+            let median = by_ate[by_ate.len() / 2];
+            let worst = by_ate[by_ate.len() - 1];
+            let worst_drift = many
+                .iter()
+                .filter_map(|s| s.drift_percent)
+                .fold(f64::NEG_INFINITY, f64::max);
+            format!(
+                "{:.1} cm / {} (worst {:.1} cm / {:.2} %)",
+                median.ate_m.unwrap_or(f64::NAN) * 1e2,
+                drift(median),
+                worst.ate_m.unwrap_or(f64::NAN) * 1e2,
+                worst_drift
+            )
+        }
+    };
+    let lost: usize = runs.iter().map(|r| r.lost).sum();
+    if lost > 0 {
+        text.push_str(&format!(" (**{lost} lost**)"));
+    }
+    text
 }
 
 /// Runs one configuration over the first `frames` frames.
@@ -71,8 +115,7 @@ pub fn run(
     {
         let first = truth[0].inverse();
         let truth: Vec<_> = truth.iter().map(|p| first * p).collect();
-        run.rpe_m = metrics::rpe_translation_rmse(&run.estimate, &truth, 1);
-        run.ate_m = metrics::ate_rmse(&run.estimate, &truth);
+        run.metrics = Some(metrics::Summary::new(&run.estimate, &truth));
         run.truth = Some(truth);
     }
     Ok(run)

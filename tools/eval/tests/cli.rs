@@ -54,7 +54,7 @@ fn table1_row(report: &str, sequence: &str, case: &str) -> Vec<String> {
 #[test]
 fn quick_report_has_every_table_row_and_plot() {
     let dir = linetrack_test_data::scratch_path("eval", "quick");
-    let report = run_report(&dir, &["--no-euroc"]);
+    let report = run_report(&dir, &["--no-euroc", "--no-kitti-raw", "--seeds", "2"]);
     for heading in [
         "## Table I",
         "## Table II",
@@ -71,10 +71,13 @@ fn quick_report_has_every_table_row_and_plot() {
             let ratio: f64 = cells[0].split(" / ").nth(1).unwrap().parse().unwrap();
             assert!(ratio > 0.8, "{sequence} {case}: {}", cells[0]);
         }
+        // Two seeds: the median and the worst of them.
         assert!(
             report
                 .lines()
-                .any(|l| l.starts_with(&format!("| {sequence} |")) && l.contains(" mm / ")),
+                .any(|l| l.starts_with(&format!("| {sequence} |"))
+                    && l.contains(" cm / ")
+                    && l.contains("(worst ")),
             "Table II row for {sequence}"
         );
     }
@@ -104,5 +107,22 @@ fn real_data_quick_report_includes_the_euroc_excerpt() {
         "no depth, so no inlier ratio: {cells:?}"
     );
     assert!(report.contains("| EuRoC V1_01_easy_micro* |"));
+    // The KITTI raw drive, found beside the workspace: a real-motion row in Table II with a
+    // single run's RPE / ATE / drift, and both real sequences' zero-motion baselines.
+    assert!(
+        report.lines().any(
+            |l| l.starts_with("| KITTI raw 2011_09_26_drive_0001_sync |") && l.contains(" mm / ")
+        ),
+        "{report}"
+    );
+    for name in [
+        "EuRoC V1_01_easy_micro",
+        "KITTI raw 2011_09_26_drive_0001_sync",
+    ] {
+        assert!(
+            report.contains(&format!("- {name}: path ")) && report.contains("staying put"),
+            "zero-motion baseline of {name}"
+        );
+    }
     let _ = std::fs::remove_dir_all(dir);
 }

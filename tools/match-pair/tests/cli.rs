@@ -185,7 +185,10 @@ fn bad_inputs_fail_naming_the_culprit() {
     let (_, shifted) = card_pair(&dir, 4);
     let grey = image::open(&shifted).unwrap().to_luma8();
     let colour = dir.join("colour.png");
-    image::DynamicImage::ImageLuma8(grey).to_rgb8().save(&colour).unwrap();
+    image::DynamicImage::ImageLuma8(grey)
+        .to_rgb8()
+        .save(&colour)
+        .unwrap();
     let colour = colour.display().to_string();
     let text = stdout(&run(&[&good, &colour, "--output", &out]));
     assert!(count_before(&text, "matches") >= 10, "{text}");

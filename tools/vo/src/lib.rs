@@ -8,7 +8,7 @@ use anyhow::Context;
 use clap::Parser;
 use linetrack_datasets::StereoSequence;
 use linetrack_datasets::tum::{self, StampedPose};
-use linetrack_odometry::{FrameResult, Features, Odometry, OdometryConfig, metrics};
+use linetrack_odometry::{Features, FrameResult, Odometry, OdometryConfig, metrics};
 use linetrack_scene_render::IlluminationConfig;
 use linetrack_vision::{DetectorKind, MatcherKind, perturb};
 use nalgebra::Isometry3;
@@ -42,12 +42,12 @@ pub struct Args {
     /// configs/pipeline.toml; missing keys take their defaults). Flags below override it.
     #[arg(long)]
     pub config: Option<PathBuf>,
-    /// Line detector.
-    #[arg(long, default_value = "lsd")]
-    pub detector: DetectorKind,
-    /// Segment matcher (stereo and frame to frame).
-    #[arg(long, default_value = "lbd")]
-    pub matcher: MatcherKind,
+    /// Line detector: lsd or fld (default lsd, or the config's).
+    #[arg(long)]
+    pub detector: Option<DetectorKind>,
+    /// Segment matcher, stereo and frame to frame: lbd or l1 (default lbd, or the config's).
+    #[arg(long)]
+    pub matcher: Option<MatcherKind>,
     /// Use line segments only (no ORB points).
     #[arg(long)]
     pub lines_only: bool,
@@ -149,24 +149,25 @@ struct RunRecord {
 
 /// Runs the odometry; returns the summary.
 pub fn run(args: &Args) -> anyhow::Result<String> {
-    let sequence = StereoSequence::open(&args.dataset)
-        .with_context(|| format!("cannot open dataset {}", args.dataset.display()))?;
-    let features = if args.lines_only {
-        Features::LinesOnly
-    } else {
-        Features::PointsAndLines
-    };
     let base = match &args.config {
         Some(path) => OdometryConfig::from_file(path).map_err(anyhow::Error::msg)?,
         None => OdometryConfig::default(),
     };
     let config = OdometryConfig {
-        detector: args.detector,
-        matcher: args.matcher,
-        features,
+        detector: args.detector.unwrap_or(base.detector),
+        matcher: args.matcher.unwrap_or(base.matcher),
+        features: if args.lines_only {
+            Features::LinesOnly
+        } else {
+            base.features
+        },
         min_line_angle_deg: args.min_line_angle_deg.unwrap_or(base.min_line_angle_deg),
         ..base
     };
+    let sequence = StereoSequence::open(&args.dataset)
+        .with_context(|| format!("cannot open dataset {}", args.dataset.display()))?;
+    let (config_detector, config_matcher, config_features) =
+        (config.detector, config.matcher, config.features);
     let mut odometry = Odometry::new(config, sequence.rig)?;
     let total = args.frames.unwrap_or(usize::MAX).min(sequence.frames.len());
     let start_ns = sequence.frames.first().map_or(0, |f| f.timestamp_ns);
@@ -241,9 +242,9 @@ pub fn run(args: &Args) -> anyhow::Result<String> {
 
     let mut record = RunRecord {
         dataset: args.dataset.display().to_string(),
-        detector: args.detector.name(),
-        matcher: args.matcher.name(),
-        lines_only: args.lines_only,
+        detector: config_detector.name(),
+        matcher: config_matcher.name(),
+        lines_only: config_features == Features::LinesOnly,
         gain_jumps_s: args.gain_jumps,
         seed: args.seed,
         frames: estimate.len(),
