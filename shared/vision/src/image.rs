@@ -5,6 +5,12 @@ use opencv::core::{self, Mat, MatTraitConst, MatTraitConstManual, Vector};
 use opencv::{imgcodecs, imgproc};
 use std::path::Path;
 
+/// Largest image file read, bytes (512 MiB).
+pub const MAX_FILE_BYTES: u64 = 512 << 20;
+
+/// Largest image decoded, pixels (100 megapixels).
+pub const MAX_PIXELS: u64 = 100_000_000;
+
 /// An 8-bit, single-channel, non-empty image, with where it came from for error messages.
 #[derive(Debug)]
 pub struct GrayImage {
@@ -22,12 +28,27 @@ impl Clone for GrayImage {
 }
 
 impl GrayImage {
-    /// Reads and decodes an image file; every error names the file.
+    /// Reads and decodes an image file; every error names the file. Only a regular file of
+    /// at most [`MAX_FILE_BYTES`] is read (not a device, a FIFO or a folder).
     pub fn load(path: &Path) -> Result<Self, VisionError> {
-        let bytes = std::fs::read(path).map_err(|reason| VisionError::Read {
+        let read_error = |reason| VisionError::Read {
             path: path.to_path_buf(),
             reason,
-        })?;
+        };
+        let metadata = std::fs::metadata(path).map_err(read_error)?;
+        if !metadata.is_file() {
+            return Err(read_error(std::io::Error::new(
+                std::io::ErrorKind::InvalidInput,
+                "not a regular file",
+            )));
+        }
+        if metadata.len() > MAX_FILE_BYTES {
+            return Err(VisionError::TooLarge {
+                origin: path.display().to_string(),
+                what: format!("{} bytes, more than {MAX_FILE_BYTES}", metadata.len()),
+            });
+        }
+        let bytes = std::fs::read(path).map_err(read_error)?;
         Self::decode(&bytes, &path.display().to_string())
     }
 
@@ -39,6 +60,19 @@ impl GrayImage {
         if bytes.is_empty() {
             return Err(VisionError::Empty {
                 origin: origin.to_string(),
+            });
+        }
+        // Refuse an oversized image from its header, before decoding allocates it (for the
+        // formats the header reader knows; OpenCV's own limit covers the others).
+        if let Ok((width, height)) = image::ImageReader::new(std::io::Cursor::new(bytes))
+            .with_guessed_format()
+            .map_err(|_| ())
+            .and_then(|reader| reader.into_dimensions().map_err(|_| ()))
+            && u64::from(width) * u64::from(height) > MAX_PIXELS
+        {
+            return Err(VisionError::TooLarge {
+                origin: origin.to_string(),
+                what: format!("{width}×{height} pixels, more than {MAX_PIXELS}"),
             });
         }
         let buffer = Vector::<u8>::from_slice(bytes);

@@ -32,7 +32,7 @@ pub use detect::{
     keep_longest,
 };
 pub use hamming::{BinaryDescriptors, FeatureMatch, HammingMatcher};
-pub use image::{BorrowedGray, GrayImage, perturb};
+pub use image::{BorrowedGray, GrayImage, MAX_FILE_BYTES, MAX_PIXELS, perturb};
 pub use lbd::LbdExtractor;
 pub use matchers::{
     L1SegmentMatcher, LbdSegmentMatcher, LineFeatures, MatcherKind, SegmentMatcher,
@@ -59,6 +59,14 @@ pub enum VisionError {
     Decode {
         /// The file or other origin of the bytes.
         origin: String,
+    },
+    /// The file or image is too large to read.
+    #[error("{origin}: too large to read ({what})")]
+    TooLarge {
+        /// The file or other origin.
+        origin: String,
+        /// What is too large.
+        what: String,
     },
     /// The image has no pixels.
     #[error("{origin}: image is empty (0 pixels)")]

@@ -372,6 +372,44 @@ fn bad_image_files_are_refused_naming_the_file() {
 }
 
 #[test]
+fn only_regular_files_of_a_sane_size_are_read() {
+    // A folder and a FIFO (which would block a plain read forever) are refused unread.
+    let folder = linetrack_test_data::scratch_dir("vision", "not-a-file").unwrap();
+    let text = error_text(GrayImage::load(&folder));
+    assert!(
+        text.contains(folder.to_str().unwrap()) && text.contains("not a regular file"),
+        "{text}"
+    );
+    let fifo = folder.join("fifo.png");
+    let made = std::process::Command::new("mkfifo")
+        .arg(&fifo)
+        .status()
+        .unwrap();
+    assert!(made.success());
+    let text = error_text(GrayImage::load(&fifo));
+    assert!(
+        text.contains("fifo.png") && text.contains("not a regular file"),
+        "{text}"
+    );
+
+    // An image over the pixel limit is refused from its header, before it is decoded.
+    let side = 10_001;
+    let big = Mat::new_rows_cols_with_default(side, side, opencv::core::CV_8UC1, Scalar::all(0.0))
+        .unwrap();
+    let mut buffer = Vector::<u8>::new();
+    imgcodecs::imencode(".png", &big, &mut buffer, &Vector::new()).unwrap();
+    drop(big);
+    let text = error_text(GrayImage::decode(buffer.as_slice(), "big.png"));
+    assert!(
+        text.contains("big.png")
+            && text.contains("10001×10001 pixels")
+            && text.contains("too large"),
+        "{text}"
+    );
+    let _ = std::fs::remove_dir_all(folder);
+}
+
+#[test]
 fn colour_and_sixteen_bit_images_are_converted_to_grey_once() {
     // BGR (30, 100, 200): grey = 0.114·30 + 0.587·100 + 0.299·200 = 121.9 → 122.
     // 16-bit 40000: 40000 · 255 / 65535 = 155.6 → 156.
