@@ -1,16 +1,17 @@
 //! PL-StVO over a stream of rectified stereo frames.
 //!
-//! [`Odometry`] per frame: ORB points and line segments (LSD or FLD) are detected in both images and
-//! matched stereo (segments with LBD or the ℓ1 matcher) and triangulated; the left image's
-//! features are matched to the previous frame's (same matchers, frame-to-frame case); each
-//! previous 3-D feature seen again becomes an observation, and the motion is estimated by
-//! `linetrack-stereo-vo` (Gauss–Newton on SE(3), two passes), starting from the previous
-//! motion (constant velocity). A frame with too few inliers or degenerate geometry is
-//! reported as lost: its pose repeats the last motion, and it becomes the new reference so
-//! tracking resumes on the next good frame instead of diverging.
+//! [`Odometry`] per frame: ORB points and line segments (LSD or FLD) are detected in both
+//! images and matched stereo (segments with LBD or the ℓ1 matcher) and triangulated — point
+//! matches refined to a fraction of a pixel, segments with look-alike partners (repetitive
+//! structure) left out; the left image's features are matched to the previous frame's
+//! (points around where the last motion puts them); each previous 3-D feature seen again
+//! becomes an observation, and the motion is estimated by `linetrack-stereo-vo` (a RANSAC
+//! start, then Gauss–Newton on SE(3) in two passes). A frame with too few inliers, an
+//! ill-conditioned problem or an estimate far from the prediction is reported as lost: its
+//! pose repeats the last good motion, and it becomes the new reference so tracking resumes.
 //!
 //! The back end alone, [`MotionTracker`], takes segments matched elsewhere (the pipeline's
-//! matcher stage) and does the rest.
+//! matcher stage) and does the rest. [`metrics`] scores trajectories.
 #![warn(missing_docs)]
 
 pub mod metrics;

@@ -1,7 +1,8 @@
 //! Stereo visual odometry with points and line segments (PL-StVO, Gomez-Ojeda et al.): the
 //! geometry half. Stereo matches are triangulated in the rectified rig ([`triangulate`]);
 //! the motion between consecutive frames is estimated by Gauss–Newton on SE(3) from
-//! point reprojection errors and endpoint-to-line distances ([`motion`]).
+//! point reprojection errors and endpoint-to-line distances ([`motion`]), started from the
+//! best of RANSAC's minimal-set hypotheses ([`robust`]).
 //!
 //! Feature detection and matching live in `linetrack-vision`; this crate only sees 2-D
 //! observations and 3-D positions, so it runs (and is tested) without OpenCV.

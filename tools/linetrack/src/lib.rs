@@ -56,7 +56,7 @@ pub struct RunArgs {
     /// Pipeline config.
     #[arg(long, default_value = "configs/pipeline.toml")]
     pub config: PathBuf,
-    /// A EuRoC or KITTI sequence folder (default: the config's; the generated default
+    /// A EuRoC, KITTI odometry or KITTI raw sequence folder (default: the config's; the generated default
     /// sequence is rendered on first use).
     #[arg(long)]
     pub dataset: Option<PathBuf>,
