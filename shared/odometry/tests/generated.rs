@@ -136,3 +136,94 @@ fn blank_frames_are_reported_lost_and_tracking_resumes() {
     eprintln!("ATE with two lost frames: {ate:.4} m");
     assert!(ate < 0.02, "ATE {ate} m");
 }
+
+/// Frames `range` of `normal` (`seed`), rendered once, for runs under several configs.
+fn rendered(seed: u64, range: Range<usize>) -> (linetrack_geometry::StereoRig, Vec<Frame>) {
+    let renderer = SequenceRenderer::new(Preset::Normal.config(seed, 200));
+    let frames = range
+        .map(|k| {
+            let frame = renderer.render(k);
+            let image = |pixels: &[u8], name: &str| {
+                GrayImage::from_pixels(frame.left.width, frame.left.height, pixels, name).unwrap()
+            };
+            Frame {
+                left: image(&frame.left.pixels, "left"),
+                right: image(&frame.right.pixels, "right"),
+                truth: frame.world_from_left,
+            }
+        })
+        .collect();
+    (renderer.config.rig, frames)
+}
+
+struct Frame {
+    left: GrayImage,
+    right: GrayImage,
+    truth: Isometry3<f64>,
+}
+
+/// ATE of the odometry under `config` over `frames`, and how many frames it lost.
+fn ate_of(
+    config: OdometryConfig,
+    rig: linetrack_geometry::StereoRig,
+    frames: &[Frame],
+) -> (f64, usize) {
+    let mut vo = Odometry::new(config, rig).unwrap();
+    let mut estimate = Vec::new();
+    let mut lost = 0;
+    for frame in frames {
+        let result = vo.track(&frame.left, &frame.right).unwrap();
+        estimate.push(result.pose);
+        lost += usize::from(result.lost);
+    }
+    let truth: Vec<_> = frames.iter().map(|f| f.truth).collect();
+    (metrics::ate_rmse(&estimate, &truth).unwrap(), lost)
+}
+
+/// Following features as landmarks (positions fused over their sightings) against
+/// re-triangulating every frame (PL-StVO), same frames, same front end. Measured over the
+/// first 100 frames of seed 1 (LSD + LBD, points and lines): ATE 3.7 mm with landmarks,
+/// 13.7 mm without.
+#[test]
+fn landmarks_drift_less_than_chained_frame_to_frame_motions() {
+    let (rig, frames) = rendered(1, 0..100);
+    let (with, lost_with) = ate_of(OdometryConfig::default(), rig, &frames);
+    let chained = OdometryConfig {
+        landmarks: false,
+        ..OdometryConfig::default()
+    };
+    let (without, lost_without) = ate_of(chained, rig, &frames);
+    eprintln!("ATE with landmarks {with:.4} m, without {without:.4} m");
+    assert_eq!((lost_with, lost_without), (0, 0));
+    assert!(with < 0.75 * without, "with {with} m, without {without} m");
+}
+
+/// A scene with its light dimmed to 15 % (grey levels 0–38): the detectors threshold
+/// absolute gradients, so without the contrast stretch most segments vanish. Measured on
+/// frame 0 of seed 1 (left segments, ORB points): 100 and 478 as rendered, 72 and 112
+/// dimmed and stretched, 2 and 0 dimmed.
+#[test]
+fn a_dimmed_scene_keeps_its_segments() {
+    let (rig, frames) = rendered(1, 0..1);
+    let dim = |image: &GrayImage| linetrack_vision::perturb(image, 0.15, 0.0).unwrap();
+    let (left, right) = (dim(&frames[0].left), dim(&frames[0].right));
+    let segments = |max_contrast_gain: f64, left: &GrayImage, right: &GrayImage| {
+        let config = OdometryConfig {
+            max_contrast_gain,
+            ..OdometryConfig::default()
+        };
+        let mut vo = Odometry::new(config, rig).unwrap();
+        let stats = vo.track(left, right).unwrap().stats;
+        (stats.segments[0], stats.points[0])
+    };
+    let bright = segments(4.0, &frames[0].left, &frames[0].right);
+    let stretched = segments(4.0, &left, &right);
+    let raw = segments(1.0, &left, &right);
+    eprintln!(
+        "segments, points: bright {bright:?}, dimmed and stretched {stretched:?}, dimmed {raw:?}"
+    );
+    assert!(
+        stretched.0 as f64 >= 0.7 * bright.0 as f64 && stretched.0 >= 2 * raw.0,
+        "bright {bright:?}, stretched {stretched:?}, dimmed {raw:?}"
+    );
+}

@@ -288,3 +288,58 @@ pub fn perturb(image: &GrayImage, gain: f64, bias: f64) -> Result<GrayImage, Vis
         origin: format!("{} (gain {gain}, bias {bias})", image.origin),
     })
 }
+
+/// A dark or flat image stretched to the full grey range, as an automatic gain would:
+/// `I' = clamp(gain·(I − low))` with `low` the 0.5th percentile and `gain` mapping the 99.5th
+/// to 255, at most `max_gain`. `None` when the image already spans the range (gain below
+/// 1.1) or `max_gain` is at most 1: the caller then keeps the original.
+///
+/// Detectors threshold absolute gradients (LSD's gradient magnitude, FAST's intensity
+/// difference), so a scene with its lights dimmed loses most of its segments and corners
+/// although its edges are all still there; the stretch is affine, so geometry-based
+/// matching is unaffected by it and descriptors see a more similar image.
+pub fn stretch_contrast(
+    image: &GrayImage,
+    max_gain: f64,
+) -> Result<Option<GrayImage>, VisionError> {
+    const TAIL: f64 = 0.005;
+    const MIN_GAIN: f64 = 1.1;
+    if !(max_gain > 1.0) {
+        return Ok(None);
+    }
+    let mut histogram = [0usize; 256];
+    let mut total = 0usize;
+    for row in 0..image.mat.rows() {
+        let pixels = image.mat.at_row::<u8>(row).context("reading a row")?;
+        for &v in pixels {
+            histogram[usize::from(v)] += 1;
+        }
+        total += pixels.len();
+    }
+    let tail = (TAIL * total as f64) as usize;
+    let percentile = |from_top: bool| {
+        let mut seen = 0;
+        for k in 0..256 {
+            let level = if from_top { 255 - k } else { k };
+            seen += histogram[level];
+            if seen > tail {
+                return level as f64;
+            }
+        }
+        if from_top { 0.0 } else { 255.0 }
+    };
+    let (low, high) = (percentile(false), percentile(true));
+    let gain = (255.0 / (high - low).max(1.0)).min(max_gain);
+    if gain < MIN_GAIN {
+        return Ok(None);
+    }
+    let mut out = Mat::default();
+    image
+        .mat
+        .convert_to(&mut out, -1, gain, -gain * low)
+        .context("stretching the contrast")?;
+    Ok(Some(GrayImage {
+        mat: out,
+        origin: image.origin.clone(),
+    }))
+}

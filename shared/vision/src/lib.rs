@@ -32,7 +32,7 @@ pub use detect::{
     keep_longest,
 };
 pub use hamming::{BinaryDescriptors, FeatureMatch, HammingMatcher};
-pub use image::{BorrowedGray, GrayImage, MAX_FILE_BYTES, MAX_PIXELS, perturb};
+pub use image::{BorrowedGray, GrayImage, MAX_FILE_BYTES, MAX_PIXELS, perturb, stretch_contrast};
 pub use lbd::LbdExtractor;
 pub use matchers::{
     L1SegmentMatcher, LbdSegmentMatcher, LineFeatures, MatcherKind, SegmentMatcher,

@@ -323,6 +323,24 @@ fn perturbation_applies_gain_and_bias_with_clamping() {
     assert!(perturb(&image, 1.0, f64::INFINITY).is_err());
 }
 
+#[test]
+fn a_dark_image_is_stretched_to_the_full_range_and_a_bright_one_is_left_alone() {
+    // 1000 pixels from 10 to 40: the 0.5 % tails are 5 pixels at each end.
+    let dark: Vec<u8> = (0..1000).map(|k| 10 + (k * 31 / 1000) as u8).collect();
+    let image = GrayImage::from_pixels(100, 10, &dark, "dark").unwrap();
+    let stretched = stretch_contrast(&image, 16.0).unwrap().expect("stretched");
+    let pixels = stretched.pixels().unwrap();
+    assert_eq!(pixels[0], 0);
+    assert!(pixels[999] >= 250, "{}", pixels[999]);
+    // The gain is capped.
+    let capped = stretch_contrast(&image, 2.0).unwrap().expect("stretched");
+    assert_eq!(capped.pixels().unwrap()[999], 60);
+    assert!(stretch_contrast(&image, 1.0).unwrap().is_none());
+    let full: Vec<u8> = (0..1000).map(|k| (k * 256 / 1000) as u8).collect();
+    let bright = GrayImage::from_pixels(100, 10, &full, "full").unwrap();
+    assert!(stretch_contrast(&bright, 16.0).unwrap().is_none());
+}
+
 // ---------------------------------------------------------------- bad input
 
 fn error_text(result: Result<GrayImage, VisionError>) -> String {
