@@ -26,7 +26,7 @@ use linetrack_geometry::{
 };
 use linetrack_stereo_vo::{
     LineObservation, MotionConfig, PointObservation, TriangulationLimits, disparity_weight,
-    estimate_motion, triangulate_point, triangulate_segment,
+    estimate_motion, estimate_motion_near, triangulate_point, triangulate_segment,
 };
 use linetrack_vision::{
     AppearanceGates, DetectorKind, FeatureMatch, FrontendConfig, GrayImage, HammingMatcher,
@@ -377,6 +377,21 @@ impl MotionTracker {
         let use_points = images.is_some();
 
         let started = Instant::now();
+        // Dark images stretched for the corner detector too (a no-op on images the front
+        // end already stretched: they span the range).
+        let gain = self.config.max_contrast_gain;
+        let stretched = match images {
+            Some((left, right)) => Some((
+                stretch_contrast(left, gain)?,
+                stretch_contrast(right, gain)?,
+            )),
+            None => None,
+        };
+        let images = images
+            .zip(stretched.as_ref())
+            .map(|((left, right), (l, r))| {
+                (l.as_ref().unwrap_or(left), r.as_ref().unwrap_or(right))
+            });
         let (mut points_l, mut points_r) = (PointFeatures::default(), PointFeatures::default());
         if let Some((left, right)) = images {
             self.orb.extract(left, &mut points_l)?;
@@ -483,7 +498,12 @@ impl MotionTracker {
         stats.ms[3] += since(started);
 
         let started = Instant::now();
-        let estimate = estimate_motion(
+        // The constant-velocity prior only once a motion was measured.
+        let estimate = if self.motion_known {
+            estimate_motion_near
+        } else {
+            estimate_motion
+        }(
             &self.rig,
             &observations.points,
             &observations.lines,

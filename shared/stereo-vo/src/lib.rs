@@ -14,6 +14,7 @@ pub mod triangulate;
 
 pub use motion::{
     LineObservation, MotionConfig, MotionError, MotionEstimate, PointObservation, estimate_motion,
+    estimate_motion_near,
 };
 pub use triangulate::{Triangulated, TriangulationLimits, triangulate_point, triangulate_segment};
 

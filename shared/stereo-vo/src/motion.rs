@@ -77,6 +77,13 @@ pub struct MotionConfig {
     /// Robust start: an observation whose residual norm under a hypothesis is within this
     /// is one of its inliers, pixels.
     pub ransac_threshold_px: f64,
+    /// Constant-velocity prior ([`estimate_motion_near`]): how far the motion may depart
+    /// from the prediction, one standard deviation, metres (0: no prior). Observations
+    /// outweigh it wherever they constrain the motion; where they do not (a wall of
+    /// parallel segments) the prediction fills in instead of noise.
+    pub prior_translation_m: f64,
+    /// The same for the rotation, degrees (0: no prior).
+    pub prior_rotation_deg: f64,
 }
 
 impl Default for MotionConfig {
@@ -90,6 +97,13 @@ impl Default for MotionConfig {
             min_relative_eigenvalue: 1e-5,
             ransac_draws: 200,
             ransac_threshold_px: 2.0,
+            // Measured on the KITTI raw drive (ℓ1): a 2 cm translation prior raised the ATE
+            // from 0.19 m to 0.59 m (forward motion is weakly observed from far features, so
+            // the prior holds the car at constant speed); the rotation prior alone leaves it
+            // at 0.19 m and takes the generated drone-gain-jumps sequence (ℓ1 lines only)
+            // from 6.8 cm to 2.4 cm.
+            prior_translation_m: 0.0,
+            prior_rotation_deg: 1.0,
         }
     }
 }
@@ -192,6 +206,45 @@ pub fn line_residual(
     Some((r, j))
 }
 
+/// Information on how far the motion departs from a prediction (a diagonal prior in the
+/// tangent space, in the units of the pixel residuals).
+#[derive(Debug, Clone, Copy)]
+struct Prior {
+    prediction: Isometry3<f64>,
+    information: Vector6<f64>,
+}
+
+impl Prior {
+    fn new(prediction: &Isometry3<f64>, config: &MotionConfig) -> Option<Self> {
+        let inverse_square = |sigma: f64| {
+            if sigma > 0.0 && sigma.is_finite() {
+                1.0 / (sigma * sigma)
+            } else {
+                0.0
+            }
+        };
+        let t = inverse_square(config.prior_translation_m);
+        let r = inverse_square(config.prior_rotation_deg.to_radians());
+        (t > 0.0 || r > 0.0).then(|| Self {
+            prediction: *prediction,
+            information: Vector6::new(t, t, t, r, r, r),
+        })
+    }
+
+    /// Adds the prior's term at `t` to the normal equations (its Jacobian is close to the
+    /// identity under the left-multiplied update).
+    fn accumulate(&self, t: &Isometry3<f64>, h: &mut Matrix6<f64>, g: &mut Vector6<f64>) {
+        let departure = t * self.prediction.inverse();
+        let (p, phi) = (
+            departure.translation.vector,
+            departure.rotation.scaled_axis(),
+        );
+        let e = Vector6::new(p.x, p.y, p.z, phi.x, phi.y, phi.z);
+        *h += Matrix6::from_diagonal(&self.information);
+        *g += self.information.component_mul(&e);
+    }
+}
+
 /// Which observations take part in a pass.
 struct Active<'a> {
     points: &'a [bool],
@@ -206,6 +259,7 @@ fn optimise(
     lines: &[LineObservation],
     active: &Active<'_>,
     mut t: Isometry3<f64>,
+    prior: Option<&Prior>,
     depth_m: f64,
     config: &MotionConfig,
 ) -> Result<(Isometry3<f64>, usize, f64), MotionError> {
@@ -230,6 +284,9 @@ fn optimise(
             if let Some((r, j)) = line_residual(rig, &t, obs) {
                 accumulate(r, j, obs.weight);
             }
+        }
+        if let Some(prior) = prior {
+            prior.accumulate(&t, &mut h, &mut g);
         }
         let eigen = (scale * h * scale).symmetric_eigenvalues();
         let (low, high) = (eigen.min(), eigen.max());
@@ -267,12 +324,38 @@ fn median_depth(points: &[PointObservation], lines: &[LineObservation]) -> f64 {
     *depths.select_nth_unstable_by(middle, f64::total_cmp).1
 }
 
-/// Estimates the motion from `initial` (e.g. identity, or the previous motion).
+/// Estimates the motion from `initial` (e.g. identity, or the previous motion), from the
+/// observations alone.
 pub fn estimate_motion(
     rig: &StereoRig,
     points: &[PointObservation],
     lines: &[LineObservation],
     initial: &Isometry3<f64>,
+    config: &MotionConfig,
+) -> Result<MotionEstimate, MotionError> {
+    estimate(rig, points, lines, initial, None, config)
+}
+
+/// Estimates the motion from the observations and a constant-velocity prior: `prediction`
+/// (the last motion) with the spread of `config.prior_translation_m` and
+/// `prior_rotation_deg`; it also starts the search.
+pub fn estimate_motion_near(
+    rig: &StereoRig,
+    points: &[PointObservation],
+    lines: &[LineObservation],
+    prediction: &Isometry3<f64>,
+    config: &MotionConfig,
+) -> Result<MotionEstimate, MotionError> {
+    let prior = Prior::new(prediction, config);
+    estimate(rig, points, lines, prediction, prior.as_ref(), config)
+}
+
+fn estimate(
+    rig: &StereoRig,
+    points: &[PointObservation],
+    lines: &[LineObservation],
+    initial: &Isometry3<f64>,
+    prior: Option<&Prior>,
     config: &MotionConfig,
 ) -> Result<MotionEstimate, MotionError> {
     let total = points.len() + lines.len();
@@ -314,6 +397,7 @@ pub fn estimate_motion(
             lines: &start_lines,
         },
         start,
+        prior,
         depth_m,
         config,
     )?;
@@ -341,7 +425,7 @@ pub fn estimate_motion(
         lines: &inlier_lines,
     };
     let (motion, iterations_2, relative_eigenvalue) =
-        optimise(rig, points, lines, &active, first, depth_m, config)?;
+        optimise(rig, points, lines, &active, first, prior, depth_m, config)?;
     let mut sum = 0.0;
     let mut n = 0usize;
     for (obs, _) in points.iter().zip(&inlier_points).filter(|(_, on)| **on) {

@@ -292,3 +292,55 @@ fn robust_start_is_reproducible_and_finds_the_inliers() {
         first.draws
     );
 }
+
+#[test]
+fn observations_outweigh_the_prior_and_the_prior_fills_what_they_leave_open() {
+    // Plenty of observations: the estimate follows them even when the prediction is 3° and
+    // 10 cm away from the truth.
+    let truth = pose(0.02, -0.04, 0.01, 0.08, -0.03, 0.15);
+    let prediction = pose(0.0, 0.0, 0.0, 0.0, 0.0, 0.1);
+    let config = MotionConfig {
+        prior_translation_m: 0.02,
+        prior_rotation_deg: 1.0,
+        ..MotionConfig::default()
+    };
+    let (points, lines) = correspondences(1, &truth, 100, 50, 0.2);
+    let estimate = estimate_motion_near(&rig(), &points, &lines, &prediction, &config).unwrap();
+    assert_close(&estimate.motion, &truth, 0.01, 0.2);
+
+    // Lines all parallel to the camera's x axis leave the translation along x unobserved:
+    // the problem is degenerate without the prior, and with it the estimate keeps the
+    // predicted x while following the observations elsewhere.
+    let truth = pose(0.0, 0.0, 0.0, 0.05, -0.02, 0.1);
+    let prediction = pose(0.0, 0.0, 0.0, 0.03, 0.0, 0.1);
+    let project = |p: &Point3<f64>| {
+        let r = rig();
+        Point::new(
+            r.focal_px * p.x / p.z + r.cx_px,
+            r.focal_px * p.y / p.z + r.cy_px,
+        )
+    };
+    let lines: Vec<LineObservation> = (0..30)
+        .filter_map(|k| {
+            let (y, z) = (-1.0 + 0.07 * f64::from(k), 2.0 + 0.2 * f64::from(k % 7));
+            let (a, b) = (Point3::new(-1.0, y, z), Point3::new(1.0, y, z));
+            let seen = Segment::new(project(&(truth * a)), project(&(truth * b)));
+            LineObservation::new([a, b], &seen, 1.0)
+        })
+        .collect();
+    let without = estimate_motion(&rig(), &[], &lines, &prediction, &config);
+    assert!(
+        matches!(without, Err(MotionError::Degenerate { .. })),
+        "{without:?}"
+    );
+    let config = MotionConfig {
+        prior_translation_m: 0.01,
+        ..config
+    };
+    let with = estimate_motion_near(&rig(), &[], &lines, &prediction, &config).unwrap();
+    let t = with.motion.translation.vector;
+    assert!(
+        (t.x - 0.03).abs() < 1e-3 && (t.y + 0.02).abs() < 0.01 && (t.z - 0.1).abs() < 5e-3,
+        "{t}"
+    );
+}
