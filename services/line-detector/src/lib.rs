@@ -13,7 +13,7 @@ use linetrack_msgs::{Command, Control, FrameHeader, SegmentRecord, StageKind, St
 use linetrack_stage_runtime::{
     HeldFrames, Reporter, StageContext, detector_code, process_frame, stereo_views, to_records,
 };
-use linetrack_vision::{GrayImage, LineDetector, create_detector};
+use linetrack_vision::{GrayImage, LineDetector, create_detector, stretch_contrast};
 use std::time::Duration;
 use tracing::info_span;
 
@@ -73,10 +73,18 @@ impl Detector {
         let _entered = span.enter();
         header.detector = self.kind_code;
         header.detector_pid = self.pid;
+        // Dark images are stretched first, as the odometry does (`odometry.max_contrast_gain`).
+        let gain = ctx.config.odometry.max_contrast_gain;
         let work = |h: &mut FrameHeader| {
             let (left, right) = stereo_views(frame)?;
-            self.detector.detect(&left, &mut self.left)?;
-            self.detector.detect(&right, &mut self.right)?;
+            let (left_stretched, right_stretched) = (
+                stretch_contrast(&left, gain)?,
+                stretch_contrast(&right, gain)?,
+            );
+            let left = left_stretched.as_ref().unwrap_or(&left);
+            let right = right_stretched.as_ref().unwrap_or(&right);
+            self.detector.detect(left, &mut self.left)?;
+            self.detector.detect(right, &mut self.right)?;
             h.left_count = self.left.len() as u32;
             h.right_count = self.right.len() as u32;
             let mut records = to_records(&self.left);

@@ -251,18 +251,30 @@ struct Active<'a> {
     lines: &'a [bool],
 }
 
+/// What stays the same over the passes of one estimate.
+struct Settings<'a> {
+    rig: &'a StereoRig,
+    prior: Option<&'a Prior>,
+    /// Median depth of the observations, metres.
+    depth_m: f64,
+    config: &'a MotionConfig,
+}
+
 /// One Gauss–Newton pass from `t`; returns the final pose, the iterations and the
 /// conditioning of the last normal matrix (smallest over largest eigenvalue).
 fn optimise(
-    rig: &StereoRig,
+    settings: &Settings<'_>,
     points: &[PointObservation],
     lines: &[LineObservation],
     active: &Active<'_>,
     mut t: Isometry3<f64>,
-    prior: Option<&Prior>,
-    depth_m: f64,
-    config: &MotionConfig,
 ) -> Result<(Isometry3<f64>, usize, f64), MotionError> {
+    let Settings {
+        rig,
+        prior,
+        depth_m,
+        config,
+    } = *settings;
     // Conditioning is judged with translations in units of the scene's depth, so that it
     // does not depend on the scene's scale (a metre matters less at 30 m than at 2 m).
     let scale = Matrix6::from_diagonal(&Vector6::new(depth_m, depth_m, depth_m, 1.0, 1.0, 1.0));
@@ -388,8 +400,14 @@ fn estimate(
     } else {
         (*initial, vec![true; points.len()], vec![true; lines.len()])
     };
-    let (first, iterations_1, _) = optimise(
+    let settings = Settings {
         rig,
+        prior,
+        depth_m,
+        config,
+    };
+    let (first, iterations_1, _) = optimise(
+        &settings,
         points,
         lines,
         &Active {
@@ -397,9 +415,6 @@ fn estimate(
             lines: &start_lines,
         },
         start,
-        prior,
-        depth_m,
-        config,
     )?;
     let within = |r: Option<Vector2<f64>>, weight: f64| {
         r.is_some_and(|r| r.amax() * weight.sqrt() <= config.outlier_px)
@@ -425,7 +440,7 @@ fn estimate(
         lines: &inlier_lines,
     };
     let (motion, iterations_2, relative_eigenvalue) =
-        optimise(rig, points, lines, &active, first, prior, depth_m, config)?;
+        optimise(&settings, points, lines, &active, first)?;
     let mut sum = 0.0;
     let mut n = 0usize;
     for (obs, _) in points.iter().zip(&inlier_points).filter(|(_, on)| **on) {
