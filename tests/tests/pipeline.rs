@@ -341,6 +341,14 @@ fn sigterm_stops_the_run_cleanly_and_a_killed_run_is_cleaned_up_by_the_next() {
             .status();
     }
     let _ = killed.child.wait();
+    // What the killed supervisor had recorded is on disk, and reports.
+    let survived = Records::read(&killed.run_dir, &killed.prefix);
+    assert!(
+        survived.frames.len() >= 5,
+        "{} frames recorded by the killed run",
+        survived.frames.len()
+    );
+    report_of(&killed.run_dir);
     std::thread::sleep(Duration::from_millis(300));
     let left = linetrack_ipc::Scope {
         prefix: killed.prefix.clone(),
@@ -384,6 +392,79 @@ fn sigterm_stops_the_run_cleanly_and_a_killed_run_is_cleaned_up_by_the_next() {
             s.pid
         );
     }
+}
+
+/// `linetrack report` on a run folder: it succeeds; its output.
+fn report_of(run_dir: &std::path::Path) -> String {
+    let out = std::process::Command::new(bin_dir().join("linetrack"))
+        .arg("report")
+        .arg(run_dir)
+        .output()
+        .unwrap_or_else(|e| panic!("linetrack report: {e}"));
+    let text = String::from_utf8_lossy(&out.stdout).to_string();
+    assert!(
+        out.status.success(),
+        "linetrack report {}: {}\n{text}{}",
+        run_dir.display(),
+        out.status,
+        String::from_utf8_lossy(&out.stderr)
+    );
+    text
+}
+
+#[test]
+fn the_restart_limit_ends_the_run_with_its_records_and_the_reason() {
+    let dir = scratch("restart-limit");
+    let extra = quick().replace("[supervisor]\n", "[supervisor]\nmax_restarts = 0\n");
+    let mut run = start(&dir, &base_sequence(FRAMES), &extra);
+    let status = run.wait_for("5 frames", RUN_TIMEOUT, |s| s.frames >= 5);
+    let victim = status
+        .stages
+        .iter()
+        .find(|s| s.stage == "matcher")
+        .unwrap_or_else(|| panic!("no matcher in {:?}", status.stages))
+        .pid;
+    signal(victim, "KILL");
+    let run_dir = run.run_dir.clone();
+    let (exit, out, records) = run.finish(RUN_TIMEOUT);
+    assert!(!exit.success(), "the run gave up but exited {exit}\n{out}");
+    // Every frame the source published has a row, in order from 0, and the crash is an event.
+    let recorded = ids(&records);
+    assert!(recorded.len() >= 5, "{recorded:?}");
+    assert_eq!(recorded, (0..recorded.len() as u64).collect::<Vec<_>>());
+    assert!(
+        records
+            .events_of("crash")
+            .iter()
+            .any(|e| e.stage == "matcher"),
+        "{:?}",
+        records.events
+    );
+    let summary = linetrack_run_record::Summary::read(&run_dir.join("summary.json"))
+        .unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(summary.end, linetrack_run_record::RunEnd::Failed);
+    let reason = summary.reason.unwrap_or_default();
+    assert!(
+        reason.contains("matcher") && reason.contains("restart limit 0"),
+        "{reason}"
+    );
+    assert_eq!(summary.report.frames, recorded.len());
+    let status: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(run_dir.join("status.json")).unwrap_or_default(),
+    )
+    .unwrap_or_default();
+    assert_eq!(status["state"], "failed", "{status}");
+    assert_eq!(status["stages"], serde_json::json!([]), "{status}");
+    let report = report_of(&run_dir);
+    assert!(
+        report.contains(&format!("frames {}", recorded.len())),
+        "{report}"
+    );
+    assert_eq!(
+        records.leftovers,
+        Default::default(),
+        "iceoryx2 nodes or services left behind"
+    );
 }
 
 fn proc_is_zombie_or_gone(pid: u32) -> bool {

@@ -285,7 +285,7 @@ pub fn live_status(run_dir: &Path) -> anyhow::Result<LiveStatus> {
 /// `linetrack ctl`.
 pub fn ctl(args: &CtlArgs) -> anyhow::Result<()> {
     let status = live_status(&args.run_dir)?;
-    if status.finished {
+    if status.finished() {
         bail!("the run in {} has finished", args.run_dir.display());
     }
     match &args.action {
@@ -323,7 +323,7 @@ pub fn ctl(args: &CtlArgs) -> anyhow::Result<()> {
                     println!("{} took over", detector.name());
                     return Ok(());
                 }
-                if now.finished {
+                if now.finished() {
                     bail!("the run finished before the swap");
                 }
             }
