@@ -467,6 +467,35 @@ fn the_restart_limit_ends_the_run_with_its_records_and_the_reason() {
     );
 }
 
+#[test]
+fn a_second_run_into_a_busy_run_folder_is_refused_naming_the_first() {
+    let dir = scratch("locked");
+    let mut first = start(&dir, &base_sequence(FRAMES), &quick());
+    let status = first.wait_for("3 frames", RUN_TIMEOUT, |s| s.frames >= 3);
+    // The same config, so the same run folder, from another shell.
+    let second = std::process::Command::new(bin_dir().join("linetrack"))
+        .args(["run", "--quiet", "--config"])
+        .arg(dir.join("pipeline.toml"))
+        .env(
+            linetrack_ipc::Scope::PREFIX_VAR,
+            format!("{}second_", first.prefix),
+        )
+        .stdin(std::process::Stdio::null())
+        .output()
+        .unwrap_or_else(|e| panic!("starting the second run: {e}"));
+    let err = String::from_utf8_lossy(&second.stderr);
+    assert!(!second.status.success(), "the second run ran: {err}");
+    assert!(
+        err.contains("in use by another run")
+            && err.contains(&format!("pid {}", status.supervisor_pid)),
+        "{err}"
+    );
+    // The first run was not disturbed.
+    let (exit, out, records) = first.finish(RUN_TIMEOUT);
+    assert!(exit.success(), "{exit}\n{out}");
+    assert_every_frame_accounted(&records);
+}
+
 fn proc_is_zombie_or_gone(pid: u32) -> bool {
     std::fs::read_to_string(format!("/proc/{pid}/stat"))
         .map_or(true, |s| s.split_whitespace().nth(2) == Some("Z"))

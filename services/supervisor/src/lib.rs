@@ -15,6 +15,7 @@
 
 pub mod fallback;
 pub mod monitor;
+pub mod run_dir;
 
 use anyhow::{Context, bail};
 use linetrack_ipc::{Bus, Inlet, Outlet, Scope, Shutdown, Wake};
@@ -165,9 +166,9 @@ pub struct StageEntry {
     pub standby: bool,
 }
 
-/// Writes the effective config and prepares the run folder.
-fn prepare_run_dir(config: &PipelineConfig) -> anyhow::Result<(PathBuf, PathBuf)> {
-    let run_dir = config.output.run_dir.clone();
+/// Clears an earlier run's files from the (locked) run folder and writes the effective
+/// config into it; returns the config's path.
+fn prepare_run_dir(config: &PipelineConfig, run_dir: &Path) -> anyhow::Result<PathBuf> {
     for stale in [
         "spans",
         "trace.json",
@@ -185,12 +186,10 @@ fn prepare_run_dir(config: &PipelineConfig) -> anyhow::Result<(PathBuf, PathBuf)
             std::fs::remove_file(&path).with_context(|| format!("clearing {}", path.display()))?;
         }
     }
-    std::fs::create_dir_all(&run_dir)
-        .with_context(|| format!("creating run folder {}", run_dir.display()))?;
     let config_path = run_dir.join("pipeline.toml");
     std::fs::write(&config_path, toml::to_string(config)?)
         .with_context(|| format!("writing {}", config_path.display()))?;
-    Ok((run_dir, config_path))
+    Ok(config_path)
 }
 
 /// Runs the pipeline on `config` until the sequence is done or `shutdown` is set.
@@ -210,7 +209,17 @@ pub fn run(
         "source.sequence {}: no frames",
         config.source.sequence.display()
     );
-    let (run_dir, config_path) = prepare_run_dir(config)?;
+    let run_dir = run_dir::resolve(&config.output, std::time::SystemTime::now())?;
+    // Held until the run is over; released by the kernel if this process dies.
+    let _lock = run_dir::lock(&run_dir)?;
+    let config = &PipelineConfig {
+        output: linetrack_pipeline_config::OutputConfig {
+            run_dir: Some(run_dir.clone()),
+            ..config.output.clone()
+        },
+        ..config.clone()
+    };
+    let config_path = prepare_run_dir(config, &run_dir)?;
     let run_id = new_run_id();
     let scope = Scope::new(&run_id);
     let mut monitor = Monitor::new(config, 0, &run_dir)?;

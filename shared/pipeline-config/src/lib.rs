@@ -242,8 +242,13 @@ impl Default for SupervisorConfig {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct OutputConfig {
-    /// Run folder: frames.csv, events.csv, poses (TUM), summary.json, trace files.
-    pub run_dir: PathBuf,
+    /// Each run gets a new folder here named by its UTC start time
+    /// (`2026-11-23T12-00-00`), and `latest` here is a symlink to the newest.
+    pub runs_dir: PathBuf,
+    /// A fixed run folder instead (`linetrack run --run-dir`): frames.csv, events.csv,
+    /// poses (TUM), summary.json, trace files. Locked while a run writes into it.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub run_dir: Option<PathBuf>,
     /// Write per-process span files and the merged Chrome/Perfetto trace.
     pub trace: bool,
 }
@@ -251,7 +256,8 @@ pub struct OutputConfig {
 impl Default for OutputConfig {
     fn default() -> Self {
         Self {
-            run_dir: PathBuf::from("out/runs/latest"),
+            runs_dir: PathBuf::from("out/runs"),
+            run_dir: None,
             trace: true,
         }
     }
