@@ -229,6 +229,32 @@ fn a_corrupt_frame_is_skipped_and_counted() {
 }
 
 #[test]
+fn a_run_that_tracks_nothing_exits_non_zero_saying_so() {
+    let dir = scratch("nothing-tracked");
+    let sequence = sequence_copy(FRAMES, &dir);
+    for image in images(&sequence, 0) {
+        std::fs::write(&image, b"\x89PNG\r\n\x1a\n this is not an image")
+            .unwrap_or_else(|e| panic!("{e}"));
+    }
+    let run = start(&dir, &sequence, &quick());
+    let run_dir = run.run_dir.clone();
+    let (status, out, records) = run.finish(RUN_TIMEOUT);
+    assert!(!status.success(), "rc 0 with nothing tracked\n{out}");
+    assert_every_frame_accounted(&records);
+    assert!(records.frames.iter().all(|f| f.outcome == "corrupt"));
+    let summary = linetrack_run_record::Summary::read(&run_dir.join("summary.json"))
+        .unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(summary.end, linetrack_run_record::RunEnd::Failed);
+    let reason = summary.reason.unwrap_or_default();
+    assert!(reason.contains("nothing was tracked"), "{reason}");
+    assert_eq!(
+        records.leftovers,
+        Default::default(),
+        "iceoryx2 nodes or services left behind"
+    );
+}
+
+#[test]
 fn a_hot_swap_to_fld_loses_and_duplicates_no_frame() {
     let dir = scratch("swap");
     // Every frame processed, however late: a loss could not hide as a policy drop.

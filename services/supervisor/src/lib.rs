@@ -236,6 +236,15 @@ pub fn run(
         .and_then(|supervisor| supervisor.run(shutdown)),
         Mode::Threads => run_threads(config, options, &run_dir, &mut monitor, shutdown),
     };
+    // A run that tracked nothing did not do its job, however cleanly it ran.
+    let result = match result {
+        Ok(false) if monitor.tracked() == 0 => Err(anyhow::anyhow!(
+            "nothing was tracked: none of the {} frames with an outcome got a tracked pose (what became of them: linetrack report {})",
+            monitor.accounted(),
+            run_dir.display()
+        )),
+        other => other,
+    };
     // Whatever happened, the run's records are closed and say how it ended.
     let (end, reason) = match &result {
         Ok(false) => (RunEnd::Completed, None),

@@ -307,6 +307,11 @@ impl Monitor {
         self.accounted.count
     }
 
+    /// Frames with a tracked pose (not predicted, not dropped).
+    pub fn tracked(&self) -> usize {
+        self.tally.tracked()
+    }
+
     /// Frame ids the monitor remembers one by one: those with an outcome ahead of a frame
     /// still on its way. Bounded by the pipeline's depth, not by the run's length.
     pub fn remembered_frames(&self) -> usize {

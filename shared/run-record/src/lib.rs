@@ -491,6 +491,11 @@ impl Tally {
         self.frames
     }
 
+    /// Frames with a tracked pose.
+    pub fn tracked(&self) -> usize {
+        self.poses
+    }
+
     /// Frames that got a pose (tracked or predicted).
     pub fn with_pose(&self) -> usize {
         self.poses + self.lost
