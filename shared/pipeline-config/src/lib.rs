@@ -106,6 +106,10 @@ pub struct FallbackConfig {
     pub recover_stereo_matches: u32,
     /// Consecutive passing probes before switching back to LBD.
     pub recover_probes: u32,
+    /// With `over_budget`, a probe also passes only when the matcher stage (ℓ1 and the LBD
+    /// probe together) took at most this fraction of its budget: below the failing bar
+    /// (the budget itself), the latency's hysteresis band.
+    pub recover_budget_fraction: f64,
 }
 
 impl Default for FallbackConfig {
@@ -119,6 +123,7 @@ impl Default for FallbackConfig {
             probe_every: 5,
             recover_stereo_matches: 24,
             recover_probes: 2,
+            recover_budget_fraction: 0.8,
         }
     }
 }
@@ -273,6 +278,8 @@ const MAX_FRAMES: usize = 1_000_000_000;
 const MAX_MATCHES: u32 = 100_000;
 /// Allowed streak lengths and probe periods of the fallback rules, frames.
 const STREAK: std::ops::RangeInclusive<u32> = 1..=1000;
+/// Allowed fractions of the matcher budget a recovering probe may take (below 1: hysteresis).
+const RECOVER_BUDGET_FRACTION: std::ops::RangeInclusive<f64> = 0.05..=0.95;
 /// Allowed heartbeat periods, milliseconds.
 const HEARTBEAT_MS: std::ops::RangeInclusive<u64> = 10..=10_000;
 /// The shortest startup timeout, milliseconds (a stage loads its detector first).
@@ -399,6 +406,11 @@ impl PipelineConfig {
         in_range("matcher.fallback.bad_frames", f.bad_frames, STREAK)?;
         in_range("matcher.fallback.probe_every", f.probe_every, STREAK)?;
         in_range("matcher.fallback.recover_probes", f.recover_probes, STREAK)?;
+        in_range(
+            "matcher.fallback.recover_budget_fraction",
+            f.recover_budget_fraction,
+            RECOVER_BUDGET_FRACTION,
+        )?;
         in_range(
             "matcher.fallback.recover_stereo_matches",
             f.recover_stereo_matches,
@@ -553,6 +565,10 @@ mod tests {
             (
                 "[matcher.fallback]\nrecover_probes = 0\n",
                 "matcher.fallback.recover_probes",
+            ),
+            (
+                "[matcher.fallback]\nrecover_budget_fraction = 1.0\n",
+                "matcher.fallback.recover_budget_fraction",
             ),
             (
                 "[matcher.fallback]\nrecover_stereo_matches = 4000000000\n",
