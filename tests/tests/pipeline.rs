@@ -202,6 +202,56 @@ fn a_killed_pose_estimator_is_restarted_and_resumes_its_trajectory() {
     kill_and_recover("pose-estimator");
 }
 
+/// Stops `stage` (SIGSTOP) for a while shorter than the hang timeout, then resumes it.
+fn stall(status: &linetrack_supervisor::LiveStatus, stage: &str, for_how_long: Duration) -> u32 {
+    let pid = status
+        .stages
+        .iter()
+        .find(|s| s.stage == stage)
+        .unwrap_or_else(|| panic!("no {stage} in {:?}", status.stages))
+        .pid;
+    signal(pid, "STOP");
+    std::thread::sleep(for_how_long);
+    signal(pid, "CONT");
+    pid
+}
+
+#[test]
+fn a_stage_stalled_shorter_than_the_hang_timeout_catches_up_without_a_crash() {
+    let dir = scratch("stall");
+    // 1.5 s stops at 10 Hz: 15 frames queue up, more than a subscriber buffers or a stage
+    // holds. The hang timeout (5 s) is well past the stop: no restart is due.
+    let extra = quick().replace("hang_timeout_ms = 2000", "hang_timeout_ms = 5000");
+    let mut run = start(&dir, &base_sequence(FRAMES), &extra);
+    let status = run.wait_for("3 frames", RUN_TIMEOUT, |s| s.frames >= 3);
+    let matcher = stall(&status, "matcher", Duration::from_millis(1500));
+    let pose_estimator = stall(&status, "pose-estimator", Duration::from_millis(1500));
+    let (exit, out, records) = run.finish(RUN_TIMEOUT);
+    assert!(exit.success(), "{exit}\n{out}");
+    assert_every_frame_accounted(&records);
+    for kind in ["crash", "hang", "restart"] {
+        assert!(
+            records.events_of(kind).is_empty(),
+            "{kind} after stalls of pids {matcher} and {pose_estimator}: {:?}",
+            records.events
+        );
+    }
+    // The stages went on after the stalls: the last frames have poses.
+    let tail: Vec<&str> = records.frames[FRAMES - 3..]
+        .iter()
+        .map(|f| f.outcome.as_str())
+        .collect();
+    assert!(
+        tail.iter().all(|o| *o == "pose" || *o == "lost"),
+        "after the stalls: {tail:?}"
+    );
+    assert_eq!(
+        records.leftovers,
+        Default::default(),
+        "iceoryx2 nodes or services left behind"
+    );
+}
+
 #[test]
 fn a_corrupt_frame_is_skipped_and_counted() {
     let dir = scratch("corrupt");

@@ -226,7 +226,7 @@ impl FrameMatcher {
 /// Runs the matcher until shutdown.
 pub fn run(ctx: &StageContext, mut ports: Ports, shutdown: &Shutdown) -> anyhow::Result<()> {
     let mut matcher = FrameMatcher::new(ctx)?;
-    let mut held = HeldFrames::new(10);
+    let mut held = HeldFrames::default();
     let mut processed = 0u64;
     ports
         .reporter
@@ -248,9 +248,8 @@ pub fn run(ctx: &StageContext, mut ports: Ports, shutdown: &Shutdown) -> anyhow:
                 _ => {}
             }
         }
-        for frame in ports.frames.receive_all()? {
-            held.push(frame);
-        }
+        let overflow = held.receive(&mut ports.frames)?;
+        ports.reporter.overflow(overflow);
         let batch = ports.segments.receive_all()?;
         let count = batch.len();
         for (k, message) in batch.iter().enumerate() {

@@ -183,7 +183,7 @@ impl PoseTracker {
 /// Runs the pose estimator until shutdown.
 pub fn run(ctx: &StageContext, mut ports: Ports, shutdown: &Shutdown) -> anyhow::Result<()> {
     let mut tracker = PoseTracker::new(ctx)?;
-    let mut held = HeldFrames::new(10);
+    let mut held = HeldFrames::default();
     let mut processed = 0u64;
     ports.reporter.report(StatusKind::Ready, 0, 0);
     while !shutdown.requested() {
@@ -196,9 +196,8 @@ pub fn run(ctx: &StageContext, mut ports: Ports, shutdown: &Shutdown) -> anyhow:
             }
         }
         if let Some(frames) = &mut ports.frames {
-            for frame in frames.receive_all()? {
-                held.push(frame);
-            }
+            let overflow = held.receive(frames)?;
+            ports.reporter.overflow(overflow);
         }
         let batch = ports.tracks.receive_all()?;
         let count = batch.len();

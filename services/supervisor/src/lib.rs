@@ -668,6 +668,16 @@ impl<'m> Supervisor<'m> {
                     self.monitor.published(report.frame_id);
                     self.monitor.source_finished(report.frame_id);
                 }
+                Some(StatusKind::Overflow) => self.monitor.event(
+                    "overflow",
+                    stage.name(),
+                    Some(report.frame_id),
+                    format!(
+                        "{} held frames released before their other input arrived (hold of {})",
+                        report.value,
+                        linetrack_stage_runtime::HELD_FRAMES
+                    ),
+                ),
                 Some(StatusKind::Heartbeat)
                     if stage == StageKind::FrameSource && report.value > 0 =>
                 {
