@@ -33,6 +33,7 @@ fn assert_every_frame_accounted(records: &Records) {
         "dropped-late",
         "dropped-behind",
         "stage-error",
+        "skipped",
         "missing",
     ];
     for f in &records.frames {
@@ -234,6 +235,29 @@ fn a_stage_stalled_shorter_than_the_hang_timeout_catches_up_without_a_crash() {
             records.events_of(kind).is_empty(),
             "{kind} after stalls of pids {matcher} and {pose_estimator}: {:?}",
             records.events
+        );
+    }
+    // Frames overwritten in a full queue are drops with their reason, not `missing`.
+    let missing: Vec<u64> = records
+        .frames
+        .iter()
+        .filter(|f| f.outcome == "missing")
+        .map(|f| f.frame_id)
+        .collect();
+    assert!(
+        missing.is_empty(),
+        "missing: {missing:?}\n{:?}",
+        records.events
+    );
+    for f in records.frames.iter().filter(|f| f.outcome == "skipped") {
+        assert!(
+            records
+                .events_of("skipped")
+                .iter()
+                .any(|e| e.stage == f.dropped_by),
+            "frame {} dropped by {} without an event",
+            f.frame_id,
+            f.dropped_by
         );
     }
     // The stages went on after the stalls: the last frames have poses.

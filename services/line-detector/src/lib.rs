@@ -11,7 +11,8 @@
 use linetrack_ipc::{Bus, Inlet, Outlet, Received, Shutdown, Wake};
 use linetrack_msgs::{Command, Control, FrameHeader, SegmentRecord, StageKind, StatusKind, Topic};
 use linetrack_stage_runtime::{
-    HeldFrames, Reporter, StageContext, detector_code, process_frame, stereo_views, to_records,
+    GapWatch, HeldFrames, Reporter, StageContext, detector_code, process_frame, stereo_views,
+    to_records,
 };
 use linetrack_vision::{GrayImage, LineDetector, create_detector};
 use std::time::Duration;
@@ -125,6 +126,7 @@ pub fn run(ctx: &StageContext, mut ports: Ports, shutdown: &Shutdown) -> anyhow:
         Role::Active
     };
     let mut held = HeldFrames::default();
+    let mut gaps = GapWatch::default();
     let mut next_unpublished = 0u64;
     let mut processed = 0u64;
     let mut ready_sent = false;
@@ -189,6 +191,7 @@ pub fn run(ctx: &StageContext, mut ports: Ports, shutdown: &Shutdown) -> anyhow:
                 let count = frames.len();
                 for (k, frame) in frames.iter().enumerate() {
                     let id = frame.header().frame_id;
+                    ports.reporter.gap(gaps.observe(id));
                     if let Role::HandingOver { at } = role
                         && id >= at
                     {

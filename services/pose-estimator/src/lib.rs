@@ -14,7 +14,7 @@ use linetrack_msgs::{
 };
 use linetrack_odometry::{Features, FrameStats, MatchedLines, MotionTracker};
 use linetrack_stage_runtime::{
-    HeldFrames, Reporter, StageContext, process_frame, stereo_views, to_segment,
+    GapWatch, HeldFrames, Reporter, StageContext, process_frame, stereo_views, to_segment,
 };
 use linetrack_vision::FeatureMatch;
 use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion};
@@ -184,6 +184,7 @@ impl PoseTracker {
 pub fn run(ctx: &StageContext, mut ports: Ports, shutdown: &Shutdown) -> anyhow::Result<()> {
     let mut tracker = PoseTracker::new(ctx)?;
     let mut held = HeldFrames::default();
+    let mut gaps = GapWatch::default();
     let mut processed = 0u64;
     ports.reporter.report(StatusKind::Ready, 0, 0);
     while !shutdown.requested() {
@@ -203,6 +204,7 @@ pub fn run(ctx: &StageContext, mut ports: Ports, shutdown: &Shutdown) -> anyhow:
         let count = batch.len();
         for (k, message) in batch.iter().enumerate() {
             let header = *message.header();
+            ports.reporter.gap(gaps.observe(header.frame_id));
             let span = info_span!("estimate_pose", frame_id = header.frame_id);
             let _entered = span.enter();
             let frame = held.take(header.frame_id);

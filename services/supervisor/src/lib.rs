@@ -678,6 +678,10 @@ impl<'m> Supervisor<'m> {
                         linetrack_stage_runtime::HELD_FRAMES
                     ),
                 ),
+                Some(StatusKind::QueueGap) => {
+                    self.monitor
+                        .presume_lost(report.frame_id, report.value, stage.name());
+                }
                 Some(StatusKind::Heartbeat)
                     if stage == StageKind::FrameSource && report.value > 0 =>
                 {

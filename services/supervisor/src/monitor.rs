@@ -14,7 +14,7 @@ use linetrack_run_record::{
     Summary, Tally,
 };
 use linetrack_stage_runtime::detector_from_code;
-use std::collections::{BTreeSet, VecDeque};
+use std::collections::{BTreeMap, BTreeSet, VecDeque};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -83,6 +83,9 @@ pub struct Monitor {
     tally: Tally,
     recent_end_to_end_ms: VecDeque<f64>,
     duplicates: usize,
+    /// Frames a stage saw skipped in its full queue, by the stage: dropped unless they
+    /// still turn up (an earlier frame arriving late is no loss).
+    presumed_lost: BTreeMap<u64, String>,
     fallback: Option<FallbackController>,
     last_pose: Option<(u64, PoseRecord)>,
     first_frame: u64,
@@ -120,6 +123,7 @@ impl Monitor {
             tally: Tally::default(),
             recent_end_to_end_ms: VecDeque::with_capacity(STATUS_WINDOW),
             duplicates: 0,
+            presumed_lost: BTreeMap::new(),
             fallback,
             last_pose: None,
             first_frame,
@@ -229,6 +233,7 @@ impl Monitor {
             tracing::warn!("frame {} reached the end twice", header.frame_id);
             return None;
         }
+        self.presumed_lost.remove(&header.frame_id);
         self.record_frame(&record);
         if status != FrameStatus::Ok {
             return None;
@@ -258,6 +263,25 @@ impl Monitor {
             );
         }
         switch
+    }
+
+    /// `stage` saw `count` frames from `first` skipped on its input (overwritten in its full
+    /// queue, or lost with an upstream stage that died): they are recorded as `skipped` by
+    /// that stage unless they still arrive, and the run does not wait for them.
+    pub fn presume_lost(&mut self, first: u64, count: u64, stage: &str) {
+        let ids = first..first.saturating_add(count);
+        self.event(
+            "skipped",
+            stage,
+            Some(first),
+            format!(
+                "frames {}..{} never arrived here: overwritten in its full queue, or lost with a stage that died",
+                ids.start, ids.end
+            ),
+        );
+        for id in ids.filter(|&id| !self.accounted.contains(id)) {
+            self.presumed_lost.insert(id, stage.to_string());
+        }
     }
 
     /// The mode the matcher should be in (re-sent to a restarted matcher).
@@ -298,8 +322,11 @@ impl Monitor {
 
     /// Whether every frame the source published has an outcome.
     pub fn complete(&self) -> bool {
-        self.source_last
-            .is_some_and(|last| self.accounted.all_up_to(last))
+        self.source_last.is_some_and(|last| {
+            self.accounted.all_up_to(last)
+                || (self.accounted.below..=last)
+                    .all(|f| self.accounted.contains(f) || self.presumed_lost.contains_key(&f))
+        })
     }
 
     /// Frames with an outcome.
@@ -360,7 +387,12 @@ impl Monitor {
         if let Some(last) = last {
             for f in self.first_frame..=last {
                 if self.accounted.insert(f) {
-                    self.record_frame(&FrameRecord::missing(f));
+                    let mut record = FrameRecord::missing(f);
+                    if let Some(stage) = self.presumed_lost.remove(&f) {
+                        record.outcome = "skipped".to_string();
+                        record.dropped_by = stage;
+                    }
+                    self.record_frame(&record);
                 }
             }
         }
@@ -481,6 +513,34 @@ mod tests {
                     .any(|e| e.kind == "failed" && e.detail == "matcher died"),
             "{events:?}"
         );
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn frames_skipped_on_a_stage_input_are_drops_unless_they_still_arrive() {
+        let dir = scratch("monitor-skipped");
+        let mut monitor =
+            Monitor::new(&PipelineConfig::default(), 0, &dir).unwrap_or_else(|e| panic!("{e}"));
+        for f in [0, 1, 5, 6] {
+            pose_of(&mut monitor, f);
+        }
+        monitor.source_finished(6);
+        assert!(!monitor.complete());
+        monitor.presume_lost(2, 3, "pose-estimator");
+        assert!(monitor.complete(), "no wait for frames known to be lost");
+        // Frame 3 was late, not lost (frames from two publishers during a hot swap).
+        pose_of(&mut monitor, 3);
+        let report = monitor
+            .finish(RunEnd::Completed, None)
+            .unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(report.drops, [("skipped".to_string(), 2)]);
+        let frames = read_frames(&dir.join("frames.csv")).unwrap_or_else(|e| panic!("{e}"));
+        let skipped: Vec<(u64, &str)> = frames
+            .iter()
+            .filter(|f| f.outcome == "skipped")
+            .map(|f| (f.frame_id, f.dropped_by.as_str()))
+            .collect();
+        assert_eq!(skipped, [(2, "pose-estimator"), (4, "pose-estimator")]);
         let _ = std::fs::remove_dir_all(&dir);
     }
 }

@@ -381,6 +381,9 @@ pub enum StatusKind {
     /// A stage's hold overflowed: `value` frames from `frame_id` on were released before
     /// their other input arrived (they go on without it).
     Overflow = 5,
+    /// Frames never arrived on a stage's input: `value` frames from `frame_id` on were
+    /// skipped (overwritten in its full queue while it was stopped or slow).
+    QueueGap = 6,
 }
 
 impl StatusKind {
@@ -393,6 +396,7 @@ impl StatusKind {
             Self::SourceFinished,
             Self::Exiting,
             Self::Overflow,
+            Self::QueueGap,
         ]
         .get(code as usize)
         .copied()

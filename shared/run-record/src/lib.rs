@@ -43,7 +43,8 @@ pub struct FrameRecord {
     /// Frame number.
     pub frame_id: u64,
     /// `pose`, `lost` (pose predicted), or a drop: `corrupt`, `dropped-late`,
-    /// `dropped-behind`, `stage-error`, `missing` (never reached the end: a stage was down).
+    /// `dropped-behind`, `stage-error`, `skipped` (never reached a stage: overwritten in
+    /// its full queue while it was stopped or slow, or lost with a stage that died), `missing` (never reached the end: a stage was down).
     pub outcome: String,
     /// The stage that dropped it, or empty.
     pub dropped_by: String,

@@ -154,6 +154,17 @@ impl Reporter {
         }
     }
 
+    /// Reports frames that never arrived on the stage's input (see [`GapWatch`]).
+    pub fn gap(&mut self, gap: Option<(u64, u64)>) {
+        if let Some((first, count)) = gap {
+            tracing::warn!(
+                "frames {first}..{} never arrived: lost in the full queue",
+                first + count
+            );
+            self.report(StatusKind::QueueGap, first, count);
+        }
+    }
+
     /// How long until the next heartbeat is due.
     pub fn until_due(&self) -> Duration {
         self.last
@@ -270,6 +281,27 @@ impl Overflow {
     fn add(&mut self, frame_id: u64) {
         self.first_frame.get_or_insert(frame_id);
         self.frames += 1;
+    }
+}
+
+/// Watches the frame ids of a stage's main input for gaps: frames the queue overwrote
+/// while the stage was stopped or slow (every frame, dropped ones too, travels down the
+/// pipeline, so ids arrive one after another).
+#[derive(Debug, Clone, Copy, Default)]
+pub struct GapWatch {
+    next: Option<u64>,
+}
+
+impl GapWatch {
+    /// Takes the next frame id; returns `(first, count)` of the frames skipped before it.
+    /// An id below the expected one (an earlier frame arriving late) is no gap.
+    pub fn observe(&mut self, frame_id: u64) -> Option<(u64, u64)> {
+        let gap = self
+            .next
+            .filter(|&n| frame_id > n)
+            .map(|n| (n, frame_id - n));
+        self.next = Some(self.next.map_or(frame_id + 1, |n| n.max(frame_id + 1)));
+        gap
     }
 }
 
@@ -498,6 +530,16 @@ mod tests {
         assert_eq!(second.first_frame, Some(depth + 1));
         // The newest frames are the ones held.
         assert_eq!(held.first_id(), Some(4 * depth - HELD_FRAMES as u64));
+    }
+
+    #[test]
+    fn gaps_in_the_frame_ids_are_found_and_late_frames_are_not_gaps() {
+        let mut watch = GapWatch::default();
+        assert_eq!(watch.observe(5), None, "the first frame sets the start");
+        assert_eq!(watch.observe(6), None);
+        assert_eq!(watch.observe(10), Some((7, 3)));
+        assert_eq!(watch.observe(8), None, "a late frame");
+        assert_eq!(watch.observe(11), None);
     }
 
     #[test]
