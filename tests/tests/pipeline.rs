@@ -33,6 +33,7 @@ fn assert_every_frame_accounted(records: &Records) {
         "dropped-late",
         "dropped-behind",
         "stage-error",
+        "skipped",
         "missing",
     ];
     for f in &records.frames {
@@ -202,6 +203,79 @@ fn a_killed_pose_estimator_is_restarted_and_resumes_its_trajectory() {
     kill_and_recover("pose-estimator");
 }
 
+/// Stops `stage` (SIGSTOP) for a while shorter than the hang timeout, then resumes it.
+fn stall(status: &linetrack_supervisor::LiveStatus, stage: &str, for_how_long: Duration) -> u32 {
+    let pid = status
+        .stages
+        .iter()
+        .find(|s| s.stage == stage)
+        .unwrap_or_else(|| panic!("no {stage} in {:?}", status.stages))
+        .pid;
+    signal(pid, "STOP");
+    std::thread::sleep(for_how_long);
+    signal(pid, "CONT");
+    pid
+}
+
+#[test]
+fn a_stage_stalled_shorter_than_the_hang_timeout_catches_up_without_a_crash() {
+    let dir = scratch("stall");
+    // 1.5 s stops at 10 Hz: 15 frames queue up, more than a subscriber buffers or a stage
+    // holds. The hang timeout (5 s) is well past the stop: no restart is due.
+    let extra = quick().replace("hang_timeout_ms = 2000", "hang_timeout_ms = 5000");
+    let mut run = start(&dir, &base_sequence(FRAMES), &extra);
+    let status = run.wait_for("3 frames", RUN_TIMEOUT, |s| s.frames >= 3);
+    let matcher = stall(&status, "matcher", Duration::from_millis(1500));
+    let pose_estimator = stall(&status, "pose-estimator", Duration::from_millis(1500));
+    let (exit, out, records) = run.finish(RUN_TIMEOUT);
+    assert!(exit.success(), "{exit}\n{out}");
+    assert_every_frame_accounted(&records);
+    for kind in ["crash", "hang", "restart"] {
+        assert!(
+            records.events_of(kind).is_empty(),
+            "{kind} after stalls of pids {matcher} and {pose_estimator}: {:?}",
+            records.events
+        );
+    }
+    // Frames overwritten in a full queue are drops with their reason, not `missing`.
+    let missing: Vec<u64> = records
+        .frames
+        .iter()
+        .filter(|f| f.outcome == "missing")
+        .map(|f| f.frame_id)
+        .collect();
+    assert!(
+        missing.is_empty(),
+        "missing: {missing:?}\n{:?}",
+        records.events
+    );
+    for f in records.frames.iter().filter(|f| f.outcome == "skipped") {
+        assert!(
+            records
+                .events_of("skipped")
+                .iter()
+                .any(|e| e.stage == f.dropped_by),
+            "frame {} dropped by {} without an event",
+            f.frame_id,
+            f.dropped_by
+        );
+    }
+    // The stages went on after the stalls: the last frames have poses.
+    let tail: Vec<&str> = records.frames[FRAMES - 3..]
+        .iter()
+        .map(|f| f.outcome.as_str())
+        .collect();
+    assert!(
+        tail.iter().all(|o| *o == "pose" || *o == "lost"),
+        "after the stalls: {tail:?}"
+    );
+    assert_eq!(
+        records.leftovers,
+        Default::default(),
+        "iceoryx2 nodes or services left behind"
+    );
+}
+
 #[test]
 fn a_corrupt_frame_is_skipped_and_counted() {
     let dir = scratch("corrupt");
@@ -225,6 +299,32 @@ fn a_corrupt_frame_is_skipped_and_counted() {
             .count()
             >= FRAMES - 13 - 2,
         "tracking did not go on"
+    );
+}
+
+#[test]
+fn a_run_that_tracks_nothing_exits_non_zero_saying_so() {
+    let dir = scratch("nothing-tracked");
+    let sequence = sequence_copy(FRAMES, &dir);
+    for image in images(&sequence, 0) {
+        std::fs::write(&image, b"\x89PNG\r\n\x1a\n this is not an image")
+            .unwrap_or_else(|e| panic!("{e}"));
+    }
+    let run = start(&dir, &sequence, &quick());
+    let run_dir = run.run_dir.clone();
+    let (status, out, records) = run.finish(RUN_TIMEOUT);
+    assert!(!status.success(), "rc 0 with nothing tracked\n{out}");
+    assert_every_frame_accounted(&records);
+    assert!(records.frames.iter().all(|f| f.outcome == "corrupt"));
+    let summary = linetrack_run_record::Summary::read(&run_dir.join("summary.json"))
+        .unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(summary.end, linetrack_run_record::RunEnd::Failed);
+    let reason = summary.reason.unwrap_or_default();
+    assert!(reason.contains("nothing was tracked"), "{reason}");
+    assert_eq!(
+        records.leftovers,
+        Default::default(),
+        "iceoryx2 nodes or services left behind"
     );
 }
 
@@ -341,6 +441,14 @@ fn sigterm_stops_the_run_cleanly_and_a_killed_run_is_cleaned_up_by_the_next() {
             .status();
     }
     let _ = killed.child.wait();
+    // What the killed supervisor had recorded is on disk, and reports.
+    let survived = Records::read(&killed.run_dir, &killed.prefix);
+    assert!(
+        survived.frames.len() >= 5,
+        "{} frames recorded by the killed run",
+        survived.frames.len()
+    );
+    report_of(&killed.run_dir);
     std::thread::sleep(Duration::from_millis(300));
     let left = linetrack_ipc::Scope {
         prefix: killed.prefix.clone(),
@@ -384,6 +492,108 @@ fn sigterm_stops_the_run_cleanly_and_a_killed_run_is_cleaned_up_by_the_next() {
             s.pid
         );
     }
+}
+
+/// `linetrack report` on a run folder: it succeeds; its output.
+fn report_of(run_dir: &std::path::Path) -> String {
+    let out = std::process::Command::new(bin_dir().join("linetrack"))
+        .arg("report")
+        .arg(run_dir)
+        .output()
+        .unwrap_or_else(|e| panic!("linetrack report: {e}"));
+    let text = String::from_utf8_lossy(&out.stdout).to_string();
+    assert!(
+        out.status.success(),
+        "linetrack report {}: {}\n{text}{}",
+        run_dir.display(),
+        out.status,
+        String::from_utf8_lossy(&out.stderr)
+    );
+    text
+}
+
+#[test]
+fn the_restart_limit_ends_the_run_with_its_records_and_the_reason() {
+    let dir = scratch("restart-limit");
+    let extra = quick().replace("[supervisor]\n", "[supervisor]\nmax_restarts = 0\n");
+    let mut run = start(&dir, &base_sequence(FRAMES), &extra);
+    let status = run.wait_for("5 frames", RUN_TIMEOUT, |s| s.frames >= 5);
+    let victim = status
+        .stages
+        .iter()
+        .find(|s| s.stage == "matcher")
+        .unwrap_or_else(|| panic!("no matcher in {:?}", status.stages))
+        .pid;
+    signal(victim, "KILL");
+    let run_dir = run.run_dir.clone();
+    let (exit, out, records) = run.finish(RUN_TIMEOUT);
+    assert!(!exit.success(), "the run gave up but exited {exit}\n{out}");
+    // Every frame the source published has a row, in order from 0, and the crash is an event.
+    let recorded = ids(&records);
+    assert!(recorded.len() >= 5, "{recorded:?}");
+    assert_eq!(recorded, (0..recorded.len() as u64).collect::<Vec<_>>());
+    assert!(
+        records
+            .events_of("crash")
+            .iter()
+            .any(|e| e.stage == "matcher"),
+        "{:?}",
+        records.events
+    );
+    let summary = linetrack_run_record::Summary::read(&run_dir.join("summary.json"))
+        .unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(summary.end, linetrack_run_record::RunEnd::Failed);
+    let reason = summary.reason.unwrap_or_default();
+    assert!(
+        reason.contains("matcher") && reason.contains("restart limit 0"),
+        "{reason}"
+    );
+    assert_eq!(summary.report.frames, recorded.len());
+    let status: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(run_dir.join("status.json")).unwrap_or_default(),
+    )
+    .unwrap_or_default();
+    assert_eq!(status["state"], "failed", "{status}");
+    assert_eq!(status["stages"], serde_json::json!([]), "{status}");
+    let report = report_of(&run_dir);
+    assert!(
+        report.contains(&format!("frames {}", recorded.len())),
+        "{report}"
+    );
+    assert_eq!(
+        records.leftovers,
+        Default::default(),
+        "iceoryx2 nodes or services left behind"
+    );
+}
+
+#[test]
+fn a_second_run_into_a_busy_run_folder_is_refused_naming_the_first() {
+    let dir = scratch("locked");
+    let mut first = start(&dir, &base_sequence(FRAMES), &quick());
+    let status = first.wait_for("3 frames", RUN_TIMEOUT, |s| s.frames >= 3);
+    // The same config, so the same run folder, from another shell.
+    let second = std::process::Command::new(bin_dir().join("linetrack"))
+        .args(["run", "--quiet", "--config"])
+        .arg(dir.join("pipeline.toml"))
+        .env(
+            linetrack_ipc::Scope::PREFIX_VAR,
+            format!("{}second_", first.prefix),
+        )
+        .stdin(std::process::Stdio::null())
+        .output()
+        .unwrap_or_else(|e| panic!("starting the second run: {e}"));
+    let err = String::from_utf8_lossy(&second.stderr);
+    assert!(!second.status.success(), "the second run ran: {err}");
+    assert!(
+        err.contains("in use by another run")
+            && err.contains(&format!("pid {}", status.supervisor_pid)),
+        "{err}"
+    );
+    // The first run was not disturbed.
+    let (exit, out, records) = first.finish(RUN_TIMEOUT);
+    assert!(exit.success(), "{exit}\n{out}");
+    assert_every_frame_accounted(&records);
 }
 
 fn proc_is_zombie_or_gone(pid: u32) -> bool {

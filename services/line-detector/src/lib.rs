@@ -11,7 +11,8 @@
 use linetrack_ipc::{Bus, Inlet, Outlet, Received, Shutdown, Wake};
 use linetrack_msgs::{Command, Control, FrameHeader, SegmentRecord, StageKind, StatusKind, Topic};
 use linetrack_stage_runtime::{
-    HeldFrames, Reporter, StageContext, detector_code, process_frame, stereo_views, to_records,
+    GapWatch, HeldFrames, Reporter, StageContext, detector_code, process_frame, stereo_views,
+    to_records,
 };
 use linetrack_vision::{GrayImage, LineDetector, create_detector, stretch_contrast};
 use std::time::Duration;
@@ -132,7 +133,8 @@ pub fn run(ctx: &StageContext, mut ports: Ports, shutdown: &Shutdown) -> anyhow:
     } else {
         Role::Active
     };
-    let mut held = HeldFrames::new(10);
+    let mut held = HeldFrames::default();
+    let mut gaps = GapWatch::default();
     let mut next_unpublished = 0u64;
     let mut processed = 0u64;
     let mut ready_sent = false;
@@ -182,21 +184,22 @@ pub fn run(ctx: &StageContext, mut ports: Ports, shutdown: &Shutdown) -> anyhow:
                 _ => {}
             }
         }
-        let frames = ports.frames.receive_all()?;
         match role {
             Role::Standby => {
-                for frame in frames {
-                    held.push(frame);
-                }
+                let overflow = held.receive(&mut ports.frames)?;
+                ports.reporter.overflow(overflow);
                 if !ready_sent && let Some(first) = held.first_id() {
                     ports.reporter.report(StatusKind::Ready, first, 0);
                     ready_sent = true;
                 }
             }
             Role::Active | Role::HandingOver { .. } => {
+                // Nothing is held here: the whole queue fits the borrow limit.
+                let frames = ports.frames.receive_all()?;
                 let count = frames.len();
                 for (k, frame) in frames.iter().enumerate() {
                     let id = frame.header().frame_id;
+                    ports.reporter.gap(gaps.observe(id));
                     if let Role::HandingOver { at } = role
                         && id >= at
                     {

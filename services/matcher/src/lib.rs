@@ -16,7 +16,7 @@ use linetrack_msgs::{
 };
 use linetrack_pipeline_config::MatcherPolicy;
 use linetrack_stage_runtime::{
-    HeldFrames, Reporter, StageContext, process_frame, stereo_views, to_segment,
+    GapWatch, HeldFrames, Reporter, StageContext, process_frame, stereo_views, to_segment,
 };
 use linetrack_vision::{
     FeatureMatch, LineFeatures, MatcherKind, SegmentMatcher, create_segment_matcher,
@@ -226,7 +226,8 @@ impl FrameMatcher {
 /// Runs the matcher until shutdown.
 pub fn run(ctx: &StageContext, mut ports: Ports, shutdown: &Shutdown) -> anyhow::Result<()> {
     let mut matcher = FrameMatcher::new(ctx)?;
-    let mut held = HeldFrames::new(10);
+    let mut held = HeldFrames::default();
+    let mut gaps = GapWatch::default();
     let mut processed = 0u64;
     ports
         .reporter
@@ -248,13 +249,13 @@ pub fn run(ctx: &StageContext, mut ports: Ports, shutdown: &Shutdown) -> anyhow:
                 _ => {}
             }
         }
-        for frame in ports.frames.receive_all()? {
-            held.push(frame);
-        }
+        let overflow = held.receive(&mut ports.frames)?;
+        ports.reporter.overflow(overflow);
         let batch = ports.segments.receive_all()?;
         let count = batch.len();
         for (k, message) in batch.iter().enumerate() {
             let header = *message.header();
+            ports.reporter.gap(gaps.observe(header.frame_id));
             let span = info_span!("match", frame_id = header.frame_id);
             let _entered = span.enter();
             let images = held.take(header.frame_id);

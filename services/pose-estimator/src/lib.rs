@@ -14,7 +14,7 @@ use linetrack_msgs::{
 };
 use linetrack_odometry::{Features, FrameStats, MatchedLines, MotionTracker};
 use linetrack_stage_runtime::{
-    HeldFrames, Reporter, StageContext, process_frame, stereo_views, to_segment,
+    GapWatch, HeldFrames, Reporter, StageContext, process_frame, stereo_views, to_segment,
 };
 use linetrack_vision::FeatureMatch;
 use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion};
@@ -183,7 +183,8 @@ impl PoseTracker {
 /// Runs the pose estimator until shutdown.
 pub fn run(ctx: &StageContext, mut ports: Ports, shutdown: &Shutdown) -> anyhow::Result<()> {
     let mut tracker = PoseTracker::new(ctx)?;
-    let mut held = HeldFrames::new(10);
+    let mut held = HeldFrames::default();
+    let mut gaps = GapWatch::default();
     let mut processed = 0u64;
     ports.reporter.report(StatusKind::Ready, 0, 0);
     while !shutdown.requested() {
@@ -196,14 +197,14 @@ pub fn run(ctx: &StageContext, mut ports: Ports, shutdown: &Shutdown) -> anyhow:
             }
         }
         if let Some(frames) = &mut ports.frames {
-            for frame in frames.receive_all()? {
-                held.push(frame);
-            }
+            let overflow = held.receive(frames)?;
+            ports.reporter.overflow(overflow);
         }
         let batch = ports.tracks.receive_all()?;
         let count = batch.len();
         for (k, message) in batch.iter().enumerate() {
             let header = *message.header();
+            ports.reporter.gap(gaps.observe(header.frame_id));
             let span = info_span!("estimate_pose", frame_id = header.frame_id);
             let _entered = span.enter();
             let frame = held.take(header.frame_id);

@@ -19,7 +19,12 @@ pub struct Switch {
 /// when the matcher stage ran over its budget; `bad_frames` failures in a row switch to ℓ1.
 /// In ℓ1 mode the matcher probes LBD every few frames; `recover_probes` probes in a row
 /// with at least `recover_stereo_matches` (a higher bar than the one for failing: the
-/// hysteresis) switch back.
+/// hysteresis) and, with `over_budget`, the matcher stage within `recover_budget_fraction`
+/// of its budget (a lower bar than the budget: the latency's hysteresis) switch back. So a
+/// matcher that fell back for its latency stays on ℓ1 until LBD clearly fits again,
+/// instead of flapping around the budget.
+///
+/// Latencies come from the frames' stamps, never from a clock: the tests inject them.
 #[derive(Debug, Clone)]
 pub struct FallbackController {
     config: FallbackConfig,
@@ -46,6 +51,26 @@ impl FallbackController {
         self.mode
     }
 
+    /// Milliseconds the matcher stage took on `header`.
+    fn matcher_ms(header: &FrameHeader) -> f64 {
+        let stamp = header.stamps[StageKind::Matcher.stamp_index().unwrap_or(2)];
+        stamp.end_ns.saturating_sub(stamp.start_ns) as f64 * 1e-6
+    }
+
+    /// Why an LBD probe does not pass, if it does not.
+    fn probe_shortfall(&self, header: &FrameHeader, found: u32) -> Option<String> {
+        let c = &self.config;
+        if found < c.recover_stereo_matches {
+            return Some(format!(
+                "{found} < {} LBD stereo matches",
+                c.recover_stereo_matches
+            ));
+        }
+        let ms = Self::matcher_ms(header);
+        let bar = c.recover_budget_fraction * self.matcher_budget_ms;
+        (c.over_budget && ms > bar).then(|| format!("matcher {ms:.1} ms > {bar:.1} ms"))
+    }
+
     /// Why an LBD frame failed, if it did.
     fn failure(&self, header: &FrameHeader, pose: &PoseRecord) -> Option<String> {
         let c = &self.config;
@@ -64,8 +89,7 @@ impl FallbackController {
                 pose.inliers[1], observed, c.min_inlier_ratio
             ));
         }
-        let stamp = header.stamps[StageKind::Matcher.stamp_index().unwrap_or(2)];
-        let ms = stamp.end_ns.saturating_sub(stamp.start_ns) as f64 * 1e-6;
+        let ms = Self::matcher_ms(header);
         if c.over_budget && ms > self.matcher_budget_ms {
             return Some(format!(
                 "matcher over budget ({ms:.1} ms > {:.1} ms)",
@@ -106,17 +130,27 @@ impl FallbackController {
                 let Ok(found) = u32::try_from(header.lbd_probe_matches) else {
                     return None;
                 };
-                if found >= self.config.recover_stereo_matches {
-                    self.good_probes += 1;
-                } else {
-                    self.good_probes = 0;
+                match self.probe_shortfall(header, found) {
+                    None => self.good_probes += 1,
+                    Some(_) => self.good_probes = 0,
                 }
                 if self.good_probes >= self.config.recover_probes {
                     self.mode = MatcherMode::Lbd;
                     self.good_probes = 0;
+                    let c = &self.config;
+                    let latency = if c.over_budget {
+                        format!(
+                            " with the matcher within {:.1} ms",
+                            c.recover_budget_fraction * self.matcher_budget_ms
+                        )
+                    } else {
+                        String::new()
+                    };
                     let reason = format!(
-                        "LBD probes found >= {} stereo matches on {} probes in a row (last {found})",
-                        self.config.recover_stereo_matches, self.config.recover_probes
+                        "LBD probes found >= {} stereo matches{latency} on {} probes in a row (last {found}, {:.1} ms)",
+                        c.recover_stereo_matches,
+                        c.recover_probes,
+                        Self::matcher_ms(header)
                     );
                     return Some(Switch {
                         to: MatcherMode::Lbd,
@@ -257,5 +291,81 @@ mod tests {
             .unwrap_or_else(|| panic!("no recovery"));
         assert_eq!(back.to, MatcherMode::Lbd);
         assert_eq!(c.mode(), MatcherMode::Lbd);
+    }
+
+    #[test]
+    fn recovery_waits_for_the_budget_too_so_a_slow_matcher_does_not_flap() {
+        // Budget 50 ms, recovery bar 0.8 × 50 = 40 ms.
+        let mut c = controller();
+        for _ in 0..3 {
+            c.observe(&frame(MatcherMode::Lbd, 40, -1, 60), &pose(0, 0));
+        }
+        assert_eq!(c.mode(), MatcherMode::L1, "over budget: fallback");
+        // Probes with plenty of LBD matches but the matcher between the bar and the budget:
+        // no recovery, however many.
+        for _ in 0..20 {
+            assert_eq!(
+                c.observe(&frame(MatcherMode::L1, 50, 40, 45), &pose(0, 0)),
+                None
+            );
+        }
+        // Within the bar: back after `recover_probes` probes in a row; one slow probe
+        // between them starts the count again.
+        assert_eq!(
+            c.observe(&frame(MatcherMode::L1, 50, 40, 30), &pose(0, 0)),
+            None
+        );
+        assert_eq!(
+            c.observe(&frame(MatcherMode::L1, 50, 40, 41), &pose(0, 0)),
+            None
+        );
+        assert_eq!(
+            c.observe(&frame(MatcherMode::L1, 50, 40, 30), &pose(0, 0)),
+            None
+        );
+        let back = c
+            .observe(&frame(MatcherMode::L1, 50, 40, 40), &pose(0, 0))
+            .unwrap_or_else(|| panic!("no recovery"));
+        assert!(back.reason.contains("within 40.0 ms"), "{}", back.reason);
+    }
+
+    #[test]
+    fn latency_around_the_budget_switches_once_not_back_and_forth() {
+        // A matcher hovering around its budget (LBD 45–60 ms; the probe frames, ℓ1 and LBD
+        // together, 45–55 ms) with LBD matching well: one fallback, no recovery.
+        let mut c = controller();
+        let mut switches = 0;
+        for i in 0..200u64 {
+            let ms = 45 + (i * 7) % 16;
+            let header = match c.mode() {
+                MatcherMode::Lbd => frame(MatcherMode::Lbd, 40, -1, ms),
+                _ => frame(
+                    MatcherMode::L1,
+                    50,
+                    if i % 5 == 0 { 40 } else { -1 },
+                    ms.min(55),
+                ),
+            };
+            switches += usize::from(c.observe(&header, &pose(20, 30)).is_some());
+        }
+        assert_eq!(switches, 1);
+        // With a recovery bar the probes clear (as when only counts mattered), it flaps.
+        let mut loose = FallbackController::new(
+            FallbackConfig {
+                recover_budget_fraction: 0.95,
+                ..controller().config
+            },
+            50.0,
+        );
+        let mut switches = 0;
+        for i in 0..200u64 {
+            let ms = 45 + (i * 7) % 16;
+            let header = match loose.mode() {
+                MatcherMode::Lbd => frame(MatcherMode::Lbd, 40, -1, ms),
+                _ => frame(MatcherMode::L1, 50, if i % 5 == 0 { 40 } else { -1 }, 45),
+            };
+            switches += usize::from(loose.observe(&header, &pose(20, 30)).is_some());
+        }
+        assert!(switches > 2, "{switches}: the comparison should flap");
     }
 }

@@ -9,10 +9,13 @@
 //! ([`Mode::Threads`]) the same stage code runs on threads over crossbeam channels: the
 //! baseline that shows what the IPC costs (no restarts or swaps there).
 //!
-//! Records go to the run folder: see [`monitor::Monitor::finish`].
+//! Records go to the run folder as the run goes ([`monitor::Monitor`]); however the run
+//! ends (completed, interrupted, a stage that would not start or died past the restart
+//! limit) `summary.json` says how, and `status.json` stops saying "running".
 
 pub mod fallback;
 pub mod monitor;
+pub mod run_dir;
 
 use anyhow::{Context, bail};
 use linetrack_ipc::{Bus, Inlet, Outlet, Scope, Shutdown, Wake};
@@ -21,7 +24,7 @@ use linetrack_msgs::{
     Topic, now_ns,
 };
 use linetrack_pipeline_config::PipelineConfig;
-use linetrack_run_record::Report;
+use linetrack_run_record::{Report, RunEnd};
 use linetrack_stage_runtime::{StageContext, detector_code, detector_from_code};
 use linetrack_vision::DetectorKind;
 use monitor::Monitor;
@@ -126,8 +129,28 @@ pub struct LiveStatus {
     pub detector: String,
     /// Frames with an outcome so far.
     pub frames: usize,
+    /// `running`, or how the run ended.
+    pub state: RunEnd,
+    /// Why it failed, when it did.
+    pub reason: Option<String>,
+}
+
+impl LiveStatus {
     /// Whether the run is over.
-    pub finished: bool,
+    pub fn finished(&self) -> bool {
+        self.state != RunEnd::Running
+    }
+
+    /// Writes `status.json` in `run_dir` (a temporary file renamed over it: readers never
+    /// see half of it).
+    fn write(&self, run_dir: &Path) {
+        if let Ok(text) = serde_json::to_string_pretty(self) {
+            let tmp = run_dir.join("status.json.tmp");
+            if std::fs::write(&tmp, text).is_ok() {
+                let _ = std::fs::rename(&tmp, run_dir.join("status.json"));
+            }
+        }
+    }
 }
 
 /// One running stage process.
@@ -143,9 +166,9 @@ pub struct StageEntry {
     pub standby: bool,
 }
 
-/// Writes the effective config and prepares the run folder.
-fn prepare_run_dir(config: &PipelineConfig) -> anyhow::Result<(PathBuf, PathBuf)> {
-    let run_dir = config.output.run_dir.clone();
+/// Clears an earlier run's files from the (locked) run folder and writes the effective
+/// config into it; returns the config's path.
+fn prepare_run_dir(config: &PipelineConfig, run_dir: &Path) -> anyhow::Result<PathBuf> {
     for stale in [
         "spans",
         "trace.json",
@@ -163,12 +186,10 @@ fn prepare_run_dir(config: &PipelineConfig) -> anyhow::Result<(PathBuf, PathBuf)
             std::fs::remove_file(&path).with_context(|| format!("clearing {}", path.display()))?;
         }
     }
-    std::fs::create_dir_all(&run_dir)
-        .with_context(|| format!("creating run folder {}", run_dir.display()))?;
     let config_path = run_dir.join("pipeline.toml");
     std::fs::write(&config_path, toml::to_string(config)?)
         .with_context(|| format!("writing {}", config_path.display()))?;
-    Ok((run_dir, config_path))
+    Ok(config_path)
 }
 
 /// Runs the pipeline on `config` until the sequence is done or `shutdown` is set.
@@ -188,14 +209,87 @@ pub fn run(
         "source.sequence {}: no frames",
         config.source.sequence.display()
     );
-    let (run_dir, config_path) = prepare_run_dir(config)?;
+    let run_dir = run_dir::resolve(&config.output, std::time::SystemTime::now())?;
+    // Held until the run is over; released by the kernel if this process dies.
+    let _lock = run_dir::lock(&run_dir)?;
+    let config = &PipelineConfig {
+        output: linetrack_pipeline_config::OutputConfig {
+            run_dir: Some(run_dir.clone()),
+            ..config.output.clone()
+        },
+        ..config.clone()
+    };
+    let config_path = prepare_run_dir(config, &run_dir)?;
     let run_id = new_run_id();
-    match options.mode {
-        Mode::Processes => {
-            Supervisor::new(config, options, run_id, run_dir, config_path)?.run(shutdown)
-        }
-        Mode::Threads => run_threads(config, options, run_id, run_dir, shutdown),
+    let scope = Scope::new(&run_id);
+    let mut monitor = Monitor::new(config, 0, &run_dir)?;
+    let result = match options.mode {
+        Mode::Processes => Supervisor::new(
+            config,
+            options,
+            &run_id,
+            &scope,
+            &run_dir,
+            config_path,
+            &mut monitor,
+        )
+        .and_then(|supervisor| supervisor.run(shutdown)),
+        Mode::Threads => run_threads(config, options, &run_dir, &mut monitor, shutdown),
+    };
+    // A run that tracked nothing did not do its job, however cleanly it ran.
+    let result = match result {
+        Ok(false) if monitor.tracked() == 0 => Err(anyhow::anyhow!(
+            "nothing was tracked: none of the {} frames with an outcome got a tracked pose (what became of them: linetrack report {})",
+            monitor.accounted(),
+            run_dir.display()
+        )),
+        other => other,
+    };
+    // Whatever happened, the run's records are closed and say how it ended.
+    let (end, reason) = match &result {
+        Ok(false) => (RunEnd::Completed, None),
+        Ok(true) => (RunEnd::Interrupted, None),
+        Err(e) => (RunEnd::Failed, Some(format!("{e:#}"))),
+    };
+    let frames = monitor.accounted();
+    let report = monitor.finish(end, reason.clone());
+    final_status(config, &run_id, &scope, &run_dir, frames, end, reason);
+    let interrupted = result?;
+    let report = report.with_context(|| format!("records of {}", run_dir.display()))?;
+    Ok(RunOutcome {
+        run_dir,
+        run_id,
+        report,
+        interrupted,
+    })
+}
+
+/// The last `status.json` of a run: no stage left, how it ended. The detector is the one
+/// the live status last named (a swap may have changed it).
+fn final_status(
+    config: &PipelineConfig,
+    run_id: &str,
+    scope: &Scope,
+    run_dir: &Path,
+    frames: usize,
+    state: RunEnd,
+    reason: Option<String>,
+) {
+    let detector = std::fs::read_to_string(run_dir.join("status.json"))
+        .ok()
+        .and_then(|text| serde_json::from_str::<LiveStatus>(&text).ok())
+        .map_or_else(|| config.detector.name().to_string(), |s| s.detector);
+    LiveStatus {
+        run_id: run_id.to_string(),
+        ipc_prefix: scope.prefix.clone(),
+        supervisor_pid: std::process::id(),
+        stages: Vec::new(),
+        detector,
+        frames,
+        state,
+        reason,
     }
+    .write(run_dir);
 }
 
 /// A running stage process.
@@ -219,7 +313,7 @@ struct Restarts {
     due: Option<Instant>,
 }
 
-struct Supervisor {
+struct Supervisor<'m> {
     config: PipelineConfig,
     options: RunOptions,
     run_id: String,
@@ -229,7 +323,7 @@ struct Supervisor {
     bin_dir: PathBuf,
     bus: Bus,
     ports: Ports,
-    monitor: Monitor,
+    monitor: &'m mut Monitor,
     processes: Vec<StageProcess>,
     restarts: [Restarts; 4],
     detector: DetectorKind,
@@ -240,13 +334,15 @@ fn stage_slot(stage: StageKind) -> usize {
     stage.stamp_index().unwrap_or(0)
 }
 
-impl Supervisor {
+impl<'m> Supervisor<'m> {
     fn new(
         config: &PipelineConfig,
         options: &RunOptions,
-        run_id: String,
-        run_dir: PathBuf,
+        run_id: &str,
+        scope: &Scope,
+        run_dir: &Path,
         config_path: PathBuf,
+        monitor: &'m mut Monitor,
     ) -> anyhow::Result<Self> {
         let bin_dir = match &options.bin_dir {
             Some(dir) => dir.clone(),
@@ -267,14 +363,13 @@ impl Supervisor {
                 );
             }
         }
-        let scope = Scope::new(&run_id);
+        let scope = scope.clone();
         // Nodes of killed runs are cleaned when a node starts (or by the explicit call).
         let dead_before = scope.dead_nodes()?;
         let bus = Bus::shared_memory(&scope, &format!("supervisor-{}", std::process::id()))?;
         bus.remove_stale_resources();
         let stale = dead_before.saturating_sub(scope.dead_nodes()?);
         let ports = Ports::open(&bus)?;
-        let mut monitor = Monitor::new(config, 0);
         if stale > 0 {
             monitor.event(
                 "stale-cleanup",
@@ -286,9 +381,9 @@ impl Supervisor {
         Ok(Self {
             config: config.clone(),
             options: options.clone(),
-            run_id,
+            run_id: run_id.to_string(),
             scope,
-            run_dir,
+            run_dir: run_dir.to_path_buf(),
             config_path,
             bin_dir,
             bus,
@@ -357,12 +452,12 @@ impl Supervisor {
             detector,
             retiring: false,
         });
-        self.write_status(false);
+        self.write_status();
         Ok(())
     }
 
-    fn write_status(&self, finished: bool) {
-        let status = LiveStatus {
+    fn write_status(&self) {
+        LiveStatus {
             run_id: self.run_id.clone(),
             ipc_prefix: self.scope.prefix.clone(),
             supervisor_pid: std::process::id(),
@@ -378,14 +473,10 @@ impl Supervisor {
                 .collect(),
             detector: self.detector.name().to_string(),
             frames: self.monitor.accounted(),
-            finished,
-        };
-        if let Ok(text) = serde_json::to_string_pretty(&status) {
-            let tmp = self.run_dir.join("status.json.tmp");
-            if std::fs::write(&tmp, text).is_ok() {
-                let _ = std::fs::rename(&tmp, self.run_dir.join("status.json"));
-            }
+            state: RunEnd::Running,
+            reason: None,
         }
+        .write(&self.run_dir);
     }
 
     fn all_ready(&self, stages: &[StageKind]) -> bool {
@@ -396,7 +487,9 @@ impl Supervisor {
         })
     }
 
-    fn run(mut self, shutdown: &Shutdown) -> anyhow::Result<RunOutcome> {
+    /// Supervises until the run ends, then stops every stage; returns whether it was
+    /// interrupted. The caller closes the records.
+    fn run(mut self, shutdown: &Shutdown) -> anyhow::Result<bool> {
         let result = self.supervise(shutdown);
         self.stop_all();
         if self.config.output.trace {
@@ -408,17 +501,7 @@ impl Supervisor {
                 Err(e) => tracing::warn!("trace not merged: {e}"),
             }
         }
-        let interrupted = result?;
-        self.write_status(true);
-        let report = self.monitor.finish(&self.run_dir, interrupted)?;
-        drop(self.ports);
-        drop(self.bus);
-        Ok(RunOutcome {
-            run_dir: self.run_dir,
-            run_id: self.run_id,
-            report,
-            interrupted,
-        })
+        result
     }
 
     /// The main loop; returns whether it was interrupted.
@@ -482,7 +565,7 @@ impl Supervisor {
                 }
             }
             if Instant::now() >= next_file {
-                self.write_status(false);
+                self.write_status();
                 next_file = Instant::now() + Duration::from_millis(200);
             }
             if self.options.live_status
@@ -552,7 +635,7 @@ impl Supervisor {
                             0,
                         )?;
                     }
-                    self.write_status(false);
+                    self.write_status();
                 }
                 Some(StatusKind::HandedOver) => {
                     process.retiring = true;
@@ -585,6 +668,20 @@ impl Supervisor {
                     self.monitor.published(report.frame_id);
                     self.monitor.source_finished(report.frame_id);
                 }
+                Some(StatusKind::Overflow) => self.monitor.event(
+                    "overflow",
+                    stage.name(),
+                    Some(report.frame_id),
+                    format!(
+                        "{} held frames released before their other input arrived (hold of {})",
+                        report.value,
+                        linetrack_stage_runtime::HELD_FRAMES
+                    ),
+                ),
+                Some(StatusKind::QueueGap) => {
+                    self.monitor
+                        .presume_lost(report.frame_id, report.value, stage.name());
+                }
                 Some(StatusKind::Heartbeat)
                     if stage == StageKind::FrameSource && report.value > 0 =>
                 {
@@ -606,7 +703,7 @@ impl Supervisor {
         }
         self.swap_to = None;
         tracing::info!("detector {pid} takes over at frame {frame_id}");
-        self.write_status(false);
+        self.write_status();
     }
 
     fn handle_poses(&mut self) -> anyhow::Result<()> {
@@ -736,7 +833,7 @@ impl Supervisor {
                 .saturating_mul(1 << slot.count.min(16))
                 .min(self.config.supervisor.restart_backoff_max_ms);
             slot.due = Some(Instant::now() + Duration::from_millis(backoff));
-            self.write_status(false);
+            self.write_status();
         }
         for stage in StageKind::PROCESSING {
             let slot = self.restarts[stage_slot(stage)];
@@ -795,23 +892,24 @@ impl Supervisor {
         if cleaned > 0 {
             tracing::info!("removed the shared memory of {cleaned} killed stage processes");
         }
-        self.write_status(false);
+        self.write_status();
     }
 }
 
 /// Runs the stages on threads of this process over channels.
+/// Returns whether it was interrupted; the caller closes the records.
 fn run_threads(
     config: &PipelineConfig,
     options: &RunOptions,
-    run_id: String,
-    run_dir: PathBuf,
+    run_dir: &Path,
+    monitor: &mut Monitor,
     shutdown: &Shutdown,
-) -> anyhow::Result<RunOutcome> {
+) -> anyhow::Result<bool> {
     let bus = Bus::local();
     let hub = bus.local_hub().context("a local bus has a hub")?;
     let mut ports = Ports::open(&bus)?;
     let stage_shutdown = Shutdown::default();
-    let ctx = |stage| StageContext::in_process(stage, config.clone(), run_dir.clone());
+    let ctx = |stage| StageContext::in_process(stage, config.clone(), run_dir.to_path_buf());
     let mut threads = Vec::new();
     macro_rules! start {
         ($stage:expr, $krate:ident) => {{
@@ -831,7 +929,6 @@ fn run_threads(
     start!(StageKind::LineDetector, linetrack_line_detector);
     start!(StageKind::Matcher, linetrack_matcher);
     start!(StageKind::PoseEstimator, linetrack_pose_estimator);
-    let mut monitor = Monitor::new(config, 0);
     let mut ready = 0;
     let mut source_started = false;
     let mut drain_since: Option<Instant> = None;
@@ -907,13 +1004,7 @@ fn run_threads(
     if let Some(f) = failure {
         bail!("{f}: {}", errors.join("; "));
     }
-    let report = monitor.finish(&run_dir, interrupted)?;
-    Ok(RunOutcome {
-        run_dir,
-        run_id,
-        report,
-        interrupted,
-    })
+    Ok(interrupted)
 }
 
 /// The detector wire code (re-exported for `linetrack ctl`).

@@ -1,27 +1,91 @@
 //! What the supervisor knows of a run: every frame's outcome, the events, the matcher mode,
 //! and whether the run is complete. Shared by the multi-process and the single-process
 //! modes.
+//!
+//! Records are appended to the run folder as they happen ([`RecordWriter`]) and the report
+//! is built up as they go ([`Tally`]), so the supervisor's memory does not grow with the
+//! length of the run, and a run that ends any way at all leaves its records.
 
 use crate::fallback::{FallbackController, Switch};
 use linetrack_msgs::{FrameHeader, FrameStatus, MatcherMode, PoseRecord, StageKind};
 use linetrack_pipeline_config::{MatcherPolicy, PipelineConfig};
 use linetrack_run_record::{
-    EventRecord, FrameRecord, Percentiles, Report, STAGES, write_events, write_frames,
+    EventRecord, FrameRecord, Percentiles, RecordError, RecordWriter, Report, RunEnd, STAGES,
+    Summary, Tally,
 };
 use linetrack_stage_runtime::detector_from_code;
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, BTreeSet, VecDeque};
 use std::fmt::Write as _;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::time::Instant;
+
+/// Frames the live status line's percentiles are over.
+const STATUS_WINDOW: usize = 100;
+
+/// Which frames have an outcome, in memory bounded by how far out of order they arrive:
+/// every frame below `below` has one, and so has each frame in `above`.
+#[derive(Debug, Clone)]
+struct Accounted {
+    below: u64,
+    above: BTreeSet<u64>,
+    count: usize,
+    highest: Option<u64>,
+}
+
+impl Accounted {
+    fn new(first_frame: u64) -> Self {
+        Self {
+            below: first_frame,
+            above: BTreeSet::new(),
+            count: 0,
+            highest: None,
+        }
+    }
+
+    fn contains(&self, frame_id: u64) -> bool {
+        frame_id < self.below || self.above.contains(&frame_id)
+    }
+
+    /// Marks `frame_id`; false when it already had an outcome.
+    fn insert(&mut self, frame_id: u64) -> bool {
+        if self.contains(frame_id) {
+            return false;
+        }
+        self.above.insert(frame_id);
+        while self.above.remove(&self.below) {
+            self.below += 1;
+        }
+        self.count += 1;
+        self.highest = Some(self.highest.map_or(frame_id, |h| h.max(frame_id)));
+        true
+    }
+
+    /// Whether every frame up to `last` has an outcome.
+    fn all_up_to(&self, last: u64) -> bool {
+        self.below > last
+    }
+
+    /// Frames whose outcome is remembered one by one (the out-of-order window).
+    fn window(&self) -> usize {
+        self.above.len()
+    }
+}
 
 /// The run's bookkeeping.
 pub struct Monitor {
     config: PipelineConfig,
     started: Instant,
-    records: BTreeMap<u64, FrameRecord>,
-    sequence_ns: BTreeMap<u64, (u64, PoseRecord)>,
+    run_dir: PathBuf,
+    writer: RecordWriter,
+    /// The first record that could not be written (the run goes on; the run then fails).
+    write_error: Option<RecordError>,
+    accounted: Accounted,
+    tally: Tally,
+    recent_end_to_end_ms: VecDeque<f64>,
     duplicates: usize,
-    events: Vec<EventRecord>,
+    /// Frames a stage saw skipped in its full queue, by the stage: dropped unless they
+    /// still turn up (an earlier frame arriving late is no loss).
+    presumed_lost: BTreeMap<u64, String>,
     fallback: Option<FallbackController>,
     last_pose: Option<(u64, PoseRecord)>,
     first_frame: u64,
@@ -39,23 +103,55 @@ fn stage_ms(header: &FrameHeader, i: usize) -> f64 {
 }
 
 impl Monitor {
-    /// A monitor for a run of `config` starting at frame `first_frame`.
-    pub fn new(config: &PipelineConfig, first_frame: u64) -> Self {
+    /// A monitor for a run of `config` starting at frame `first_frame`, recording into
+    /// `run_dir` (its record files are created, empty, now).
+    pub fn new(
+        config: &PipelineConfig,
+        first_frame: u64,
+        run_dir: &Path,
+    ) -> Result<Self, RecordError> {
         let fallback = (config.matcher.mode == MatcherPolicy::Auto).then(|| {
             FallbackController::new(config.matcher.fallback.clone(), config.budget.matcher_ms)
         });
-        Self {
+        Ok(Self {
             config: config.clone(),
             started: Instant::now(),
-            records: BTreeMap::new(),
-            sequence_ns: BTreeMap::new(),
+            run_dir: run_dir.to_path_buf(),
+            writer: RecordWriter::create(run_dir)?,
+            write_error: None,
+            accounted: Accounted::new(first_frame),
+            tally: Tally::default(),
+            recent_end_to_end_ms: VecDeque::with_capacity(STATUS_WINDOW),
             duplicates: 0,
-            events: Vec::new(),
+            presumed_lost: BTreeMap::new(),
             fallback,
             last_pose: None,
             first_frame,
             source_last: None,
             published: None,
+        })
+    }
+
+    /// Keeps the first write error (later records are still attempted).
+    fn note(&mut self, result: Result<(), RecordError>) {
+        if let Err(e) = result
+            && self.write_error.is_none()
+        {
+            tracing::error!("run records: {e}");
+            self.write_error = Some(e);
+        }
+    }
+
+    /// Appends a frame's record and counts it.
+    fn record_frame(&mut self, record: &FrameRecord) {
+        let written = self.writer.frame(record);
+        self.note(written);
+        self.tally.add_frame(record);
+        if record.has_pose() {
+            if self.recent_end_to_end_ms.len() == STATUS_WINDOW {
+                self.recent_end_to_end_ms.pop_front();
+            }
+            self.recent_end_to_end_ms.push_back(record.end_to_end_ms);
         }
     }
 
@@ -65,13 +161,16 @@ impl Monitor {
             .map(|f| format!(" at frame {f}"))
             .unwrap_or_default();
         tracing::info!("{kind} [{stage}]{at}: {detail}");
-        self.events.push(EventRecord {
+        let event = EventRecord {
             time_s: self.started.elapsed().as_secs_f64(),
             kind: kind.to_string(),
             stage: stage.to_string(),
             frame_id,
             detail,
-        });
+        };
+        let written = self.writer.event(&event);
+        self.note(written);
+        self.tally.add_event(&event);
     }
 
     /// Takes one pose message; returns a matcher mode switch when one is due.
@@ -129,18 +228,21 @@ impl Monitor {
                 || end_to_end_ms > budget.end_to_end_ms
                 || status == FrameStatus::DroppedLate,
         };
-        if self.records.contains_key(&header.frame_id) {
+        if !self.accounted.insert(header.frame_id) {
             self.duplicates += 1;
             tracing::warn!("frame {} reached the end twice", header.frame_id);
             return None;
         }
-        self.records.insert(header.frame_id, record);
+        self.presumed_lost.remove(&header.frame_id);
+        self.record_frame(&record);
         if status != FrameStatus::Ok {
             return None;
         }
         self.last_pose = Some((header.frame_id, *pose));
-        self.sequence_ns
-            .insert(header.frame_id, (header.sequence_ns, *pose));
+        let written = self
+            .writer
+            .pose(header.sequence_ns, pose.translation, pose.rotation_xyzw);
+        self.note(written);
         let switch = self.fallback.as_mut().and_then(|f| f.observe(header, pose));
         if let Some(s) = &switch {
             let kind = if s.to == MatcherMode::L1 {
@@ -161,6 +263,25 @@ impl Monitor {
             );
         }
         switch
+    }
+
+    /// `stage` saw `count` frames from `first` skipped on its input (overwritten in its full
+    /// queue, or lost with an upstream stage that died): they are recorded as `skipped` by
+    /// that stage unless they still arrive, and the run does not wait for them.
+    pub fn presume_lost(&mut self, first: u64, count: u64, stage: &str) {
+        let ids = first..first.saturating_add(count);
+        self.event(
+            "skipped",
+            stage,
+            Some(first),
+            format!(
+                "frames {}..{} never arrived here: overwritten in its full queue, or lost with a stage that died",
+                ids.start, ids.end
+            ),
+        );
+        for id in ids.filter(|&id| !self.accounted.contains(id)) {
+            self.presumed_lost.insert(id, stage.to_string());
+        }
     }
 
     /// The mode the matcher should be in (re-sent to a restarted matcher).
@@ -187,7 +308,7 @@ impl Monitor {
     pub fn next_source_frame(&self) -> u64 {
         self.published
             .map_or(self.first_frame, |p| p + 1)
-            .max(self.records.keys().next_back().map_or(0, |k| k + 1))
+            .max(self.accounted.highest.map_or(0, |k| k + 1))
     }
 
     /// The last tracked pose, as `--resume-pose` text.
@@ -201,36 +322,42 @@ impl Monitor {
 
     /// Whether every frame the source published has an outcome.
     pub fn complete(&self) -> bool {
-        self.source_last
-            .is_some_and(|last| (self.first_frame..=last).all(|f| self.records.contains_key(&f)))
+        self.source_last.is_some_and(|last| {
+            self.accounted.all_up_to(last)
+                || (self.accounted.below..=last)
+                    .all(|f| self.accounted.contains(f) || self.presumed_lost.contains_key(&f))
+        })
     }
 
     /// Frames with an outcome.
     pub fn accounted(&self) -> usize {
-        self.records.len()
+        self.accounted.count
+    }
+
+    /// Frames with a tracked pose (not predicted, not dropped).
+    pub fn tracked(&self) -> usize {
+        self.tally.tracked()
+    }
+
+    /// Frame ids the monitor remembers one by one: those with an outcome ahead of a frame
+    /// still on its way. Bounded by the pipeline's depth, not by the run's length.
+    pub fn remembered_frames(&self) -> usize {
+        self.accounted.window()
     }
 
     /// The one-line live status.
     pub fn status_line(&self) -> String {
         let elapsed = self.started.elapsed().as_secs_f64();
-        let recent: Vec<&FrameRecord> = self.records.values().rev().take(100).collect();
-        let e2e = Percentiles::of(
-            recent
-                .iter()
-                .filter(|f| f.has_pose())
-                .map(|f| f.end_to_end_ms),
-        );
-        let rate = self.records.len() as f64 / elapsed.max(1e-3);
-        let drops = self.records.values().filter(|f| !f.has_pose()).count();
-        let misses = self.records.values().filter(|f| f.deadline_miss).count();
+        let e2e = Percentiles::of(self.recent_end_to_end_ms.iter().copied());
+        let frames = self.tally.frames();
+        let rate = frames as f64 / elapsed.max(1e-3);
+        let drops = frames - self.tally.with_pose();
+        let misses = self.tally.deadline_misses();
         let mode = self.fallback.as_ref().map_or_else(
             || self.config.matcher.mode_name().to_string(),
             |f| format!("auto:{}", f.mode().name()),
         );
-        let mut line = format!(
-            "[{elapsed:6.1} s] frames {:>5}  {rate:5.1} fps  ",
-            self.records.len()
-        );
+        let mut line = format!("[{elapsed:6.1} s] frames {frames:>5}  {rate:5.1} fps  ");
         match e2e {
             Some(p) => {
                 let _ = write!(
@@ -241,7 +368,7 @@ impl Monitor {
             }
             None => line.push_str("e2e -  "),
         }
-        let restarts = self.events.iter().filter(|e| e.kind == "restart").count();
+        let restarts = self.tally.events_of("restart");
         let _ = write!(
             line,
             "matcher {mode}  drops {drops}  misses {misses}  restarts {restarts}"
@@ -249,18 +376,24 @@ impl Monitor {
         line
     }
 
-    /// Fills in frames that never arrived, writes the records to `run_dir` and returns the
-    /// report.
-    pub fn finish(mut self, run_dir: &Path, interrupted: bool) -> anyhow::Result<Report> {
+    /// Records the frames that never arrived as `missing`, writes `summary.json` saying
+    /// how the run ended (`reason`: why it failed) and returns the report. Called on every
+    /// way a run ends.
+    pub fn finish(mut self, end: RunEnd, reason: Option<String>) -> Result<Report, RecordError> {
         let last = self
             .source_last
             .or(self.published)
-            .or(self.records.keys().next_back().copied());
+            .or(self.accounted.highest);
         if let Some(last) = last {
             for f in self.first_frame..=last {
-                self.records
-                    .entry(f)
-                    .or_insert_with(|| FrameRecord::missing(f));
+                if self.accounted.insert(f) {
+                    let mut record = FrameRecord::missing(f);
+                    if let Some(stage) = self.presumed_lost.remove(&f) {
+                        record.outcome = "skipped".to_string();
+                        record.dropped_by = stage;
+                    }
+                    self.record_frame(&record);
+                }
             }
         }
         if self.duplicates > 0 {
@@ -272,35 +405,142 @@ impl Monitor {
                 format!("{n} frames reached the end twice (first outcome kept)"),
             );
         }
-        if interrupted {
-            self.event(
+        match end {
+            RunEnd::Interrupted => self.event(
                 "interrupted",
                 "supervisor",
                 None,
                 "stopped before the sequence ended".to_string(),
-            );
+            ),
+            RunEnd::Failed => self.event(
+                "failed",
+                "supervisor",
+                None,
+                reason.clone().unwrap_or_default(),
+            ),
+            RunEnd::Running | RunEnd::Completed => {}
         }
-        let frames: Vec<FrameRecord> = self.records.into_values().collect();
-        write_frames(&run_dir.join("frames.csv"), &frames)?;
-        write_events(&run_dir.join("events.csv"), &self.events)?;
-        let mut tum = String::from(
-            "# timestamp tx ty tz qx qy qz qw (left camera in the first frame's world)\n",
+        let report = self.tally.report();
+        Summary {
+            end,
+            reason,
+            report: report.clone(),
+        }
+        .write(&self.run_dir.join("summary.json"))?;
+        match self.write_error {
+            Some(e) => Err(e),
+            None => Ok(report),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use linetrack_run_record::{read_events, read_frames};
+
+    fn scratch(name: &str) -> PathBuf {
+        let dir = std::env::temp_dir().join(format!("linetrack-{name}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap_or_else(|e| panic!("{e}"));
+        dir
+    }
+
+    fn pose_of(monitor: &mut Monitor, frame_id: u64) {
+        let mut header = FrameHeader::new(frame_id, frame_id * 50_000_000, 1);
+        header.stamps[3].end_ns = 2_000_001;
+        header.stereo_matches = 40;
+        header.matcher_mode = MatcherMode::Lbd as u32;
+        monitor.on_pose(&header, &PoseRecord::default());
+    }
+
+    #[test]
+    fn records_are_on_disk_as_frames_complete_and_memory_stays_bounded() {
+        let dir = scratch("monitor-stream");
+        let config = PipelineConfig::default();
+        let mut monitor = Monitor::new(&config, 0, &dir).unwrap_or_else(|e| panic!("{e}"));
+        // 20 000 frames arriving up to 3 out of order (a restarted stage, a hot swap).
+        const FRAMES: u64 = 20_000;
+        let mut most_remembered = 0;
+        for base in (0..FRAMES).step_by(4) {
+            for f in [base + 3, base + 1, base + 2, base] {
+                pose_of(&mut monitor, f);
+                most_remembered = most_remembered.max(monitor.remembered_frames());
+            }
+        }
+        monitor.event("restart", "matcher", Some(7), "restart 1 of 5".to_string());
+        assert!(
+            most_remembered <= 3,
+            "{most_remembered} frame ids held one by one"
         );
-        for (sequence_ns, p) in self.sequence_ns.values() {
-            let [tx, ty, tz] = p.translation;
-            let [qx, qy, qz, qw] = p.rotation_xyzw;
-            let _ = writeln!(
-                tum,
-                "{:.9} {tx:.6} {ty:.6} {tz:.6} {qx:.6} {qy:.6} {qz:.6} {qw:.6}",
-                *sequence_ns as f64 * 1e-9
-            );
+        // Everything so far is in the files before the run ends.
+        let frames = read_frames(&dir.join("frames.csv")).unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(frames.len(), FRAMES as usize);
+        assert_eq!(frames.last().map(|f| f.frame_id), Some(FRAMES - 1));
+        assert_eq!(
+            read_events(&dir.join("events.csv"))
+                .unwrap_or_else(|e| panic!("{e}"))
+                .len(),
+            1
+        );
+        let poses = std::fs::read_to_string(dir.join("poses.tum")).unwrap_or_default();
+        assert_eq!(poses.lines().count(), FRAMES as usize + 1);
+        // A frame arriving twice is counted once.
+        pose_of(&mut monitor, 5);
+        monitor.source_finished(FRAMES + 1);
+        assert!(
+            !monitor.complete(),
+            "frames {FRAMES} and {} missing",
+            FRAMES + 1
+        );
+        let report = monitor
+            .finish(RunEnd::Failed, Some("matcher died".to_string()))
+            .unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(
+            (report.frames, report.poses, report.restarts),
+            (FRAMES as usize + 2, FRAMES as usize, 1)
+        );
+        assert_eq!(report.drops, [("missing".to_string(), 2)]);
+        let summary = Summary::read(&dir.join("summary.json")).unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(summary.end, RunEnd::Failed);
+        assert_eq!(summary.reason.as_deref(), Some("matcher died"));
+        assert_eq!(summary.report, report);
+        let events = read_events(&dir.join("events.csv")).unwrap_or_else(|e| panic!("{e}"));
+        assert!(
+            events.iter().any(|e| e.kind == "duplicate")
+                && events
+                    .iter()
+                    .any(|e| e.kind == "failed" && e.detail == "matcher died"),
+            "{events:?}"
+        );
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn frames_skipped_on_a_stage_input_are_drops_unless_they_still_arrive() {
+        let dir = scratch("monitor-skipped");
+        let mut monitor =
+            Monitor::new(&PipelineConfig::default(), 0, &dir).unwrap_or_else(|e| panic!("{e}"));
+        for f in [0, 1, 5, 6] {
+            pose_of(&mut monitor, f);
         }
-        std::fs::write(run_dir.join("poses.tum"), tum)?;
-        let report = Report::new(&frames, &self.events);
-        std::fs::write(
-            run_dir.join("summary.json"),
-            serde_json::to_string_pretty(&report)?,
-        )?;
-        Ok(report)
+        monitor.source_finished(6);
+        assert!(!monitor.complete());
+        monitor.presume_lost(2, 3, "pose-estimator");
+        assert!(monitor.complete(), "no wait for frames known to be lost");
+        // Frame 3 was late, not lost (frames from two publishers during a hot swap).
+        pose_of(&mut monitor, 3);
+        let report = monitor
+            .finish(RunEnd::Completed, None)
+            .unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(report.drops, [("skipped".to_string(), 2)]);
+        let frames = read_frames(&dir.join("frames.csv")).unwrap_or_else(|e| panic!("{e}"));
+        let skipped: Vec<(u64, &str)> = frames
+            .iter()
+            .filter(|f| f.outcome == "skipped")
+            .map(|f| (f.frame_id, f.dropped_by.as_str()))
+            .collect();
+        assert_eq!(skipped, [(2, "pose-estimator"), (4, "pose-estimator")]);
+        let _ = std::fs::remove_dir_all(&dir);
     }
 }

@@ -136,7 +136,10 @@ impl Topic {
     /// How many messages a subscriber queues before the oldest is overwritten. Images are
     /// large and stages drop late frames rather than queue them; the small topics get room
     /// for bursts.
-    pub fn queue_depth(self) -> usize {
+    ///
+    /// The one number behind a subscriber's buffer, its borrow limit (the same) and the
+    /// frames a stage may hold (`linetrack_stage_runtime::HELD_FRAMES`, one less).
+    pub const fn queue_depth(self) -> usize {
         match self {
             Topic::Frames => 12,
             Topic::Segments | Topic::Tracks => 16,
@@ -375,6 +378,12 @@ pub enum StatusKind {
     SourceFinished = 3,
     /// A stage exits on its own (`value`: 0 done, 1 error).
     Exiting = 4,
+    /// A stage's hold overflowed: `value` frames from `frame_id` on were released before
+    /// their other input arrived (they go on without it).
+    Overflow = 5,
+    /// Frames never arrived on a stage's input: `value` frames from `frame_id` on were
+    /// skipped (overwritten in its full queue while it was stopped or slow).
+    QueueGap = 6,
 }
 
 impl StatusKind {
@@ -386,6 +395,8 @@ impl StatusKind {
             Self::HandedOver,
             Self::SourceFinished,
             Self::Exiting,
+            Self::Overflow,
+            Self::QueueGap,
         ]
         .get(code as usize)
         .copied()

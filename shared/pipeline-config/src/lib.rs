@@ -106,6 +106,10 @@ pub struct FallbackConfig {
     pub recover_stereo_matches: u32,
     /// Consecutive passing probes before switching back to LBD.
     pub recover_probes: u32,
+    /// With `over_budget`, a probe also passes only when the matcher stage (ℓ1 and the LBD
+    /// probe together) took at most this fraction of its budget: below the failing bar
+    /// (the budget itself), the latency's hysteresis band.
+    pub recover_budget_fraction: f64,
 }
 
 impl Default for FallbackConfig {
@@ -119,6 +123,7 @@ impl Default for FallbackConfig {
             probe_every: 5,
             recover_stereo_matches: 24,
             recover_probes: 2,
+            recover_budget_fraction: 0.8,
         }
     }
 }
@@ -242,8 +247,13 @@ impl Default for SupervisorConfig {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct OutputConfig {
-    /// Run folder: frames.csv, events.csv, poses (TUM), summary.json, trace files.
-    pub run_dir: PathBuf,
+    /// Each run gets a new folder here named by its UTC start time
+    /// (`2026-11-23T12-00-00`), and `latest` here is a symlink to the newest.
+    pub runs_dir: PathBuf,
+    /// A fixed run folder instead (`linetrack run --run-dir`): frames.csv, events.csv,
+    /// poses (TUM), summary.json, trace files. Locked while a run writes into it.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub run_dir: Option<PathBuf>,
     /// Write per-process span files and the merged Chrome/Perfetto trace.
     pub trace: bool,
 }
@@ -251,9 +261,50 @@ pub struct OutputConfig {
 impl Default for OutputConfig {
     fn default() -> Self {
         Self {
-            run_dir: PathBuf::from("out/runs/latest"),
+            runs_dir: PathBuf::from("out/runs"),
+            run_dir: None,
             trace: true,
         }
+    }
+}
+
+/// Allowed latency budgets, milliseconds: above zero, at most a minute.
+const BUDGET_MS: std::ops::RangeInclusive<f64> = 0.001..=60_000.0;
+/// Allowed realtime rates, frames per second (0 = the sequence's own rate).
+const RATE_HZ: std::ops::RangeInclusive<f64> = 0.01..=1000.0;
+/// The most frames a run may be limited to.
+const MAX_FRAMES: usize = 1_000_000_000;
+/// The largest match and observation counts the fallback rules may name.
+const MAX_MATCHES: u32 = 100_000;
+/// Allowed streak lengths and probe periods of the fallback rules, frames.
+const STREAK: std::ops::RangeInclusive<u32> = 1..=1000;
+/// Allowed fractions of the matcher budget a recovering probe may take (below 1: hysteresis).
+const RECOVER_BUDGET_FRACTION: std::ops::RangeInclusive<f64> = 0.05..=0.95;
+/// Allowed heartbeat periods, milliseconds.
+const HEARTBEAT_MS: std::ops::RangeInclusive<u64> = 10..=10_000;
+/// The shortest startup timeout, milliseconds (a stage loads its detector first).
+const MIN_STARTUP_MS: u64 = 100;
+/// The longest timeout, backoff, drain or grace period, milliseconds (10 minutes).
+const MAX_WAIT_MS: u64 = 600_000;
+/// The most restarts per stage.
+const MAX_RESTARTS: u32 = 1000;
+/// The longest live-status period, milliseconds (an hour).
+const MAX_STATUS_EVERY_MS: u64 = 3_600_000;
+
+/// `key = value` inside `range`, or an error naming both (NaN is never inside).
+fn in_range<T: PartialOrd + std::fmt::Debug>(
+    key: &str,
+    value: T,
+    range: std::ops::RangeInclusive<T>,
+) -> Result<(), String> {
+    if range.contains(&value) {
+        Ok(())
+    } else {
+        Err(format!(
+            "{key} = {value:?} is out of range: allowed {:?} ..= {:?}",
+            range.start(),
+            range.end()
+        ))
     }
 }
 
@@ -315,59 +366,97 @@ impl PipelineConfig {
         Self::from_toml_str(&text, &path.display().to_string())
     }
 
-    /// The first out-of-range value, named by its key.
+    /// The first out-of-range value, named by its key with its allowed range. Every key of
+    /// this crate is checked (the ranges are in `configs/pipeline.toml`), so no stage can
+    /// be handed a value that overflows a clock or a duration; `[odometry]` is checked by
+    /// its own crate.
     pub fn validate(&self) -> Result<(), String> {
-        let positive = |key: &str, v: f64| {
-            if v.is_finite() && v > 0.0 {
-                Ok(())
-            } else {
-                Err(format!("{key} must be a positive number, got {v}"))
-            }
-        };
         let b = &self.budget;
-        positive("budget.end_to_end_ms", b.end_to_end_ms)?;
-        positive("budget.frame_source_ms", b.frame_source_ms)?;
-        positive("budget.line_detector_ms", b.line_detector_ms)?;
-        positive("budget.matcher_ms", b.matcher_ms)?;
-        positive("budget.pose_estimator_ms", b.pose_estimator_ms)?;
-        if !(self.source.rate_hz.is_finite() && self.source.rate_hz >= 0.0) {
-            return Err(format!(
-                "source.rate_hz must be >= 0 (0 = the sequence's rate), got {}",
-                self.source.rate_hz
-            ));
+        for (key, ms) in [
+            ("budget.end_to_end_ms", b.end_to_end_ms),
+            ("budget.frame_source_ms", b.frame_source_ms),
+            ("budget.line_detector_ms", b.line_detector_ms),
+            ("budget.matcher_ms", b.matcher_ms),
+            ("budget.pose_estimator_ms", b.pose_estimator_ms),
+        ] {
+            in_range(key, ms, BUDGET_MS)?;
         }
+        let src = &self.source;
+        if src.rate_hz != 0.0 {
+            in_range("source.rate_hz", src.rate_hz, RATE_HZ)
+                .map_err(|e| format!("{e} (or 0 = the sequence's rate)"))?;
+        }
+        in_range("source.max_frames", src.max_frames, 0..=MAX_FRAMES)?;
         let f = &self.matcher.fallback;
-        if !(0.0..=1.0).contains(&f.min_inlier_ratio) {
-            return Err(format!(
-                "matcher.fallback.min_inlier_ratio must be in [0, 1], got {}",
-                f.min_inlier_ratio
-            ));
-        }
-        if f.bad_frames == 0 || f.probe_every == 0 || f.recover_probes == 0 {
-            return Err(
-                "matcher.fallback.bad_frames, probe_every and recover_probes must be at least 1"
-                    .to_string(),
-            );
-        }
-        if f.recover_stereo_matches <= f.min_stereo_matches {
-            return Err(format!(
-                "matcher.fallback.recover_stereo_matches ({}) must exceed min_stereo_matches ({}): that gap is the hysteresis",
-                f.recover_stereo_matches, f.min_stereo_matches
-            ));
-        }
+        in_range(
+            "matcher.fallback.min_stereo_matches",
+            f.min_stereo_matches,
+            1..=MAX_MATCHES,
+        )?;
+        in_range(
+            "matcher.fallback.min_inlier_ratio",
+            f.min_inlier_ratio,
+            0.0..=1.0,
+        )?;
+        in_range(
+            "matcher.fallback.min_observations",
+            f.min_observations,
+            0..=MAX_MATCHES,
+        )?;
+        in_range("matcher.fallback.bad_frames", f.bad_frames, STREAK)?;
+        in_range("matcher.fallback.probe_every", f.probe_every, STREAK)?;
+        in_range("matcher.fallback.recover_probes", f.recover_probes, STREAK)?;
+        in_range(
+            "matcher.fallback.recover_budget_fraction",
+            f.recover_budget_fraction,
+            RECOVER_BUDGET_FRACTION,
+        )?;
+        in_range(
+            "matcher.fallback.recover_stereo_matches",
+            f.recover_stereo_matches,
+            f.min_stereo_matches.saturating_add(1)..=MAX_MATCHES,
+        )
+        .map_err(|e| format!("{e}: above min_stereo_matches, that gap is the hysteresis"))?;
         let s = &self.supervisor;
-        if s.heartbeat_ms == 0 || s.hang_timeout_ms <= 2 * s.heartbeat_ms {
-            return Err(format!(
-                "supervisor.hang_timeout_ms ({}) must be more than twice heartbeat_ms ({}), which must be positive",
-                s.hang_timeout_ms, s.heartbeat_ms
-            ));
-        }
-        if s.restart_backoff_ms == 0 || s.restart_backoff_max_ms < s.restart_backoff_ms {
-            return Err(
-                "supervisor.restart_backoff_ms must be positive and at most restart_backoff_max_ms"
-                    .to_string(),
-            );
-        }
+        in_range("supervisor.heartbeat_ms", s.heartbeat_ms, HEARTBEAT_MS)?;
+        in_range(
+            "supervisor.hang_timeout_ms",
+            s.hang_timeout_ms,
+            2 * s.heartbeat_ms + 1..=MAX_WAIT_MS,
+        )
+        .map_err(|e| format!("{e}: more than twice heartbeat_ms"))?;
+        in_range(
+            "supervisor.startup_timeout_ms",
+            s.startup_timeout_ms,
+            MIN_STARTUP_MS..=MAX_WAIT_MS,
+        )?;
+        in_range(
+            "supervisor.restart_backoff_ms",
+            s.restart_backoff_ms,
+            1..=MAX_WAIT_MS,
+        )?;
+        in_range(
+            "supervisor.restart_backoff_max_ms",
+            s.restart_backoff_max_ms,
+            s.restart_backoff_ms..=MAX_WAIT_MS,
+        )
+        .map_err(|e| format!("{e}: at least restart_backoff_ms"))?;
+        in_range("supervisor.max_restarts", s.max_restarts, 0..=MAX_RESTARTS)?;
+        in_range(
+            "supervisor.drain_timeout_ms",
+            s.drain_timeout_ms,
+            0..=MAX_WAIT_MS,
+        )?;
+        in_range(
+            "supervisor.shutdown_grace_ms",
+            s.shutdown_grace_ms,
+            0..=MAX_WAIT_MS,
+        )?;
+        in_range(
+            "supervisor.status_every_ms",
+            s.status_every_ms,
+            0..=MAX_STATUS_EVERY_MS,
+        )?;
         self.odometry
             .validate()
             .map_err(|e| format!("odometry.{e}"))?;
@@ -422,6 +511,139 @@ mod tests {
             .map(|e| e.to_string())
             .unwrap_or_default();
         assert!(err.contains("sift"), "{err}");
+    }
+
+    fn refusal(toml: &str) -> String {
+        match PipelineConfig::from_toml_str(toml, "x.toml") {
+            Ok(_) => panic!("accepted: {toml}"),
+            Err(e) => e.to_string(),
+        }
+    }
+
+    #[test]
+    fn every_key_is_range_checked_at_load_naming_key_and_range() {
+        for (toml, key) in [
+            ("[budget]\nend_to_end_ms = 1e308\n", "budget.end_to_end_ms"),
+            (
+                "[budget]\nframe_source_ms = 0.0\n",
+                "budget.frame_source_ms",
+            ),
+            (
+                "[budget]\nline_detector_ms = -1.0\n",
+                "budget.line_detector_ms",
+            ),
+            (
+                "[budget]\npose_estimator_ms = inf\n",
+                "budget.pose_estimator_ms",
+            ),
+            ("[source]\nrate_hz = 1e-300\n", "source.rate_hz"),
+            ("[source]\nrate_hz = nan\n", "source.rate_hz"),
+            (
+                "[source]\nmax_frames = 9223372036854775807\n",
+                "source.max_frames",
+            ),
+            (
+                "[matcher.fallback]\nmin_stereo_matches = 0\n",
+                "matcher.fallback.min_stereo_matches",
+            ),
+            (
+                "[matcher.fallback]\nmin_inlier_ratio = 1.5\n",
+                "matcher.fallback.min_inlier_ratio",
+            ),
+            (
+                "[matcher.fallback]\nmin_observations = 4000000000\n",
+                "matcher.fallback.min_observations",
+            ),
+            (
+                "[matcher.fallback]\nbad_frames = 0\n",
+                "matcher.fallback.bad_frames",
+            ),
+            (
+                "[matcher.fallback]\nprobe_every = 5000\n",
+                "matcher.fallback.probe_every",
+            ),
+            (
+                "[matcher.fallback]\nrecover_probes = 0\n",
+                "matcher.fallback.recover_probes",
+            ),
+            (
+                "[matcher.fallback]\nrecover_budget_fraction = 1.0\n",
+                "matcher.fallback.recover_budget_fraction",
+            ),
+            (
+                "[matcher.fallback]\nrecover_stereo_matches = 4000000000\n",
+                "matcher.fallback.recover_stereo_matches",
+            ),
+            (
+                "[supervisor]\nheartbeat_ms = 9223372036854775807\n",
+                "supervisor.heartbeat_ms",
+            ),
+            (
+                "[supervisor]\nheartbeat_ms = 0\n",
+                "supervisor.heartbeat_ms",
+            ),
+            (
+                "[supervisor]\nhang_timeout_ms = 400\n",
+                "supervisor.hang_timeout_ms",
+            ),
+            (
+                "[supervisor]\nstartup_timeout_ms = 0\n",
+                "supervisor.startup_timeout_ms",
+            ),
+            (
+                "[supervisor]\nrestart_backoff_ms = 0\n",
+                "supervisor.restart_backoff_ms",
+            ),
+            (
+                "[supervisor]\nrestart_backoff_max_ms = 100\n",
+                "supervisor.restart_backoff_max_ms",
+            ),
+            (
+                "[supervisor]\nmax_restarts = 4000000000\n",
+                "supervisor.max_restarts",
+            ),
+            (
+                "[supervisor]\ndrain_timeout_ms = 9223372036854775807\n",
+                "supervisor.drain_timeout_ms",
+            ),
+            (
+                "[supervisor]\nshutdown_grace_ms = 9223372036854775807\n",
+                "supervisor.shutdown_grace_ms",
+            ),
+            (
+                "[supervisor]\nstatus_every_ms = 9223372036854775807\n",
+                "supervisor.status_every_ms",
+            ),
+        ] {
+            let err = refusal(toml);
+            assert!(
+                err.contains("x.toml")
+                    && err.contains(&format!("{key} = "))
+                    && err.contains("allowed"),
+                "{toml}: {err}"
+            );
+        }
+    }
+
+    #[test]
+    fn the_ends_of_every_range_are_accepted() {
+        let edges = "[budget]\nend_to_end_ms = 60000.0\nframe_source_ms = 0.001\n\
+            [source]\nrate_hz = 1000.0\nmax_frames = 1000000000\n\
+            [matcher.fallback]\nmin_stereo_matches = 1\nmin_inlier_ratio = 1.0\n\
+            min_observations = 0\nbad_frames = 1000\nprobe_every = 1\n\
+            recover_stereo_matches = 100000\nrecover_probes = 1\n\
+            [supervisor]\nheartbeat_ms = 10\nhang_timeout_ms = 21\n\
+            startup_timeout_ms = 600000\nrestart_backoff_ms = 1\n\
+            restart_backoff_max_ms = 600000\nmax_restarts = 0\ndrain_timeout_ms = 0\n\
+            shutdown_grace_ms = 600000\nstatus_every_ms = 3600000\n";
+        if let Err(e) = PipelineConfig::from_toml_str(edges, "edges.toml") {
+            panic!("{e}");
+        }
+        let slow = "[source]\nrate_hz = 0.01\n[supervisor]\nheartbeat_ms = 10000\n\
+            hang_timeout_ms = 600000\nstartup_timeout_ms = 100\n";
+        if let Err(e) = PipelineConfig::from_toml_str(slow, "slow.toml") {
+            panic!("{e}");
+        }
     }
 
     #[test]

@@ -5,7 +5,9 @@
 //! [`EventRecord`] per notable event to `events.csv` (fallbacks, restarts, hot swaps).
 //! [`Report`] turns them into percentiles, deadline misses, drops and counts.
 
+use hdrhistogram::Histogram;
 use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
@@ -41,7 +43,8 @@ pub struct FrameRecord {
     /// Frame number.
     pub frame_id: u64,
     /// `pose`, `lost` (pose predicted), or a drop: `corrupt`, `dropped-late`,
-    /// `dropped-behind`, `stage-error`, `missing` (never reached the end: a stage was down).
+    /// `dropped-behind`, `stage-error`, `skipped` (never reached a stage: overwritten in
+    /// its full queue while it was stopped or slow, or lost with a stage that died), `missing` (never reached the end: a stage was down).
     pub outcome: String,
     /// The stage that dropped it, or empty.
     pub dropped_by: String,
@@ -115,54 +118,117 @@ fn ms(v: f64) -> String {
     }
 }
 
-/// Writes `frames.csv`.
-pub fn write_frames(path: &Path, frames: &[FrameRecord]) -> Result<(), RecordError> {
-    let mut out = String::from(FRAME_HEADER);
-    out.push('\n');
-    for f in frames {
-        let _ = writeln!(
-            out,
-            "{},{},{},{},{},{},{},{},{},{},{},{},{}",
-            f.frame_id,
-            clean(&f.outcome),
-            clean(&f.dropped_by),
-            ms(f.stage_ms[0]),
-            ms(f.stage_ms[1]),
-            ms(f.stage_ms[2]),
-            ms(f.stage_ms[3]),
-            ms(f.end_to_end_ms),
-            clean(&f.matcher),
-            clean(&f.detector),
-            f.stereo_matches,
-            f.tracked_matches,
-            u8::from(f.deadline_miss)
-        );
-    }
-    std::fs::write(path, out).map_err(|source| RecordError::Io {
-        path: path.to_path_buf(),
-        source,
-    })
+fn frame_row(f: &FrameRecord) -> String {
+    format!(
+        "{},{},{},{},{},{},{},{},{},{},{},{},{}",
+        f.frame_id,
+        clean(&f.outcome),
+        clean(&f.dropped_by),
+        ms(f.stage_ms[0]),
+        ms(f.stage_ms[1]),
+        ms(f.stage_ms[2]),
+        ms(f.stage_ms[3]),
+        ms(f.end_to_end_ms),
+        clean(&f.matcher),
+        clean(&f.detector),
+        f.stereo_matches,
+        f.tracked_matches,
+        u8::from(f.deadline_miss)
+    )
 }
 
-/// Writes `events.csv`.
-pub fn write_events(path: &Path, events: &[EventRecord]) -> Result<(), RecordError> {
-    let mut out = String::from(EVENT_HEADER);
-    out.push('\n');
-    for e in events {
-        let frame = e.frame_id.map(|f| f.to_string()).unwrap_or_default();
-        let _ = writeln!(
-            out,
-            "{:.3},{},{},{frame},{}",
-            e.time_s,
-            clean(&e.kind),
-            clean(&e.stage),
-            clean(&e.detail)
-        );
+fn event_row(e: &EventRecord) -> String {
+    let frame = e.frame_id.map(|f| f.to_string()).unwrap_or_default();
+    format!(
+        "{:.3},{},{},{frame},{}",
+        e.time_s,
+        clean(&e.kind),
+        clean(&e.stage),
+        clean(&e.detail)
+    )
+}
+
+const POSES_HEADER: &str =
+    "# timestamp tx ty tz qx qy qz qw (left camera in the first frame's world)";
+
+/// One line of a record file, written through to the kernel as soon as it is added.
+struct Appender {
+    path: PathBuf,
+    file: std::fs::File,
+}
+
+impl Appender {
+    /// Creates (or empties) `path` and writes `header`.
+    fn create(path: PathBuf, header: &str) -> Result<Self, RecordError> {
+        let file = std::fs::File::create(&path).map_err(|source| RecordError::Io {
+            path: path.clone(),
+            source,
+        })?;
+        let mut appender = Self { path, file };
+        appender.line(header)?;
+        Ok(appender)
     }
-    std::fs::write(path, out).map_err(|source| RecordError::Io {
-        path: path.to_path_buf(),
-        source,
-    })
+
+    /// Appends `text` and a newline in one unbuffered write: once this returns, the line
+    /// survives the process being killed.
+    fn line(&mut self, text: &str) -> Result<(), RecordError> {
+        use std::io::Write as _;
+        let mut line = String::with_capacity(text.len() + 1);
+        line.push_str(text);
+        line.push('\n');
+        self.file
+            .write_all(line.as_bytes())
+            .map_err(|source| RecordError::Io {
+                path: self.path.clone(),
+                source,
+            })
+    }
+}
+
+/// Appends a run's records as they happen: `frames.csv` (a row per frame as its outcome
+/// is known, so not necessarily in frame order), `events.csv` and `poses.tum`. Every row
+/// goes to the kernel when it is added, so the records of a run whose supervisor is killed
+/// are complete up to that moment.
+pub struct RecordWriter {
+    frames: Appender,
+    events: Appender,
+    poses: Appender,
+}
+
+impl RecordWriter {
+    /// Creates the three files in `run_dir` (emptying earlier ones) with their headers.
+    pub fn create(run_dir: &Path) -> Result<Self, RecordError> {
+        Ok(Self {
+            frames: Appender::create(run_dir.join("frames.csv"), FRAME_HEADER)?,
+            events: Appender::create(run_dir.join("events.csv"), EVENT_HEADER)?,
+            poses: Appender::create(run_dir.join("poses.tum"), POSES_HEADER)?,
+        })
+    }
+
+    /// Appends a frame's row to `frames.csv`.
+    pub fn frame(&mut self, frame: &FrameRecord) -> Result<(), RecordError> {
+        self.frames.line(&frame_row(frame))
+    }
+
+    /// Appends an event's row to `events.csv`.
+    pub fn event(&mut self, event: &EventRecord) -> Result<(), RecordError> {
+        self.events.line(&event_row(event))
+    }
+
+    /// Appends a pose (TUM: seconds, position, quaternion x y z w) to `poses.tum`.
+    pub fn pose(
+        &mut self,
+        sequence_ns: u64,
+        translation: [f64; 3],
+        rotation_xyzw: [f64; 4],
+    ) -> Result<(), RecordError> {
+        let [tx, ty, tz] = translation;
+        let [qx, qy, qz, qw] = rotation_xyzw;
+        self.poses.line(&format!(
+            "{:.9} {tx:.6} {ty:.6} {tz:.6} {qx:.6} {qy:.6} {qz:.6} {qw:.6}",
+            sequence_ns as f64 * 1e-9
+        ))
+    }
 }
 
 fn read_rows(
@@ -203,7 +269,7 @@ fn read_rows(
     Ok(rows)
 }
 
-/// Reads `frames.csv`.
+/// Reads `frames.csv`, in frame order.
 pub fn read_frames(path: &Path) -> Result<Vec<FrameRecord>, RecordError> {
     let rows = read_rows(path, FRAME_HEADER, 13)?;
     let mut frames = Vec::with_capacity(rows.len());
@@ -245,6 +311,8 @@ pub fn read_frames(path: &Path) -> Result<Vec<FrameRecord>, RecordError> {
             },
         });
     }
+    // Rows are appended as frames complete: a frame lost to a stage crash comes last.
+    frames.sort_by_key(|f| f.frame_id);
     Ok(frames)
 }
 
@@ -313,6 +381,155 @@ impl Percentiles {
     }
 }
 
+/// A latency distribution kept in bounded memory however many samples it takes: an
+/// HDR histogram of microseconds to 3 significant digits (percentiles within 0.1 %), up to
+/// an hour; the largest sample is kept exactly.
+#[derive(Debug, Clone)]
+pub struct LatencyHistogram {
+    micros: Histogram<u64>,
+    max_ms: f64,
+}
+
+/// Microseconds per millisecond: the histogram's unit.
+const MICROS_PER_MS: f64 = 1000.0;
+/// The largest latency the histogram tells apart (larger ones count as this), microseconds.
+const HIGHEST_MICROS: u64 = 3_600_000_000;
+/// Significant decimal digits the histogram keeps.
+const SIGNIFICANT_DIGITS: u8 = 3;
+
+impl Default for LatencyHistogram {
+    fn default() -> Self {
+        Self {
+            // Constant bounds, valid (the tests build one): this cannot fail.
+            micros: Histogram::new_with_max(HIGHEST_MICROS, SIGNIFICANT_DIGITS)
+                .unwrap_or_else(|e| unreachable!("constant histogram bounds: {e}")),
+            max_ms: f64::NAN,
+        }
+    }
+}
+
+impl LatencyHistogram {
+    /// Adds a sample; NaN (the stage did not handle the frame) and negative values are
+    /// left out.
+    pub fn record(&mut self, ms: f64) {
+        if !(ms >= 0.0) || !ms.is_finite() {
+            return;
+        }
+        self.micros
+            .saturating_record((ms * MICROS_PER_MS).round().min(HIGHEST_MICROS as f64) as u64);
+        self.max_ms = if self.max_ms.is_nan() {
+            ms
+        } else {
+            self.max_ms.max(ms)
+        };
+    }
+
+    /// The percentiles of the samples so far; `None` when there are none.
+    pub fn percentiles(&self) -> Option<Percentiles> {
+        if self.micros.is_empty() {
+            return None;
+        }
+        let at =
+            |q: f64| (self.micros.value_at_quantile(q) as f64 / MICROS_PER_MS).min(self.max_ms);
+        Some(Percentiles {
+            count: self.micros.len() as usize,
+            p50: at(0.50),
+            p90: at(0.90),
+            p99: at(0.99),
+            max: self.max_ms,
+        })
+    }
+}
+
+/// A run's report built up one frame and one event at a time, in memory that does not
+/// grow with the run's length.
+#[derive(Debug, Clone, Default)]
+pub struct Tally {
+    frames: usize,
+    poses: usize,
+    lost: usize,
+    drops: BTreeMap<String, usize>,
+    stage: [LatencyHistogram; 4],
+    end_to_end: LatencyHistogram,
+    deadline_misses: usize,
+    l1_frames: usize,
+    events: BTreeMap<String, usize>,
+}
+
+impl Tally {
+    /// Counts a frame.
+    pub fn add_frame(&mut self, f: &FrameRecord) {
+        self.frames += 1;
+        match f.outcome.as_str() {
+            "pose" => self.poses += 1,
+            "lost" => self.lost += 1,
+            other => *self.drops.entry(other.to_string()).or_default() += 1,
+        }
+        // Latency over the frames every stage worked on: a dropped frame's near-zero
+        // times would flatter the stages.
+        if f.has_pose() {
+            for (h, ms) in self.stage.iter_mut().zip(f.stage_ms) {
+                h.record(ms);
+            }
+            self.end_to_end.record(f.end_to_end_ms);
+        }
+        self.deadline_misses += usize::from(f.deadline_miss);
+        self.l1_frames += usize::from(f.matcher == "l1");
+    }
+
+    /// Counts an event.
+    pub fn add_event(&mut self, e: &EventRecord) {
+        *self.events.entry(e.kind.clone()).or_default() += 1;
+    }
+
+    /// Events of `kind` so far.
+    pub fn events_of(&self, kind: &str) -> usize {
+        self.events.get(kind).copied().unwrap_or(0)
+    }
+
+    /// Frames counted so far.
+    pub fn frames(&self) -> usize {
+        self.frames
+    }
+
+    /// Frames with a tracked pose.
+    pub fn tracked(&self) -> usize {
+        self.poses
+    }
+
+    /// Frames that got a pose (tracked or predicted).
+    pub fn with_pose(&self) -> usize {
+        self.poses + self.lost
+    }
+
+    /// Frames over some budget.
+    pub fn deadline_misses(&self) -> usize {
+        self.deadline_misses
+    }
+
+    /// The report so far.
+    pub fn report(&self) -> Report {
+        Report {
+            frames: self.frames,
+            poses: self.poses,
+            lost: self.lost,
+            drops: self.drops.iter().map(|(k, n)| (k.clone(), *n)).collect(),
+            stage_latency: STAGES
+                .iter()
+                .zip(&self.stage)
+                .map(|(s, h)| (s.to_string(), h.percentiles()))
+                .collect(),
+            end_to_end: self.end_to_end.percentiles(),
+            deadline_misses: self.deadline_misses,
+            l1_frames: self.l1_frames,
+            fallbacks: self.events_of("fallback"),
+            recoveries: self.events_of("recover"),
+            restarts: self.events_of("restart"),
+            swaps: self.events_of("swap"),
+        }
+    }
+}
+
 /// What a run's records add up to.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Report {
@@ -343,48 +560,12 @@ pub struct Report {
 }
 
 impl Report {
-    /// The report of `frames` and `events`.
+    /// The report of `frames` and `events` (percentiles as [`LatencyHistogram`] gives them).
     pub fn new(frames: &[FrameRecord], events: &[EventRecord]) -> Self {
-        let mut drops: std::collections::BTreeMap<String, usize> = Default::default();
-        for f in frames.iter().filter(|f| !f.has_pose()) {
-            *drops.entry(f.outcome.clone()).or_default() += 1;
-        }
-        let count = |kind: &str| events.iter().filter(|e| e.kind == kind).count();
-        Self {
-            frames: frames.len(),
-            poses: frames.iter().filter(|f| f.outcome == "pose").count(),
-            lost: frames.iter().filter(|f| f.outcome == "lost").count(),
-            drops: drops.into_iter().collect(),
-            // Over the frames every stage worked on: a dropped frame's near-zero times
-            // would flatter the stages.
-            stage_latency: STAGES
-                .iter()
-                .enumerate()
-                .map(|(i, s)| {
-                    (
-                        s.to_string(),
-                        Percentiles::of(
-                            frames
-                                .iter()
-                                .filter(|f| f.has_pose())
-                                .map(|f| f.stage_ms[i]),
-                        ),
-                    )
-                })
-                .collect(),
-            end_to_end: Percentiles::of(
-                frames
-                    .iter()
-                    .filter(|f| f.has_pose())
-                    .map(|f| f.end_to_end_ms),
-            ),
-            deadline_misses: frames.iter().filter(|f| f.deadline_miss).count(),
-            l1_frames: frames.iter().filter(|f| f.matcher == "l1").count(),
-            fallbacks: count("fallback"),
-            recoveries: count("recover"),
-            restarts: count("restart"),
-            swaps: count("swap"),
-        }
+        let mut tally = Tally::default();
+        frames.iter().for_each(|f| tally.add_frame(f));
+        events.iter().for_each(|e| tally.add_event(e));
+        tally.report()
     }
 
     /// Frames dropped, all reasons.
@@ -439,6 +620,59 @@ impl Report {
     }
 }
 
+/// How a run ended (`summary.json`, and `status.json` while it runs).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum RunEnd {
+    /// Not over yet.
+    Running,
+    /// Every frame has an outcome (or the drain timed out).
+    Completed,
+    /// Stopped by a signal before the sequence ended.
+    Interrupted,
+    /// Abandoned: a stage would not start, died past the restart limit, ... (see `reason`).
+    Failed,
+}
+
+/// `summary.json`: how the run ended and its report.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Summary {
+    /// How it ended.
+    pub end: RunEnd,
+    /// Why it failed (or other words on its end).
+    pub reason: Option<String>,
+    /// What the records add up to.
+    #[serde(flatten)]
+    pub report: Report,
+}
+
+impl Summary {
+    /// Writes `path` whole or not at all (a temporary file renamed over it).
+    pub fn write(&self, path: &Path) -> Result<(), RecordError> {
+        let io = |source| RecordError::Io {
+            path: path.to_path_buf(),
+            source,
+        };
+        let text = serde_json::to_string_pretty(self).map_err(|e| io(e.into()))?;
+        let tmp = path.with_extension("json.tmp");
+        std::fs::write(&tmp, text).map_err(io)?;
+        std::fs::rename(&tmp, path).map_err(io)
+    }
+
+    /// Reads `summary.json`.
+    pub fn read(path: &Path) -> Result<Self, RecordError> {
+        let text = std::fs::read_to_string(path).map_err(|source| RecordError::Io {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        serde_json::from_str(&text).map_err(|e| RecordError::Parse {
+            path: path.to_path_buf(),
+            line: e.line(),
+            message: e.to_string(),
+        })
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -467,29 +701,88 @@ mod tests {
     }
 
     #[test]
+    fn streaming_percentiles_are_within_a_tenth_of_a_percent() {
+        let mut h = LatencyHistogram::default();
+        assert!(h.percentiles().is_none());
+        for ms in (1..=100).map(f64::from) {
+            h.record(ms);
+        }
+        h.record(f64::NAN);
+        h.record(-1.0);
+        let p = h.percentiles().unwrap_or_else(|| panic!("no samples"));
+        assert_eq!((p.count, p.max), (100, 100.0));
+        for (got, want) in [(p.p50, 50.0), (p.p90, 90.0), (p.p99, 99.0)] {
+            assert!((got - want).abs() <= want * 1e-3, "{got} vs {want}");
+        }
+        // A value past an hour is counted, not lost; the maximum stays exact.
+        h.record(1e308);
+        let p = h.percentiles().unwrap_or_else(|| panic!("no samples"));
+        assert_eq!((p.count, p.max), (101, 1e308));
+    }
+
+    #[test]
+    fn the_summary_says_how_the_run_ended() {
+        let dir = std::env::temp_dir().join(format!("linetrack-summary-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap_or_else(|e| panic!("{e}"));
+        let summary = Summary {
+            end: RunEnd::Failed,
+            reason: Some("matcher died 2 times (restart limit 1): giving up".into()),
+            report: Report::new(&[frame(0, "pose", 40.0)], &[]),
+        };
+        let path = dir.join("summary.json");
+        summary.write(&path).unwrap_or_else(|e| panic!("{e}"));
+        let text = std::fs::read_to_string(&path).unwrap_or_default();
+        assert!(text.contains("\"end\": \"failed\""), "{text}");
+        assert_eq!(
+            Summary::read(&path).unwrap_or_else(|e| panic!("{e}")),
+            summary
+        );
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
     fn records_round_trip_through_csv_and_add_up() {
         let dir = std::env::temp_dir().join(format!("linetrack-run-record-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap_or_else(|e| panic!("{e}"));
         let mut late = frame(2, "dropped-late", f64::NAN);
         late.dropped_by = "matcher".into();
         late.deadline_miss = true;
-        let frames = vec![
+        let frames = [
             frame(0, "pose", 40.0),
             frame(1, "lost", 60.0),
             late,
             FrameRecord::missing(3),
         ];
-        let events = vec![EventRecord {
+        let events = [EventRecord {
             time_s: 1.5,
             kind: "fallback".into(),
             stage: "matcher".into(),
             frame_id: Some(1),
             detail: "too few matches, 3 < 12".into(),
         }];
-        write_frames(&dir.join("frames.csv"), &frames).unwrap_or_else(|e| panic!("{e}"));
-        write_events(&dir.join("events.csv"), &events).unwrap_or_else(|e| panic!("{e}"));
+        {
+            // Appended as frames complete: the missing frame 3 comes in before frame 2.
+            let mut writer = RecordWriter::create(&dir).unwrap_or_else(|e| panic!("{e}"));
+            for f in [&frames[0], &frames[1], &frames[3], &frames[2]] {
+                writer.frame(f).unwrap_or_else(|e| panic!("{e}"));
+            }
+            writer.event(&events[0]).unwrap_or_else(|e| panic!("{e}"));
+            // Every row is on disk while the writer is still open (no flush at the end).
+            let now = read_frames(&dir.join("frames.csv")).unwrap_or_else(|e| panic!("{e}"));
+            assert_eq!(now.len(), 4);
+            assert_eq!(
+                read_events(&dir.join("events.csv"))
+                    .unwrap_or_else(|e| panic!("{e}"))
+                    .len(),
+                1
+            );
+        }
         let back = read_frames(&dir.join("frames.csv")).unwrap_or_else(|e| panic!("{e}"));
-        assert_eq!(back.len(), 4);
+        assert_eq!(
+            back.iter().map(|f| f.frame_id).collect::<Vec<_>>(),
+            [0, 1, 2, 3],
+            "read back in frame order"
+        );
         assert_eq!(back[2].dropped_by, "matcher");
         assert!(back[3].end_to_end_ms.is_nan());
         assert_eq!(back[0].end_to_end_ms, 40.0);

@@ -7,7 +7,7 @@
 
 use clap::Parser;
 use linetrack_geometry::{Point, Segment};
-use linetrack_ipc::{Bus, IpcError, Outlet, Received, Scope, Shutdown};
+use linetrack_ipc::{Bus, Inlet, IpcError, Outlet, Received, Scope, Shutdown};
 use linetrack_msgs::SegmentRecord;
 use linetrack_msgs::{
     FrameHeader, FrameStatus, StageKind, StatusKind, StatusReport, Topic, now_ns,
@@ -142,6 +142,29 @@ impl Reporter {
         }
     }
 
+    /// Reports an overflow of the stage's hold, if there was one (the supervisor records it
+    /// as an event).
+    pub fn overflow(&mut self, overflow: Overflow) {
+        if let Some(first) = overflow.first_frame {
+            tracing::warn!(
+                "hold full ({HELD_FRAMES} frames): {} frames from {first} released before their other input",
+                overflow.frames
+            );
+            self.report(StatusKind::Overflow, first, overflow.frames);
+        }
+    }
+
+    /// Reports frames that never arrived on the stage's input (see [`GapWatch`]).
+    pub fn gap(&mut self, gap: Option<(u64, u64)>) {
+        if let Some((first, count)) = gap {
+            tracing::warn!(
+                "frames {first}..{} never arrived: lost in the full queue",
+                first + count
+            );
+            self.report(StatusKind::QueueGap, first, count);
+        }
+    }
+
     /// How long until the next heartbeat is due.
     pub fn until_due(&self) -> Duration {
         self.last
@@ -239,28 +262,85 @@ pub fn stereo_views<'a>(
     ))
 }
 
+/// Frames a stage holds at most: one less than the frame subscriber's borrow limit
+/// ([`Topic::queue_depth`], which also sizes its buffer), so that the held frames and the
+/// one being received never exceed what iceoryx2 lets a subscriber borrow, however long
+/// the stage was stopped.
+pub const HELD_FRAMES: usize = Topic::Frames.queue_depth() - 1;
+
+/// Frames released from a hold before their turn: the hold overflowed.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct Overflow {
+    /// The first frame released.
+    pub first_frame: Option<u64>,
+    /// Frames released.
+    pub frames: u64,
+}
+
+impl Overflow {
+    fn add(&mut self, frame_id: u64) {
+        self.first_frame.get_or_insert(frame_id);
+        self.frames += 1;
+    }
+}
+
+/// Watches the frame ids of a stage's main input for gaps: frames the queue overwrote
+/// while the stage was stopped or slow (every frame, dropped ones too, travels down the
+/// pipeline, so ids arrive one after another).
+#[derive(Debug, Clone, Copy, Default)]
+pub struct GapWatch {
+    next: Option<u64>,
+}
+
+impl GapWatch {
+    /// Takes the next frame id; returns `(first, count)` of the frames skipped before it.
+    /// An id below the expected one (an earlier frame arriving late) is no gap.
+    pub fn observe(&mut self, frame_id: u64) -> Option<(u64, u64)> {
+        let gap = self
+            .next
+            .filter(|&n| frame_id > n)
+            .map(|n| (n, frame_id - n));
+        self.next = Some(self.next.map_or(frame_id + 1, |n| n.max(frame_id + 1)));
+        gap
+    }
+}
+
 /// Frame messages held (in shared memory, not copied) until the stage's other input for
-/// the same frame arrives.
+/// the same frame arrives; at most [`HELD_FRAMES`].
 pub struct HeldFrames {
     held: VecDeque<Received<u8>>,
-    capacity: usize,
+}
+
+impl Default for HeldFrames {
+    fn default() -> Self {
+        Self {
+            held: VecDeque::with_capacity(HELD_FRAMES),
+        }
+    }
 }
 
 impl HeldFrames {
-    /// Holds at most `capacity` frames; the oldest is released first.
-    pub fn new(capacity: usize) -> Self {
-        Self {
-            held: VecDeque::new(),
-            capacity: capacity.max(1),
-        }
+    /// Holds `frame`, releasing the oldest when full; returns the id of the frame released.
+    pub fn push(&mut self, frame: Received<u8>) -> Option<u64> {
+        let released = (self.held.len() >= HELD_FRAMES)
+            .then(|| self.held.pop_front())
+            .flatten()
+            .map(|f| f.header().frame_id);
+        self.held.push_back(frame);
+        released
     }
 
-    /// Holds `frame` (releasing the oldest when full).
-    pub fn push(&mut self, frame: Received<u8>) {
-        if self.held.len() == self.capacity {
-            self.held.pop_front();
+    /// Receives every waiting frame into the hold, one at a time (the oldest released first
+    /// when full, so never more than the subscriber's borrow limit is borrowed); returns
+    /// what was released to make room.
+    pub fn receive(&mut self, inlet: &mut Inlet<u8>) -> Result<Overflow, IpcError> {
+        let mut overflow = Overflow::default();
+        while let Some(frame) = inlet.receive()? {
+            if let Some(id) = self.push(frame) {
+                overflow.add(id);
+            }
         }
-        self.held.push_back(frame);
+        Ok(overflow)
     }
 
     /// Takes frame `frame_id`, releasing every older one (their turn has passed).
@@ -407,6 +487,60 @@ fn watch_parent(shutdown: &Shutdown) {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_full_hold_and_a_full_queue_never_exceed_the_borrow_limit() {
+        // Real shared memory: iceoryx2 enforces the subscriber's borrow limit.
+        let scope = Scope {
+            prefix: format!("ltsrt{}_", std::process::id()),
+            run_id: format!("hold{}", std::process::id()),
+        };
+        let bus = Bus::shared_memory(&scope, &format!("hold-{}", std::process::id()))
+            .unwrap_or_else(|e| panic!("{e}"));
+        let mut inlet = bus
+            .inlet::<u8>(Topic::Frames)
+            .unwrap_or_else(|e| panic!("{e}"));
+        let mut outlet = bus
+            .outlet::<u8>(Topic::Frames, 4)
+            .unwrap_or_else(|e| panic!("{e}"));
+        let mut publish = |from: u64, to: u64| {
+            for id in from..to {
+                outlet
+                    .publish(&FrameHeader::new(id, 0, 0), &[&[1, 2, 3, 4]])
+                    .unwrap_or_else(|e| panic!("{e}"));
+            }
+        };
+        let depth = Topic::Frames.queue_depth() as u64;
+        let mut held = HeldFrames::default();
+        // A stage that was stopped: its queue full (the oldest overwritten), then a hold
+        // full, then the queue full again.
+        publish(0, 2 * depth);
+        let first = held.receive(&mut inlet).unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(held.len(), HELD_FRAMES);
+        assert_eq!(first.frames, depth - HELD_FRAMES as u64);
+        publish(2 * depth, 4 * depth);
+        let second = held
+            .receive(&mut inlet)
+            .unwrap_or_else(|e| panic!("exceeded the borrow limit: {e}"));
+        assert_eq!(held.len(), HELD_FRAMES);
+        assert_eq!(second.frames, depth);
+        // Queue had depth..2·depth; the hold kept the newest of them, so the next released
+        // is the frame after the first one released.
+        assert_eq!(first.first_frame, Some(depth));
+        assert_eq!(second.first_frame, Some(depth + 1));
+        // The newest frames are the ones held.
+        assert_eq!(held.first_id(), Some(4 * depth - HELD_FRAMES as u64));
+    }
+
+    #[test]
+    fn gaps_in_the_frame_ids_are_found_and_late_frames_are_not_gaps() {
+        let mut watch = GapWatch::default();
+        assert_eq!(watch.observe(5), None, "the first frame sets the start");
+        assert_eq!(watch.observe(6), None);
+        assert_eq!(watch.observe(10), Some((7, 3)));
+        assert_eq!(watch.observe(8), None, "a late frame");
+        assert_eq!(watch.observe(11), None);
+    }
 
     #[test]
     fn late_frames_are_dropped_only_under_the_policy() {

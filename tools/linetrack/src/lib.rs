@@ -69,7 +69,8 @@ pub struct RunArgs {
     /// Start with this detector (lsd or fld).
     #[arg(long)]
     pub detector: Option<DetectorKind>,
-    /// Run folder (default: the config's).
+    /// Run folder (default: a new dated folder under the config's `output.runs_dir`, with
+    /// `latest` pointing at it).
     #[arg(long)]
     pub run_dir: Option<PathBuf>,
     /// Run the stages as threads of this process over channels instead of processes over
@@ -84,7 +85,7 @@ pub struct RunArgs {
 /// `linetrack ctl`.
 #[derive(Debug, clap::Args)]
 pub struct CtlArgs {
-    /// The running pipeline's run folder.
+    /// The running pipeline's run folder (default: the newest run).
     #[arg(long, default_value = "out/runs/latest")]
     pub run_dir: PathBuf,
     /// The command.
@@ -108,7 +109,7 @@ pub enum CtlAction {
 /// `linetrack report`.
 #[derive(Debug, clap::Args)]
 pub struct ReportArgs {
-    /// Run folder.
+    /// Run folder (default: the newest run).
     #[arg(default_value = "out/runs/latest")]
     pub run_dir: PathBuf,
     /// Histogram bin width, milliseconds.
@@ -148,7 +149,7 @@ pub fn effective_config(args: &RunArgs) -> anyhow::Result<PipelineConfig> {
         config.detector = detector;
     }
     if let Some(dir) = &args.run_dir {
-        config.output.run_dir = dir.clone();
+        config.output.run_dir = Some(dir.clone());
     }
     Ok(config)
 }
@@ -285,7 +286,7 @@ pub fn live_status(run_dir: &Path) -> anyhow::Result<LiveStatus> {
 /// `linetrack ctl`.
 pub fn ctl(args: &CtlArgs) -> anyhow::Result<()> {
     let status = live_status(&args.run_dir)?;
-    if status.finished {
+    if status.finished() {
         bail!("the run in {} has finished", args.run_dir.display());
     }
     match &args.action {
@@ -323,7 +324,7 @@ pub fn ctl(args: &CtlArgs) -> anyhow::Result<()> {
                     println!("{} took over", detector.name());
                     return Ok(());
                 }
-                if now.finished {
+                if now.finished() {
                     bail!("the run finished before the swap");
                 }
             }

@@ -246,10 +246,10 @@ fn bench(args: &Args) -> anyhow::Result<()> {
             config.source.max_frames = args.frames;
             config.source.pacing = Pacing::Realtime;
             config.output.trace = false;
-            config.output.run_dir = args.output.join(format!(
+            config.output.run_dir = Some(args.output.join(format!(
                 "run-{}-{repeat}",
                 if m == 0 { "processes" } else { "threads" }
-            ));
+            )));
             eprintln!("pipeline run {}/{}: {:?}", repeat + 1, args.repeats, mode);
             let outcome = linetrack_supervisor::run(
                 &config,
