@@ -839,15 +839,17 @@ impl Odometry {
             stretch_contrast(left, gain)?,
             stretch_contrast(right, gain)?,
         );
-        let left = left_stretched.as_ref().unwrap_or(left);
-        let right = right_stretched.as_ref().unwrap_or(right);
+        // The detectors see the stretched images; the back end stretches the originals for
+        // its corners itself (stretching twice would exceed the gain limit).
+        let seen_left = left_stretched.as_ref().unwrap_or(left);
+        let seen_right = right_stretched.as_ref().unwrap_or(right);
         let (mut lines_l, mut lines_r) = (LineFeatures::default(), LineFeatures::default());
-        self.detector.detect(left, &mut lines_l.segments)?;
-        self.detector.detect(right, &mut lines_r.segments)?;
+        self.detector.detect(seen_left, &mut lines_l.segments)?;
+        self.detector.detect(seen_right, &mut lines_r.segments)?;
         stats.ms[0] = since(started);
         let started = Instant::now();
-        self.matcher.describe(left, &mut lines_l)?;
-        self.matcher.describe(right, &mut lines_r)?;
+        self.matcher.describe(seen_left, &mut lines_l)?;
+        self.matcher.describe(seen_right, &mut lines_r)?;
         stats.ms[1] = since(started);
         stats.segments = [lines_l.segments.len(), lines_r.segments.len()];
 
