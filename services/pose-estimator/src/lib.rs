@@ -61,8 +61,48 @@ pub fn pose_record(pose: &Isometry3<f64>) -> PoseRecord {
     }
 }
 
-/// Parses `frame,tx,ty,tz,qx,qy,qz,qw` (the supervisor's `--resume-pose`).
-pub fn parse_resume_pose(text: &str) -> anyhow::Result<(u64, Isometry3<f64>)> {
+/// Where a restarted pose estimator picks up: the last pose the run recorded and the
+/// motion per frame before it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Resume {
+    /// The frame of the last pose.
+    pub frame: u64,
+    /// Its pose (camera to world).
+    pub pose: Isometry3<f64>,
+    /// The motion per frame (`p_curr = motion · p_prev`) from the two last poses when they
+    /// are consecutive frames; the identity otherwise.
+    pub motion: Isometry3<f64>,
+}
+
+/// Parses the supervisor's `--resume-pose`: `frame,tx,ty,tz,qx,qy,qz,qw` for the last pose,
+/// optionally followed by `;` and the pose before it in the same form.
+pub fn parse_resume_pose(text: &str) -> anyhow::Result<Resume> {
+    let mut parts = text.split(';');
+    let (frame, pose) = parse_pose(parts.next().unwrap_or_default())?;
+    let motion = match parts.next() {
+        Some(previous) => {
+            let (previous_frame, previous_pose) = parse_pose(previous)?;
+            if previous_frame + 1 == frame {
+                pose.inverse() * previous_pose
+            } else {
+                Isometry3::identity()
+            }
+        }
+        None => Isometry3::identity(),
+    };
+    anyhow::ensure!(
+        parts.next().is_none(),
+        "--resume-pose {text:?}: at most two poses"
+    );
+    Ok(Resume {
+        frame,
+        pose,
+        motion,
+    })
+}
+
+/// One `frame,tx,ty,tz,qx,qy,qz,qw`.
+fn parse_pose(text: &str) -> anyhow::Result<(u64, Isometry3<f64>)> {
     let fields: Vec<&str> = text.split(',').map(str::trim).collect();
     anyhow::ensure!(
         fields.len() == 8,
@@ -93,6 +133,8 @@ pub fn parse_resume_pose(text: &str) -> anyhow::Result<(u64, Isometry3<f64>)> {
 pub struct PoseTracker {
     tracker: MotionTracker,
     last_frame: u64,
+    /// After a restart: the frame of the last recorded pose, until the first frame is tracked.
+    resumed_after: Option<u64>,
 }
 
 impl PoseTracker {
@@ -103,14 +145,17 @@ impl PoseTracker {
             .with_context(|| format!("reading the rig of {}", sequence.display()))?
             .rig;
         let mut tracker = MotionTracker::new(ctx.config.odometry_config(), rig)?;
+        let mut resumed_after = None;
         if let Some(text) = &ctx.args.resume_pose {
-            let (frame, pose) = parse_resume_pose(text)?;
-            tracing::info!("resuming after frame {frame}");
-            tracker.resume_from(pose, Isometry3::identity());
+            let resume = parse_resume_pose(text)?;
+            tracing::info!("resuming after frame {}", resume.frame);
+            tracker.resume_from(resume.pose, resume.motion);
+            resumed_after = Some(resume.frame);
         }
         Ok(Self {
             tracker,
             last_frame: NO_FRAME,
+            resumed_after,
         })
     }
 
@@ -164,12 +209,19 @@ impl PoseTracker {
             None => None,
         };
         let images = views.as_ref().map(|(l, r)| (&**l, &**r));
+        // The first frame after a restart: the motion across the gap is predicted (the
+        // last motion per frame), and the pose says so.
+        let resumed = self.resumed_after.take();
+        if let Some(frame) = resumed {
+            self.tracker
+                .predict_frames(header.frame_id.saturating_sub(frame));
+        }
         let result = self
             .tracker
             .update(images, matched, FrameStats::default())?;
         self.last_frame = header.frame_id;
         let mut record = pose_record(&result.pose);
-        record.lost = u32::from(result.lost);
+        record.lost = u32::from(result.lost || resumed.is_some());
         record.inliers = result.stats.inliers.map(|n| n as u32);
         record.observations = result.stats.observations.map(|n| n as u32);
         record.rms_px = result.stats.rms_px;
@@ -255,16 +307,45 @@ mod tests {
             r.rotation_xyzw[2],
             r.rotation_xyzw[3]
         );
-        let (frame, back) = parse_resume_pose(&text).unwrap_or_else(|e| panic!("{e}"));
-        assert_eq!(frame, 12);
-        assert!((back.translation.vector - pose.translation.vector).norm() < 1e-12);
-        assert!(back.rotation.angle_to(&pose.rotation) < 1e-9);
+        let back = parse_resume_pose(&text).unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(back.frame, 12);
+        assert!((back.pose.translation.vector - pose.translation.vector).norm() < 1e-12);
+        assert!(back.pose.rotation.angle_to(&pose.rotation) < 1e-9);
+        assert_eq!(back.motion, Isometry3::identity());
+        // With the pose before it (frame 11, 5 cm behind along z): the motion per frame.
+        let before = pose * Translation3::new(0.0, 0.0, -0.05);
+        let b = pose_record(&before);
+        let two = format!(
+            "{text};11,{},{},{},{},{},{},{}",
+            b.translation[0],
+            b.translation[1],
+            b.translation[2],
+            b.rotation_xyzw[0],
+            b.rotation_xyzw[1],
+            b.rotation_xyzw[2],
+            b.rotation_xyzw[3]
+        );
+        let back = parse_resume_pose(&two).unwrap_or_else(|e| panic!("{e}"));
+        // p_curr = motion · p_prev: a camera moving 5 cm forward sees points 5 cm nearer.
+        assert!(
+            (back.motion.translation.vector - nalgebra::Vector3::new(0.0, 0.0, -0.05)).norm()
+                < 1e-9,
+            "{}",
+            back.motion
+        );
+        // Not consecutive: no motion is inferred.
+        let gap = two.replace(";11,", ";9,");
+        assert_eq!(
+            parse_resume_pose(&gap).unwrap().motion,
+            Isometry3::identity()
+        );
         for bad in [
             "",
             "1,2,3",
             "x,0,0,0,0,0,0,1",
             "1,0,0,nan,0,0,0,1",
             "1,0,0,0,0,0,0,0",
+            "1,0,0,0,0,0,0,1;2,0,0,0,0,0,0,1;3,0,0,0,0,0,0,1",
         ] {
             assert!(parse_resume_pose(bad).is_err(), "{bad:?} accepted");
         }

@@ -88,6 +88,8 @@ pub struct Monitor {
     presumed_lost: BTreeMap<u64, String>,
     fallback: Option<FallbackController>,
     last_pose: Option<(u64, PoseRecord)>,
+    /// The pose before `last_pose` (a restarted pose estimator predicts from the two).
+    previous_pose: Option<(u64, PoseRecord)>,
     first_frame: u64,
     source_last: Option<u64>,
     published: Option<u64>,
@@ -126,6 +128,7 @@ impl Monitor {
             presumed_lost: BTreeMap::new(),
             fallback,
             last_pose: None,
+            previous_pose: None,
             first_frame,
             source_last: None,
             published: None,
@@ -238,7 +241,13 @@ impl Monitor {
         if status != FrameStatus::Ok {
             return None;
         }
-        self.last_pose = Some((header.frame_id, *pose));
+        if self
+            .last_pose
+            .is_none_or(|(frame, _)| header.frame_id > frame)
+        {
+            self.previous_pose = self.last_pose;
+            self.last_pose = Some((header.frame_id, *pose));
+        }
         let written = self
             .writer
             .pose(header.sequence_ns, pose.translation, pose.rotation_xyzw);
@@ -311,12 +320,18 @@ impl Monitor {
             .max(self.accounted.highest.map_or(0, |k| k + 1))
     }
 
-    /// The last tracked pose, as `--resume-pose` text.
+    /// The last pose and the one before it, as `--resume-pose` text
+    /// (`frame,tx,ty,tz,qx,qy,qz,qw[;frame,tx,…]`).
     pub fn resume_pose(&self) -> Option<String> {
-        self.last_pose.map(|(frame, p)| {
+        let text = |(frame, p): (u64, PoseRecord)| {
             let [tx, ty, tz] = p.translation;
             let [qx, qy, qz, qw] = p.rotation_xyzw;
             format!("{frame},{tx},{ty},{tz},{qx},{qy},{qz},{qw}")
+        };
+        let last = text(self.last_pose?);
+        Some(match self.previous_pose {
+            Some(previous) => format!("{last};{}", text(previous)),
+            None => last,
         })
     }
 
