@@ -455,10 +455,7 @@ mod tests {
     use linetrack_run_record::{read_events, read_frames};
 
     fn scratch(name: &str) -> PathBuf {
-        let dir = std::env::temp_dir().join(format!("linetrack-{name}-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
-        std::fs::create_dir_all(&dir).unwrap_or_else(|e| panic!("{e}"));
-        dir
+        linetrack_test_data::scratch_dir("supervisor", name).unwrap_or_else(|e| panic!("{e}"))
     }
 
     fn pose_of(monitor: &mut Monitor, frame_id: u64) {

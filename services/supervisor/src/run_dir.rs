@@ -129,10 +129,7 @@ mod tests {
     use std::time::Duration;
 
     fn scratch(name: &str) -> PathBuf {
-        let dir = std::env::temp_dir().join(format!("linetrack-{name}-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
-        std::fs::create_dir_all(&dir).unwrap_or_else(|e| panic!("{e}"));
-        dir
+        linetrack_test_data::scratch_dir("supervisor", name).unwrap_or_else(|e| panic!("{e}"))
     }
 
     #[test]

@@ -48,9 +48,10 @@ pub(crate) trait Geometry: Copy {
     fn fused(&self, w: f64, other: &Self, w_other: f64) -> Self;
 }
 
+/// Disparity of `p`, pixels (infinite at or behind the camera).
 fn disparity(rig: &StereoRig, p: &Point3<f64>) -> f64 {
     if p.z > 0.0 {
-        rig.focal_px * rig.baseline_m / p.z
+        rig.disparity_px(p.z)
     } else {
         f64::INFINITY
     }
@@ -144,11 +145,8 @@ mod tests {
     fn rig() -> StereoRig {
         StereoRig {
             focal_px: 400.0,
-            cx_px: 320.0,
-            cy_px: 240.0,
             baseline_m: 0.1,
-            width_px: 640,
-            height_px: 480,
+            ..StereoRig::default()
         }
     }
 

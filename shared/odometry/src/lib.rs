@@ -24,6 +24,7 @@ use landmarks::{Geometry, Landmark, sighted};
 use linetrack_geometry::{
     MatchCase, Segment, SegmentFeatures, StereoRig, direction_angle, length_ratio, overlap,
 };
+use linetrack_stereo_vo::motion::{line_residual, point_residual};
 use linetrack_stereo_vo::{
     LineObservation, MotionConfig, PointObservation, TriangulationLimits, disparity_weight,
     estimate_motion, estimate_motion_near, triangulate_point, triangulate_segment,
@@ -376,6 +377,26 @@ impl MotionTracker {
         &mut self,
         images: Option<(&GrayImage, &GrayImage)>,
         lines: MatchedLines<'_>,
+        stats: FrameStats,
+    ) -> Result<FrameResult, OdometryError> {
+        // Dark images are stretched for the corner detector as for the segment detector.
+        let stretched = match images {
+            Some((left, right)) => Some(stretch_pair(left, right, self.config.max_contrast_gain)?),
+            None => None,
+        };
+        let images = images
+            .zip(stretched.as_ref())
+            .map(|((left, right), (l, r))| {
+                (l.as_ref().unwrap_or(left), r.as_ref().unwrap_or(right))
+            });
+        self.update_stretched(images, lines, stats)
+    }
+
+    /// [`MotionTracker::update`] on images already stretched.
+    fn update_stretched(
+        &mut self,
+        images: Option<(&GrayImage, &GrayImage)>,
+        lines: MatchedLines<'_>,
         mut stats: FrameStats,
     ) -> Result<FrameResult, OdometryError> {
         let limits = TriangulationLimits {
@@ -386,21 +407,6 @@ impl MotionTracker {
         let use_points = images.is_some();
 
         let started = Instant::now();
-        // Dark images stretched for the corner detector too (a no-op on images the front
-        // end already stretched: they span the range).
-        let gain = self.config.max_contrast_gain;
-        let stretched = match images {
-            Some((left, right)) => Some((
-                stretch_contrast(left, gain)?,
-                stretch_contrast(right, gain)?,
-            )),
-            None => None,
-        };
-        let images = images
-            .zip(stretched.as_ref())
-            .map(|((left, right), (l, r))| {
-                (l.as_ref().unwrap_or(left), r.as_ref().unwrap_or(right))
-            });
         let (mut points_l, mut points_r) = (PointFeatures::default(), PointFeatures::default());
         if let Some((left, right)) = images {
             self.orb.extract(left, &mut points_l)?;
@@ -608,10 +614,8 @@ impl MotionTracker {
         let outlier = self.config.motion.outlier_px;
         let pose = current.pose;
         for (obs, &(k, j)) in observations.points.iter().zip(&observations.point_pairs) {
-            let fits = self
-                .rig
-                .project_left(&(motion * obs.position))
-                .is_some_and(|p| (p - obs.pixel).norm() <= outlier);
+            let fits =
+                point_residual(&self.rig, motion, obs).is_some_and(|(r, _)| r.norm() <= outlier);
             if let (true, Some(Some(landmark))) = (fits, previous.point_landmarks.get(k)) {
                 let seen = fresh.points[j].as_ref().map(|(p, w)| (p, *w));
                 current.point_landmarks[j] =
@@ -619,11 +623,8 @@ impl MotionTracker {
             }
         }
         for (obs, &(k, j)) in observations.lines.iter().zip(&observations.line_pairs) {
-            let fits = obs.endpoints.iter().all(|x| {
-                self.rig.project_left(&(motion * x)).is_some_and(|p| {
-                    obs.line.dot(&nalgebra::Vector3::new(p.x, p.y, 1.0)).abs() <= outlier
-                })
-            });
+            let fits =
+                line_residual(&self.rig, motion, obs).is_some_and(|(r, _)| r.amax() <= outlier);
             if let (true, Some(Some(landmark))) = (fits, previous.line_landmarks.get(k)) {
                 let seen = fresh.lines[j].as_ref().map(|(p, w)| (p, *w));
                 current.line_landmarks[j] = Some(landmark.seen_again(&pose, seen, &self.rig, gate));
@@ -819,6 +820,18 @@ pub enum OdometryError {
     Vision(#[from] VisionError),
 }
 
+/// Both images of a stereo pair through [`stretch_contrast`] (`None`: keep the original).
+fn stretch_pair(
+    left: &GrayImage,
+    right: &GrayImage,
+    max_gain: f64,
+) -> Result<(Option<GrayImage>, Option<GrayImage>), VisionError> {
+    Ok((
+        stretch_contrast(left, max_gain)?,
+        stretch_contrast(right, max_gain)?,
+    ))
+}
+
 fn since(start: Instant) -> f64 {
     start.elapsed().as_secs_f64() * 1e3
 }
@@ -842,13 +855,9 @@ impl Odometry {
     ) -> Result<FrameResult, OdometryError> {
         let mut stats = FrameStats::default();
         let started = Instant::now();
-        let gain = self.tracker.config.max_contrast_gain;
-        let (left_stretched, right_stretched) = (
-            stretch_contrast(left, gain)?,
-            stretch_contrast(right, gain)?,
-        );
-        // The detectors see the stretched images; the back end stretches the originals for
-        // its corners itself (stretching twice would exceed the gain limit).
+        let (left_stretched, right_stretched) =
+            stretch_pair(left, right, self.tracker.config.max_contrast_gain)?;
+        // Stretched once, for the detectors and the back end's corners alike.
         let seen_left = left_stretched.as_ref().unwrap_or(left);
         let seen_right = right_stretched.as_ref().unwrap_or(right);
         let (mut lines_l, mut lines_r) = (LineFeatures::default(), LineFeatures::default());
@@ -879,7 +888,9 @@ impl Odometry {
             stereo: &stereo,
             tracked: self.previous_lines.as_ref().map(|_| tracked.as_slice()),
         };
-        let result = self.tracker.update(Some((left, right)), lines, stats);
+        let result = self
+            .tracker
+            .update_stretched(Some((seen_left, seen_right)), lines, stats);
         self.previous_lines = Some(lines_l);
         result
     }
