@@ -228,10 +228,7 @@ impl Records {
     pub fn read(run_dir: &Path, prefix: &str) -> Self {
         let frames = read_frames(&run_dir.join("frames.csv")).unwrap_or_else(|e| panic!("{e}"));
         let events = read_events(&run_dir.join("events.csv")).unwrap_or_else(|e| panic!("{e}"));
-        let scope = Scope {
-            prefix: prefix.to_string(),
-            run_id: String::new(),
-        };
+        let scope = Scope::with_prefix(prefix, "");
         let leftovers = scope.resources().unwrap_or_else(|e| panic!("{e}"));
         Self {
             frames,

@@ -203,6 +203,37 @@ fn a_killed_pose_estimator_is_restarted_and_resumes_its_trajectory() {
     kill_and_recover("pose-estimator");
 }
 
+#[test]
+fn a_killed_frame_source_is_restarted_from_the_next_frame() {
+    kill_and_recover("frame-source");
+}
+
+#[test]
+fn a_killed_supervisor_takes_its_stages_with_it() {
+    let dir = scratch("kill-supervisor");
+    let mut run = start(&dir, &base_sequence(FRAMES), &quick());
+    let status = run.wait_for("5 frames", RUN_TIMEOUT, |s| s.frames >= 5);
+    signal(status.supervisor_pid, "KILL");
+    let _ = run.child.wait();
+    // The kernel ends each stage with its parent (the parent-death signal): none is left
+    // running; the wait is bounded only so that a failure does not hang the suite.
+    let deadline = std::time::Instant::now() + Duration::from_secs(20);
+    for s in &status.stages {
+        while !proc_is_zombie_or_gone(s.pid) {
+            assert!(
+                std::time::Instant::now() < deadline,
+                "stage {} (pid {}) outlived its supervisor",
+                s.stage,
+                s.pid
+            );
+            std::thread::sleep(Duration::from_millis(50));
+        }
+    }
+    // What the supervisor recorded before it died is on disk.
+    let records = Records::read(&run.run_dir, &run.prefix);
+    assert!(records.frames.len() >= 5, "{} frames", records.frames.len());
+}
+
 /// Stops `stage` (SIGSTOP) for a while shorter than the hang timeout, then resumes it.
 fn stall(status: &linetrack_supervisor::LiveStatus, stage: &str, for_how_long: Duration) -> u32 {
     let pid = status
@@ -409,15 +440,19 @@ fn matching_falls_back_to_l1_when_the_right_image_turns_unmatchable() {
         records.frames[..10].iter().all(|f| f.matcher == "lbd"),
         "before the change"
     );
-    // The switch reaches the matcher while the pose of frame `at` is computed: from the
-    // frame after next at the latest, everything is matched by ℓ1.
-    let after: Vec<&str> = records.frames[at as usize + 2..]
+    // The switch reaches the matcher while the frames after `at` are on their way: the
+    // matcher may be ahead of the pose by as many frames as the tracks' queue holds (more
+    // under load). It switches once, within that, and stays.
+    let after: Vec<&str> = records.frames[at as usize + 1..]
         .iter()
         .map(|f| f.matcher.as_str())
         .collect();
+    let switched = after.iter().position(|m| *m == "l1");
     assert!(
-        after.iter().all(|m| *m == "l1"),
-        "after the fallback: {after:?}"
+        switched.is_some_and(|k| k <= linetrack_msgs::Topic::Tracks.queue_depth()
+            && after[k..].iter().all(|m| *m == "l1")
+            && after[..k].iter().all(|m| *m == "lbd")),
+        "after the fallback at {at}: {after:?}"
     );
     assert!(
         records.events_of("recover").is_empty(),
@@ -450,12 +485,9 @@ fn sigterm_stops_the_run_cleanly_and_a_killed_run_is_cleaned_up_by_the_next() {
     );
     report_of(&killed.run_dir);
     std::thread::sleep(Duration::from_millis(300));
-    let left = linetrack_ipc::Scope {
-        prefix: killed.prefix.clone(),
-        run_id: String::new(),
-    }
-    .resources()
-    .unwrap_or_else(|e| panic!("{e}"));
+    let left = linetrack_ipc::Scope::with_prefix(&killed.prefix, "")
+        .resources()
+        .unwrap_or_else(|e| panic!("{e}"));
     assert!(
         left.nodes > 0,
         "a killed run should leave nodes behind: {left:?}"

@@ -7,16 +7,17 @@ use anyhow::Context;
 use linetrack_datasets::StereoSequence;
 use linetrack_ipc::{Bus, Inlet, Outlet, Shutdown, Wake};
 use linetrack_msgs::{
-    Command, Control, FrameHeader, FrameStatus, StageKind, StatusKind, Topic, now_ns,
+    Command, Control, FrameHeader, FrameStatus, RigRecord, StageKind, StatusKind, Topic, now_ns,
 };
 use linetrack_pipeline_config::Pacing;
-use linetrack_stage_runtime::{Reporter, StageContext, stamp_end};
+use linetrack_stage_runtime::{Reporter, StageContext, rig_record, stamp_end};
 use std::time::{Duration, Instant};
 use tracing::info_span;
 
 /// The source's connections.
-pub struct Ports {
+struct Ports {
     frames: Outlet<u8>,
+    rig: Outlet<RigRecord>,
     control: Inlet<Control>,
     wake: Wake,
     reporter: Reporter,
@@ -24,9 +25,10 @@ pub struct Ports {
 
 impl Ports {
     /// Opens the source's services on `bus`.
-    pub fn open(bus: &Bus, ctx: &StageContext) -> anyhow::Result<Self> {
+    fn open(bus: &Bus, ctx: &StageContext) -> anyhow::Result<Self> {
         Ok(Self {
             frames: bus.outlet(Topic::Frames, 2 * 752 * 480)?,
+            rig: bus.outlet(Topic::Rig, 1)?,
             control: bus.inlet(Topic::Control)?,
             wake: bus.wake(StageKind::FrameSource)?,
             reporter: Reporter::new(bus, ctx, 0)?,
@@ -58,8 +60,13 @@ fn shutdown_ordered(control: &mut Inlet<Control>, pid: u32) -> anyhow::Result<bo
     }))
 }
 
-/// Publishes the sequence; returns when it is done or shutdown is asked for.
-pub fn run(ctx: &StageContext, mut ports: Ports, shutdown: &Shutdown) -> anyhow::Result<()> {
+/// Runs the source: publishes the rig and the sequence, then holds the rig until the run
+/// ends (shutdown by signal or command).
+pub fn run(ctx: &StageContext, bus: &Bus, shutdown: &Shutdown) -> anyhow::Result<()> {
+    publish(ctx, Ports::open(bus, ctx)?, shutdown)
+}
+
+fn publish(ctx: &StageContext, mut ports: Ports, shutdown: &Shutdown) -> anyhow::Result<()> {
     let source = &ctx.config.source;
     let sequence = StereoSequence::open(&source.sequence)
         .with_context(|| format!("opening sequence {}", source.sequence.display()))?;
@@ -81,6 +88,10 @@ pub fn run(ctx: &StageContext, mut ports: Ports, shutdown: &Shutdown) -> anyhow:
         sequence.name,
         source.pacing
     );
+    // The rig goes first: the pose estimator needs it before the first frame's tracks.
+    ports
+        .rig
+        .publish(&FrameHeader::default(), &[&[rig_record(&sequence.rig)]])?;
     let stream = sequence.into_stream(start, 4);
     ports.reporter.report(StatusKind::Ready, start as u64, 0);
 
@@ -136,6 +147,8 @@ pub fn run(ctx: &StageContext, mut ports: Ports, shutdown: &Shutdown) -> anyhow:
         ports
             .reporter
             .report(StatusKind::Heartbeat, index as u64, published);
+        // A stage that (re)started since gets the rig.
+        ports.rig.update_connections()?;
     }
     ports.reporter.report(
         StatusKind::SourceFinished,
@@ -143,6 +156,15 @@ pub fn run(ctx: &StageContext, mut ports: Ports, shutdown: &Shutdown) -> anyhow:
         published,
     );
     tracing::info!("finished: {published} frames published");
+    // The source stays until the run ends: it holds the rig, which a stage restarted after
+    // the last frame still needs.
+    while !shutdown.requested() && !shutdown_ordered(&mut ports.control, ctx.pid)? {
+        ports.rig.update_connections()?;
+        ports.reporter.beat(published);
+        ports
+            .wake
+            .wait(ports.reporter.until_due().max(Duration::from_millis(1)))?;
+    }
     Ok(())
 }
 

@@ -4,8 +4,5 @@ use linetrack_msgs::StageKind;
 use std::process::ExitCode;
 
 fn main() -> ExitCode {
-    linetrack_stage_runtime::stage_main(StageKind::FrameSource, |ctx, bus, shutdown| {
-        let ports = linetrack_frame_source::Ports::open(bus, ctx)?;
-        linetrack_frame_source::run(ctx, ports, shutdown)
-    })
+    linetrack_stage_runtime::stage_main(StageKind::FrameSource, linetrack_frame_source::run)
 }

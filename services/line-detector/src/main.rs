@@ -4,8 +4,5 @@ use linetrack_msgs::StageKind;
 use std::process::ExitCode;
 
 fn main() -> ExitCode {
-    linetrack_stage_runtime::stage_main(StageKind::LineDetector, |ctx, bus, shutdown| {
-        let ports = linetrack_line_detector::Ports::open(bus, ctx)?;
-        linetrack_line_detector::run(ctx, ports, shutdown)
-    })
+    linetrack_stage_runtime::stage_main(StageKind::LineDetector, linetrack_line_detector::run)
 }

@@ -9,44 +9,17 @@
 //! frames were described, else ℓ1. The supervisor sets the mode; the matcher reports.
 
 use linetrack_geometry::MatchCase;
-use linetrack_ipc::{Bus, Inlet, Outlet, Received, Shutdown, Wake};
+use linetrack_ipc::{Bus, Received, Shutdown};
 use linetrack_msgs::{
     Command, Control, FrameHeader, MatcherMode, NO_FRAME, SegmentRecord, StageKind, Topic,
     TrackedLine,
 };
 use linetrack_pipeline_config::MatcherPolicy;
-use linetrack_stage_runtime::{
-    GapWatch, HeldFrames, Reporter, StageContext, process_frame, stereo_views, to_segment,
-};
+use linetrack_stage_runtime::{Stage, StageContext, run_stage, stereo_views, to_segment};
 use linetrack_vision::{
     FeatureMatch, LineFeatures, MatcherKind, SegmentMatcher, create_segment_matcher,
 };
-use std::time::Duration;
 use tracing::info_span;
-
-/// The matcher's connections.
-pub struct Ports {
-    frames: Inlet<u8>,
-    segments: Inlet<SegmentRecord>,
-    tracks: Outlet<TrackedLine>,
-    control: Inlet<Control>,
-    wake: Wake,
-    reporter: Reporter,
-}
-
-impl Ports {
-    /// Opens the matcher's services on `bus`.
-    pub fn open(bus: &Bus, ctx: &StageContext) -> anyhow::Result<Self> {
-        Ok(Self {
-            frames: bus.inlet(Topic::Frames)?,
-            segments: bus.inlet(Topic::Segments)?,
-            tracks: bus.outlet(Topic::Tracks, 128)?,
-            control: bus.inlet(Topic::Control)?,
-            wake: bus.wake(StageKind::Matcher)?,
-            reporter: Reporter::new(bus, ctx, 0)?,
-        })
-    }
-}
 
 /// The previous frame's left features.
 struct Previous {
@@ -223,59 +196,38 @@ impl FrameMatcher {
     }
 }
 
-/// Runs the matcher until shutdown.
-pub fn run(ctx: &StageContext, mut ports: Ports, shutdown: &Shutdown) -> anyhow::Result<()> {
-    let mut matcher = FrameMatcher::new(ctx)?;
-    let mut held = HeldFrames::default();
-    let mut gaps = GapWatch::default();
-    let mut processed = 0u64;
-    ports
-        .reporter
-        .report(linetrack_msgs::StatusKind::Ready, 0, 0);
-    while !shutdown.requested() {
-        for message in ports.control.receive_all()? {
-            let Some(&c) = message.payload().first() else {
-                continue;
-            };
-            if !c.is_for(StageKind::Matcher, ctx.pid) {
-                continue;
-            }
-            match Command::from_code(c.command) {
-                Some(Command::Shutdown) => return Ok(()),
-                Some(Command::SetMatcherMode) => match MatcherMode::from_code(c.value) {
-                    Some(mode) => matcher.set_mode(mode),
-                    None => tracing::warn!("unknown matcher mode code {}", c.value),
-                },
-                _ => {}
-            }
-        }
-        let overflow = held.receive(&mut ports.frames)?;
-        ports.reporter.overflow(overflow);
-        let batch = ports.segments.receive_all()?;
-        let count = batch.len();
-        for (k, message) in batch.iter().enumerate() {
-            let header = *message.header();
-            ports.reporter.gap(gaps.observe(header.frame_id));
-            let span = info_span!("match", frame_id = header.frame_id);
-            let _entered = span.enter();
-            let images = held.take(header.frame_id);
-            let work =
-                |h: &mut FrameHeader| matcher.match_frame(h, message.payload(), images.as_ref());
-            process_frame(
-                StageKind::Matcher,
-                header,
-                k + 1 < count,
-                &ctx.config.budget,
-                &mut ports.tracks,
-                work,
-                Vec::new,
-            )?;
-            processed += 1;
-        }
-        ports.reporter.beat(processed);
-        ports
-            .wake
-            .wait(ports.reporter.until_due().max(Duration::from_millis(1)))?;
+impl Stage for FrameMatcher {
+    type Input = SegmentRecord;
+    type Output = TrackedLine;
+    const KIND: StageKind = StageKind::Matcher;
+    const INPUT: Topic = Topic::Segments;
+    const OUTPUT: Topic = Topic::Tracks;
+    const OUTPUT_LEN: usize = 128;
+
+    fn joins_images(&self) -> bool {
+        true
     }
-    Ok(())
+
+    fn process(
+        &mut self,
+        header: &mut FrameHeader,
+        segments: &Received<SegmentRecord>,
+        images: Option<&Received<u8>>,
+    ) -> anyhow::Result<Vec<TrackedLine>> {
+        self.match_frame(header, segments.payload(), images)
+    }
+
+    fn command(&mut self, command: Command, control: &Control) {
+        if command == Command::SetMatcherMode {
+            match MatcherMode::from_code(control.value) {
+                Some(mode) => self.set_mode(mode),
+                None => tracing::warn!("unknown matcher mode code {}", control.value),
+            }
+        }
+    }
+}
+
+/// Runs the matcher stage until shutdown.
+pub fn run(ctx: &StageContext, bus: &Bus, shutdown: &Shutdown) -> anyhow::Result<()> {
+    run_stage(ctx, bus, FrameMatcher::new(ctx)?, shutdown)
 }

@@ -4,8 +4,5 @@ use linetrack_msgs::StageKind;
 use std::process::ExitCode;
 
 fn main() -> ExitCode {
-    linetrack_stage_runtime::stage_main(StageKind::Matcher, |ctx, bus, shutdown| {
-        let ports = linetrack_matcher::Ports::open(bus, ctx)?;
-        linetrack_matcher::run(ctx, ports, shutdown)
-    })
+    linetrack_stage_runtime::stage_main(StageKind::Matcher, linetrack_matcher::run)
 }

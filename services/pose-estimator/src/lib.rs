@@ -3,52 +3,20 @@
 //! the config uses points), finds the previous frame's 3-D features through the
 //! frame-to-frame matches, and publishes the frame's pose. When the tracks were matched
 //! against another frame than the one it last tracked (a drop upstream, a restart), it
-//! starts again from the current pose instead of using them.
+//! starts again from the current pose instead of using them. The stereo rig comes from the
+//! stream (the frame source publishes it on [`Topic::Rig`]): the stage never opens the
+//! data set, so any source (a live camera) can feed it.
 
 use anyhow::Context;
-use linetrack_datasets::StereoSequence;
-use linetrack_geometry::Segment;
-use linetrack_ipc::{Bus, Inlet, Outlet, Shutdown, Wake};
-use linetrack_msgs::{
-    Command, Control, FrameHeader, NO_FRAME, PoseRecord, StageKind, StatusKind, Topic, TrackedLine,
-};
-use linetrack_odometry::{Features, FrameStats, MatchedLines, MotionTracker};
+use linetrack_geometry::{Segment, StereoRig};
+use linetrack_ipc::{Bus, Inlet, Received, Shutdown};
+use linetrack_msgs::{FrameHeader, NO_FRAME, PoseRecord, RigRecord, StageKind, Topic, TrackedLine};
+use linetrack_odometry::{Features, FrameStats, MatchedLines, MotionTracker, OdometryConfig};
 use linetrack_stage_runtime::{
-    GapWatch, HeldFrames, Reporter, StageContext, process_frame, stereo_views, to_segment,
+    Stage, StageContext, rig_from_record, run_stage, stereo_views, to_segment,
 };
 use linetrack_vision::FeatureMatch;
 use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion};
-use std::time::Duration;
-use tracing::info_span;
-
-/// The pose estimator's connections.
-pub struct Ports {
-    frames: Option<Inlet<u8>>,
-    tracks: Inlet<TrackedLine>,
-    poses: Outlet<PoseRecord>,
-    control: Inlet<Control>,
-    wake: Wake,
-    reporter: Reporter,
-}
-
-impl Ports {
-    /// Opens the pose estimator's services on `bus` (the images only when points are used).
-    pub fn open(bus: &Bus, ctx: &StageContext) -> anyhow::Result<Self> {
-        let points = ctx.config.odometry.features == Features::PointsAndLines;
-        Ok(Self {
-            frames: if points {
-                Some(bus.inlet(Topic::Frames)?)
-            } else {
-                None
-            },
-            tracks: bus.inlet(Topic::Tracks)?,
-            poses: bus.outlet(Topic::Poses, 1)?,
-            control: bus.inlet(Topic::Control)?,
-            wake: bus.wake(StageKind::PoseEstimator)?,
-            reporter: Reporter::new(bus, ctx, 0)?,
-        })
-    }
-}
 
 /// A pose as a record.
 pub fn pose_record(pose: &Isometry3<f64>) -> PoseRecord {
@@ -129,34 +97,75 @@ fn parse_pose(text: &str) -> anyhow::Result<(u64, Isometry3<f64>)> {
     ))
 }
 
-/// Tracking state: the back end and the frame it last tracked.
+/// Tracking state: the back end (once the rig is known) and the frame it last tracked.
 pub struct PoseTracker {
-    tracker: MotionTracker,
+    config: OdometryConfig,
+    tracker: Option<MotionTracker>,
+    rig: Option<StereoRig>,
     last_frame: u64,
+    /// After a restart: where to pick up, until the tracker exists.
+    resume: Option<Resume>,
     /// After a restart: the frame of the last recorded pose, until the first frame is tracked.
     resumed_after: Option<u64>,
 }
 
 impl PoseTracker {
-    /// A tracker for the run's sequence rig.
+    /// A tracker for the run's odometry settings (and `--resume-pose` after a restart); it
+    /// tracks once it has a rig ([`PoseTracker::set_rig`]).
     pub fn new(ctx: &StageContext) -> anyhow::Result<Self> {
-        let sequence = &ctx.config.source.sequence;
-        let rig = StereoSequence::open(sequence)
-            .with_context(|| format!("reading the rig of {}", sequence.display()))?
-            .rig;
-        let mut tracker = MotionTracker::new(ctx.config.odometry_config(), rig)?;
-        let mut resumed_after = None;
-        if let Some(text) = &ctx.args.resume_pose {
-            let resume = parse_resume_pose(text)?;
-            tracing::info!("resuming after frame {}", resume.frame);
-            tracker.resume_from(resume.pose, resume.motion);
-            resumed_after = Some(resume.frame);
-        }
+        let resume = ctx
+            .args
+            .resume_pose
+            .as_deref()
+            .map(parse_resume_pose)
+            .transpose()?;
         Ok(Self {
-            tracker,
+            config: ctx.config.odometry_config(),
+            tracker: None,
+            rig: None,
             last_frame: NO_FRAME,
-            resumed_after,
+            resumed_after: resume.map(|r| r.frame),
+            resume,
         })
+    }
+
+    /// Uses `rig` from now on. A new rig starts the back end again from the current pose
+    /// (the features of the old rig do not carry over).
+    pub fn set_rig(&mut self, rig: StereoRig) -> anyhow::Result<()> {
+        if self.rig == Some(rig) {
+            return Ok(());
+        }
+        let mut tracker = MotionTracker::new(self.config.clone(), rig)?;
+        match (&self.tracker, self.resume.take()) {
+            (Some(old), _) => tracker.resume_from(old.pose(), old.last_motion()),
+            (None, Some(resume)) => {
+                tracing::info!("resuming after frame {}", resume.frame);
+                tracker.resume_from(resume.pose, resume.motion);
+            }
+            (None, None) => {}
+        }
+        tracing::info!(
+            "rig: f {:.1} px, c ({:.1}, {:.1}) px, baseline {:.4} m, {}×{}",
+            rig.focal_px,
+            rig.cx_px,
+            rig.cy_px,
+            rig.baseline_m,
+            rig.width_px,
+            rig.height_px
+        );
+        self.tracker = Some(tracker);
+        self.rig = Some(rig);
+        self.last_frame = NO_FRAME;
+        Ok(())
+    }
+
+    /// The current pose (the identity before the rig is known, or the resumed pose).
+    pub fn pose(&self) -> Isometry3<f64> {
+        match (&self.tracker, &self.resume) {
+            (Some(t), _) => t.pose(),
+            (None, Some(r)) => r.pose,
+            (None, None) => Isometry3::identity(),
+        }
     }
 
     /// Tracks one frame.
@@ -164,7 +173,7 @@ impl PoseTracker {
         &mut self,
         header: &FrameHeader,
         lines: &[TrackedLine],
-        frame: Option<&linetrack_ipc::Received<u8>>,
+        frame: Option<&Received<u8>>,
     ) -> anyhow::Result<PoseRecord> {
         let left: Vec<Segment> = lines.iter().map(|t| to_segment(&t.left)).collect();
         let right: Vec<Segment> = lines
@@ -211,14 +220,15 @@ impl PoseTracker {
         let images = views.as_ref().map(|(l, r)| (&**l, &**r));
         // The first frame after a restart: the motion across the gap is predicted (the
         // last motion per frame), and the pose says so.
+        let tracker = self
+            .tracker
+            .as_mut()
+            .context("no stereo rig has arrived from the frame source yet")?;
         let resumed = self.resumed_after.take();
         if let Some(frame) = resumed {
-            self.tracker
-                .predict_frames(header.frame_id.saturating_sub(frame));
+            tracker.predict_frames(header.frame_id.saturating_sub(frame));
         }
-        let result = self
-            .tracker
-            .update(images, matched, FrameStats::default())?;
+        let result = tracker.update(images, matched, FrameStats::default())?;
         self.last_frame = header.frame_id;
         let mut record = pose_record(&result.pose);
         record.lost = u32::from(result.lost || resumed.is_some());
@@ -232,58 +242,73 @@ impl PoseTracker {
     }
 }
 
-/// Runs the pose estimator until shutdown.
-pub fn run(ctx: &StageContext, mut ports: Ports, shutdown: &Shutdown) -> anyhow::Result<()> {
-    let mut tracker = PoseTracker::new(ctx)?;
-    let mut held = HeldFrames::default();
-    let mut gaps = GapWatch::default();
-    let mut processed = 0u64;
-    ports.reporter.report(StatusKind::Ready, 0, 0);
-    while !shutdown.requested() {
-        for message in ports.control.receive_all()? {
-            if let Some(&c) = message.payload().first()
-                && c.is_for(StageKind::PoseEstimator, ctx.pid)
-                && Command::from_code(c.command) == Some(Command::Shutdown)
-            {
-                return Ok(());
+/// The pose estimator stage: the tracker and the rig's topic.
+pub struct PoseStage {
+    tracker: PoseTracker,
+    rig: Inlet<RigRecord>,
+    points: bool,
+}
+
+impl PoseStage {
+    /// The stage of `ctx`, subscribed to the rig on `bus`.
+    pub fn new(ctx: &StageContext, bus: &Bus) -> anyhow::Result<Self> {
+        Ok(Self {
+            tracker: PoseTracker::new(ctx)?,
+            rig: bus.inlet(Topic::Rig)?,
+            points: ctx.config.odometry.features == Features::PointsAndLines,
+        })
+    }
+}
+
+impl Stage for PoseStage {
+    type Input = TrackedLine;
+    type Output = PoseRecord;
+    const KIND: StageKind = StageKind::PoseEstimator;
+    const INPUT: Topic = Topic::Tracks;
+    const OUTPUT: Topic = Topic::Poses;
+    const OUTPUT_LEN: usize = 1;
+
+    fn joins_images(&self) -> bool {
+        // ORB points are found in the images.
+        self.points
+    }
+
+    fn poll(&mut self) -> anyhow::Result<()> {
+        for message in self.rig.receive_all()? {
+            let Some(record) = message.payload().first() else {
+                continue;
+            };
+            // A bad rig is refused and the last good one kept: the run goes on.
+            match rig_from_record(record) {
+                Ok(rig) => self.tracker.set_rig(rig)?,
+                Err(e) => tracing::error!("{e}"),
             }
         }
-        if let Some(frames) = &mut ports.frames {
-            let overflow = held.receive(frames)?;
-            ports.reporter.overflow(overflow);
-        }
-        let batch = ports.tracks.receive_all()?;
-        let count = batch.len();
-        for (k, message) in batch.iter().enumerate() {
-            let header = *message.header();
-            ports.reporter.gap(gaps.observe(header.frame_id));
-            let span = info_span!("estimate_pose", frame_id = header.frame_id);
-            let _entered = span.enter();
-            let frame = held.take(header.frame_id);
-            // A dropped or failed frame repeats the last pose.
-            let last = pose_record(&tracker.tracker.pose());
-            let work = |h: &mut FrameHeader| {
-                tracker
-                    .track(h, message.payload(), frame.as_ref())
-                    .map(|r| vec![r])
-            };
-            process_frame(
-                StageKind::PoseEstimator,
-                header,
-                k + 1 < count,
-                &ctx.config.budget,
-                &mut ports.poses,
-                work,
-                || vec![last],
-            )?;
-            processed += 1;
-        }
-        ports.reporter.beat(processed);
-        ports
-            .wake
-            .wait(ports.reporter.until_due().max(Duration::from_millis(1)))?;
+        Ok(())
     }
-    Ok(())
+
+    fn process(
+        &mut self,
+        header: &mut FrameHeader,
+        tracks: &Received<TrackedLine>,
+        images: Option<&Received<u8>>,
+    ) -> anyhow::Result<Vec<PoseRecord>> {
+        Ok(vec![self.tracker.track(
+            header,
+            tracks.payload(),
+            images,
+        )?])
+    }
+
+    /// A dropped or failed frame repeats the last pose.
+    fn placeholder(&self) -> Vec<PoseRecord> {
+        vec![pose_record(&self.tracker.pose())]
+    }
+}
+
+/// Runs the pose estimator stage until shutdown.
+pub fn run(ctx: &StageContext, bus: &Bus, shutdown: &Shutdown) -> anyhow::Result<()> {
+    run_stage(ctx, bus, PoseStage::new(ctx, bus)?, shutdown)
 }
 
 #[cfg(test)]

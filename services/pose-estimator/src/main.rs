@@ -4,8 +4,5 @@ use linetrack_msgs::StageKind;
 use std::process::ExitCode;
 
 fn main() -> ExitCode {
-    linetrack_stage_runtime::stage_main(StageKind::PoseEstimator, |ctx, bus, shutdown| {
-        let ports = linetrack_pose_estimator::Ports::open(bus, ctx)?;
-        linetrack_pose_estimator::run(ctx, ports, shutdown)
-    })
+    linetrack_stage_runtime::stage_main(StageKind::PoseEstimator, linetrack_pose_estimator::run)
 }

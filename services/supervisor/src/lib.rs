@@ -411,6 +411,8 @@ impl<'m> Supervisor<'m> {
             .arg(&self.run_id)
             .arg("--run-dir")
             .arg(&self.run_dir)
+            .arg("--supervisor-pid")
+            .arg(std::process::id().to_string())
             .env(Scope::PREFIX_VAR, &self.scope.prefix)
             .stdin(Stdio::null())
             .stdout(Stdio::null());
@@ -920,8 +922,7 @@ fn run_threads(
                 .name($stage.name().to_string())
                 .spawn(move || {
                     let bus = h.bus();
-                    let p = $krate::Ports::open(&bus, &c)?;
-                    $krate::run(&c, p, &s)
+                    $krate::run(&c, &bus, &s)
                 })?;
             threads.push(($stage, handle));
         }};

@@ -17,6 +17,7 @@ use iceoryx2::port::listener::Listener;
 use iceoryx2::port::notifier::Notifier;
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::subscriber::Subscriber;
+use iceoryx2::prelude::Path as IoxPath;
 use iceoryx2::prelude::{
     AllocationStrategy, FileName, NodeBuilder, NodeName, SemanticString, ServiceName,
     SignalHandlingMode, ZeroCopySend, ipc,
@@ -26,6 +27,8 @@ use linetrack_msgs::{FrameHeader, StageKind, Topic, wake_service_name};
 use std::any::Any;
 use std::collections::HashMap;
 use std::fmt::Debug;
+use std::os::unix::fs::{MetadataExt, PermissionsExt};
+use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
@@ -78,39 +81,165 @@ impl<T: Debug + Copy + Default + ZeroCopySend + Send + Sync + 'static> Record fo
 
 /// Where a run's shared-memory resources live: every file is named with `prefix`, every
 /// service with `run_id`, so runs (and tests) side by side never meet, and a run's leftovers
-/// are found by prefix.
+/// are found by prefix. Both the prefix and the root folder of iceoryx2's bookkeeping
+/// belong to the user who runs the pipeline (`linetrack_u<uid>_`, `$XDG_RUNTIME_DIR` or
+/// `/tmp/linetrack-<uid>`), so runs of different users never block each other, and
+/// [`Scope::lock_down`] keeps every file of the scope readable and writable by its owner
+/// only.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Scope {
-    /// File-name prefix of the iceoryx2 resources (`linetrack_` unless
+    /// File-name prefix of the iceoryx2 resources (`linetrack_u<uid>_` unless
     /// `LINETRACK_IPC_PREFIX` says otherwise).
     pub prefix: String,
     /// The run.
     pub run_id: String,
+    /// The folder of iceoryx2's node and service descriptions (`LINETRACK_IPC_ROOT`, else
+    /// `$XDG_RUNTIME_DIR/linetrack-iceoryx2`, else `/tmp/linetrack-<uid>/iceoryx2`).
+    pub root: PathBuf,
 }
+
+/// Where POSIX shared memory lives on Linux.
+const SHM_DIR: &str = "/dev/shm";
 
 impl Scope {
     /// The environment variable that overrides the prefix.
     pub const PREFIX_VAR: &'static str = "LINETRACK_IPC_PREFIX";
+    /// The environment variable that overrides the root folder.
+    pub const ROOT_VAR: &'static str = "LINETRACK_IPC_ROOT";
 
-    /// A scope for `run_id` with the prefix from the environment or the default.
+    /// A scope for `run_id` with the prefix from the environment or this user's default.
     pub fn new(run_id: &str) -> Self {
         let prefix = std::env::var(Self::PREFIX_VAR)
             .ok()
             .filter(|p| !p.is_empty())
-            .unwrap_or_else(|| "linetrack_".to_string());
+            .unwrap_or_else(|| format!("linetrack_u{}_", rustix::process::getuid().as_raw()));
+        Self::with_prefix(&prefix, run_id)
+    }
+
+    /// A scope with an explicit prefix (tests, `linetrack ctl` reaching a recorded run).
+    pub fn with_prefix(prefix: &str, run_id: &str) -> Self {
         Self {
-            prefix,
+            prefix: prefix.to_string(),
             run_id: run_id.to_string(),
+            root: Self::default_root(),
         }
     }
 
-    /// The iceoryx2 configuration of this scope.
+    /// This user's root folder for iceoryx2's bookkeeping.
+    pub fn default_root() -> PathBuf {
+        let from_env = |var: &str| {
+            std::env::var_os(var)
+                .filter(|v| !v.is_empty())
+                .map(PathBuf::from)
+        };
+        from_env(Self::ROOT_VAR)
+            .or_else(|| {
+                from_env("XDG_RUNTIME_DIR")
+                    .filter(|dir| dir.is_dir())
+                    .map(|dir| dir.join("linetrack-iceoryx2"))
+            })
+            .unwrap_or_else(|| {
+                PathBuf::from(format!(
+                    "/tmp/linetrack-{}",
+                    rustix::process::getuid().as_raw()
+                ))
+                .join("iceoryx2")
+            })
+    }
+
+    /// The iceoryx2 configuration of this scope (the root folder is created, owner-only,
+    /// when missing).
     pub fn config(&self) -> Result<Config, IpcError> {
+        let root = self.root.to_string_lossy();
+        private_dir(&self.root).map_err(|message| setup("iceoryx2 root folder", &root)(message))?;
         let mut config = Config::default();
         config.global.prefix = FileName::new(self.prefix.as_bytes())
             .map_err(|e| setup("iceoryx2 prefix", &self.prefix)(format!("{e:?}")))?;
+        let with_slash = format!("{}/", root.trim_end_matches('/'));
+        let path = IoxPath::new(with_slash.as_bytes())
+            .map_err(|e| setup("iceoryx2 root folder", &root)(format!("{e:?}")))?;
+        config.global.set_root_path(&path);
         Ok(config)
     }
+
+    /// Checks the scope's shared-memory files: one owned by another user is an error naming
+    /// it (it would lock this user's runs out); one that others may read or write is made
+    /// owner-only (iceoryx2 creates its global management segment world-writable).
+    /// Returns how many files were tightened.
+    pub fn lock_down(&self) -> Result<usize, IpcError> {
+        lock_down_files(
+            Path::new(SHM_DIR),
+            &self.prefix,
+            rustix::process::getuid().as_raw(),
+        )
+        .map_err(|message| setup("locking down shared memory", &self.prefix)(message))
+    }
+}
+
+/// [`Scope::lock_down`] over the files of `dir` whose names start with `prefix`, for user `me`.
+fn lock_down_files(dir: &Path, prefix: &str, me: u32) -> Result<usize, String> {
+    let entries = std::fs::read_dir(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+    let mut tightened = 0;
+    for entry in entries.flatten() {
+        if !entry.file_name().to_string_lossy().starts_with(prefix) {
+            continue;
+        }
+        let path = entry.path();
+        // A file that went away between listing and reading belonged to a node that ended.
+        let Ok(meta) = std::fs::symlink_metadata(&path) else {
+            continue;
+        };
+        if meta.uid() != me {
+            return Err(format!(
+                "{} belongs to user {}, not to this user ({me}): another user's file in this \
+                 user's namespace; remove it or set {} to another prefix",
+                path.display(),
+                meta.uid(),
+                Scope::PREFIX_VAR
+            ));
+        }
+        if meta.mode() & 0o077 != 0 {
+            std::fs::set_permissions(&path, std::fs::Permissions::from_mode(0o600))
+                .map_err(|e| format!("{}: {e}", path.display()))?;
+            tightened += 1;
+        }
+    }
+    Ok(tightened)
+}
+
+/// Makes sure `dir` is a folder only this user can enter: created (mode 0700, parents
+/// too) when missing; refused when it is a link, another user's, or open to others.
+fn private_dir(dir: &Path) -> Result<(), String> {
+    use std::os::unix::fs::DirBuilderExt;
+    if std::fs::symlink_metadata(dir).is_err() {
+        std::fs::DirBuilder::new()
+            .recursive(true)
+            .mode(0o700)
+            .create(dir)
+            .map_err(|e| format!("creating {}: {e}", dir.display()))?;
+    }
+    let meta = std::fs::symlink_metadata(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+    let me = rustix::process::getuid().as_raw();
+    if !meta.is_dir() {
+        return Err(format!("{} is not a folder", dir.display()));
+    }
+    if meta.uid() != me {
+        return Err(format!(
+            "{} belongs to user {}, not to this user ({me}); set {} to a folder of yours",
+            dir.display(),
+            meta.uid(),
+            Scope::ROOT_VAR
+        ));
+    }
+    if meta.mode() & 0o022 != 0 {
+        return Err(format!(
+            "{} can be written by other users (mode {:o}); make it 0700 or set {}",
+            dir.display(),
+            meta.mode() & 0o777,
+            Scope::ROOT_VAR
+        ));
+    }
+    Ok(())
 }
 
 /// iceoryx2 resources left in a scope: nodes (alive or dead) and services.
@@ -193,9 +322,17 @@ pub struct LocalPayload<P> {
     payload: Vec<P>,
 }
 
+/// A local topic: its subscribers' queues and, for a topic with history, the last message
+/// (handed to a subscriber that comes later, as iceoryx2's history does).
+#[derive(Default)]
+struct LocalTopic {
+    subscribers: Vec<Sender<LocalMessage>>,
+    last: Option<LocalMessage>,
+}
+
 #[derive(Default)]
 struct LocalRegistry {
-    topics: HashMap<Topic, Arc<Mutex<Vec<Sender<LocalMessage>>>>>,
+    topics: HashMap<Topic, Arc<Mutex<LocalTopic>>>,
     wakes: HashMap<StageKind, (Sender<()>, Receiver<()>)>,
 }
 
@@ -229,6 +366,7 @@ impl Bus {
     /// The shared-memory transport, as a node named `node_name` in `scope`.
     pub fn shared_memory(scope: &Scope, node_name: &str) -> Result<Self, IpcError> {
         let config = scope.config()?;
+        scope.lock_down()?;
         let name = NodeName::new(node_name)
             .map_err(|e| setup("node name", node_name)(format!("{e:?}")))?;
         let node = NodeBuilder::new()
@@ -237,6 +375,7 @@ impl Bus {
             .signal_handling_mode(SignalHandlingMode::Disabled)
             .create::<ipc::Service>()
             .map_err(|e| setup("iceoryx2 node", node_name)(format!("{e:?}")))?;
+        scope.lock_down()?;
         Ok(Self {
             kind: BusKind::Shm {
                 node,
@@ -331,6 +470,7 @@ impl Bus {
                     service_name: topic.name().to_string(),
                     inner: OutletInner::Local {
                         subscribers,
+                        keep_last: topic.history() > 0,
                         wakes,
                         _record: std::marker::PhantomData,
                     },
@@ -357,8 +497,13 @@ impl Bus {
             }
             BusKind::Local(registry) => {
                 let (tx, rx) = crossbeam_channel::bounded(topic.queue_depth());
-                let list = Arc::clone(Self::lock_local(registry).topics.entry(topic).or_default());
-                list.lock().unwrap_or_else(|p| p.into_inner()).push(tx);
+                let shared =
+                    Arc::clone(Self::lock_local(registry).topics.entry(topic).or_default());
+                let mut local = shared.lock().unwrap_or_else(|p| p.into_inner());
+                if let Some(last) = &local.last {
+                    let _ = tx.try_send(Arc::clone(last));
+                }
+                local.subscribers.push(tx);
                 Ok(Inlet {
                     service_name: topic.name().to_string(),
                     inner: InletInner::Local(rx, std::marker::PhantomData),
@@ -416,7 +561,7 @@ fn pubsub_service<P: Record>(
         .max_subscribers(8)
         .subscriber_max_buffer_size(topic.queue_depth())
         .subscriber_max_borrowed_samples(topic.queue_depth())
-        .history_size(0)
+        .history_size(topic.history())
         .enable_safe_overflow(true)
         .open_or_create()
         .map_err(|e| setup("publish-subscribe service", service_name)(format!("{e:?}")))
@@ -442,7 +587,8 @@ enum OutletInner<P: Record> {
         notifiers: Vec<Notifier<ipc::Service>>,
     },
     Local {
-        subscribers: Arc<Mutex<Vec<Sender<LocalMessage>>>>,
+        subscribers: Arc<Mutex<LocalTopic>>,
+        keep_last: bool,
         wakes: Vec<Sender<()>>,
         _record: std::marker::PhantomData<P>,
     },
@@ -489,7 +635,10 @@ impl<P: Record> Outlet<P> {
                 Ok(delivered)
             }
             OutletInner::Local {
-                subscribers, wakes, ..
+                subscribers,
+                keep_last,
+                wakes,
+                ..
             } => {
                 let mut payload = Vec::with_capacity(len);
                 for part in parts {
@@ -499,9 +648,12 @@ impl<P: Record> Outlet<P> {
                     header: *header,
                     payload,
                 });
-                let list = subscribers.lock().unwrap_or_else(|p| p.into_inner());
+                let mut local = subscribers.lock().unwrap_or_else(|p| p.into_inner());
+                if *keep_last {
+                    local.last = Some(Arc::clone(&message));
+                }
                 let mut delivered = 0;
-                for tx in list.iter() {
+                for tx in local.subscribers.iter() {
                     match tx.try_send(Arc::clone(&message)) {
                         Ok(()) => delivered += 1,
                         // A full queue loses the message for that subscriber, as a shared
@@ -514,6 +666,19 @@ impl<P: Record> Outlet<P> {
                 }
                 Ok(delivered)
             }
+        }
+    }
+
+    /// Hands the topic's history (see [`Topic::history`]) to subscribers that connected
+    /// since the last message: a publisher with nothing new to send calls it now and then.
+    /// (A local subscriber gets the history when it is created.)
+    pub fn update_connections(&self) -> Result<(), IpcError> {
+        use iceoryx2::port::update_connections::UpdateConnections;
+        match &self.inner {
+            OutletInner::Shm { publisher, .. } => publisher
+                .update_connections()
+                .map_err(|e| transfer("update connections", &self.service_name)(format!("{e:?}"))),
+            OutletInner::Local { .. } => Ok(()),
         }
     }
 
@@ -629,11 +794,114 @@ mod tests {
     use super::*;
     use linetrack_msgs::SegmentRecord;
 
-    fn unique_scope(tag: &str) -> Scope {
-        Scope {
-            prefix: format!("ltipc{}_", std::process::id()),
-            run_id: format!("{tag}{}", std::process::id()),
+    #[test]
+    fn a_scope_leaves_nothing_that_other_users_can_write() {
+        let root = linetrack_test_data::scratch_path("ipc", "root").join("iceoryx2");
+        let scope = Scope {
+            root: root.clone(),
+            ..unique_scope("private")
+        };
+        let bus = Bus::shared_memory(&scope, "private").unwrap_or_else(|e| panic!("{e}"));
+        let _outlet = bus
+            .outlet::<SegmentRecord>(Topic::Segments, 4)
+            .unwrap_or_else(|e| panic!("{e}"));
+        let _inlet = bus
+            .inlet::<SegmentRecord>(Topic::Segments)
+            .unwrap_or_else(|e| panic!("{e}"));
+        let mode = |path: &Path| {
+            std::fs::symlink_metadata(path)
+                .unwrap_or_else(|e| panic!("{}: {e}", path.display()))
+                .mode()
+        };
+        assert_eq!(mode(&root) & 0o777, 0o700, "{}", root.display());
+        let mut files = 0;
+        for entry in std::fs::read_dir(SHM_DIR)
+            .unwrap_or_else(|e| panic!("{e}"))
+            .flatten()
+        {
+            if entry
+                .file_name()
+                .to_string_lossy()
+                .starts_with(&scope.prefix)
+            {
+                files += 1;
+                let path = entry.path();
+                assert_eq!(
+                    mode(&path) & 0o077,
+                    0,
+                    "{} is open to others",
+                    path.display()
+                );
+            }
         }
+        assert!(
+            files > 0,
+            "the bus made no shared memory under {}",
+            scope.prefix
+        );
+    }
+
+    #[test]
+    fn another_users_file_in_the_namespace_is_named_and_open_files_are_tightened() {
+        let dir =
+            linetrack_test_data::scratch_dir("ipc", "lockdown").unwrap_or_else(|e| panic!("{e}"));
+        let open = dir.join("lt_x_node.global_mgmt");
+        std::fs::write(&open, b"0123").unwrap_or_else(|e| panic!("{e}"));
+        std::fs::set_permissions(&open, std::fs::Permissions::from_mode(0o666))
+            .unwrap_or_else(|e| panic!("{e}"));
+        std::fs::write(dir.join("other_prefix"), b"").unwrap_or_else(|e| panic!("{e}"));
+        let me = rustix::process::getuid().as_raw();
+        assert_eq!(lock_down_files(&dir, "lt_x_", me), Ok(1));
+        let mode = std::fs::metadata(&open)
+            .unwrap_or_else(|e| panic!("{e}"))
+            .mode();
+        assert_eq!(mode & 0o777, 0o600);
+        assert_eq!(lock_down_files(&dir, "lt_x_", me), Ok(0), "already tight");
+        // Seen by another user, the same file is someone else's: refused, by name.
+        let err = lock_down_files(&dir, "lt_x_", me.wrapping_add(1)).unwrap_err();
+        assert!(
+            err.contains("lt_x_node.global_mgmt") && err.contains(Scope::PREFIX_VAR),
+            "{err}"
+        );
+    }
+
+    #[test]
+    fn a_root_folder_open_to_others_is_refused() {
+        let dir =
+            linetrack_test_data::scratch_dir("ipc", "openroot").unwrap_or_else(|e| panic!("{e}"));
+        std::fs::set_permissions(&dir, std::fs::Permissions::from_mode(0o777))
+            .unwrap_or_else(|e| panic!("{e}"));
+        let scope = Scope {
+            root: dir.clone(),
+            ..unique_scope("openroot")
+        };
+        let err = scope
+            .config()
+            .err()
+            .map(|e| e.to_string())
+            .unwrap_or_default();
+        assert!(
+            err.contains(&dir.display().to_string()) && err.contains("other users"),
+            "{err}"
+        );
+        let link = linetrack_test_data::scratch_path("ipc", "linkroot");
+        std::os::unix::fs::symlink(&dir, &link).unwrap_or_else(|e| panic!("{e}"));
+        let err = Scope {
+            root: link,
+            ..unique_scope("linkroot")
+        }
+        .config()
+        .err()
+        .map(|e| e.to_string())
+        .unwrap_or_default();
+        assert!(err.contains("not a folder"), "{err}");
+    }
+
+    fn unique_scope(tag: &str) -> Scope {
+        Scope::with_prefix(
+            &format!("ltipc{}_", std::process::id()),
+            &format!("{tag}{}", std::process::id()),
+        )
     }
 
     fn round_trip(publisher_bus: &Bus, subscriber_bus: &Bus) {

@@ -89,17 +89,22 @@ pub enum Topic {
     Status,
     /// Commands: payload one [`Control`].
     Control,
+    /// The stereo rig the frames are rectified to: payload one [`RigRecord`], published by
+    /// the frame source before its first frame and whenever the rig changes; kept as history,
+    /// so a stage that starts later (a restart) gets it too.
+    Rig,
 }
 
 impl Topic {
     /// Every topic.
-    pub const ALL: [Topic; 6] = [
+    pub const ALL: [Topic; 7] = [
         Topic::Frames,
         Topic::Segments,
         Topic::Tracks,
         Topic::Poses,
         Topic::Status,
         Topic::Control,
+        Topic::Rig,
     ];
 
     /// Short name.
@@ -111,6 +116,7 @@ impl Topic {
             Topic::Poses => "poses",
             Topic::Status => "status",
             Topic::Control => "control",
+            Topic::Rig => "rig",
         }
     }
 
@@ -122,6 +128,7 @@ impl Topic {
             Topic::Segments => &[Matcher],
             Topic::Tracks => &[PoseEstimator],
             Topic::Poses => &[Supervisor],
+            Topic::Rig => &[PoseEstimator],
             Topic::Status => &[Supervisor],
             Topic::Control => &[
                 FrameSource,
@@ -144,6 +151,15 @@ impl Topic {
             Topic::Frames => 12,
             Topic::Segments | Topic::Tracks => 16,
             Topic::Poses | Topic::Status | Topic::Control => 64,
+            Topic::Rig => 4,
+        }
+    }
+
+    /// Messages a subscriber that connects later still receives: the last rig.
+    pub const fn history(self) -> usize {
+        match self {
+            Topic::Rig => 1,
+            _ => 0,
         }
     }
 
@@ -151,7 +167,7 @@ impl Topic {
     /// status; the supervisor and `linetrack ctl` send control.
     pub fn max_publishers(self) -> usize {
         match self {
-            Topic::Frames | Topic::Tracks | Topic::Poses => 2,
+            Topic::Frames | Topic::Tracks | Topic::Poses | Topic::Rig => 2,
             Topic::Segments => 3,
             Topic::Status | Topic::Control => 12,
         }
@@ -401,6 +417,24 @@ impl StatusKind {
         .get(code as usize)
         .copied()
     }
+}
+
+/// A rectified pinhole stereo rig on the wire (`linetrack_geometry::StereoRig`).
+#[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
+#[repr(C)]
+pub struct RigRecord {
+    /// Focal length, pixels (square pixels).
+    pub focal_px: f64,
+    /// Principal point x, pixels.
+    pub cx_px: f64,
+    /// Principal point y, pixels.
+    pub cy_px: f64,
+    /// Baseline, metres.
+    pub baseline_m: f64,
+    /// Image width, pixels.
+    pub width_px: u32,
+    /// Image height, pixels.
+    pub height_px: u32,
 }
 
 /// A stage's heartbeat or event.

@@ -5,16 +5,20 @@
 //! shared-memory bus, arms SIGINT/SIGTERM, and runs the stage's loop. The loop uses a
 //! [`Reporter`] for heartbeats and events, and [`late_drop`] for the budget policy.
 
+use anyhow::Context;
 use clap::Parser;
-use linetrack_geometry::{Point, Segment};
-use linetrack_ipc::{Bus, Inlet, IpcError, Outlet, Received, Scope, Shutdown};
-use linetrack_msgs::SegmentRecord;
+use linetrack_geometry::{Point, Segment, StereoRig};
+use linetrack_ipc::{Bus, Inlet, IpcError, Outlet, Received, Record, Scope, Shutdown};
+
+mod runner;
 use linetrack_msgs::{
     FrameHeader, FrameStatus, StageKind, StatusKind, StatusReport, Topic, now_ns,
 };
+use linetrack_msgs::{RigRecord, SegmentRecord};
 use linetrack_pipeline_config::{BudgetConfig, PipelineConfig};
 use linetrack_vision::DetectorKind;
 use linetrack_vision::{BorrowedGray, GrayImage, VisionError};
+pub use runner::{Stage, run_stage};
 use std::collections::VecDeque;
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -45,6 +49,9 @@ pub struct StageArgs {
     /// Pose estimator: continue from this pose, "frame,tx,ty,tz,qx,qy,qz,qw" (after a restart).
     #[arg(long)]
     pub resume_pose: Option<String>,
+    /// The supervisor's pid: the stage ends when that process does.
+    #[arg(long)]
+    pub supervisor_pid: Option<u32>,
 }
 
 /// A stage's view of its run.
@@ -71,6 +78,7 @@ impl StageContext {
             standby: false,
             start_frame: 0,
             resume_pose: None,
+            supervisor_pid: None,
         };
         Self {
             stage,
@@ -147,7 +155,8 @@ impl Reporter {
     pub fn overflow(&mut self, overflow: Overflow) {
         if let Some(first) = overflow.first_frame {
             tracing::warn!(
-                "hold full ({HELD_FRAMES} frames): {} frames from {first} released before their other input",
+                "hold full ({} messages): {} frames from {first} released before their turn",
+                overflow.capacity,
                 overflow.frames
             );
             self.report(StatusKind::Overflow, first, overflow.frames);
@@ -262,15 +271,19 @@ pub fn stereo_views<'a>(
     ))
 }
 
-/// Frames a stage holds at most: one less than the frame subscriber's borrow limit
-/// ([`Topic::queue_depth`], which also sizes its buffer), so that the held frames and the
-/// one being received never exceed what iceoryx2 lets a subscriber borrow, however long
-/// the stage was stopped.
-pub const HELD_FRAMES: usize = Topic::Frames.queue_depth() - 1;
+/// Messages of `topic` a stage holds at most (see [`Held`]).
+pub const fn held_capacity(topic: Topic) -> usize {
+    topic.queue_depth() - 1
+}
+
+/// Frames a stage holds at most: the images' hold.
+pub const HELD_FRAMES: usize = held_capacity(Topic::Frames);
 
 /// Frames released from a hold before their turn: the hold overflowed.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub struct Overflow {
+    /// The hold's capacity.
+    pub capacity: usize,
     /// The first frame released.
     pub first_frame: Option<u64>,
     /// Frames released.
@@ -305,46 +318,54 @@ impl GapWatch {
     }
 }
 
-/// Frame messages held (in shared memory, not copied) until the stage's other input for
-/// the same frame arrives; at most [`HELD_FRAMES`].
-pub struct HeldFrames {
-    held: VecDeque<Received<u8>>,
+/// Messages held (in shared memory, not copied): images until the stage's input for the
+/// same frame arrives, or a standby's inputs until it takes over. At most one less than the
+/// topic's subscriber borrow limit ([`Topic::queue_depth`], which also sizes its buffer),
+/// so that the held messages and the one being received never exceed what iceoryx2 lets a
+/// subscriber borrow, however long the stage was stopped.
+pub struct Held<P: Record> {
+    held: VecDeque<Received<P>>,
+    capacity: usize,
 }
 
-impl Default for HeldFrames {
-    fn default() -> Self {
+impl<P: Record> Held<P> {
+    /// An empty hold for messages of `topic`.
+    pub fn new(topic: Topic) -> Self {
+        let capacity = held_capacity(topic);
         Self {
-            held: VecDeque::with_capacity(HELD_FRAMES),
+            held: VecDeque::with_capacity(capacity),
+            capacity,
         }
     }
-}
 
-impl HeldFrames {
-    /// Holds `frame`, releasing the oldest when full; returns the id of the frame released.
-    pub fn push(&mut self, frame: Received<u8>) -> Option<u64> {
-        let released = (self.held.len() >= HELD_FRAMES)
+    /// Holds `message`, releasing the oldest when full; returns the id of the frame released.
+    pub fn push(&mut self, message: Received<P>) -> Option<u64> {
+        let released = (self.held.len() >= self.capacity)
             .then(|| self.held.pop_front())
             .flatten()
             .map(|f| f.header().frame_id);
-        self.held.push_back(frame);
+        self.held.push_back(message);
         released
     }
 
-    /// Receives every waiting frame into the hold, one at a time (the oldest released first
-    /// when full, so never more than the subscriber's borrow limit is borrowed); returns
-    /// what was released to make room.
-    pub fn receive(&mut self, inlet: &mut Inlet<u8>) -> Result<Overflow, IpcError> {
-        let mut overflow = Overflow::default();
-        while let Some(frame) = inlet.receive()? {
-            if let Some(id) = self.push(frame) {
+    /// Receives every waiting message into the hold, one at a time (the oldest released
+    /// first when full, so never more than the subscriber's borrow limit is borrowed);
+    /// returns what was released to make room.
+    pub fn receive(&mut self, inlet: &mut Inlet<P>) -> Result<Overflow, IpcError> {
+        let mut overflow = Overflow {
+            capacity: self.capacity,
+            ..Overflow::default()
+        };
+        while let Some(message) = inlet.receive()? {
+            if let Some(id) = self.push(message) {
                 overflow.add(id);
             }
         }
         Ok(overflow)
     }
 
-    /// Takes frame `frame_id`, releasing every older one (their turn has passed).
-    pub fn take(&mut self, frame_id: u64) -> Option<Received<u8>> {
+    /// Takes frame `frame_id`'s message, releasing every older one (their turn has passed).
+    pub fn take(&mut self, frame_id: u64) -> Option<Received<P>> {
         while self
             .held
             .front()
@@ -363,12 +384,12 @@ impl HeldFrames {
         }
     }
 
-    /// Takes the oldest held frame.
-    pub fn take_next(&mut self) -> Option<Received<u8>> {
+    /// Takes the oldest held message.
+    pub fn take_next(&mut self) -> Option<Received<P>> {
         self.held.pop_front()
     }
 
-    /// Frames held.
+    /// Messages held.
     pub fn len(&self) -> usize {
         self.held.len()
     }
@@ -378,7 +399,7 @@ impl HeldFrames {
         self.held.is_empty()
     }
 
-    /// The oldest held frame's id.
+    /// The oldest held message's frame id.
     pub fn first_id(&self) -> Option<u64> {
         self.held.front().map(|f| f.header().frame_id)
     }
@@ -403,6 +424,56 @@ pub fn to_records(segments: &[Segment]) -> Vec<SegmentRecord> {
 pub fn to_segment(endpoints: &[f32; 4]) -> Segment {
     let [x1, y1, x2, y2] = endpoints.map(f64::from);
     Segment::new(Point::new(x1, y1), Point::new(x2, y2))
+}
+
+/// A rig as a record.
+pub fn rig_record(rig: &StereoRig) -> RigRecord {
+    RigRecord {
+        focal_px: rig.focal_px,
+        cx_px: rig.cx_px,
+        cy_px: rig.cy_px,
+        baseline_m: rig.baseline_m,
+        width_px: rig.width_px,
+        height_px: rig.height_px,
+    }
+}
+
+/// A record as a rig, refused (saying which value) unless it describes a camera: finite,
+/// positive focal length and baseline, a non-empty image with the principal point inside.
+pub fn rig_from_record(r: &RigRecord) -> anyhow::Result<StereoRig> {
+    let finite = [r.focal_px, r.cx_px, r.cy_px, r.baseline_m]
+        .iter()
+        .all(|v| v.is_finite());
+    anyhow::ensure!(finite, "the stereo rig has a non-finite value: {r:?}");
+    anyhow::ensure!(
+        r.focal_px > 0.0 && r.baseline_m > 0.0,
+        "the stereo rig's focal length ({} px) and baseline ({} m) must be positive",
+        r.focal_px,
+        r.baseline_m
+    );
+    anyhow::ensure!(
+        r.width_px > 0 && r.height_px > 0,
+        "the stereo rig's image is {}×{} pixels",
+        r.width_px,
+        r.height_px
+    );
+    anyhow::ensure!(
+        (0.0..=f64::from(r.width_px)).contains(&r.cx_px)
+            && (0.0..=f64::from(r.height_px)).contains(&r.cy_px),
+        "the stereo rig's principal point ({}, {}) lies outside its {}×{} image",
+        r.cx_px,
+        r.cy_px,
+        r.width_px,
+        r.height_px
+    );
+    Ok(StereoRig {
+        focal_px: r.focal_px,
+        cx_px: r.cx_px,
+        cy_px: r.cy_px,
+        baseline_m: r.baseline_m,
+        width_px: r.width_px,
+        height_px: r.height_px,
+    })
 }
 
 /// The wire code of a detector kind (in status reports and frame headers).
@@ -452,7 +523,7 @@ fn start(
         .then(|| linetrack_telemetry::span_file(&args.run_dir, stage.name(), pid));
     linetrack_telemetry::init(stage.name(), "warn", spans.as_deref())?;
     let shutdown = Shutdown::on_signals()?;
-    watch_parent(&shutdown);
+    end_with_parent(&shutdown, args.supervisor_pid)?;
     let bus = Bus::shared_memory(
         &Scope::new(&args.run_id),
         &format!("{}-{pid}", stage.name()),
@@ -467,21 +538,17 @@ fn start(
 }
 
 /// Asks for shutdown when the process that started this one (the supervisor) dies: a stage
-/// never outlives its supervisor.
-fn watch_parent(shutdown: &Shutdown) {
+/// never outlives its supervisor. The kernel sends SIGTERM (which sets `shutdown`) when
+/// the parent ends; a parent that ended before that was armed is seen by its pid.
+fn end_with_parent(shutdown: &Shutdown, supervisor: Option<u32>) -> anyhow::Result<()> {
+    rustix::process::set_parent_process_death_signal(Some(rustix::process::Signal::TERM))
+        .context("arming the parent-death signal")?;
     let parent = std::os::unix::process::parent_id();
-    let flag = shutdown.clone();
-    let _ = std::thread::Builder::new()
-        .name("parent-watch".to_string())
-        .spawn(move || {
-            while !flag.requested() {
-                std::thread::sleep(Duration::from_millis(250));
-                if std::os::unix::process::parent_id() != parent {
-                    tracing::warn!("the supervisor (pid {parent}) is gone: shutting down");
-                    flag.request();
-                }
-            }
-        });
+    if supervisor.is_some_and(|pid| pid != parent) {
+        tracing::warn!("the supervisor is gone before this stage started: shutting down");
+        shutdown.request();
+    }
+    Ok(())
 }
 
 #[cfg(test)]
@@ -491,10 +558,10 @@ mod tests {
     #[test]
     fn a_full_hold_and_a_full_queue_never_exceed_the_borrow_limit() {
         // Real shared memory: iceoryx2 enforces the subscriber's borrow limit.
-        let scope = Scope {
-            prefix: format!("ltsrt{}_", std::process::id()),
-            run_id: format!("hold{}", std::process::id()),
-        };
+        let scope = Scope::with_prefix(
+            &format!("ltsrt{}_", std::process::id()),
+            &format!("hold{}", std::process::id()),
+        );
         let bus = Bus::shared_memory(&scope, &format!("hold-{}", std::process::id()))
             .unwrap_or_else(|e| panic!("{e}"));
         let mut inlet = bus
@@ -511,7 +578,7 @@ mod tests {
             }
         };
         let depth = Topic::Frames.queue_depth() as u64;
-        let mut held = HeldFrames::default();
+        let mut held = Held::<u8>::new(Topic::Frames);
         // A stage that was stopped: its queue full (the oldest overwritten), then a hold
         // full, then the queue full again.
         publish(0, 2 * depth);
@@ -530,6 +597,52 @@ mod tests {
         assert_eq!(second.first_frame, Some(depth + 1));
         // The newest frames are the ones held.
         assert_eq!(held.first_id(), Some(4 * depth - HELD_FRAMES as u64));
+    }
+
+    #[test]
+    fn a_rig_travels_as_a_record_and_a_broken_one_is_refused_by_value() {
+        let rig = StereoRig::default();
+        assert_eq!(
+            rig_from_record(&rig_record(&rig)).unwrap_or_else(|e| panic!("{e}")),
+            rig
+        );
+        let broken = [
+            (
+                RigRecord {
+                    focal_px: f64::NAN,
+                    ..rig_record(&rig)
+                },
+                "non-finite",
+            ),
+            (
+                RigRecord {
+                    baseline_m: 0.0,
+                    ..rig_record(&rig)
+                },
+                "baseline",
+            ),
+            (
+                RigRecord {
+                    width_px: 0,
+                    ..rig_record(&rig)
+                },
+                "0×480",
+            ),
+            (
+                RigRecord {
+                    cx_px: 900.0,
+                    ..rig_record(&rig)
+                },
+                "principal point",
+            ),
+        ];
+        for (record, says) in broken {
+            let err = rig_from_record(&record)
+                .err()
+                .map(|e| e.to_string())
+                .unwrap_or_default();
+            assert!(err.contains(says), "{record:?}: {err:?}");
+        }
     }
 
     #[test]

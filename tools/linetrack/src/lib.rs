@@ -295,10 +295,7 @@ pub fn ctl(args: &CtlArgs) -> anyhow::Result<()> {
                 println!("detector is already {}", detector.name());
                 return Ok(());
             }
-            let scope = Scope {
-                prefix: status.ipc_prefix.clone(),
-                run_id: status.run_id.clone(),
-            };
+            let scope = Scope::with_prefix(&status.ipc_prefix, &status.run_id);
             let bus = Bus::shared_memory(&scope, &format!("ctl-{}", std::process::id()))?;
             let mut control = bus.outlet::<Control>(Topic::Control, 1)?;
             let request = Control {

@@ -1,0 +1,290 @@
+//! The one loop every processing stage runs: the runtime receives, holds, joins by frame
+//! id, applies the drop policy, counts overflows and gaps, answers commands, takes part in
+//! hot swaps, and sends heartbeats; a stage only says what it does with one frame
+//! ([`Stage::process`]). The same loop runs over shared memory between processes and over
+//! channels between threads: it sees only a [`Bus`].
+//!
+//! Hot swap, for any stage: a second instance starts as a standby (`--standby`), holds the
+//! newest inputs and reports ready; the supervisor asks the running one to hand over. The
+//! running one picks the hand-over frame F (the first it has not published, and no earlier
+//! than the oldest frame the standby holds), publishes everything below F, reports
+//! `HandedOver(F)` and exits; the standby, told F, publishes from F on. Frames below F come
+//! only from the old instance and frames from F on only from the new one.
+
+use crate::{GapWatch, Held, Reporter, StageContext, process_frame};
+use linetrack_ipc::{Bus, Inlet, Outlet, Received, Record, Shutdown, Wake};
+use linetrack_msgs::{Command, Control, FrameHeader, StageKind, StatusKind, Topic};
+use std::time::Duration;
+use tracing::info_span;
+
+/// One processing stage's per-frame work.
+pub trait Stage {
+    /// The records of the input it processes, one message per frame.
+    type Input: Record;
+    /// The records it publishes, one message per frame.
+    type Output: Record;
+    /// Which stage it is.
+    const KIND: StageKind;
+    /// Where its input comes from.
+    const INPUT: Topic;
+    /// Where its output goes.
+    const OUTPUT: Topic;
+    /// Records an output message holds before more are allocated.
+    const OUTPUT_LEN: usize;
+
+    /// Whether each input is joined with the frame's images (held, in place, since they
+    /// arrived on [`Topic::Frames`]).
+    fn joins_images(&self) -> bool;
+
+    /// What travels in every status report of this stage (the detector kind).
+    fn detail(&self) -> u32 {
+        0
+    }
+
+    /// Processes one frame: `input` is the frame's message on [`Stage::INPUT`], `images`
+    /// the frame's images when the stage joins them (`None` when they never arrived).
+    /// Fills `header` with what it found; an error marks the frame failed by this stage.
+    fn process(
+        &mut self,
+        header: &mut FrameHeader,
+        input: &Received<Self::Input>,
+        images: Option<&Received<u8>>,
+    ) -> anyhow::Result<Vec<Self::Output>>;
+
+    /// What is published for a frame that was dropped or failed (nothing by default).
+    fn placeholder(&self) -> Vec<Self::Output> {
+        Vec::new()
+    }
+
+    /// A command for this stage that the runtime does not handle itself (shutdown and the
+    /// hot swap are the runtime's).
+    fn command(&mut self, _command: Command, _control: &Control) {}
+
+    /// Called once per turn of the loop, before the frames: a stage reads its own side
+    /// inputs here (the pose estimator's rig).
+    fn poll(&mut self) -> anyhow::Result<()> {
+        Ok(())
+    }
+}
+
+/// Where a stage instance is in a hot swap.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Role {
+    /// Waiting to take over; holds inputs.
+    Standby,
+    /// Processing and publishing.
+    Active,
+    /// Publishing frames below `at`, then handing over.
+    HandingOver { at: u64 },
+}
+
+/// A stage's connections, opened by the runtime.
+struct Ports<S: Stage> {
+    input: Inlet<S::Input>,
+    output: Outlet<S::Output>,
+    frames: Option<Inlet<u8>>,
+    control: Inlet<Control>,
+    wake: Wake,
+    reporter: Reporter,
+}
+
+/// The loop's state besides the ports.
+struct Runner<'a, S: Stage> {
+    ctx: &'a StageContext,
+    stage: S,
+    role: Role,
+    /// Inputs held by a standby.
+    waiting: Held<S::Input>,
+    /// Images held until the input of the same frame arrives.
+    images: Held<u8>,
+    gaps: GapWatch,
+    next_unpublished: u64,
+    processed: u64,
+}
+
+/// How a turn of the loop ended.
+enum Turn {
+    Continue,
+    Finished,
+}
+
+/// Runs `stage` until shutdown (a signal, a shutdown command, or, after a hand-over, once
+/// its part is published).
+pub fn run_stage<S: Stage>(
+    ctx: &StageContext,
+    bus: &Bus,
+    stage: S,
+    shutdown: &Shutdown,
+) -> anyhow::Result<()> {
+    let mut ports = Ports::<S> {
+        input: bus.inlet(S::INPUT)?,
+        output: bus.outlet(S::OUTPUT, S::OUTPUT_LEN)?,
+        frames: if stage.joins_images() {
+            Some(bus.inlet(Topic::Frames)?)
+        } else {
+            None
+        },
+        control: bus.inlet(Topic::Control)?,
+        wake: bus.wake(S::KIND)?,
+        reporter: Reporter::new(bus, ctx, stage.detail())?,
+    };
+    let role = if ctx.args.standby {
+        Role::Standby
+    } else {
+        Role::Active
+    };
+    let mut runner = Runner {
+        ctx,
+        stage,
+        role,
+        waiting: Held::new(S::INPUT),
+        images: Held::new(Topic::Frames),
+        gaps: GapWatch::default(),
+        next_unpublished: 0,
+        processed: 0,
+    };
+    let mut ready_sent = false;
+    if role == Role::Active {
+        ports.reporter.report(StatusKind::Ready, 0, 0);
+        ready_sent = true;
+    }
+    tracing::info!("{} {role:?}", S::KIND);
+    while !shutdown.requested() {
+        if let Turn::Finished = runner.commands(&mut ports)? {
+            return Ok(());
+        }
+        runner.stage.poll()?;
+        if let Some(frames) = &mut ports.frames {
+            let overflow = runner.images.receive(frames)?;
+            ports.reporter.overflow(overflow);
+        }
+        match runner.role {
+            Role::Standby => {
+                let overflow = runner.waiting.receive(&mut ports.input)?;
+                ports.reporter.overflow(overflow);
+                if !ready_sent && let Some(first) = runner.waiting.first_id() {
+                    ports.reporter.report(StatusKind::Ready, first, 0);
+                    ready_sent = true;
+                }
+            }
+            Role::Active | Role::HandingOver { .. } => runner.process_waiting(&mut ports)?,
+        }
+        if let Role::HandingOver { at } = runner.role
+            && runner.next_unpublished >= at
+        {
+            ports
+                .reporter
+                .report(StatusKind::HandedOver, at, runner.processed);
+            tracing::info!(
+                "handed over at frame {at} after {} frames",
+                runner.processed
+            );
+            return Ok(());
+        }
+        ports.reporter.beat(runner.processed);
+        ports
+            .wake
+            .wait(ports.reporter.until_due().max(Duration::from_millis(1)))?;
+    }
+    Ok(())
+}
+
+impl<S: Stage> Runner<'_, S> {
+    /// Answers the commands for this process.
+    fn commands(&mut self, ports: &mut Ports<S>) -> anyhow::Result<Turn> {
+        for message in ports.control.receive_all()? {
+            let Some(&c) = message.payload().first() else {
+                continue;
+            };
+            if !c.is_for(S::KIND, self.ctx.pid) {
+                continue;
+            }
+            match Command::from_code(c.command) {
+                Some(Command::Shutdown) => return Ok(Turn::Finished),
+                Some(Command::HandOver) if self.role == Role::Active => {
+                    let at = self.next_unpublished.max(c.frame_id);
+                    tracing::info!("handing over at frame {at}");
+                    self.role = Role::HandingOver { at };
+                }
+                Some(Command::TakeOver) if self.role == Role::Standby => {
+                    self.take_over(c.frame_id, ports)?
+                }
+                Some(command) => self.stage.command(command, &c),
+                None => tracing::warn!("unknown command code {}", c.command),
+            }
+        }
+        Ok(Turn::Continue)
+    }
+
+    /// A standby takes over at frame `from`: the held inputs below it were published by the
+    /// old instance; the rest are processed now.
+    fn take_over(&mut self, from: u64, ports: &mut Ports<S>) -> anyhow::Result<()> {
+        tracing::info!("taking over at frame {from}");
+        if let Some(first) = self.waiting.first_id()
+            && first > from
+        {
+            tracing::warn!("frames {from}..{first} were released before the take-over");
+        }
+        let inputs: Vec<Received<S::Input>> = std::iter::from_fn(|| self.waiting.take_next())
+            .filter(|m| m.header().frame_id >= from)
+            .collect();
+        self.role = Role::Active;
+        // Held inputs were queued by the swap, not by slowness: none is dropped as behind
+        // (the age limit still applies).
+        for input in &inputs {
+            self.one_frame(input, false, ports)?;
+        }
+        Ok(())
+    }
+
+    /// Processes every waiting input, stopping at the hand-over frame.
+    fn process_waiting(&mut self, ports: &mut Ports<S>) -> anyhow::Result<()> {
+        // The whole queue fits the subscriber's borrow limit.
+        let batch = ports.input.receive_all()?;
+        let count = batch.len();
+        for (k, input) in batch.iter().enumerate() {
+            let id = input.header().frame_id;
+            ports.reporter.gap(self.gaps.observe(id));
+            if let Role::HandingOver { at } = self.role
+                && id >= at
+            {
+                // Every frame below F has been seen: the rest is the new instance's.
+                self.next_unpublished = self.next_unpublished.max(at);
+                break;
+            }
+            self.one_frame(input, k + 1 < count, ports)?;
+        }
+        Ok(())
+    }
+
+    /// Takes one frame through the stage and publishes the result.
+    fn one_frame(
+        &mut self,
+        input: &Received<S::Input>,
+        newer_waiting: bool,
+        ports: &mut Ports<S>,
+    ) -> anyhow::Result<()> {
+        let header = *input.header();
+        let span = info_span!("frame", frame_id = header.frame_id, stage = S::KIND.name());
+        let _entered = span.enter();
+        let images = if ports.frames.is_some() {
+            self.images.take(header.frame_id)
+        } else {
+            None
+        };
+        let placeholder = self.stage.placeholder();
+        let stage = &mut self.stage;
+        process_frame(
+            S::KIND,
+            header,
+            newer_waiting,
+            &self.ctx.config.budget,
+            &mut ports.output,
+            |h| stage.process(h, input, images.as_ref()),
+            || placeholder,
+        )?;
+        self.next_unpublished = header.frame_id + 1;
+        self.processed += 1;
+        Ok(())
+    }
+}
