@@ -72,9 +72,12 @@ fn every_frame_gets_a_pose_and_the_run_leaves_no_shared_memory() {
         .iter()
         .filter(|f| f.outcome == "pose")
         .count();
+    // Under load the policy drops late frames (counted above); of the frames that reached
+    // the pose estimator, most are tracked.
+    let estimated = records.frames.iter().filter(|f| f.has_pose()).count();
     assert!(
-        tracked >= FRAMES / 2,
-        "only {tracked} of {FRAMES} frames tracked:\n{out}"
+        estimated > 0 && tracked * 2 >= estimated,
+        "only {tracked} of the {estimated} frames with a pose tracked:\n{out}"
     );
     // Per-stage latencies were measured in each process. On a loaded machine the matcher
     // may go over budget and fall back: then ℓ1 frames follow a recorded fallback.
@@ -468,11 +471,17 @@ fn sigterm_stops_the_run_cleanly_and_a_killed_run_is_cleaned_up_by_the_next() {
     // A run killed outright (supervisor and stages) leaves its shared memory behind ...
     let mut killed = start(&dir, &sequence, &quick());
     let status = killed.wait_for("5 frames", RUN_TIMEOUT, |s| s.frames >= 5);
-    signal(status.supervisor_pid, "KILL");
-    for s in &status.stages {
-        // A stage may already be on its way out.
+    // Frozen first, so that no process of the run sees another die (a stage would end
+    // cleanly on its supervisor's death and tidy up), then all killed at once.
+    let pids: Vec<String> = std::iter::once(status.supervisor_pid)
+        .chain(status.stages.iter().map(|s| s.pid))
+        .map(|pid| pid.to_string())
+        .collect();
+    for sig in ["-STOP", "-KILL"] {
+        // A stage may already be on its way out: `kill` then fails for that pid only.
         let _ = std::process::Command::new("kill")
-            .args(["-KILL", &s.pid.to_string()])
+            .arg(sig)
+            .args(&pids)
             .status();
     }
     let _ = killed.child.wait();

@@ -7,7 +7,7 @@ use anyhow::Context;
 use linetrack_datasets::StereoSequence;
 use linetrack_ipc::{Bus, Inlet, Outlet, Shutdown, Wake};
 use linetrack_msgs::{
-    Command, Control, FrameHeader, FrameStatus, RigRecord, StageKind, StatusKind, Topic, now_ns,
+    Command, Control, FrameHeader, FrameStatus, RigRecord, StageKind, StatusKind, Topic,
 };
 use linetrack_pipeline_config::Pacing;
 use linetrack_stage_runtime::{Reporter, StageContext, rig_record, stamp_end};
@@ -120,7 +120,7 @@ fn publish(ctx: &StageContext, mut ports: Ports, shutdown: &Shutdown) -> anyhow:
         }
         let span = info_span!("publish_frame", frame_id = index as u64);
         let _entered = span.enter();
-        let capture_ns = now_ns();
+        let capture_ns = ctx.clock.now_ns();
         let mut header = FrameHeader::new(index as u64, timestamp_ns, capture_ns);
         if let Some(stamp) = header.stamp_mut(StageKind::FrameSource) {
             stamp.start_ns = capture_ns;
@@ -133,13 +133,13 @@ fn publish(ctx: &StageContext, mut ports: Ports, shutdown: &Shutdown) -> anyhow:
                 let (Some(left), Some(right)) = (frame.left.pixels(), frame.right.pixels()) else {
                     anyhow::bail!("frame {index}: images are not continuous in memory");
                 };
-                stamp_end(&mut header, StageKind::FrameSource);
+                stamp_end(&mut header, StageKind::FrameSource, ctx.clock.now_ns());
                 ports.frames.publish(&header, &[left, right])?;
             }
             Err(e) => {
                 tracing::warn!("{e}");
                 header.mark(FrameStatus::Corrupt, StageKind::FrameSource);
-                stamp_end(&mut header, StageKind::FrameSource);
+                stamp_end(&mut header, StageKind::FrameSource, ctx.clock.now_ns());
                 ports.frames.publish(&header, &[])?;
             }
         }

@@ -11,9 +11,7 @@ use linetrack_geometry::{Point, Segment, StereoRig};
 use linetrack_ipc::{Bus, Inlet, IpcError, Outlet, Received, Record, Scope, Shutdown};
 
 mod runner;
-use linetrack_msgs::{
-    FrameHeader, FrameStatus, StageKind, StatusKind, StatusReport, Topic, now_ns,
-};
+use linetrack_msgs::{Clock, FrameHeader, FrameStatus, StageKind, StatusKind, StatusReport, Topic};
 use linetrack_msgs::{RigRecord, SegmentRecord};
 use linetrack_pipeline_config::{BudgetConfig, PipelineConfig};
 use linetrack_vision::DetectorKind;
@@ -22,7 +20,7 @@ pub use runner::{Stage, run_stage};
 use std::collections::VecDeque;
 use std::path::PathBuf;
 use std::process::ExitCode;
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 /// The arguments the supervisor passes to every stage.
 #[derive(Debug, Clone, Parser)]
@@ -65,6 +63,8 @@ pub struct StageContext {
     pub args: StageArgs,
     /// This process.
     pub pid: u32,
+    /// The time the stage's policies read.
+    pub clock: Clock,
 }
 
 impl StageContext {
@@ -85,6 +85,7 @@ impl StageContext {
             config,
             args,
             pid: std::process::id(),
+            clock: Clock::System,
         }
     }
 
@@ -109,7 +110,8 @@ pub struct Reporter {
     pid: u32,
     detail: u32,
     every: Duration,
-    last: Option<Instant>,
+    clock: Clock,
+    last_ns: Option<u64>,
 }
 
 impl Reporter {
@@ -121,7 +123,8 @@ impl Reporter {
             pid: ctx.pid,
             detail,
             every: ctx.heartbeat(),
-            last: None,
+            clock: ctx.clock.clone(),
+            last_ns: None,
         })
     }
 
@@ -139,13 +142,16 @@ impl Reporter {
             tracing::warn!("status report lost: {e}");
         }
         if kind == StatusKind::Heartbeat {
-            self.last = Some(Instant::now());
+            self.last_ns = Some(self.clock.now_ns());
         }
     }
 
     /// Sends a heartbeat if one is due; `processed` = frames handled so far.
     pub fn beat(&mut self, processed: u64) {
-        if self.last.is_none_or(|t| t.elapsed() >= self.every) {
+        if self
+            .last_ns
+            .is_none_or(|t| self.clock.since(t) >= self.every)
+        {
             self.report(StatusKind::Heartbeat, 0, processed);
         }
     }
@@ -176,17 +182,20 @@ impl Reporter {
 
     /// How long until the next heartbeat is due.
     pub fn until_due(&self) -> Duration {
-        self.last
-            .map_or(Duration::ZERO, |t| self.every.saturating_sub(t.elapsed()))
+        self.last_ns.map_or(Duration::ZERO, |t| {
+            self.every.saturating_sub(self.clock.since(t))
+        })
     }
 }
 
 /// The budget policy for a frame a stage is about to take: `Some(status)` when it must be
-/// dropped instead. `newer_waiting` says whether a newer frame is already queued behind it.
+/// dropped instead. `newer_waiting` says whether a newer frame is already queued behind it;
+/// `now_ns` is the stage's clock.
 pub fn late_drop(
     header: &FrameHeader,
     newer_waiting: bool,
     budget: &BudgetConfig,
+    now_ns: u64,
 ) -> Option<FrameStatus> {
     if !budget.drop_late {
         return None;
@@ -194,7 +203,18 @@ pub fn late_drop(
     if newer_waiting {
         return Some(FrameStatus::DroppedBehind);
     }
-    (header.age_ms(now_ns()) > budget.end_to_end_ms).then_some(FrameStatus::DroppedLate)
+    (header.age_ms(now_ns) > budget.end_to_end_ms).then_some(FrameStatus::DroppedLate)
+}
+
+/// What a stage applies to every frame it takes: who it is, its budget, its clock.
+#[derive(Debug, Clone, Copy)]
+pub struct FramePolicy<'a> {
+    /// The stage.
+    pub stage: StageKind,
+    /// The run's budget.
+    pub budget: &'a BudgetConfig,
+    /// The stage's clock.
+    pub clock: &'a Clock,
 }
 
 /// Takes one frame through a stage: stamps when it took it, applies the drop policy
@@ -203,17 +223,18 @@ pub fn late_drop(
 /// what `work` returned, or `placeholder()` for a dropped or failed frame, under the
 /// stamped header.
 pub fn process_frame<O: linetrack_ipc::Record>(
-    stage: StageKind,
+    policy: FramePolicy<'_>,
     mut header: FrameHeader,
     newer_waiting: bool,
-    budget: &BudgetConfig,
     out: &mut Outlet<O>,
     work: impl FnOnce(&mut FrameHeader) -> anyhow::Result<Vec<O>>,
     placeholder: impl FnOnce() -> Vec<O>,
 ) -> anyhow::Result<()> {
-    stamp_start(&mut header, stage);
+    let stage = policy.stage;
+    let taken_ns = policy.clock.now_ns();
+    stamp_start(&mut header, stage, taken_ns);
     if header.frame_status() == FrameStatus::Ok
-        && let Some(status) = late_drop(&header, newer_waiting, budget)
+        && let Some(status) = late_drop(&header, newer_waiting, policy.budget, taken_ns)
     {
         header.mark(status, stage);
     }
@@ -228,22 +249,22 @@ pub fn process_frame<O: linetrack_ipc::Record>(
         },
         _ => placeholder(),
     };
-    stamp_end(&mut header, stage);
+    stamp_end(&mut header, stage, policy.clock.now_ns());
     out.publish(&header, &[&records])?;
     Ok(())
 }
 
-/// Marks `header` as taken by `stage` now.
-pub fn stamp_start(header: &mut FrameHeader, stage: StageKind) {
+/// Marks `header` as taken by `stage` at `now_ns`.
+pub fn stamp_start(header: &mut FrameHeader, stage: StageKind, now_ns: u64) {
     if let Some(s) = header.stamp_mut(stage) {
-        s.start_ns = now_ns();
+        s.start_ns = now_ns;
     }
 }
 
-/// Marks `header` as published by `stage` now.
-pub fn stamp_end(header: &mut FrameHeader, stage: StageKind) {
+/// Marks `header` as published by `stage` at `now_ns`.
+pub fn stamp_end(header: &mut FrameHeader, stage: StageKind, now_ns: u64) {
     if let Some(s) = header.stamp_mut(stage) {
-        s.end_ns = now_ns();
+        s.end_ns = now_ns;
     }
 }
 
@@ -533,6 +554,7 @@ fn start(
         config,
         args,
         pid,
+        clock: Clock::System,
     };
     run(&ctx, &bus, &shutdown)
 }
@@ -661,22 +683,23 @@ mod tests {
             end_to_end_ms: 100.0,
             ..BudgetConfig::default()
         };
-        let fresh = FrameHeader::new(1, 0, now_ns());
-        let stale = FrameHeader::new(2, 0, now_ns() - 200_000_000);
-        assert_eq!(late_drop(&fresh, false, &budget), None);
+        let now = 10_000_000_000;
+        let fresh = FrameHeader::new(1, 0, now - 99_000_000);
+        let stale = FrameHeader::new(2, 0, now - 101_000_000);
+        assert_eq!(late_drop(&fresh, false, &budget, now), None);
         assert_eq!(
-            late_drop(&fresh, true, &budget),
+            late_drop(&fresh, true, &budget, now),
             Some(FrameStatus::DroppedBehind)
         );
         assert_eq!(
-            late_drop(&stale, false, &budget),
+            late_drop(&stale, false, &budget, now),
             Some(FrameStatus::DroppedLate)
         );
         let keep_all = BudgetConfig {
             drop_late: false,
             ..budget
         };
-        assert_eq!(late_drop(&stale, true, &keep_all), None);
+        assert_eq!(late_drop(&stale, true, &keep_all, now), None);
     }
 
     #[test]
@@ -692,43 +715,47 @@ mod tests {
             end_to_end_ms: 100.0,
             ..BudgetConfig::default()
         };
+        let clock = Clock::manual(10_000_000_000);
+        let policy = FramePolicy {
+            stage: StageKind::LineDetector,
+            budget: &budget,
+            clock: &clock,
+        };
         let record = SegmentRecord {
             endpoints: [1.0, 2.0, 3.0, 4.0],
         };
-        let stage = StageKind::LineDetector;
-        let fresh = FrameHeader::new(1, 0, now_ns());
-        let stale = FrameHeader::new(2, 0, now_ns() - 500_000_000);
+        let fresh = FrameHeader::new(1, 0, clock.now_ns() - 10_000_000);
+        let stale = FrameHeader::new(2, 0, clock.now_ns() - 500_000_000);
+        // The work takes 7 ms of the stage's clock.
         let ok = |h: &mut FrameHeader| {
             h.left_count = 1;
+            clock.advance(Duration::from_millis(7));
             Ok(vec![record])
         };
-        process_frame(stage, fresh, false, &budget, &mut out, ok, Vec::new)
+        process_frame(policy, fresh, false, &mut out, ok, Vec::new)
             .unwrap_or_else(|e| panic!("{e}"));
         process_frame(
-            stage,
+            policy,
             stale,
             false,
-            &budget,
             &mut out,
             |_| panic!("a late frame is not processed"),
             Vec::new,
         )
         .unwrap_or_else(|e| panic!("{e}"));
         process_frame(
-            stage,
+            policy,
             fresh,
             true,
-            &budget,
             &mut out,
             |_| panic!("a frame behind is not processed"),
             Vec::new,
         )
         .unwrap_or_else(|e| panic!("{e}"));
         process_frame(
-            stage,
+            policy,
             fresh,
             false,
-            &budget,
             &mut out,
             |_| anyhow::bail!("detector failed"),
             || vec![SegmentRecord::default()],
@@ -751,35 +778,49 @@ mod tests {
         let first = got[0].header();
         assert_eq!((first.left_count, got[0].payload()[0]), (1, record));
         let stamp = first.stamps[1];
-        assert!(
-            stamp.start_ns > 0 && stamp.end_ns >= stamp.start_ns,
-            "{stamp:?}"
-        );
+        assert_eq!(stamp.end_ns - stamp.start_ns, 7_000_000, "{stamp:?}");
         assert!(
             got[1..]
                 .iter()
-                .all(|m| m.header().dropped_by == stage.code())
+                .all(|m| m.header().dropped_by == StageKind::LineDetector.code())
         );
     }
 
     #[test]
-    fn heartbeats_are_paced() {
+    fn heartbeats_are_paced_by_the_stage_clock() {
         let bus = Bus::local();
-        let ctx = StageContext::in_process(
+        let mut ctx = StageContext::in_process(
             StageKind::Matcher,
             PipelineConfig::default(),
             PathBuf::new(),
         );
+        ctx.clock = Clock::manual(1_000_000_000);
+        let every = ctx.heartbeat();
         let mut inlet = bus
             .inlet::<StatusReport>(Topic::Status)
             .unwrap_or_else(|e| panic!("{e}"));
         let mut reporter = Reporter::new(&bus, &ctx, 0).unwrap_or_else(|e| panic!("{e}"));
+        let beats = |inlet: &mut Inlet<StatusReport>| -> Vec<u64> {
+            inlet
+                .receive_all()
+                .unwrap_or_else(|e| panic!("{e}"))
+                .iter()
+                .map(|m| m.payload()[0].value)
+                .collect()
+        };
         reporter.beat(1);
-        reporter.beat(2); // too soon: not sent
-        let got = inlet.receive_all().unwrap_or_else(|e| panic!("{e}"));
-        assert_eq!(got.len(), 1);
-        assert_eq!(got[0].payload()[0].value, 1);
-        assert_eq!(got[0].payload()[0].stage, StageKind::Matcher.code());
-        assert!(reporter.until_due() > Duration::ZERO);
+        assert_eq!(reporter.until_due(), every);
+        ctx.clock.advance(every / 2);
+        reporter.beat(2); // half a period later: not due
+        assert_eq!(reporter.until_due(), every / 2);
+        ctx.clock.advance(every / 2);
+        assert_eq!(reporter.until_due(), Duration::ZERO);
+        reporter.beat(3);
+        assert_eq!(beats(&mut inlet), [1, 3]);
+        let got_stage = {
+            reporter.report(StatusKind::Ready, 0, 0);
+            inlet.receive_all().unwrap_or_else(|e| panic!("{e}"))[0].payload()[0].stage
+        };
+        assert_eq!(got_stage, StageKind::Matcher.code());
     }
 }

@@ -11,7 +11,7 @@
 //! `HandedOver(F)` and exits; the standby, told F, publishes from F on. Frames below F come
 //! only from the old instance and frames from F on only from the new one.
 
-use crate::{GapWatch, Held, Reporter, StageContext, process_frame};
+use crate::{FramePolicy, GapWatch, Held, Reporter, StageContext, process_frame};
 use linetrack_ipc::{Bus, Inlet, Outlet, Received, Record, Shutdown, Wake};
 use linetrack_msgs::{Command, Control, FrameHeader, StageKind, StatusKind, Topic};
 use std::time::Duration;
@@ -274,11 +274,15 @@ impl<S: Stage> Runner<'_, S> {
         };
         let placeholder = self.stage.placeholder();
         let stage = &mut self.stage;
+        let policy = FramePolicy {
+            stage: S::KIND,
+            budget: &self.ctx.config.budget,
+            clock: &self.ctx.clock,
+        };
         process_frame(
-            S::KIND,
+            policy,
             header,
             newer_waiting,
-            &self.ctx.config.budget,
             &mut ports.output,
             |h| stage.process(h, input, images.as_ref()),
             || placeholder,
@@ -286,5 +290,184 @@ impl<S: Stage> Runner<'_, S> {
         self.next_unpublished = header.frame_id + 1;
         self.processed += 1;
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use linetrack_msgs::{SegmentRecord, StatusReport};
+    use linetrack_pipeline_config::PipelineConfig;
+    use std::path::PathBuf;
+    use std::time::Instant;
+
+    /// A stage that answers each frame with one record: which instance took it, the frame,
+    /// and fails a blank frame.
+    struct Tag {
+        instance: f32,
+    }
+
+    impl Stage for Tag {
+        type Input = u8;
+        type Output = SegmentRecord;
+        const KIND: StageKind = StageKind::LineDetector;
+        const INPUT: Topic = Topic::Frames;
+        const OUTPUT: Topic = Topic::Segments;
+        const OUTPUT_LEN: usize = 1;
+
+        fn joins_images(&self) -> bool {
+            false
+        }
+
+        fn process(
+            &mut self,
+            header: &mut FrameHeader,
+            input: &Received<u8>,
+            _images: Option<&Received<u8>>,
+        ) -> anyhow::Result<Vec<SegmentRecord>> {
+            anyhow::ensure!(input.payload().first() != Some(&0), "a blank frame");
+            Ok(vec![SegmentRecord {
+                endpoints: [self.instance, header.frame_id as f32, 0.0, 0.0],
+            }])
+        }
+    }
+
+    fn context(pid: u32, standby: bool) -> StageContext {
+        let mut config = PipelineConfig::default();
+        config.budget.drop_late = false;
+        let mut ctx = StageContext::in_process(StageKind::LineDetector, config, PathBuf::new());
+        ctx.pid = pid;
+        ctx.args.standby = standby;
+        ctx.clock = linetrack_msgs::Clock::manual(1);
+        ctx
+    }
+
+    /// Receives until `n` messages arrived (panics after a generous minute: a hung runtime).
+    fn collect<P: Record>(inlet: &mut Inlet<P>, n: usize) -> Vec<Received<P>> {
+        let deadline = Instant::now() + Duration::from_secs(60);
+        let mut got = Vec::new();
+        while got.len() < n {
+            got.extend(inlet.receive_all().unwrap_or_else(|e| panic!("{e}")));
+            assert!(Instant::now() < deadline, "{} of {n} messages", got.len());
+            std::thread::sleep(Duration::from_millis(2));
+        }
+        got
+    }
+
+    #[test]
+    fn a_hand_over_between_two_instances_publishes_every_frame_once() {
+        let hub = linetrack_ipc::LocalHub::default();
+        let bus = hub.bus();
+        let mut frames = bus
+            .outlet::<u8>(Topic::Frames, 4)
+            .unwrap_or_else(|e| panic!("{e}"));
+        let mut control = bus
+            .outlet::<Control>(Topic::Control, 1)
+            .unwrap_or_else(|e| panic!("{e}"));
+        let mut out = bus
+            .inlet::<SegmentRecord>(Topic::Segments)
+            .unwrap_or_else(|e| panic!("{e}"));
+        let mut status = bus
+            .inlet::<StatusReport>(Topic::Status)
+            .unwrap_or_else(|e| panic!("{e}"));
+        let start = |pid: u32, standby: bool, instance: f32| {
+            let hub = hub.clone();
+            std::thread::spawn(move || {
+                let stage = Tag { instance };
+                run_stage(
+                    &context(pid, standby),
+                    &hub.bus(),
+                    stage,
+                    &Shutdown::default(),
+                )
+            })
+        };
+        let mut publish = |ids: std::ops::Range<u64>| {
+            for id in ids {
+                // Frame 3 is blank: the stage fails it, and it is still published.
+                let pixel = u8::from(id != 3);
+                frames
+                    .publish(&FrameHeader::new(id, 0, 1), &[&[pixel]])
+                    .unwrap_or_else(|e| panic!("{e}"));
+            }
+        };
+        // The frame id of `pid`'s ready report, if it sent one.
+        let ready = |status: &mut Inlet<StatusReport>, pid: u32| {
+            status
+                .receive_all()
+                .unwrap_or_else(|e| panic!("{e}"))
+                .iter()
+                .map(|r| r.payload()[0])
+                .find(|r| r.pid == pid && r.kind == StatusKind::Ready as u32)
+                .map(|r| r.frame_id)
+        };
+        let mut send = |pid: u32, command: Command, frame_id: u64| {
+            let c = Control {
+                command: command as u32,
+                target_pid: pid,
+                target_stage: StageKind::LineDetector.code(),
+                value: 0,
+                frame_id,
+            };
+            control
+                .publish(&FrameHeader::default(), &[&[c]])
+                .unwrap_or_else(|e| panic!("{e}"));
+        };
+        let old = start(100, false, 1.0);
+        let deadline = Instant::now() + Duration::from_secs(60);
+        while ready(&mut status, 100).is_none() {
+            assert!(Instant::now() < deadline, "never ready");
+            std::thread::sleep(Duration::from_millis(2));
+        }
+        publish(0..5);
+        let mut results = collect(&mut out, 5);
+        // The standby reports ready once it holds a frame: frames go on until it does.
+        let new = start(200, true, 2.0);
+        let mut next = 5;
+        let first_held = loop {
+            publish(next..next + 1);
+            next += 1;
+            results.extend(collect(&mut out, 1));
+            if let Some(first) = ready(&mut status, 200) {
+                break first;
+            }
+            assert!(Instant::now() < deadline, "the standby never got ready");
+        };
+        assert!(first_held < next);
+        // The old instance has published every frame below `next`: it hands over there.
+        send(100, Command::HandOver, first_held);
+        let handed = old.join().map_err(|_| "panicked");
+        assert!(matches!(handed, Ok(Ok(()))), "{handed:?}");
+        send(200, Command::TakeOver, next);
+        publish(next..next + 4);
+        results.extend(collect(&mut out, 4));
+        send(0, Command::Shutdown, 0);
+        let ended = new.join().map_err(|_| "panicked");
+        assert!(matches!(ended, Ok(Ok(()))), "{ended:?}");
+
+        let seen: Vec<(u64, f32, usize)> = results
+            .iter()
+            .map(|m| {
+                let instance = m.payload().first().map_or(0.0, |r| r.endpoints[0]);
+                (m.header().frame_id, instance, m.payload().len())
+            })
+            .collect();
+        let expected: Vec<(u64, f32, usize)> = (0..next + 4)
+            .map(|id| match id {
+                3 => (3, 0.0, 0),
+                _ if id < next => (id, 1.0, 1),
+                _ => (id, 2.0, 1),
+            })
+            .collect();
+        assert_eq!(seen, expected, "(frame, instance, records)");
+        assert_eq!(
+            results[3].header().frame_status(),
+            linetrack_msgs::FrameStatus::StageError
+        );
+        assert!(
+            out.receive_all()
+                .unwrap_or_else(|e| panic!("{e}"))
+                .is_empty()
+        );
     }
 }
