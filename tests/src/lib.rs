@@ -136,6 +136,16 @@ pub fn start(dir: &Path, sequence: &Path, extra: &str) -> Run {
 
 /// [`start`] with a given shared-memory prefix.
 pub fn start_with_prefix(dir: &Path, sequence: &Path, extra: &str, prefix: &str) -> Run {
+    launch(dir, sequence, extra, prefix, &[])
+}
+
+/// [`start`] with the stages on threads of one process (`--single-process`).
+pub fn start_single_process(dir: &Path, sequence: &Path, extra: &str) -> Run {
+    let prefix = format!("lte2e{}_threads_", std::process::id());
+    launch(dir, sequence, extra, &prefix, &["--single-process"])
+}
+
+fn launch(dir: &Path, sequence: &Path, extra: &str, prefix: &str, args: &[&str]) -> Run {
     let prefix = prefix.to_string();
     let run_dir = dir.join("run");
     let config = dir.join("pipeline.toml");
@@ -146,7 +156,9 @@ pub fn start_with_prefix(dir: &Path, sequence: &Path, extra: &str, prefix: &str)
     );
     std::fs::write(&config, text).unwrap_or_else(|e| panic!("{e}"));
     let child = Command::new(bin_dir().join("linetrack"))
-        .args(["run", "--quiet", "--config"])
+        .args(["run", "--quiet"])
+        .args(args)
+        .arg("--config")
         .arg(&config)
         .env(Scope::PREFIX_VAR, &prefix)
         .stdin(Stdio::null())

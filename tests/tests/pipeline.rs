@@ -366,7 +366,28 @@ fn a_run_that_tracks_nothing_exits_non_zero_saying_so() {
 fn a_hot_swap_to_fld_loses_and_duplicates_no_frame() {
     let dir = scratch("swap");
     // Every frame processed, however late: a loss could not hide as a policy drop.
-    let mut run = start(&dir, &base_sequence(FRAMES), &quick());
+    hot_swap(start(&dir, &base_sequence(FRAMES), &quick()));
+}
+
+#[test]
+fn single_process_mode_is_supervised_the_same_way() {
+    // The same supervision core runs thread stages: `linetrack ctl` swaps the detector of
+    // a `--single-process` run too, and its records are the same.
+    let dir = scratch("threads");
+    let mut run = start_single_process(&dir, &base_sequence(FRAMES), &quick());
+    let status = run.wait_for("four stages", RUN_TIMEOUT, |s| s.stages.len() == 4);
+    assert!(
+        status
+            .stages
+            .iter()
+            .all(|s| s.pid >= linetrack_supervisor::THREAD_IDS && s.pid != status.supervisor_pid),
+        "{:?}",
+        status.stages
+    );
+    hot_swap(run);
+}
+
+fn hot_swap(mut run: Run) {
     run.wait_for("8 frames", RUN_TIMEOUT, |s| s.frames >= 8);
     let ctl = std::process::Command::new(bin_dir().join("linetrack"))
         .args(["ctl", "--run-dir"])

@@ -6,8 +6,10 @@
 //! restarts a stage that crashed or hung (with exponential backoff, up to a limit), hot-swaps
 //! the detector on command, steers the matcher between LBD and ℓ1, and shuts everything
 //! down on SIGINT/SIGTERM or when every frame has an outcome. In single-process mode
-//! ([`Mode::Threads`]) the same stage code runs on threads over crossbeam channels: the
-//! baseline that shows what the IPC costs (no restarts or swaps there).
+//! ([`Mode::Threads`]) the same stage code runs on threads over crossbeam channels, under
+//! the same supervision (restarts, swaps, fallback, status, records): the baseline that
+//! shows what the IPC costs. A thread stage has an id in place of a pid (from
+//! [`THREAD_IDS`]); a hung thread cannot be killed, only asked to stop and left behind.
 //!
 //! Records go to the run folder as the run goes ([`monitor::Monitor`]); however the run
 //! ends (completed, interrupted, a stage that would not start or died past the restart
@@ -18,7 +20,7 @@ pub mod monitor;
 pub mod run_dir;
 
 use anyhow::{Context, bail};
-use linetrack_ipc::{Bus, Inlet, Outlet, Scope, Shutdown, Wake};
+use linetrack_ipc::{Bus, Inlet, LocalHub, Outlet, Scope, Shutdown, Wake};
 use linetrack_msgs::{
     Command, Control, FrameHeader, MatcherMode, PoseRecord, StageKind, StatusKind, StatusReport,
     Topic, now_ns,
@@ -76,13 +78,15 @@ struct Ports {
 }
 
 impl Ports {
-    fn open(bus: &Bus) -> anyhow::Result<Self> {
+    /// The supervisor's ports: to and from the stages on `stages`, requests (`linetrack ctl`)
+    /// on `requests` (shared memory in both modes).
+    fn open(stages: &Bus, requests: &Bus) -> anyhow::Result<Self> {
         Ok(Self {
-            poses: bus.inlet(Topic::Poses)?,
-            status: bus.inlet(Topic::Status)?,
-            control_in: bus.inlet(Topic::Control)?,
-            control: bus.outlet(Topic::Control, 1)?,
-            wake: bus.wake(StageKind::Supervisor)?,
+            poses: stages.inlet(Topic::Poses)?,
+            status: stages.inlet(Topic::Status)?,
+            control_in: requests.inlet(Topic::Control)?,
+            control: stages.outlet(Topic::Control, 1)?,
+            wake: stages.wake(StageKind::Supervisor)?,
         })
     }
 
@@ -224,7 +228,7 @@ pub fn run(
     let scope = Scope::new(&run_id);
     let mut monitor = Monitor::new(config, 0, &run_dir)?;
     let result = match options.mode {
-        Mode::Processes => Supervisor::new(
+        Mode::Processes | Mode::Threads => Supervisor::new(
             config,
             options,
             &run_id,
@@ -234,7 +238,6 @@ pub fn run(
             &mut monitor,
         )
         .and_then(|supervisor| supervisor.run(shutdown)),
-        Mode::Threads => run_threads(config, options, &run_dir, &mut monitor, shutdown),
     };
     // A run that tracked nothing did not do its job, however cleanly it ran.
     let result = match result {
@@ -292,10 +295,85 @@ fn final_status(
     .write(run_dir);
 }
 
-/// A running stage process.
+/// Ids of thread stages start here (above any Linux pid), so that commands and status
+/// reports name each instance as they name processes.
+pub const THREAD_IDS: u32 = 1 << 30;
+
+/// How a stage instance runs: a child process, or a thread of this process.
+enum Launch {
+    Process(Child),
+    Thread {
+        handle: Option<std::thread::JoinHandle<anyhow::Result<()>>>,
+        stop: Shutdown,
+    },
+}
+
+impl Launch {
+    /// How it ended, if it has: a description and whether it succeeded.
+    fn try_wait(&mut self) -> Result<Option<(String, bool)>, std::io::Error> {
+        match self {
+            Launch::Process(child) => Ok(child
+                .try_wait()?
+                .map(|status| (status.to_string(), status.success()))),
+            Launch::Thread { handle, .. } => {
+                if !handle.as_ref().is_some_and(|h| h.is_finished()) {
+                    return Ok(handle.is_none().then(|| ("left behind".to_string(), false)));
+                }
+                Ok(handle.take().map(|h| match h.join() {
+                    Ok(Ok(())) => ("exit status: 0".to_string(), true),
+                    Ok(Err(e)) => (format!("failed: {e:#}"), false),
+                    Err(_) => ("panicked".to_string(), false),
+                }))
+            }
+        }
+    }
+
+    /// Ends it: a process is killed; a thread is asked to stop (it cannot be killed).
+    fn kill(&mut self) {
+        match self {
+            Launch::Process(child) => {
+                let _ = child.kill();
+            }
+            Launch::Thread { stop, .. } => stop.request(),
+        }
+    }
+
+    /// Reaps a process; a thread that has not ended is left behind.
+    fn reap(&mut self) {
+        match self {
+            Launch::Process(child) => {
+                let _ = child.wait();
+            }
+            Launch::Thread { handle, .. } => {
+                if handle.as_ref().is_some_and(|h| h.is_finished())
+                    && let Some(h) = handle.take()
+                {
+                    let _ = h.join();
+                }
+                *handle = None;
+            }
+        }
+    }
+}
+
+/// A stage's code, as a thread runs it.
+type StageRun = fn(&StageContext, &Bus, &Shutdown) -> anyhow::Result<()>;
+
+/// The code of `stage` (the same function its process's `main` runs).
+fn stage_code(stage: StageKind) -> Option<StageRun> {
+    match stage {
+        StageKind::FrameSource => Some(linetrack_frame_source::run),
+        StageKind::LineDetector => Some(linetrack_line_detector::run),
+        StageKind::Matcher => Some(linetrack_matcher::run),
+        StageKind::PoseEstimator => Some(linetrack_pose_estimator::run),
+        StageKind::Supervisor => None,
+    }
+}
+
+/// A running stage instance.
 struct StageProcess {
     stage: StageKind,
-    child: Child,
+    child: Launch,
     pid: u32,
     started: Instant,
     last_seen: Instant,
@@ -314,6 +392,9 @@ struct Restarts {
 }
 
 struct Supervisor<'m> {
+    /// Threads mode: the stages' channels (the supervisor's `bus` is on them too).
+    hub: Option<LocalHub>,
+    next_thread_id: u32,
     config: PipelineConfig,
     options: RunOptions,
     run_id: String,
@@ -356,7 +437,7 @@ impl<'m> Supervisor<'m> {
         };
         for stage in StageKind::PROCESSING {
             let bin = bin_dir.join(format!("linetrack-{}", stage.name()));
-            if !bin.is_file() {
+            if options.mode == Mode::Processes && !bin.is_file() {
                 bail!(
                     "{} not found: build the stage binaries (cargo build --release --workspace) or set LINETRACK_BIN_DIR",
                     bin.display()
@@ -369,7 +450,11 @@ impl<'m> Supervisor<'m> {
         let bus = Bus::shared_memory(&scope, &format!("supervisor-{}", std::process::id()))?;
         bus.remove_stale_resources();
         let stale = dead_before.saturating_sub(scope.dead_nodes()?);
-        let ports = Ports::open(&bus)?;
+        let hub = (options.mode == Mode::Threads).then(LocalHub::default);
+        let ports = match &hub {
+            Some(hub) => Ports::open(&hub.bus(), &bus)?,
+            None => Ports::open(&bus, &bus)?,
+        };
         if stale > 0 {
             monitor.event(
                 "stale-cleanup",
@@ -379,6 +464,8 @@ impl<'m> Supervisor<'m> {
             );
         }
         Ok(Self {
+            hub,
+            next_thread_id: THREAD_IDS,
             config: config.clone(),
             options: options.clone(),
             run_id: run_id.to_string(),
@@ -402,6 +489,72 @@ impl<'m> Supervisor<'m> {
         detector: Option<DetectorKind>,
         standby: bool,
     ) -> anyhow::Result<()> {
+        let restarted = self.restarts[stage_slot(stage)].count > 0;
+        let resume_pose = (restarted && stage == StageKind::PoseEstimator)
+            .then(|| self.monitor.resume_pose())
+            .flatten();
+        let start_frame = if restarted && stage == StageKind::FrameSource {
+            self.monitor.next_source_frame()
+        } else {
+            0
+        };
+        let (child, pid) = match &self.hub {
+            None => self.spawn_process(stage, detector, standby, resume_pose, start_frame)?,
+            Some(hub) => {
+                let pid = self.next_thread_id;
+                self.next_thread_id += 1;
+                let mut ctx =
+                    StageContext::in_process(stage, self.config.clone(), self.run_dir.clone());
+                ctx.pid = pid;
+                ctx.args.detector = detector;
+                ctx.args.standby = standby;
+                ctx.args.resume_pose = resume_pose;
+                ctx.args.start_frame = usize::try_from(start_frame).unwrap_or(usize::MAX);
+                let code = stage_code(stage).context("the supervisor is no stage")?;
+                let stop = Shutdown::default();
+                let (hub, flag) = (hub.clone(), stop.clone());
+                let handle = std::thread::Builder::new()
+                    .name(stage.name().to_string())
+                    .spawn(move || code(&ctx, &hub.bus(), &flag))
+                    .with_context(|| format!("starting the {stage} thread"))?;
+                (
+                    Launch::Thread {
+                        handle: Some(handle),
+                        stop,
+                    },
+                    pid,
+                )
+            }
+        };
+        tracing::info!(
+            "started {stage} (pid {pid}{})",
+            if standby { ", standby" } else { "" }
+        );
+        let now = Instant::now();
+        self.processes.push(StageProcess {
+            stage,
+            child,
+            pid,
+            started: now,
+            last_seen: now,
+            ready: false,
+            standby,
+            detector,
+            retiring: false,
+        });
+        self.write_status();
+        Ok(())
+    }
+
+    /// Starts `stage`'s binary as a child process.
+    fn spawn_process(
+        &self,
+        stage: StageKind,
+        detector: Option<DetectorKind>,
+        standby: bool,
+        resume_pose: Option<String>,
+        start_frame: u64,
+    ) -> anyhow::Result<(Launch, u32)> {
         let bin = self.bin_dir.join(format!("linetrack-{}", stage.name()));
         let mut command = Process::new(&bin);
         command
@@ -422,40 +575,17 @@ impl<'m> Supervisor<'m> {
         if standby {
             command.arg("--standby");
         }
-        let restarted = self.restarts[stage_slot(stage)].count > 0;
-        if restarted
-            && stage == StageKind::PoseEstimator
-            && let Some(pose) = self.monitor.resume_pose()
-        {
+        if let Some(pose) = resume_pose {
             command.arg("--resume-pose").arg(pose);
         }
-        if restarted && stage == StageKind::FrameSource {
-            command
-                .arg("--start-frame")
-                .arg(self.monitor.next_source_frame().to_string());
+        if start_frame > 0 {
+            command.arg("--start-frame").arg(start_frame.to_string());
         }
         let child = command
             .spawn()
             .with_context(|| format!("starting {}", bin.display()))?;
         let pid = child.id();
-        tracing::info!(
-            "started {stage} (pid {pid}{})",
-            if standby { ", standby" } else { "" }
-        );
-        let now = Instant::now();
-        self.processes.push(StageProcess {
-            stage,
-            child,
-            pid,
-            started: now,
-            last_seen: now,
-            ready: false,
-            standby,
-            detector,
-            retiring: false,
-        });
-        self.write_status();
-        Ok(())
+        Ok((Launch::Process(child), pid))
     }
 
     fn write_status(&self) {
@@ -764,7 +894,7 @@ impl<'m> Supervisor<'m> {
         let mut exited = Vec::new();
         for (i, p) in self.processes.iter_mut().enumerate() {
             match p.child.try_wait() {
-                Ok(Some(status)) => exited.push((i, status.to_string(), status.success())),
+                Ok(Some((status, success))) => exited.push((i, status, success)),
                 Ok(None) => {
                     let silent = p.last_seen.elapsed();
                     let limit = if p.ready { hang } else { startup };
@@ -774,7 +904,7 @@ impl<'m> Supervisor<'m> {
                             p.stage,
                             p.pid
                         );
-                        let _ = p.child.kill();
+                        p.child.kill();
                     }
                 }
                 Err(e) => tracing::warn!("cannot poll {} (pid {}): {e}", p.stage, p.pid),
@@ -782,7 +912,7 @@ impl<'m> Supervisor<'m> {
         }
         for (i, status, success) in exited.into_iter().rev() {
             let mut p = self.processes.remove(i);
-            let _ = p.child.wait();
+            p.child.reap();
             let expected = p.retiring
                 || (p.stage == StageKind::FrameSource && success && self.monitor.source_done());
             if expected || shutdown.requested() {
@@ -882,8 +1012,8 @@ impl<'m> Supervisor<'m> {
                         p.stage,
                         p.pid
                     );
-                    let _ = p.child.kill();
-                    let _ = p.child.wait();
+                    p.child.kill();
+                    p.child.reap();
                 }
                 self.processes.clear();
                 break;
@@ -896,116 +1026,6 @@ impl<'m> Supervisor<'m> {
         }
         self.write_status();
     }
-}
-
-/// Runs the stages on threads of this process over channels.
-/// Returns whether it was interrupted; the caller closes the records.
-fn run_threads(
-    config: &PipelineConfig,
-    options: &RunOptions,
-    run_dir: &Path,
-    monitor: &mut Monitor,
-    shutdown: &Shutdown,
-) -> anyhow::Result<bool> {
-    let bus = Bus::local();
-    let hub = bus.local_hub().context("a local bus has a hub")?;
-    let mut ports = Ports::open(&bus)?;
-    let stage_shutdown = Shutdown::default();
-    let ctx = |stage| StageContext::in_process(stage, config.clone(), run_dir.to_path_buf());
-    let mut threads = Vec::new();
-    macro_rules! start {
-        ($stage:expr, $krate:ident) => {{
-            let c = ctx($stage);
-            let s = stage_shutdown.clone();
-            let h = hub.clone();
-            let handle = std::thread::Builder::new()
-                .name($stage.name().to_string())
-                .spawn(move || {
-                    let bus = h.bus();
-                    $krate::run(&c, &bus, &s)
-                })?;
-            threads.push(($stage, handle));
-        }};
-    }
-    start!(StageKind::LineDetector, linetrack_line_detector);
-    start!(StageKind::Matcher, linetrack_matcher);
-    start!(StageKind::PoseEstimator, linetrack_pose_estimator);
-    let mut ready = 0;
-    let mut source_started = false;
-    let mut drain_since: Option<Instant> = None;
-    let status_every = Duration::from_millis(config.supervisor.status_every_ms);
-    let mut next_status = Instant::now();
-    let mut failure = None;
-    let interrupted = loop {
-        if shutdown.requested() {
-            break true;
-        }
-        ports.wake.wait(Duration::from_millis(50))?;
-        for message in ports.status.receive_all()? {
-            let Some(report) = message.payload().first() else {
-                continue;
-            };
-            match StatusKind::from_code(report.kind) {
-                Some(StatusKind::Ready) => ready += 1,
-                Some(StatusKind::SourceFinished) => monitor.source_finished(report.frame_id),
-                _ => {}
-            }
-        }
-        if !source_started && ready >= 3 {
-            start!(StageKind::FrameSource, linetrack_frame_source);
-            source_started = true;
-        }
-        for message in ports.poses.receive_all()? {
-            let Some(&pose) = message.payload().first() else {
-                continue;
-            };
-            if let Some(switch) = monitor.on_pose(message.header(), &pose) {
-                ports.send(
-                    StageKind::Matcher,
-                    0,
-                    Command::SetMatcherMode,
-                    switch.to as u32,
-                    0,
-                )?;
-            }
-        }
-        if let Some((stage, _)) = threads
-            .iter()
-            .find(|(s, h)| h.is_finished() && *s != StageKind::FrameSource)
-        {
-            failure = Some(format!("{stage} stopped"));
-            break false;
-        }
-        if monitor.complete() {
-            break false;
-        }
-        if monitor.source_done()
-            && drain_since.get_or_insert_with(Instant::now).elapsed()
-                > Duration::from_millis(config.supervisor.drain_timeout_ms)
-        {
-            break false;
-        }
-        if options.live_status && status_every > Duration::ZERO && Instant::now() >= next_status {
-            println!("{}", monitor.status_line());
-            next_status = Instant::now() + status_every;
-        }
-    };
-    stage_shutdown.request();
-    for stage in StageKind::PROCESSING {
-        let _ = ports.send(stage, 0, Command::Shutdown, 0, 0);
-    }
-    let mut errors = Vec::new();
-    for (stage, handle) in threads {
-        match handle.join() {
-            Ok(Ok(())) => {}
-            Ok(Err(e)) => errors.push(format!("{stage}: {e:#}")),
-            Err(_) => errors.push(format!("{stage}: panicked")),
-        }
-    }
-    if let Some(f) = failure {
-        bail!("{f}: {}", errors.join("; "));
-    }
-    Ok(interrupted)
 }
 
 /// The detector wire code (re-exported for `linetrack ctl`).
