@@ -55,8 +55,7 @@ fn due_offset(
 fn shutdown_ordered(control: &mut Inlet<Control>, pid: u32) -> anyhow::Result<bool> {
     Ok(control.receive_all()?.iter().any(|c| {
         let c = c.payload().first().copied().unwrap_or_default();
-        Command::from_code(c.command) == Some(Command::Shutdown)
-            && c.is_for(StageKind::FrameSource, pid)
+        c.command() == Some(Command::Shutdown) && c.is_for(StageKind::FrameSource, pid)
     }))
 }
 

@@ -98,13 +98,7 @@ impl Ports {
         value: u32,
         frame_id: u64,
     ) -> anyhow::Result<()> {
-        let c = Control {
-            command: command as u32,
-            target_pid: pid,
-            target_stage: stage.code(),
-            value,
-            frame_id,
-        };
+        let c = Control::new(command, stage, pid, value, frame_id);
         self.control.publish(&FrameHeader::default(), &[&[c]])?;
         Ok(())
     }
@@ -724,7 +718,7 @@ impl<'m> Supervisor<'m> {
             };
             process.last_seen = Instant::now();
             let (stage, standby) = (process.stage, process.standby);
-            match StatusKind::from_code(report.kind) {
+            match report.kind() {
                 Some(StatusKind::Ready) => {
                     process.ready = true;
                     if standby {
@@ -763,7 +757,7 @@ impl<'m> Supervisor<'m> {
                             StageKind::Matcher,
                             report.pid,
                             Command::SetMatcherMode,
-                            mode as u32,
+                            mode.into(),
                             0,
                         )?;
                     }
@@ -848,7 +842,7 @@ impl<'m> Supervisor<'m> {
                     StageKind::Matcher,
                     0,
                     Command::SetMatcherMode,
-                    switch.to as u32,
+                    switch.to.into(),
                     0,
                 )?;
             }
@@ -862,7 +856,7 @@ impl<'m> Supervisor<'m> {
                 continue;
             };
             if !c.is_for(StageKind::Supervisor, std::process::id())
-                || Command::from_code(c.command) != Some(Command::SwapDetector)
+                || c.command() != Some(Command::SwapDetector)
             {
                 continue;
             }

@@ -7,10 +7,12 @@
 //! topic, and so which stages a publisher wakes.
 
 use iceoryx2::prelude::ZeroCopySend;
+use num_enum::{IntoPrimitive, TryFromPrimitive};
 use std::fmt;
 
 /// A stage of the pipeline.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, TryFromPrimitive, IntoPrimitive)]
+#[repr(u32)]
 pub enum StageKind {
     /// Reads (or renders) stereo frames and publishes them.
     FrameSource,
@@ -51,20 +53,12 @@ impl StageKind {
 
     /// The stage with this wire code.
     pub fn from_code(code: u32) -> Option<Self> {
-        [
-            Self::FrameSource,
-            Self::LineDetector,
-            Self::Matcher,
-            Self::PoseEstimator,
-            Self::Supervisor,
-        ]
-        .get(code as usize)
-        .copied()
+        Self::try_from(code).ok()
     }
 
     /// The wire code.
     pub fn code(self) -> u32 {
-        self as u32
+        u32::from(self)
     }
 }
 
@@ -188,7 +182,7 @@ pub fn wake_service_name(run_id: &str, stage: StageKind) -> String {
 pub const NO_FRAME: u64 = u64::MAX;
 
 /// What happened to a frame.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, TryFromPrimitive, IntoPrimitive)]
 #[repr(u32)]
 pub enum FrameStatus {
     /// Processed.
@@ -206,15 +200,7 @@ pub enum FrameStatus {
 impl FrameStatus {
     /// The status with this wire code.
     pub fn from_code(code: u32) -> Option<Self> {
-        [
-            Self::Ok,
-            Self::Corrupt,
-            Self::DroppedLate,
-            Self::StageError,
-            Self::DroppedBehind,
-        ]
-        .get(code as usize)
-        .copied()
+        Self::try_from(code).ok()
     }
 
     /// Short name used in run records.
@@ -230,7 +216,7 @@ impl FrameStatus {
 }
 
 /// Matcher mode codes in [`FrameHeader::matcher_mode`].
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, TryFromPrimitive, IntoPrimitive)]
 #[repr(u32)]
 pub enum MatcherMode {
     /// LBD descriptors.
@@ -242,7 +228,7 @@ pub enum MatcherMode {
 impl MatcherMode {
     /// The mode with this wire code.
     pub fn from_code(code: u32) -> Option<Self> {
-        [Self::Lbd, Self::L1].get(code as usize).copied()
+        Self::try_from(code).ok()
     }
 
     /// `lbd` or `l1`.
@@ -381,7 +367,7 @@ pub struct PoseRecord {
 }
 
 /// What a [`StatusReport`] says.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, TryFromPrimitive, IntoPrimitive)]
 #[repr(u32)]
 pub enum StatusKind {
     /// Alive; `value` = frames processed.
@@ -405,17 +391,7 @@ pub enum StatusKind {
 impl StatusKind {
     /// The kind with this wire code.
     pub fn from_code(code: u32) -> Option<Self> {
-        [
-            Self::Heartbeat,
-            Self::Ready,
-            Self::HandedOver,
-            Self::SourceFinished,
-            Self::Exiting,
-            Self::Overflow,
-            Self::QueueGap,
-        ]
-        .get(code as usize)
-        .copied()
+        Self::try_from(code).ok()
     }
 }
 
@@ -455,8 +431,20 @@ pub struct StatusReport {
     pub value: u64,
 }
 
+impl StatusReport {
+    /// What the report says (`None` for a code this build does not know).
+    pub fn kind(&self) -> Option<StatusKind> {
+        StatusKind::from_code(self.kind)
+    }
+
+    /// The stage that sent it.
+    pub fn stage(&self) -> Option<StageKind> {
+        StageKind::from_code(self.stage)
+    }
+}
+
 /// Commands.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, TryFromPrimitive, IntoPrimitive)]
 #[repr(u32)]
 pub enum Command {
     /// To the matcher: use [`MatcherMode`] `value` from the next frame.
@@ -476,15 +464,7 @@ pub enum Command {
 impl Command {
     /// The command with this wire code.
     pub fn from_code(code: u32) -> Option<Self> {
-        [
-            Self::SetMatcherMode,
-            Self::HandOver,
-            Self::TakeOver,
-            Self::SwapDetector,
-            Self::Shutdown,
-        ]
-        .get(code as usize)
-        .copied()
+        Self::try_from(code).ok()
     }
 }
 
@@ -505,6 +485,22 @@ pub struct Control {
 }
 
 impl Control {
+    /// A command for process `pid` of `stage` (0: every process of it).
+    pub fn new(command: Command, stage: StageKind, pid: u32, value: u32, frame_id: u64) -> Self {
+        Self {
+            command: command.into(),
+            target_pid: pid,
+            target_stage: stage.into(),
+            value,
+            frame_id,
+        }
+    }
+
+    /// The command (`None` for a code this build does not know).
+    pub fn command(&self) -> Option<Command> {
+        Command::from_code(self.command)
+    }
+
     /// Whether this command is for the process `pid` of stage `stage`.
     pub fn is_for(&self, stage: StageKind, pid: u32) -> bool {
         self.target_stage == stage.code() && (self.target_pid == 0 || self.target_pid == pid)

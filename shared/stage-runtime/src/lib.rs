@@ -133,7 +133,7 @@ impl Reporter {
         let report = StatusReport {
             stage: self.stage.code(),
             pid: self.pid,
-            kind: kind as u32,
+            kind: kind.into(),
             detail: self.detail,
             frame_id,
             value,

@@ -199,7 +199,7 @@ impl<S: Stage> Runner<'_, S> {
             if !c.is_for(S::KIND, self.ctx.pid) {
                 continue;
             }
-            match Command::from_code(c.command) {
+            match c.command() {
                 Some(Command::Shutdown) => return Ok(Turn::Finished),
                 Some(Command::HandOver) if self.role == Role::Active => {
                     let at = self.next_unpublished.max(c.frame_id);
@@ -398,17 +398,11 @@ mod tests {
                 .unwrap_or_else(|e| panic!("{e}"))
                 .iter()
                 .map(|r| r.payload()[0])
-                .find(|r| r.pid == pid && r.kind == StatusKind::Ready as u32)
+                .find(|r| r.pid == pid && r.kind() == Some(StatusKind::Ready))
                 .map(|r| r.frame_id)
         };
         let mut send = |pid: u32, command: Command, frame_id: u64| {
-            let c = Control {
-                command: command as u32,
-                target_pid: pid,
-                target_stage: StageKind::LineDetector.code(),
-                value: 0,
-                frame_id,
-            };
+            let c = Control::new(command, StageKind::LineDetector, pid, 0, frame_id);
             control
                 .publish(&FrameHeader::default(), &[&[c]])
                 .unwrap_or_else(|e| panic!("{e}"));

@@ -298,13 +298,13 @@ pub fn ctl(args: &CtlArgs) -> anyhow::Result<()> {
             let scope = Scope::with_prefix(&status.ipc_prefix, &status.run_id);
             let bus = Bus::shared_memory(&scope, &format!("ctl-{}", std::process::id()))?;
             let mut control = bus.outlet::<Control>(Topic::Control, 1)?;
-            let request = Control {
-                command: Command::SwapDetector as u32,
-                target_pid: status.supervisor_pid,
-                target_stage: StageKind::Supervisor.code(),
-                value: linetrack_supervisor::detector_wire_code(*detector),
-                frame_id: 0,
-            };
+            let request = Control::new(
+                Command::SwapDetector,
+                StageKind::Supervisor,
+                status.supervisor_pid,
+                linetrack_supervisor::detector_wire_code(*detector),
+                0,
+            );
             control.publish(&FrameHeader::default(), &[&[request]])?;
             println!(
                 "asked the supervisor (pid {}) to swap {} -> {}",
