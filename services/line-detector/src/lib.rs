@@ -12,14 +12,31 @@ use linetrack_stage_runtime::{
 };
 use linetrack_vision::{GrayImage, LineDetector, create_detector, stretch_contrast};
 
-/// The detector stage: one detector, with its output buffers.
-pub struct Detector {
+/// One side's detector and its output buffer.
+struct Side {
     detector: Box<dyn LineDetector>,
+    segments: Vec<linetrack_geometry::Segment>,
+}
+
+impl Side {
+    /// Detects in `image`, stretched first when it is dark (as the odometry does:
+    /// `odometry.max_contrast_gain`).
+    fn detect(&mut self, image: &GrayImage, max_gain: f64) -> anyhow::Result<()> {
+        let stretched = stretch_contrast(image, max_gain)?;
+        self.detector
+            .detect(stretched.as_ref().unwrap_or(image), &mut self.segments)?;
+        Ok(())
+    }
+}
+
+/// The detector stage: a detector per image side, so that both sides can run at once.
+pub struct Detector {
+    left: Side,
+    right: Side,
+    in_parallel: bool,
     kind_code: u32,
     pid: u32,
     max_contrast_gain: f64,
-    left: Vec<linetrack_geometry::Segment>,
-    right: Vec<linetrack_geometry::Segment>,
 }
 
 impl Detector {
@@ -27,13 +44,19 @@ impl Detector {
     /// detection allocates.
     pub fn new(ctx: &StageContext) -> anyhow::Result<Self> {
         let kind = ctx.args.detector.unwrap_or(ctx.config.detector);
+        let side = || -> anyhow::Result<Side> {
+            Ok(Side {
+                detector: create_detector(kind, &ctx.config.odometry.frontend)?,
+                segments: Vec::new(),
+            })
+        };
         let mut detector = Self {
-            detector: create_detector(kind, &ctx.config.odometry.frontend)?,
+            left: side()?,
+            right: side()?,
+            in_parallel: ctx.config.detect_sides_in_parallel,
             kind_code: detector_code(kind),
             pid: ctx.pid,
             max_contrast_gain: ctx.config.odometry.max_contrast_gain,
-            left: Vec::new(),
-            right: Vec::new(),
         };
         let (w, h) = (752, 480);
         let card: Vec<u8> = (0..w * h)
@@ -46,7 +69,8 @@ impl Detector {
             })
             .collect();
         let warm = GrayImage::from_pixels(w, h, &card, "warm-up card")?;
-        detector.detector.detect(&warm, &mut detector.left)?;
+        detector.left.detect(&warm, 0.0)?;
+        detector.right.detect(&warm, 0.0)?;
         tracing::info!("{} detector ready", kind.name());
         Ok(detector)
     }
@@ -78,19 +102,25 @@ impl Stage for Detector {
         header.detector = self.kind_code;
         header.detector_pid = self.pid;
         let (left, right) = stereo_views(frame)?;
-        // Dark images are stretched first, as the odometry does (`odometry.max_contrast_gain`).
-        let (left_stretched, right_stretched) = (
-            stretch_contrast(&left, self.max_contrast_gain)?,
-            stretch_contrast(&right, self.max_contrast_gain)?,
-        );
-        let left = left_stretched.as_ref().unwrap_or(&left);
-        let right = right_stretched.as_ref().unwrap_or(&right);
-        self.detector.detect(left, &mut self.left)?;
-        self.detector.detect(right, &mut self.right)?;
-        header.left_count = self.left.len() as u32;
-        header.right_count = self.right.len() as u32;
-        let mut records = to_records(&self.left);
-        records.extend(to_records(&self.right));
+        let gain = self.max_contrast_gain;
+        if self.in_parallel {
+            let (left_side, right_side) = (&mut self.left, &mut self.right);
+            std::thread::scope(|scope| {
+                let right_job = scope.spawn(move || right_side.detect(&right, gain));
+                let left_done = left_side.detect(&left, gain);
+                let right_done = right_job.join().unwrap_or_else(|_| {
+                    Err(anyhow::anyhow!("the right image's detection panicked"))
+                });
+                left_done.and(right_done)
+            })?;
+        } else {
+            self.left.detect(&left, gain)?;
+            self.right.detect(&right, gain)?;
+        }
+        header.left_count = self.left.segments.len() as u32;
+        header.right_count = self.right.segments.len() as u32;
+        let mut records = to_records(&self.left.segments);
+        records.extend(to_records(&self.right.segments));
         Ok(records)
     }
 }
@@ -99,4 +129,61 @@ impl Stage for Detector {
 /// published).
 pub fn run(ctx: &StageContext, bus: &Bus, shutdown: &Shutdown) -> anyhow::Result<()> {
     run_stage(ctx, bus, Detector::new(ctx)?, shutdown)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use linetrack_pipeline_config::PipelineConfig;
+    use std::path::PathBuf;
+
+    /// The segments of one EuRoC stereo frame, detected with the sides at once or in turn.
+    fn detect(in_parallel: bool) -> (FrameHeader, Vec<SegmentRecord>) {
+        let (left, right) =
+            linetrack_test_data::euroc_stereo_pair(0).unwrap_or_else(|e| panic!("{e}"));
+        let read = |p: &std::path::Path| GrayImage::load(p).unwrap_or_else(|e| panic!("{e}"));
+        let (left, right) = (read(&left), read(&right));
+        let (Some(l), Some(r)) = (left.pixels(), right.pixels()) else {
+            panic!("images not continuous");
+        };
+        let bus = Bus::local();
+        let mut inlet = bus
+            .inlet::<u8>(Topic::Frames)
+            .unwrap_or_else(|e| panic!("{e}"));
+        let mut outlet = bus
+            .outlet::<u8>(Topic::Frames, l.len() + r.len())
+            .unwrap_or_else(|e| panic!("{e}"));
+        let mut header = FrameHeader::new(0, 0, 1);
+        header.width = left.width() as u32;
+        header.height = left.height() as u32;
+        outlet
+            .publish(&header, &[l, r])
+            .unwrap_or_else(|e| panic!("{e}"));
+        let frame = inlet
+            .receive()
+            .unwrap_or_else(|e| panic!("{e}"))
+            .unwrap_or_else(|| panic!("no frame"));
+        let config = PipelineConfig {
+            detect_sides_in_parallel: in_parallel,
+            ..PipelineConfig::default()
+        };
+        let ctx = StageContext::in_process(StageKind::LineDetector, config, PathBuf::new());
+        let mut detector = Detector::new(&ctx).unwrap_or_else(|e| panic!("{e}"));
+        let records = detector
+            .process(&mut header, &frame, None)
+            .unwrap_or_else(|e| panic!("{e}"));
+        (header, records)
+    }
+
+    #[test]
+    fn both_sides_at_once_find_what_one_after_the_other_finds() {
+        let (serial_header, serial) = detect(false);
+        let (parallel_header, parallel) = detect(true);
+        assert!(serial_header.left_count > 20 && serial_header.right_count > 20);
+        assert_eq!(
+            (parallel_header.left_count, parallel_header.right_count),
+            (serial_header.left_count, serial_header.right_count)
+        );
+        assert_eq!(parallel, serial);
+    }
 }

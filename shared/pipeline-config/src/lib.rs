@@ -316,6 +316,8 @@ pub struct PipelineConfig {
     pub source: SourceConfig,
     /// Line detector at start (swappable at run time).
     pub detector: DetectorKind,
+    /// Detect the left and the right image at the same time, on two threads.
+    pub detect_sides_in_parallel: bool,
     /// Matcher policy.
     pub matcher: MatcherConfig,
     /// Budgets and drop policy.
@@ -334,6 +336,7 @@ impl Default for PipelineConfig {
         Self {
             source: SourceConfig::default(),
             detector: DetectorKind::Lsd,
+            detect_sides_in_parallel: true,
             matcher: MatcherConfig::default(),
             budget: BudgetConfig::default(),
             supervisor: SupervisorConfig::default(),
