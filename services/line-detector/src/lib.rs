@@ -1,5 +1,5 @@
-//! The line detector: LSD or FLD on both images of each frame, read in place from shared
-//! memory, publishing the segments.
+//! The line detector: LSD, FLD or edgelines on both images of each frame, read in place from
+//! shared memory, publishing the segments.
 //!
 //! Hot swap: a second detector starts with `--standby`, warms up and holds the newest
 //! frames; the supervisor then asks the running one to hand over. The running detector

@@ -410,6 +410,7 @@ pub fn detector_code(kind: DetectorKind) -> u32 {
     match kind {
         DetectorKind::Lsd => 0,
         DetectorKind::Fld => 1,
+        DetectorKind::EdgeLines => 2,
     }
 }
 
@@ -418,6 +419,7 @@ pub fn detector_from_code(code: u32) -> Option<DetectorKind> {
     match code {
         0 => Some(DetectorKind::Lsd),
         1 => Some(DetectorKind::Fld),
+        2 => Some(DetectorKind::EdgeLines),
         _ => None,
     }
 }
