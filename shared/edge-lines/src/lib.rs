@@ -190,14 +190,14 @@ pub struct Params {
 impl Default for Params {
     fn default() -> Self {
         Self {
-            gradient_threshold: 30,
+            gradient_threshold: 16,
             anchor_threshold: 8,
             scan_interval: 2,
             max_fit_error_px: 1.0,
             max_outlier_run: 3,
             min_length_px: 15.0,
             max_segments: 100,
-            min_aligned_fraction: 0.5,
+            min_aligned_fraction: 0.7,
         }
     }
 }
