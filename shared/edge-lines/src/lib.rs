@@ -42,8 +42,11 @@ mod tests;
 
 use thiserror::Error;
 
+/// Largest image the detector takes, pixels (its pixel indices are 32-bit).
+pub const MAX_PIXELS: usize = u32::MAX as usize;
+
 /// Errors in describing an image to the detector.
-#[derive(Debug, Error, PartialEq, Eq)]
+#[derive(Debug, Clone, Error, PartialEq, Eq)]
 pub enum EdgeLinesError {
     /// The pixel slice does not hold `height` rows of `stride` bytes (the last row `width`).
     #[error(
@@ -60,6 +63,14 @@ pub enum EdgeLinesError {
         /// Bytes from one row to the next.
         stride: usize,
     },
+    /// More pixels than [`MAX_PIXELS`].
+    #[error("a {width}×{height} image has more than {MAX_PIXELS} pixels")]
+    TooLarge {
+        /// Width, pixels.
+        width: usize,
+        /// Height, pixels.
+        height: usize,
+    },
 }
 
 /// An 8-bit grayscale image the detector reads in place: `height` rows of `width` pixels,
@@ -73,8 +84,8 @@ pub struct GrayView<'a> {
 }
 
 impl<'a> GrayView<'a> {
-    /// A view of `pixels`, checked to hold the image (an empty image, 0 wide or high, is
-    /// allowed and has no segments).
+    /// A view of `pixels`, checked to hold the image and to have at most [`MAX_PIXELS`]
+    /// pixels (an empty image, 0 wide or high, is allowed and has no segments).
     pub fn new(
         pixels: &'a [u8],
         width: usize,
@@ -99,6 +110,9 @@ impl<'a> GrayView<'a> {
         };
         if pixels.len() < needed {
             return Err(error);
+        }
+        if width.checked_mul(height).is_none_or(|n| n > MAX_PIXELS) {
+            return Err(EdgeLinesError::TooLarge { width, height });
         }
         Ok(Self {
             pixels,
@@ -126,24 +140,6 @@ impl<'a> GrayView<'a> {
     /// Row `y` (its `width` pixels). `y < height`.
     fn row(&self, y: usize) -> &'a [u8] {
         &self.pixels[y * self.stride..y * self.stride + self.width]
-    }
-}
-
-impl Clone for EdgeLinesError {
-    fn clone(&self) -> Self {
-        match *self {
-            EdgeLinesError::Size {
-                len,
-                width,
-                height,
-                stride,
-            } => EdgeLinesError::Size {
-                len,
-                width,
-                height,
-                stride,
-            },
-        }
     }
 }
 

@@ -491,6 +491,16 @@ mod tests {
     use super::*;
 
     #[test]
+    fn every_detector_has_its_own_wire_code_and_back() {
+        let codes: Vec<u32> = DetectorKind::ALL.into_iter().map(detector_code).collect();
+        for (kind, &code) in DetectorKind::ALL.iter().zip(&codes) {
+            assert_eq!(detector_from_code(code), Some(*kind));
+            assert_eq!(codes.iter().filter(|&&c| c == code).count(), 1);
+        }
+        assert_eq!(detector_from_code(99), None);
+    }
+
+    #[test]
     fn a_full_hold_and_a_full_queue_never_exceed_the_borrow_limit() {
         // Real shared memory: iceoryx2 enforces the subscriber's borrow limit.
         let scope = Scope {
