@@ -1,5 +1,5 @@
-//! The line detector: LSD or FLD on both images of each frame, read in place from shared
-//! memory, publishing the segments.
+//! The line detector: LSD, FLD or edgelines on both images of each frame, read in place from
+//! shared memory, publishing the segments.
 //!
 //! Hot swap (the stage runtime's, see `linetrack_stage_runtime::run_stage`): a second
 //! detector of the other kind starts with `--standby`, warms up and holds the newest frames

@@ -1,7 +1,7 @@
 //! PL-StVO over a stream of rectified stereo frames.
 //!
 //! [`Odometry`] per frame: dark images are stretched to the full grey range (a bounded
-//! gain), ORB points and line segments (LSD or FLD) are detected in both images and matched
+//! gain), ORB points and line segments (LSD, FLD or edgelines) are detected in both images and matched
 //! stereo (segments with LBD or the ℓ1 matcher) and triangulated — point matches refined to
 //! a fraction of a pixel, segments with look-alike partners (repetitive structure) left
 //! out; the left image's features are matched to the previous frame's (points around where

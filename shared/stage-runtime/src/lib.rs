@@ -502,6 +502,7 @@ pub fn detector_code(kind: DetectorKind) -> u32 {
     match kind {
         DetectorKind::Lsd => 0,
         DetectorKind::Fld => 1,
+        DetectorKind::EdgeLines => 2,
     }
 }
 
@@ -510,6 +511,7 @@ pub fn detector_from_code(code: u32) -> Option<DetectorKind> {
     match code {
         0 => Some(DetectorKind::Lsd),
         1 => Some(DetectorKind::Fld),
+        2 => Some(DetectorKind::EdgeLines),
         _ => None,
     }
 }
@@ -576,6 +578,16 @@ fn end_with_parent(shutdown: &Shutdown, supervisor: Option<u32>) -> anyhow::Resu
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn every_detector_has_its_own_wire_code_and_back() {
+        let codes: Vec<u32> = DetectorKind::ALL.into_iter().map(detector_code).collect();
+        for (kind, &code) in DetectorKind::ALL.iter().zip(&codes) {
+            assert_eq!(detector_from_code(code), Some(*kind));
+            assert_eq!(codes.iter().filter(|&&c| c == code).count(), 1);
+        }
+        assert_eq!(detector_from_code(99), None);
+    }
 
     #[test]
     fn a_full_hold_and_a_full_queue_never_exceed_the_borrow_limit() {

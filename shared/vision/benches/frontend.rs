@@ -2,7 +2,12 @@
 //! (frame 0, left and right; frame 1 for frame to frame), so the paper's Table III
 //! (detector × matcher, monocular and stereo) can be rebuilt from one run:
 //!
-//! - `detect/{lsd,fld}`: one image;
+//! - `detect/{lsd,fld,edgelines}`: one image (every [`DetectorKind`], 100 longest kept);
+//! - `detect/edgedrawing`: OpenCV's EdgeDrawing (EDLines, ximgproc) on the same image, a
+//!   reference for our own `edgelines` (not a pipeline detector; its segments are not
+//!   capped or sorted, which would only add to its time);
+//! - `mono/{lsd+lbd,fld+l1,edgelines+l1}`: one whole monocular step, measured as one: detect
+//!   the next image, describe its segments, match them to the previous image's;
 //! - `lbd/describe`: LBD descriptors of one image's 100 segments;
 //! - `match/{lbd,l1}/{stereo,frame-to-frame}`: matching two images' segments (ℓ1 stereo
 //!   with its photometric check, the profiles already taken);
@@ -23,6 +28,8 @@ use linetrack_vision::{
     DetectorKind, FrontendConfig, GrayImage, HammingMatcher, LineFeatures, MatcherKind,
     OrbExtractor, PointFeatures, create_detector, create_segment_matcher, match_points,
 };
+use opencv::core::{Vec4f, Vector};
+use opencv::ximgproc::{self, EdgeDrawingTrait};
 use std::hint::black_box;
 
 fn load(index: usize) -> (GrayImage, GrayImage) {
@@ -45,6 +52,42 @@ fn bench_frontend(c: &mut Criterion) {
         let mut out = Vec::new();
         group.bench_function(format!("detect/{}", kind.name()), |b| {
             b.iter(|| detector.detect(black_box(&left), &mut out))
+        });
+    }
+
+    let mut edge_drawing = ximgproc::create_edge_drawing().expect("EdgeDrawing");
+    let mut lines = Vector::<Vec4f>::new();
+    group.bench_function("detect/edgedrawing", |b| {
+        b.iter(|| {
+            edge_drawing.detect_edges(black_box(left.mat()))?;
+            edge_drawing.detect_lines(&mut lines)?;
+            Ok::<_, opencv::Error>(lines.len())
+        })
+    });
+
+    // A whole monocular step: detect, describe, match to the previous frame.
+    for (detector_kind, matcher_kind) in [
+        (DetectorKind::Lsd, MatcherKind::Lbd),
+        (DetectorKind::Fld, MatcherKind::L1),
+        (DetectorKind::EdgeLines, MatcherKind::L1),
+    ] {
+        let mut detector = create_detector(detector_kind, &config).expect("detector");
+        let mut matcher = create_segment_matcher(matcher_kind, &config).expect("matcher");
+        let mut previous = LineFeatures::default();
+        detector
+            .detect(&left, &mut previous.segments)
+            .expect("detection");
+        matcher.describe(&left, &mut previous).expect("describe");
+        let mut current = LineFeatures::default();
+        let mut matches = Vec::new();
+        let name = format!("mono/{}+{}", detector_kind.name(), matcher_kind.name());
+        group.bench_function(name, |b| {
+            b.iter(|| {
+                detector.detect(black_box(&next), &mut current.segments)?;
+                matcher.describe(&next, &mut current)?;
+                matcher.match_lines(MatchCase::FrameToFrame, &previous, &current, &mut matches);
+                Ok::<_, linetrack_vision::VisionError>(matches.len())
+            })
         });
     }
 

@@ -11,7 +11,7 @@ use std::path::Path;
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct FrontendConfig {
-    /// Line detector: `lsd` or `fld`.
+    /// Line detector: `lsd`, `fld` or `edgelines`.
     pub detector: DetectorKind,
     /// Segment matcher: `lbd` (appearance) or `l1` (geometry).
     pub matcher: MatcherKind,
@@ -21,6 +21,8 @@ pub struct FrontendConfig {
     pub lsd: LsdOptions,
     /// FLD parameters (OpenCV's defaults).
     pub fld: FldOptions,
+    /// Parameters of our own detector (`edgelines`).
+    pub edgelines: EdgeLinesOptions,
     /// LBD matching.
     pub lbd: LbdOptions,
     /// ORB points and their matching.
@@ -39,6 +41,7 @@ impl Default for FrontendConfig {
             lines: LineOptions::default(),
             lsd: LsdOptions::default(),
             fld: FldOptions::default(),
+            edgelines: EdgeLinesOptions::default(),
             lbd: LbdOptions::default(),
             orb: OrbOptions::default(),
             appearance_gates: AppearanceGates::default(),
@@ -142,6 +145,56 @@ impl Default for FldOptions {
             canny_high: 50.0,
             canny_aperture: 3,
             merge: false,
+        }
+    }
+}
+
+/// Parameters of the `edgelines` detector (`linetrack-edge-lines`). Gradient thresholds
+/// are in units of a 3×3 Sobel `|gx| + |gy|` on the smoothed 8-bit image (at most 2040).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct EdgeLinesOptions {
+    /// Pixels whose gradient is below this are not edges.
+    pub gradient_threshold: u16,
+    /// An anchor's gradient exceeds both neighbours across the edge by at least this.
+    pub anchor_threshold: u16,
+    /// Anchors are looked for on every this-th row and column (>= 1).
+    pub scan_interval: usize,
+    /// A pixel further than this from the fitted line is an outlier, pixels.
+    pub max_fit_error_px: f32,
+    /// A segment ends after more than this many outlier pixels in a row.
+    pub max_outlier_run: usize,
+    /// A segment is kept when at least this fraction of its pixels have a gradient across
+    /// it (within 22.5°) of one sign.
+    pub min_aligned_fraction: f32,
+}
+
+impl Default for EdgeLinesOptions {
+    fn default() -> Self {
+        let p = linetrack_edge_lines::Params::default();
+        Self {
+            gradient_threshold: p.gradient_threshold,
+            anchor_threshold: p.anchor_threshold,
+            scan_interval: p.scan_interval,
+            max_fit_error_px: p.max_fit_error_px,
+            max_outlier_run: p.max_outlier_run,
+            min_aligned_fraction: p.min_aligned_fraction,
+        }
+    }
+}
+
+impl EdgeLinesOptions {
+    /// The detector's parameters, keeping segments by `keep`.
+    pub fn params(&self, keep: LineOptions) -> linetrack_edge_lines::Params {
+        linetrack_edge_lines::Params {
+            gradient_threshold: self.gradient_threshold,
+            anchor_threshold: self.anchor_threshold,
+            scan_interval: self.scan_interval,
+            max_fit_error_px: self.max_fit_error_px,
+            max_outlier_run: self.max_outlier_run,
+            min_length_px: keep.min_length_px as f32,
+            max_segments: keep.max_segments,
+            min_aligned_fraction: self.min_aligned_fraction,
         }
     }
 }
@@ -290,6 +343,35 @@ impl FrontendConfig {
                 "fld.length_threshold_px",
                 self.fld.length_threshold_px.to_string(),
                 ">= 0",
+            );
+        }
+        let e = &self.edgelines;
+        if e.gradient_threshold < 1 {
+            return bad(
+                "edgelines.gradient_threshold",
+                e.gradient_threshold.to_string(),
+                ">= 1",
+            );
+        }
+        if e.scan_interval < 1 {
+            return bad(
+                "edgelines.scan_interval",
+                e.scan_interval.to_string(),
+                ">= 1",
+            );
+        }
+        if !(e.max_fit_error_px > 0.0 && e.max_fit_error_px.is_finite()) {
+            return bad(
+                "edgelines.max_fit_error_px",
+                e.max_fit_error_px.to_string(),
+                "a finite number > 0",
+            );
+        }
+        if !(0.0..=1.0).contains(&e.min_aligned_fraction) {
+            return bad(
+                "edgelines.min_aligned_fraction",
+                e.min_aligned_fraction.to_string(),
+                "in [0, 1]",
             );
         }
         for (field, ratio) in [

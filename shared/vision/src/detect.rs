@@ -1,11 +1,12 @@
-//! Line segment detection: LSD and FLD behind one trait.
+//! Line segment detection: LSD, FLD and our own edge-drawing detector behind one trait.
 
 use crate::{
-    FldOptions, FrontendConfig, GrayImage, LineOptions, LsdOptions, LsdRefine, OpenCvContext,
-    VisionError,
+    EdgeLinesOptions, FldOptions, FrontendConfig, GrayImage, LineOptions, LsdOptions, LsdRefine,
+    OpenCvContext, VisionError,
 };
+use linetrack_edge_lines::{EdgeLineDetector, GrayView, LineSegment};
 use linetrack_geometry::Segment;
-use opencv::core::{Ptr, Vec4f, Vector};
+use opencv::core::{MatTraitConstManual, Ptr, Vec4f, Vector};
 use opencv::imgproc::{self, LineSegmentDetector, LineSegmentDetectorTrait};
 use opencv::ximgproc::{self, FastLineDetector, FastLineDetectorTrait};
 use serde::{Deserialize, Serialize};
@@ -17,7 +18,7 @@ pub const MIN_IMAGE_SIDE_PX: i32 = 8;
 
 /// A line segment detector.
 pub trait LineDetector: Send {
-    /// Short name: `lsd` or `fld`.
+    /// Short name: `lsd`, `fld` or `edgelines`.
     fn name(&self) -> &'static str;
 
     /// Detects segments in `image`, replacing the contents of `out` with the kept ones:
@@ -34,17 +35,26 @@ pub enum DetectorKind {
     Lsd,
     /// Fast Line Detector (Lee et al.), OpenCV ximgproc.
     Fld,
+    /// Our own edge-drawing detector with line fitting while drawing (`linetrack-edge-lines`,
+    /// no OpenCV).
+    #[serde(rename = "edgelines")]
+    EdgeLines,
 }
 
 impl DetectorKind {
     /// Every kind, in a fixed order.
-    pub const ALL: [DetectorKind; 2] = [DetectorKind::Lsd, DetectorKind::Fld];
+    pub const ALL: [DetectorKind; 3] = [
+        DetectorKind::Lsd,
+        DetectorKind::Fld,
+        DetectorKind::EdgeLines,
+    ];
 
     /// The name used in configs and on the command line.
     pub fn name(self) -> &'static str {
         match self {
             DetectorKind::Lsd => "lsd",
             DetectorKind::Fld => "fld",
+            DetectorKind::EdgeLines => "edgelines",
         }
     }
 }
@@ -56,7 +66,7 @@ impl FromStr for DetectorKind {
         Self::ALL
             .into_iter()
             .find(|k| k.name().eq_ignore_ascii_case(s))
-            .ok_or_else(|| format!("unknown detector {s:?}: expected one of lsd, fld"))
+            .ok_or_else(|| format!("unknown detector {s:?}: expected one of lsd, fld, edgelines"))
     }
 }
 
@@ -68,6 +78,9 @@ pub fn create_detector(
     Ok(match kind {
         DetectorKind::Lsd => Box::new(LsdDetector::new(&config.lsd, config.lines)?),
         DetectorKind::Fld => Box::new(FldDetector::new(&config.fld, config.lines)?),
+        DetectorKind::EdgeLines => {
+            Box::new(EdgeLinesDetector::new(&config.edgelines, config.lines))
+        }
     })
 }
 
@@ -167,6 +180,78 @@ impl LineDetector for FldDetector {
         detect_with(image, &mut self.lines, self.keep, out, |lines| {
             fld.detect(image.mat(), lines).context("FLD detection")
         })
+    }
+}
+
+/// Our own detector (`linetrack-edge-lines`): no OpenCV call, the pixels read in place.
+pub struct EdgeLinesDetector {
+    detector: EdgeLineDetector,
+    segments: Vec<LineSegment>,
+    /// Rows copied out of a non-continuous image (a region of a larger one); unused for
+    /// decoded and borrowed images, which are continuous.
+    copy: Vec<u8>,
+}
+
+impl EdgeLinesDetector {
+    /// The detector with `options`, keeping segments by `keep`.
+    pub fn new(options: &EdgeLinesOptions, keep: LineOptions) -> Self {
+        Self {
+            detector: EdgeLineDetector::new(options.params(keep)),
+            segments: Vec::new(),
+            copy: Vec::new(),
+        }
+    }
+}
+
+impl LineDetector for EdgeLinesDetector {
+    fn name(&self) -> &'static str {
+        "edgelines"
+    }
+
+    fn detect(&mut self, image: &GrayImage, out: &mut Vec<Segment>) -> Result<(), VisionError> {
+        out.clear();
+        self.segments.clear();
+        if image.width() < MIN_IMAGE_SIDE_PX || image.height() < MIN_IMAGE_SIDE_PX {
+            return Ok(());
+        }
+        // Both sides are at least MIN_IMAGE_SIDE_PX > 0: the casts are exact.
+        let (width, height) = (image.width() as usize, image.height() as usize);
+        let pixels = match image.pixels() {
+            Some(pixels) => pixels,
+            None => {
+                self.copy.clear();
+                for row in 0..image.height() {
+                    let row = image
+                        .mat()
+                        .at_row::<u8>(row)
+                        .context("reading a row of a non-continuous image")?;
+                    self.copy.extend_from_slice(row);
+                }
+                &self.copy
+            }
+        };
+        let view =
+            GrayView::packed(pixels, width, height).map_err(|source| VisionError::EdgeLines {
+                origin: image.origin().to_string(),
+                source,
+            })?;
+        self.detector.detect(view, &mut self.segments);
+        let bounds = ((width - 1) as f64, (height - 1) as f64);
+        out.extend(
+            self.segments
+                .iter()
+                .map(|s| {
+                    Segment::from_coords(
+                        f64::from(s.start[0]),
+                        f64::from(s.start[1]),
+                        f64::from(s.end[0]),
+                        f64::from(s.end[1]),
+                    )
+                })
+                .filter_map(|s| s.clipped_to(bounds.0, bounds.1))
+                .filter(|s| s.is_finite()),
+        );
+        Ok(())
     }
 }
 

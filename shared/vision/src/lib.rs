@@ -3,8 +3,9 @@
 //! - [`GrayImage`]: an 8-bit single-channel image that has been checked (decodable, not
 //!   empty, one channel, 8 bits); loading names the file in every error.
 //! - [`perturb`]: the paper's photometric perturbation `I' = clamp(α·I + β)`.
-//! - [`LineDetector`]: LSD (imgproc) and FLD (ximgproc) behind one trait, chosen by name
-//!   at runtime ([`DetectorKind`]); both keep the N longest segments above a length.
+//! - [`LineDetector`]: LSD (imgproc), FLD (ximgproc) and our own edge-drawing detector
+//!   (`linetrack-edge-lines`, no OpenCV) behind one trait, chosen by name at runtime
+//!   ([`DetectorKind`]); all keep the N longest segments above a length.
 //! - [`SegmentMatcher`]: the appearance baseline LBD (line_descriptor descriptors, mutual
 //!   best + ratio test) and the geometric ℓ1 matcher behind one trait ([`MatcherKind`]).
 //! - [`OrbExtractor`] and [`HammingMatcher`]: ORB points matched mutual-best with a
@@ -24,12 +25,12 @@ mod orb;
 mod pair;
 
 pub use config::{
-    AppearanceGates, FldOptions, FrontendConfig, LbdOptions, LineOptions, LsdOptions, LsdRefine,
-    OrbOptions,
+    AppearanceGates, EdgeLinesOptions, FldOptions, FrontendConfig, LbdOptions, LineOptions,
+    LsdOptions, LsdRefine, OrbOptions,
 };
 pub use detect::{
-    DetectorKind, FldDetector, LineDetector, LsdDetector, MIN_IMAGE_SIDE_PX, create_detector,
-    keep_longest,
+    DetectorKind, EdgeLinesDetector, FldDetector, LineDetector, LsdDetector, MIN_IMAGE_SIDE_PX,
+    create_detector, keep_longest,
 };
 pub use hamming::{BinaryDescriptors, FeatureMatch, HammingMatcher};
 pub use image::{BorrowedGray, GrayImage, MAX_FILE_BYTES, MAX_PIXELS, perturb, stretch_contrast};
@@ -111,6 +112,15 @@ pub enum VisionError {
         width: usize,
         /// Stated height.
         height: usize,
+    },
+    /// The image's pixels could not be handed to the `edgelines` detector.
+    #[error("{origin}: edgelines detection")]
+    EdgeLines {
+        /// The image's origin.
+        origin: String,
+        /// Why.
+        #[source]
+        source: linetrack_edge_lines::EdgeLinesError,
     },
     /// A gain or bias that is not a finite, usable number.
     #[error("photometric perturbation: {0}")]

@@ -103,6 +103,40 @@ fn detectors_find_the_test_card_edges_and_nothing_else() {
 }
 
 #[test]
+fn edgelines_orients_segments_as_lsd_and_fld_do() {
+    // The ℓ1 matcher's polarity gate compares endpoint order; frame to frame across a
+    // detector swap it compares segments of two detectors, so all must agree.
+    let image = card(0);
+    let ours = detect_all(DetectorKind::EdgeLines, &image);
+    for kind in [DetectorKind::Lsd, DetectorKind::Fld] {
+        let theirs = detect_all(kind, &image);
+        let mut compared = 0;
+        for s in ours.iter().filter(|s| s.length() > 40.0) {
+            let f = features(s);
+            let same_edge = theirs.iter().find(|t| {
+                let g = features(t);
+                direction_angle(&f, &g).to_degrees() < 2.0
+                    && linetrack_geometry::cross(&f.dir, &(g.mid - f.mid)).abs() < 2.0
+                    && linetrack_geometry::overlap(&f, &g, MatchCase::FrameToFrame) > 0.3
+            });
+            if let Some(t) = same_edge {
+                compared += 1;
+                assert!(
+                    (s.end - s.start).dot(&(t.end - t.start)) > 0.0,
+                    "{}: {t:?} runs against edgelines' {s:?}",
+                    kind.name()
+                );
+            }
+        }
+        assert!(
+            compared >= 10,
+            "{}: {compared} segments compared",
+            kind.name()
+        );
+    }
+}
+
+#[test]
 fn detections_are_capped_longest_first_and_above_the_minimum_length() {
     let image = card(0);
     let config = FrontendConfig {

@@ -13,7 +13,7 @@ use clap::Parser;
 use linetrack_datasets::StereoSequence;
 use linetrack_scene_render::{IlluminationConfig, Preset};
 use linetrack_stereo_bench::{Bench, Condition, MatcherEntry};
-use linetrack_vision::DetectorKind;
+use linetrack_vision::{DetectorKind, MatcherKind};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -273,7 +273,7 @@ fn middlebury_section(
         Condition::ALL.to_vec()
     };
     let bench = Bench {
-        detectors: vec![DetectorKind::Lsd, DetectorKind::Fld],
+        detectors: DetectorKind::ALL.to_vec(),
         matchers: MatcherEntry::defaults(config),
         conditions,
         detection: config.clone(),
@@ -320,8 +320,20 @@ pub fn run(args: &Args) -> anyhow::Result<String> {
         (il.gain[0], il.bias[0])
     };
 
-    let mut table1 = String::from(
-        "| sequence | case | LSD+LBD | LSD+ℓ1 | FLD+LBD | FLD+ℓ1 |\n|---|---|---|---|---|---|\n",
+    let combination_names: Vec<String> = COMBINATIONS
+        .iter()
+        .map(|(d, m)| {
+            let matcher = match m {
+                MatcherKind::L1 => "ℓ1",
+                other => &other.name().to_uppercase(),
+            };
+            format!("{}+{matcher}", d.name().to_uppercase())
+        })
+        .collect();
+    let mut table1 = format!(
+        "| sequence | case | {} |\n|---|---|{}\n",
+        combination_names.join(" | "),
+        "---|".repeat(COMBINATIONS.len())
     );
     let mut costs: Vec<(Vec<f64>, Vec<f64>)> = vec![(Vec::new(), Vec::new()); COMBINATIONS.len()];
     let mut table2 =
@@ -521,12 +533,14 @@ pub fn run(args: &Args) -> anyhow::Result<String> {
         }
     }
 
-    let paper = [
-        ("39.3", "51.3"),
-        ("25.9", "35.8"),
-        ("18.1", "33.3"),
-        ("7.7", "23.4"),
-    ];
+    // The paper's figures, by combination (it has none for our own detector).
+    let paper = |d: DetectorKind, m: MatcherKind| match (d, m) {
+        (DetectorKind::Lsd, MatcherKind::Lbd) => ("39.3", "51.3"),
+        (DetectorKind::Lsd, MatcherKind::L1) => ("25.9", "35.8"),
+        (DetectorKind::Fld, MatcherKind::Lbd) => ("18.1", "33.3"),
+        (DetectorKind::Fld, MatcherKind::L1) => ("7.7", "23.4"),
+        _ => ("–", "–"),
+    };
     let mut table3 = String::from(
         "| detector + matcher | mono ms/frame | stereo ms/frame | paper mono | paper stereo |\n|---|---|---|---|---|\n",
     );
@@ -538,8 +552,8 @@ pub fn run(args: &Args) -> anyhow::Result<String> {
             m.name(),
             median(&costs[k].0),
             median(&costs[k].1),
-            paper[k].0,
-            paper[k].1
+            paper(*d, *m).0,
+            paper(*d, *m).1
         )?;
     }
     let plot_list: Vec<String> = plots

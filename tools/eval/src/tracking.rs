@@ -25,11 +25,13 @@ use std::path::Path;
 pub type Illumination<'a> = Option<&'a dyn Fn(f64) -> (f64, f64)>;
 
 /// Detector × matcher combinations of the paper's tables.
-pub const COMBINATIONS: [(DetectorKind, MatcherKind); 4] = [
+pub const COMBINATIONS: [(DetectorKind, MatcherKind); 6] = [
     (DetectorKind::Lsd, MatcherKind::Lbd),
     (DetectorKind::Lsd, MatcherKind::L1),
     (DetectorKind::Fld, MatcherKind::Lbd),
     (DetectorKind::Fld, MatcherKind::L1),
+    (DetectorKind::EdgeLines, MatcherKind::Lbd),
+    (DetectorKind::EdgeLines, MatcherKind::L1),
 ];
 
 /// Per frame counts of one combination and case.

@@ -66,7 +66,7 @@ fn quick_report_has_every_table_row_and_plot() {
     for sequence in ["normal", "hdr-flicker", "left-right-mismatch"] {
         for case in ["stereo", "frame to frame"] {
             let cells = table1_row(&report, sequence, case);
-            assert_eq!(cells.len(), 4);
+            assert_eq!(cells.len(), 6);
             // LSD+LBD on easy generated frames: most matches are geometric inliers.
             let ratio: f64 = cells[0].split(" / ").nth(1).unwrap().parse().unwrap();
             assert!(ratio > 0.8, "{sequence} {case}: {}", cells[0]);
@@ -88,9 +88,11 @@ fn quick_report_has_every_table_row_and_plot() {
     assert_eq!(
         report
             .lines()
-            .filter(|l| l.starts_with("| LSD+") || l.starts_with("| FLD+"))
+            .filter(|l| {
+                l.starts_with("| LSD+") || l.starts_with("| FLD+") || l.starts_with("| EDGELINES+")
+            })
             .count(),
-        4,
+        6,
         "Table III rows"
     );
     let _ = std::fs::remove_dir_all(dir);

@@ -66,7 +66,7 @@ pub struct RunArgs {
     /// realtime (the sequence's rate) or fastest.
     #[arg(long)]
     pub pacing: Option<String>,
-    /// Start with this detector (lsd or fld).
+    /// Start with this detector (lsd, fld or edgelines).
     #[arg(long)]
     pub detector: Option<DetectorKind>,
     /// Run folder (default: a new dated folder under the config's `output.runs_dir`, with
@@ -96,7 +96,8 @@ pub struct CtlArgs {
 /// Commands to a running pipeline.
 #[derive(Debug, Subcommand)]
 pub enum CtlAction {
-    /// Replace the line detector without stopping (lsd or fld); waits for the take-over.
+    /// Replace the line detector without stopping (lsd, fld or edgelines); waits for the
+    /// take-over.
     SwapDetector {
         /// The detector to switch to.
         detector: DetectorKind,

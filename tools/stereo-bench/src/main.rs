@@ -18,6 +18,9 @@ use std::process::ExitCode;
     linetrack-stereo-bench --condition as-is --detector lsd
     linetrack-stereo-bench --compare l1-paper=l1:configs/l1-matcher-paper.toml
 
+A detector's stereo repeatability is the share of its left segments that some right segment
+would correctly match (the same rule).
+
 A match is correct when the left segment, shifted by the ground-truth disparity read along
 it (either side of a depth edge, whichever surface fits), lies within 1 px of the right
 segment's line and overlaps it. Precision = correct / judged matches; recall = correct /
@@ -31,7 +34,7 @@ struct Args {
     /// Folder of the Middlebury scenes (default: ../shared/data/middlebury beside the workspace).
     #[arg(long)]
     data: Option<PathBuf>,
-    /// Detectors to run (repeatable; default: lsd and fld).
+    /// Detectors to run (repeatable; default: all, lsd, fld and edgelines).
     #[arg(long = "detector")]
     detectors: Vec<DetectorKind>,
     /// Conditions of the right image (repeatable; default: all).
@@ -113,7 +116,7 @@ fn run() -> anyhow::Result<String> {
     }
     let bench = Bench {
         detectors: if args.detectors.is_empty() {
-            vec![DetectorKind::Lsd, DetectorKind::Fld]
+            DetectorKind::ALL.to_vec()
         } else {
             args.detectors.clone()
         },

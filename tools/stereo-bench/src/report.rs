@@ -25,6 +25,8 @@ pub struct Aggregate {
     pub unjudged: usize,
     /// Matchable left segments.
     pub matchable: usize,
+    /// Left segments detected.
+    pub left_segments: usize,
     /// Median milliseconds of description + matching per pair.
     pub median_ms: f64,
 }
@@ -37,6 +39,17 @@ impl Aggregate {
             1.0
         } else {
             self.correct as f64 / judged as f64
+        }
+    }
+
+    /// The detector's stereo repeatability: matchable left segments (found again in the
+    /// right image at the ground-truth disparity, within 1 px and overlapping) over all left
+    /// segments (0 when there are none). The same for every matcher.
+    pub fn repeatability(&self) -> f64 {
+        if self.left_segments == 0 {
+            0.0
+        } else {
+            self.matchable as f64 / self.left_segments as f64
         }
     }
 
@@ -70,6 +83,7 @@ pub fn aggregate(rows: &[PairRow]) -> Vec<Aggregate> {
                     wrong: 0,
                     unjudged: 0,
                     matchable: 0,
+                    left_segments: 0,
                     median_ms: 0.0,
                 });
                 times.push(Vec::new());
@@ -83,6 +97,7 @@ pub fn aggregate(rows: &[PairRow]) -> Vec<Aggregate> {
         a.wrong += row.wrong;
         a.unjudged += row.unjudged;
         a.matchable += row.matchable;
+        a.left_segments += row.left_segments;
         times[k].push(row.match_ms);
     }
     for (a, t) in out.iter_mut().zip(&mut times) {
@@ -199,6 +214,40 @@ pub fn markdown(aggregates: &[Aggregate], goals: &[Goal], pairs: usize) -> Strin
                     .find(|a| a.condition == *c && a.detector == *d && a.matcher == *m)
                     .map_or("–".to_string(), |a| {
                         format!("{} / {:.3} / {:.2}", a.correct, a.precision(), a.recall())
+                    })
+            })
+            .collect();
+        let _ = writeln!(out, "| {} | {} |", c.name(), cells.join(" | "));
+    }
+    let mut detectors: Vec<&'static str> = Vec::new();
+    for (d, _) in &columns {
+        if !detectors.contains(d) {
+            detectors.push(d);
+        }
+    }
+    let _ = writeln!(
+        out,
+        "\nStereo repeatability of the detectors: left segments found again in the right image \
+         at the ground-truth disparity (within 1 px of a right segment's line, overlapping it) / \
+         left segments, summed over {pairs} pairs:\n"
+    );
+    let upper: Vec<String> = detectors.iter().map(|d| d.to_uppercase()).collect();
+    let _ = writeln!(out, "| condition | {} |", upper.join(" | "));
+    let _ = writeln!(out, "|---|{}", "---|".repeat(detectors.len()));
+    for c in &conditions {
+        let cells: Vec<String> = detectors
+            .iter()
+            .map(|d| {
+                aggregates
+                    .iter()
+                    .find(|a| a.condition == *c && a.detector == *d)
+                    .map_or("–".to_string(), |a| {
+                        format!(
+                            "{:.3} ({} / {})",
+                            a.repeatability(),
+                            a.matchable,
+                            a.left_segments
+                        )
                     })
             })
             .collect();

@@ -42,14 +42,17 @@ fn real_data_two_pairs_give_tables_csv_plot_and_goals() {
         "| over-exposed |",
         "LSD+lbd",
         "FLD+l1",
+        "EDGELINES+l1",
+        "Stereo repeatability",
         "Goals",
     ] {
         assert!(table.contains(needle), "{needle} missing:\n{table}");
     }
-    // One row per pair × condition × detector × matcher, with counts that add up.
+    // One row per pair × condition × detector (LSD, FLD, edgelines) × matcher, with counts
+    // that add up.
     let mut reader = csv::Reader::from_path(out.join("stereo-bench.csv")).unwrap();
     let rows: Vec<csv::StringRecord> = reader.records().map(Result::unwrap).collect();
-    assert_eq!(rows.len(), 2 * 2 * 2 * 2);
+    assert_eq!(rows.len(), 2 * 2 * 3 * 2);
     let headers = reader.headers().unwrap().clone();
     let field = |row: &csv::StringRecord, name: &str| -> usize {
         row[headers.iter().position(|h| h == name).unwrap()]
@@ -63,6 +66,7 @@ fn real_data_two_pairs_give_tables_csv_plot_and_goals() {
             field(row, "correct") + field(row, "wrong") + field(row, "unjudged")
         );
         assert!(field(row, "correct") <= field(row, "matchable"));
+        assert!(field(row, "matchable") <= field(row, "left_segments"));
         correct += field(row, "correct");
     }
     assert!(correct > 100, "real pairs give real matches: {correct}");

@@ -42,7 +42,7 @@ pub struct Args {
     /// configs/pipeline.toml; missing keys take their defaults). Flags below override it.
     #[arg(long)]
     pub config: Option<PathBuf>,
-    /// Line detector: lsd or fld (default lsd, or the config's).
+    /// Line detector: lsd, fld or edgelines (default lsd, or the config's).
     #[arg(long)]
     pub detector: Option<DetectorKind>,
     /// Segment matcher, stereo and frame to frame: lbd or l1 (default lbd, or the config's).
