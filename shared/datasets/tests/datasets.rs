@@ -271,7 +271,7 @@ fn malformed_calibration_and_ground_truth_are_refused() {
             "no-intrinsics",
             "mav0/cam1/sensor.yaml",
             sensor_yaml(0.1).replace("intrinsics", "intrinsix"),
-            "missing key `intrinsics`",
+            "sensor.yaml:15: missing field `intrinsics`",
         ),
         (
             "bad-number",
