@@ -3,9 +3,13 @@
 //! The supervisor writes one [`FrameRecord`] per frame of the sequence to `frames.csv`
 //! (what became of it, per-stage and end-to-end latency, matcher mode) and one
 //! [`EventRecord`] per notable event to `events.csv` (fallbacks, restarts, hot swaps).
-//! [`Report`] turns them into percentiles, deadline misses, drops and counts.
+//! [`Report`] turns them into percentiles, deadline misses, drops and counts. With ground
+//! truth, [`trajectory_metrics`] scores the run's `poses.tum` with the metrics (and names)
+//! `linetrack-vo` writes, for [`Summary::metrics`].
 
 use hdrhistogram::Histogram;
+use linetrack_trajectory::metrics;
+use linetrack_trajectory::tum::{self, StampedPose};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
@@ -32,6 +36,9 @@ pub enum RecordError {
         /// What is wrong.
         message: String,
     },
+    /// `poses.tum` cannot be read back.
+    #[error(transparent)]
+    Trajectory(#[from] linetrack_trajectory::TrajectoryError),
 }
 
 /// The stages with a latency of their own, in pipeline order.
@@ -695,6 +702,24 @@ pub struct Summary {
     /// What the records add up to.
     #[serde(flatten)]
     pub report: Report,
+    /// The trajectory (`poses.tum`) against the sequence's ground truth, when it has some:
+    /// the names and definitions of `linetrack-vo`'s `metrics.json`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub metrics: Option<metrics::Summary>,
+}
+
+/// The metrics of the run's trajectory (`poses`, a `poses.tum` as [`RecordWriter`] writes it)
+/// against `truth` (the sequence's ground truth, stamped with the same sequence times), each
+/// pose compared with the true pose of its frame ([`metrics::Summary::of_stamped`]).
+/// `None` without ground truth or when no pose has one.
+pub fn trajectory_metrics(
+    poses: &Path,
+    truth: &[StampedPose],
+) -> Result<Option<metrics::Summary>, RecordError> {
+    if truth.is_empty() {
+        return Ok(None);
+    }
+    Ok(metrics::Summary::of_stamped(&tum::read(poses)?, truth))
 }
 
 impl Summary {
@@ -779,11 +804,16 @@ mod tests {
             end: RunEnd::Failed,
             reason: Some("matcher died 2 times (restart limit 1): giving up".into()),
             report: Report::new(&[frame(0, "pose", 40.0)], &[]),
+            metrics: None,
         };
         let path = dir.join("summary.json");
         summary.write(&path).unwrap_or_else(|e| panic!("{e}"));
         let text = std::fs::read_to_string(&path).unwrap_or_default();
         assert!(text.contains("\"end\": \"failed\""), "{text}");
+        assert!(
+            !text.contains("metrics"),
+            "no ground truth, no metrics: {text}"
+        );
         assert_eq!(
             Summary::read(&path).unwrap_or_else(|e| panic!("{e}")),
             summary
@@ -887,6 +917,87 @@ mod tests {
             .map(|e| e.to_string())
             .unwrap_or_default();
         assert!(err.contains("bad.csv:1: expected the header"), "{err}");
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn a_run_with_ground_truth_is_scored_under_the_metric_names_of_linetrack_vo() {
+        use nalgebra::{Isometry3, Translation3};
+        let dir =
+            std::env::temp_dir().join(format!("linetrack-run-metrics-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap_or_else(|e| panic!("{e}"));
+        // Ground truth moves 10 cm a frame along x, every 50 ms from a Unix-epoch stamp;
+        // the run's poses 11 cm a frame, and frame 2 never got a pose.
+        let start_ns = 1_403_715_273_262_142_976u64;
+        let stamp_ns = |k: u64| start_ns + k * 50_000_000;
+        let truth: Vec<StampedPose> = (0..20u64)
+            .map(|k| StampedPose {
+                timestamp_s: stamp_ns(k) as f64 * 1e-9,
+                pose: Isometry3::from_parts(
+                    Translation3::new(0.1 * k as f64, 0.0, 0.0),
+                    nalgebra::UnitQuaternion::identity(),
+                ),
+            })
+            .collect();
+        {
+            let mut writer = RecordWriter::create(&dir).unwrap_or_else(|e| panic!("{e}"));
+            for k in (0..20u64).filter(|&k| k != 2) {
+                writer
+                    .pose(
+                        stamp_ns(k),
+                        [0.11 * k as f64, 0.0, 0.0],
+                        [0.0, 0.0, 0.0, 1.0],
+                    )
+                    .unwrap_or_else(|e| panic!("{e}"));
+            }
+        }
+        let poses = dir.join("poses.tum");
+        let scored = trajectory_metrics(&poses, &truth)
+            .unwrap_or_else(|e| panic!("{e}"))
+            .unwrap_or_else(|| panic!("no pose paired with the ground truth"));
+        assert_eq!(scored.poses, 19);
+        // Final error 0.19 m over a 1.9 m path.
+        assert!(
+            (scored.drift_percent.unwrap_or(f64::NAN) - 10.0).abs() < 1e-3,
+            "{scored:?}"
+        );
+        assert!(
+            trajectory_metrics(&poses, &[])
+                .unwrap_or_else(|e| panic!("{e}"))
+                .is_none()
+        );
+
+        let summary = Summary {
+            end: RunEnd::Completed,
+            reason: None,
+            report: Report::new(&[], &[]),
+            metrics: Some(scored),
+        };
+        let path = dir.join("summary.json");
+        summary.write(&path).unwrap_or_else(|e| panic!("{e}"));
+        let json: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&path).unwrap_or_default())
+                .unwrap_or_else(|e| panic!("{e}"));
+        let mut names: Vec<&str> = json["metrics"]
+            .as_object()
+            .map(|m| m.keys().map(String::as_str).collect())
+            .unwrap_or_default();
+        names.sort_unstable();
+        let mut expected = metrics::METRIC_NAMES.to_vec();
+        expected.sort_unstable();
+        assert_eq!(names, expected, "the names of linetrack-vo's metrics.json");
+        assert_eq!(
+            Summary::read(&path).unwrap_or_else(|e| panic!("{e}")),
+            summary
+        );
+
+        // A damaged poses file is named.
+        std::fs::write(&poses, "1 2 3\n").unwrap_or_else(|e| panic!("{e}"));
+        let err = trajectory_metrics(&poses, &truth)
+            .err()
+            .map(|e| e.to_string())
+            .unwrap_or_default();
+        assert!(err.contains("poses.tum:1"), "{err}");
         let _ = std::fs::remove_dir_all(&dir);
     }
 }

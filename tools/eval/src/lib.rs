@@ -11,6 +11,7 @@ mod tracking;
 use anyhow::Context;
 use clap::Parser;
 use linetrack_datasets::StereoSequence;
+use linetrack_progress::Progress;
 use linetrack_scene_render::{IlluminationConfig, Preset};
 use linetrack_stereo_bench::{Bench, Condition, MatcherEntry};
 use linetrack_vision::DetectorKind;
@@ -30,7 +31,14 @@ use tracking::{COMBINATIONS, TrackingResult, median};
     linetrack-eval --quick         # CI-sized: 8 frames of three presets + 10 EuRoC frames
 
 Generated sequences are made on first use in <sequences>/<preset> and reused. The report is
-<output>/report.md; plots are PNG files beside it."
+<output>/report.md; plots are PNG files beside it.
+
+PROGRESS: a bar with the time left on stderr when it is a terminal, otherwise a line per
+tenth of the work; --quiet for none.
+
+IMAGES: grey or colour (colour converted to grey once, 0.299 R + 0.587 G + 0.114 B), 8- or
+16-bit (16-bit scaled to 8 bits over its full range: v × 255 / 65535); two-channel and
+floating-point images are refused naming the file."
 )]
 pub struct Args {
     /// Small settings: three presets, 8 frames each (the EuRoC excerpt: 10 frames).
@@ -80,6 +88,10 @@ pub struct Args {
     /// many seconds (default: 2 s, or 0.15 s with --quick).
     #[arg(long)]
     pub jump_period_s: Option<f64>,
+    /// No progress on stderr (by default a bar with the time left on a terminal, a line per
+    /// tenth of the work otherwise); warnings (a data set left out) are still printed.
+    #[arg(long)]
+    pub quiet: bool,
 }
 
 /// A sequence to evaluate.
@@ -110,12 +122,14 @@ fn generated(
         .sequences
         .join(format!("{}-{frames}{suffix}", preset.name()));
     if !dir.join("mav0/cam0/data.csv").is_file() {
-        eprintln!(
-            "generating {} seed {seed} ({frames} frames) in {}",
-            preset.name(),
-            dir.display()
-        );
-        linetrack_synth::generate(preset, seed, frames, &dir)?;
+        if !args.quiet {
+            eprintln!(
+                "generating {} seed {seed} ({frames} frames) in {}",
+                preset.name(),
+                dir.display()
+            );
+        }
+        linetrack_synth::generate(preset, seed, frames, &dir, args.quiet)?;
     }
     let sequence =
         StereoSequence::open(&dir).with_context(|| format!("cannot open {}", dir.display()))?;
@@ -279,9 +293,12 @@ fn middlebury_section(
         detection: config.clone(),
         scorer: Default::default(),
     };
-    let rows = linetrack_stereo_bench::evaluate(&pairs, &bench, |done, total, name| {
-        eprintln!("middlebury: [{done}/{total}] {name}");
+    let progress = Progress::new("middlebury pairs", pairs.len() as u64, args.quiet);
+    let rows = linetrack_stereo_bench::evaluate(&pairs, &bench, |done, _, name| {
+        progress.step(name);
+        progress.set(done as u64);
     })?;
+    progress.finish();
     let aggregates = linetrack_stereo_bench::aggregate(&rows);
     let goals = linetrack_stereo_bench::goals(&aggregates, "l1", "lbd");
     linetrack_stereo_bench::write_csv(&args.output.join("stereo-bench.csv"), &rows)?;
@@ -293,6 +310,26 @@ fn middlebury_section(
          `stereo-bench.csv`.\n\n{}\n![stereo-bench.png](stereo-bench.png)\n",
         linetrack_stereo_bench::markdown(&aggregates, &goals, pairs.len())
     ))
+}
+
+/// The work of Tables I and II in frames (one frame through one configuration), for the
+/// progress: every detector × matcher over each sequence, then every odometry
+/// configuration over each sequence, its starred variant and its further seeds.
+fn work_units(args: &Args, entries: &[Entry]) -> u64 {
+    entries
+        .iter()
+        .map(|entry| {
+            let tracking = COMBINATIONS.len();
+            let odometry = if args.no_odometry {
+                0
+            } else {
+                let runs_per_configuration =
+                    1 + entry.more_seeds.len() + usize::from(entry.perturb);
+                odometry::CONFIGURATIONS.len() * runs_per_configuration
+            };
+            ((tracking + odometry) * entry.frames) as u64
+        })
+        .sum()
 }
 
 /// Runs everything and writes the report; returns a summary.
@@ -328,19 +365,22 @@ pub fn run(args: &Args) -> anyhow::Result<String> {
         String::from("| sequence | P+L, LBD | P+L, ℓ1 | L, LBD | L, ℓ1 |\n|---|---|---|---|---|\n");
     let mut plots = Vec::new();
     let mut baselines = String::new();
+    let progress = Progress::new("frames", work_units(args, &entries), args.quiet);
     for entry in &entries {
-        eprintln!("tracking: {} ({} frames)", entry.name, entry.frames);
+        progress.step(format!("tracking {}", entry.name));
         let results: Vec<TrackingResult> = COMBINATIONS
             .iter()
             .map(|c| {
-                tracking::evaluate(
+                let result = tracking::evaluate(
                     &entry.dir,
                     &entry.sequence,
                     &frontend,
                     *c,
                     entry.frames,
                     None,
-                )
+                );
+                progress.inc(entry.frames as u64);
+                result
             })
             .collect::<anyhow::Result<_>>()?;
         for (case, pick) in [("stereo", 0usize), ("frame to frame", 1)] {
@@ -435,7 +475,7 @@ pub fn run(args: &Args) -> anyhow::Result<String> {
         if args.no_odometry {
             continue;
         }
-        eprintln!("odometry: {}", entry.name);
+        progress.step(format!("odometry {}", entry.name));
         let variants: Vec<(String, tracking::Illumination<'_>)> = if entry.perturb {
             vec![
                 (entry.name.clone(), None),
@@ -455,6 +495,7 @@ pub fn run(args: &Args) -> anyhow::Result<String> {
                     entry.frames,
                     illumination,
                 )?;
+                progress.inc(entry.frames as u64);
                 if illumination.is_none()
                     && let Some(m) = &run.metrics
                     && trajectories.is_empty()
@@ -478,6 +519,7 @@ pub fn run(args: &Args) -> anyhow::Result<String> {
                             entry.frames,
                             None,
                         )?);
+                        progress.inc(entry.frames as u64);
                     }
                 }
                 cells.push(odometry::cell(&runs));
@@ -521,6 +563,7 @@ pub fn run(args: &Args) -> anyhow::Result<String> {
         }
     }
 
+    progress.finish();
     let paper = [
         ("39.3", "51.3"),
         ("25.9", "35.8"),

@@ -39,7 +39,11 @@ use std::time::Instant;
     linetrack-match-demo --dataset ../shared/data/euroc/V1_01_easy_micro --detector fld   # real EuRoC images
 
 In the pictures, each correct match has one colour in both images; wrong matches are red,
-unmatched segments grey."
+unmatched segments grey.
+
+IMAGES (--dataset): grey or colour (colour converted to grey once, 0.299 R + 0.587 G +
+0.114 B), 8- or 16-bit (16-bit scaled to 8 bits over its full range: v × 255 / 65535);
+two-channel and floating-point images are refused naming the file."
 )]
 pub struct Args {
     /// Seed of the generated scene.

@@ -37,9 +37,10 @@ OUTPUT: <output>/matches.png (first image left, second right; a match has one co
 both, unmatched segments are grey), <output>/matches.json (everything), <output>/matches.csv
 (one row per match), and one summary line on stdout.
 
-Images may be grey or colour (converted to grey once, by luminance), 8- or 16-bit (scaled to
-8 bits), and must be the same size. They are used as given: rectify stereo pairs first for
-best stereo results."
+IMAGES: grey or colour (colour converted to grey once, 0.299 R + 0.587 G + 0.114 B), 8- or
+16-bit (16-bit scaled to 8 bits over its full range: v × 255 / 65535); two-channel and
+floating-point images are refused naming the file. Both must be the same size. They are
+used as given: rectify stereo pairs first for best stereo results."
 )]
 pub struct Args {
     /// First image (left, or frame k).

@@ -25,7 +25,11 @@ matchable left segments (those some detected right segment would correctly match
 
 OUTPUT: <output>/stereo-bench.md (tables and goals), stereo-bench.csv (one row per pair ×
 condition × detector × matcher), stereo-bench.png (precision against correct matches), and
-with --matches, matches.jsonl (every match with its verdict)."
+with --matches, matches.jsonl (every match with its verdict).
+
+IMAGES: grey or colour (colour converted to grey once, 0.299 R + 0.587 G + 0.114 B), 8- or
+16-bit (16-bit scaled to 8 bits over its full range: v × 255 / 65535); two-channel and
+floating-point images are refused naming the file."
 )]
 struct Args {
     /// Folder of the Middlebury scenes (default: ../shared/data/middlebury beside the workspace).
@@ -54,7 +58,8 @@ struct Args {
     /// Also write every match with its verdict (matches.jsonl).
     #[arg(long)]
     matches: bool,
-    /// No progress on stderr.
+    /// No progress on stderr (by default a bar with the time left on a terminal, a line per
+    /// tenth of the pairs otherwise).
     #[arg(long)]
     quiet: bool,
 }
@@ -126,12 +131,12 @@ fn run() -> anyhow::Result<String> {
         detection: config,
         scorer: Default::default(),
     };
-    let quiet = args.quiet;
-    let rows = linetrack_stereo_bench::evaluate(&pairs, &bench, |done, total, name| {
-        if !quiet {
-            eprintln!("[{done:>2}/{total}] {name}");
-        }
+    let progress = linetrack_progress::Progress::new("pairs", pairs.len() as u64, args.quiet);
+    let rows = linetrack_stereo_bench::evaluate(&pairs, &bench, |done, _, name| {
+        progress.step(name);
+        progress.set(done as u64);
     })?;
+    progress.finish();
     std::fs::create_dir_all(&args.output)
         .with_context(|| format!("cannot create {}", args.output.display()))?;
     let aggregates = aggregate(&rows);

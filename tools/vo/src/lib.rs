@@ -7,14 +7,14 @@
 use anyhow::Context;
 use clap::Parser;
 use linetrack_datasets::StereoSequence;
-use linetrack_datasets::tum::{self, StampedPose};
 use linetrack_odometry::{Features, FrameResult, Odometry, OdometryConfig, metrics};
+use linetrack_progress::Progress;
 use linetrack_scene_render::IlluminationConfig;
+use linetrack_trajectory::tum::{self, StampedPose};
 use linetrack_vision::{DetectorKind, MatcherKind, perturb};
 use nalgebra::Isometry3;
 use serde::Serialize;
 use std::fmt::Write as _;
-use std::io::IsTerminal;
 use std::path::PathBuf;
 use std::time::Instant;
 
@@ -33,7 +33,15 @@ OUTPUT (<output>/): trajectory.txt (TUM: t tx ty tz qx qy qz qw, left camera, wo
 camera), groundtruth.txt (the same frame, when the dataset has ground truth), frames.csv (one
 row per frame: lost, features, matches, inliers, iterations, conditioning, departure from the
 prediction, milliseconds per step), metrics.json (the run's settings, lost frames and, with
-ground truth: path length, RPE, ATE origin- and SE(3)-aligned, drift, zero-motion ATE)."
+ground truth, under `metrics`: poses, path_m, rpe_m, ate_m, ate_aligned_m, drift_percent,
+zero_motion_ate_m — the names `linetrack run` writes to summary.json).
+
+IMAGES: grey or colour (colour converted to grey once, 0.299 R + 0.587 G + 0.114 B), 8- or
+16-bit (16-bit scaled to 8 bits over its full range: v × 255 / 65535); two-channel and
+floating-point images are refused naming the file.
+
+PROGRESS: a bar with the time left on stderr when it is a terminal, otherwise a line per
+tenth of the frames; --quiet for none."
 )]
 pub struct Args {
     /// Dataset folder: EuRoC (holding mav0/), a KITTI odometry sequence, or linetrack-synth output.
@@ -68,6 +76,10 @@ pub struct Args {
     /// Output folder.
     #[arg(long, default_value = "out/vo")]
     pub output: PathBuf,
+    /// No progress on stderr (by default a bar with the time left on a terminal, a line per
+    /// tenth of the frames otherwise). Frames that cannot be loaded are still named.
+    #[arg(long)]
+    pub quiet: bool,
 }
 
 /// One row of frames.csv.
@@ -186,14 +198,15 @@ pub fn run(args: &Args) -> anyhow::Result<String> {
     let (mut estimate, mut truth, mut stamps) = (Vec::new(), Vec::new(), Vec::new());
     let (mut lost, mut skipped, mut busy_ms) = (0usize, Vec::new(), 0.0);
     let started = Instant::now();
-    let live = std::io::stderr().is_terminal();
+    let progress = Progress::new(&format!("{name}: frames"), total as u64, args.quiet);
     let mut stream = sequence.into_stream(0, 4);
     for item in stream.by_ref().take(total) {
         let frame = match item {
             Ok(frame) => frame,
             Err(error) => {
-                eprintln!("{error}");
+                progress.warn(&error.to_string());
                 skipped.push(error.index);
+                progress.inc(1);
                 continue;
             }
         };
@@ -216,16 +229,10 @@ pub fn run(args: &Args) -> anyhow::Result<String> {
         estimate.push(result.pose);
         stamps.push(frame.timestamp_ns as f64 * 1e-9);
         truth.push(frame.pose);
-        let done = estimate.len() + skipped.len();
-        if live {
-            eprint!("\rframe {done}/{total}, {lost} lost");
-        } else if done % 50 == 0 {
-            eprintln!("frame {done}/{total}, {lost} lost");
-        }
+        progress.step(format!("{lost} lost"));
+        progress.inc(1);
     }
-    if live {
-        eprintln!();
-    }
+    progress.finish();
     csv.flush()
         .with_context(|| format!("cannot write {}", frames_path.display()))?;
     let stamped = |poses: &[Isometry3<f64>]| -> Vec<StampedPose> {
