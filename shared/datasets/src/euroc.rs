@@ -480,9 +480,13 @@ mod tests {
 
     #[test]
     fn sensor_yaml_reads_the_nested_t_bs_data_and_ignores_other_keys() {
-        // Another `data:` key, nested elsewhere and later: T_BS's is the one read.
-        let (camera, rate) =
-            parse_text(&sensor("other:\n  data: [9, 9]\n")).unwrap_or_else(|e| panic!("{e}"));
+        // Other `data:` keys, nested elsewhere before and after T_BS: T_BS's is the one read.
+        let text = sensor("after:\n  data: [8, 8]\n").replacen(
+            "T_BS:",
+            "before:\n  rows: 1\n  data: [9, 9]\nT_BS:",
+            1,
+        );
+        let (camera, rate) = parse_text(&text).unwrap_or_else(|e| panic!("{e}"));
         assert_eq!(rate, Some(30.0));
         assert_eq!((camera.width, camera.height), (640, 480));
         assert_eq!(camera.intrinsics, [400.0, 401.0, 320.0, 240.0]);

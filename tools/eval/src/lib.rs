@@ -365,7 +365,7 @@ pub fn run(args: &Args) -> anyhow::Result<String> {
         String::from("| sequence | P+L, LBD | P+L, ℓ1 | L, LBD | L, ℓ1 |\n|---|---|---|---|---|\n");
     let mut plots = Vec::new();
     let mut baselines = String::new();
-    let progress = Progress::new("frames", work_units(args, &entries), args.quiet);
+    let progress = Progress::new("eval frames", work_units(args, &entries), args.quiet);
     for entry in &entries {
         progress.step(format!("tracking {}", entry.name));
         let results: Vec<TrackingResult> = COMBINATIONS

@@ -198,7 +198,7 @@ pub fn run(args: &Args) -> anyhow::Result<String> {
     let (mut estimate, mut truth, mut stamps) = (Vec::new(), Vec::new(), Vec::new());
     let (mut lost, mut skipped, mut busy_ms) = (0usize, Vec::new(), 0.0);
     let started = Instant::now();
-    let progress = Progress::new(&format!("{name}: frames"), total as u64, args.quiet);
+    let progress = Progress::new(&format!("{name} frames"), total as u64, args.quiet);
     let mut stream = sequence.into_stream(0, 4);
     for item in stream.by_ref().take(total) {
         let frame = match item {
