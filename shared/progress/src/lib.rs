@@ -15,6 +15,19 @@ use std::io::{IsTerminal, Write};
 use std::sync::Mutex;
 use std::time::Instant;
 
+/// The paragraph on progress for a tool's `--help`, the work counted in `$units` (a macro so
+/// that `concat!` can join it to the tool's own text).
+#[macro_export]
+macro_rules! progress_help {
+    ($units:literal) => {
+        concat!(
+            "PROGRESS: a bar with the time left on stderr when it is a terminal, otherwise a line per\ntenth of the ",
+            $units,
+            "; --quiet for none."
+        )
+    };
+}
+
 /// The bar's layout on a terminal.
 const BAR_TEMPLATE: &str =
     "{prefix} [{bar:30}] {pos}/{len} ({percent} %) {elapsed} elapsed, ETA {eta} {wide_msg}";

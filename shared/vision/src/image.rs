@@ -5,6 +5,17 @@ use opencv::core::{self, Mat, MatTraitConst, MatTraitConstManual, Vector};
 use opencv::{imgcodecs, imgproc};
 use std::path::Path;
 
+/// The paragraph on which images are read that ends the `--help` of every tool reading
+/// images (a macro so that `concat!` can join it to a tool's own text).
+#[macro_export]
+macro_rules! images_help {
+    () => {
+        "IMAGES: grey or colour (colour converted to grey once, 0.299 R + 0.587 G + 0.114 B), 8- or
+16-bit (scaled to 8 bits over the full range: v × 255 / 65535, or v × 255 / maxval for a
+PGM/PPM); two-channel and floating-point images are refused naming the file."
+    };
+}
+
 /// Largest image file read, bytes (512 MiB).
 pub const MAX_FILE_BYTES: u64 = 512 << 20;
 

@@ -26,19 +26,12 @@ use tracking::{COMBINATIONS, TrackingResult, median};
     name = "linetrack-eval",
     version,
     about = "Reproduce the paper's tables (tracking, odometry, cost) in one Markdown report with plots.",
-    after_help = "EXAMPLES:
+    after_help = concat!("EXAMPLES:
     linetrack-eval                 # full: 200 frames of every preset + the EuRoC excerpt (tens of minutes)
     linetrack-eval --quick         # CI-sized: 8 frames of three presets + 10 EuRoC frames
 
 Generated sequences are made on first use in <sequences>/<preset> and reused. The report is
-<output>/report.md; plots are PNG files beside it.
-
-PROGRESS: a bar with the time left on stderr when it is a terminal, otherwise a line per
-tenth of the work; --quiet for none.
-
-IMAGES: grey or colour (colour converted to grey once, 0.299 R + 0.587 G + 0.114 B), 8- or
-16-bit (16-bit scaled to 8 bits over its full range: v × 255 / 65535); two-channel and
-floating-point images are refused naming the file."
+<output>/report.md; plots are PNG files beside it.\n\n", linetrack_progress::progress_help!("work"), "\n\n", linetrack_vision::images_help!())
 )]
 pub struct Args {
     /// Small settings: three presets, 8 frames each (the EuRoC excerpt: 10 frames).

@@ -26,7 +26,7 @@ const DEFAULT_FRAMES: usize = 100;
     name = "linetrack",
     version,
     about = "Geometric line tracking for stereo visual odometry: the multi-process pipeline.",
-    after_help = "EXAMPLES:
+    after_help = concat!("EXAMPLES:
     linetrack run                                   # generated sequence, live status, report
     linetrack run --dataset ../shared/data/euroc/V1_01_easy_micro --pacing fastest
     linetrack run --single-process                  # same stages on threads (baseline)
@@ -36,9 +36,7 @@ const DEFAULT_FRAMES: usize = 100;
 A run folder holds frames.csv, events.csv, poses.tum (TUM), summary.json (how the run ended,
 the report, and with ground truth `metrics`: the names of linetrack-vo's metrics.json).
 
-IMAGES: grey or colour (colour converted to grey once, 0.299 R + 0.587 G + 0.114 B), 8- or
-16-bit (16-bit scaled to 8 bits over its full range: v × 255 / 65535); two-channel and
-floating-point images are refused naming the file."
+", linetrack_vision::images_help!())
 )]
 pub struct Cli {
     /// What to do.

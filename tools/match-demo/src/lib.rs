@@ -31,7 +31,7 @@ use std::time::Instant;
     name = "linetrack-match-demo",
     version,
     about = "Match line segments by geometry alone: on a generated segment scene scored against ground truth, then LBD against l1 on stereo images.",
-    after_help = "EXAMPLES:
+    after_help = concat!("EXAMPLES:
     linetrack-match-demo                          # default scene, both cases, PNGs in out/match-demo
     linetrack-match-demo --seed 7 --case stereo   # another scene, stereo only
     linetrack-match-demo --config configs/l1-matcher-paper.toml   # the method as published
@@ -41,9 +41,7 @@ use std::time::Instant;
 In the pictures, each correct match has one colour in both images; wrong matches are red,
 unmatched segments grey.
 
-IMAGES (--dataset): grey or colour (colour converted to grey once, 0.299 R + 0.587 G +
-0.114 B), 8- or 16-bit (16-bit scaled to 8 bits over its full range: v × 255 / 65535);
-two-channel and floating-point images are refused naming the file."
+", linetrack_vision::images_help!())
 )]
 pub struct Args {
     /// Seed of the generated scene.

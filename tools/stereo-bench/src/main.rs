@@ -13,7 +13,7 @@ use std::process::ExitCode;
     name = "linetrack-stereo-bench",
     version,
     about = "Score stereo segment matching (every detector × matcher) on real Middlebury pairs with ground-truth disparity, as photographed and under simulated illumination changes of the right image.",
-    after_help = "EXAMPLES:
+    after_help = concat!("EXAMPLES:
     linetrack-stereo-bench                               # every pair, detector, matcher and condition
     linetrack-stereo-bench --condition as-is --detector lsd
     linetrack-stereo-bench --compare l1-paper=l1:configs/l1-matcher-paper.toml
@@ -27,9 +27,7 @@ OUTPUT: <output>/stereo-bench.md (tables and goals), stereo-bench.csv (one row p
 condition × detector × matcher), stereo-bench.png (precision against correct matches), and
 with --matches, matches.jsonl (every match with its verdict).
 
-IMAGES: grey or colour (colour converted to grey once, 0.299 R + 0.587 G + 0.114 B), 8- or
-16-bit (16-bit scaled to 8 bits over its full range: v × 255 / 65535); two-channel and
-floating-point images are refused naming the file."
+", linetrack_progress::progress_help!("pairs"), "\n\n", linetrack_vision::images_help!())
 )]
 struct Args {
     /// Folder of the Middlebury scenes (default: ../shared/data/middlebury beside the workspace).

@@ -19,7 +19,7 @@ use std::time::Instant;
     name = "linetrack-synth",
     version,
     about = "Generate a synthetic indoor stereo sequence with exact ground truth, in the EuRoC layout.",
-    after_help = "PRESETS:
+    after_help = concat!("PRESETS:
     normal                steady light, hand-held motion
     handheld-gain-jumps   gain α ~ U(0.5, 2.5) and bias β ~ U(0, 20) drawn every 2 s (the paper's protocol)
     drone-gain-jumps      the same with faster, wider drone-like motion
@@ -36,7 +36,9 @@ OUTPUT (<output>/): mav0/cam0|cam1 (images, sensor.yaml, data.csv), mav0/depth0|
 (16-bit PNG depth, metres × 5000, 0 = none), mav0/state_groundtruth_estimate0/data.csv (left
 camera pose = body), mav0/scene/segments3d.csv (x0,y0,z0,x1,y1,z1 per 3-D segment, world),
 mav0/scene/illumination.csv (per frame: gain and bias of each camera, light levels),
-mav0/scene/config.json, and contact-sheet.png (six frames at half size)."
+mav0/scene/config.json, and contact-sheet.png (six frames at half size).
+
+", linetrack_progress::progress_help!("frames"))
 )]
 pub struct Args {
     /// Scene, motion and illumination preset.

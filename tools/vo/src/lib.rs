@@ -24,7 +24,7 @@ use std::time::Instant;
     name = "linetrack-vo",
     version,
     about = "Stereo visual odometry with points and line segments over a dataset folder.",
-    after_help = "EXAMPLES:
+    after_help = concat!("EXAMPLES:
     linetrack-vo ../shared/data/euroc/V1_01_easy_micro
     linetrack-vo out/sequences/default --matcher l1 --lines-only
     linetrack-vo out/sequences/normal-1 --gain-jumps 2   # the paper's illumination protocol, every 2 s
@@ -34,14 +34,7 @@ camera), groundtruth.txt (the same frame, when the dataset has ground truth), fr
 row per frame: lost, features, matches, inliers, iterations, conditioning, departure from the
 prediction, milliseconds per step), metrics.json (the run's settings, lost frames and, with
 ground truth, under `metrics`: poses, path_m, rpe_m, ate_m, ate_aligned_m, drift_percent,
-zero_motion_ate_m — the names `linetrack run` writes to summary.json).
-
-IMAGES: grey or colour (colour converted to grey once, 0.299 R + 0.587 G + 0.114 B), 8- or
-16-bit (16-bit scaled to 8 bits over its full range: v × 255 / 65535); two-channel and
-floating-point images are refused naming the file.
-
-PROGRESS: a bar with the time left on stderr when it is a terminal, otherwise a line per
-tenth of the frames; --quiet for none."
+zero_motion_ate_m — the names `linetrack run` writes to summary.json).\n\n", linetrack_progress::progress_help!("frames"), "\n\n", linetrack_vision::images_help!())
 )]
 pub struct Args {
     /// Dataset folder: EuRoC (holding mav0/), a KITTI odometry sequence, or linetrack-synth output.
