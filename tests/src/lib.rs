@@ -60,7 +60,7 @@ pub fn base_sequence(frames: usize) -> PathBuf {
     }
     let partial = tmp_root().join(format!("sequence-{frames}.partial-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&partial);
-    linetrack_synth::generate(Preset::Normal, 1, frames, &partial)
+    linetrack_synth::generate(Preset::Normal, 1, frames, &partial, true)
         .unwrap_or_else(|e| panic!("generating the sequence: {e:#}"));
     // Another test may have finished first: either copy is the same sequence.
     if std::fs::rename(&partial, &dir).is_err() {

@@ -13,7 +13,9 @@
 //!
 //! Records go to the run folder as the run goes ([`monitor::Monitor`]); however the run
 //! ends (completed, interrupted, a stage that would not start or died past the restart
-//! limit) `summary.json` says how, and `status.json` stops saying "running".
+//! limit) `summary.json` says how, and `status.json` stops saying "running". When the
+//! sequence has ground truth, `summary.json` also scores the run's `poses.tum` against it
+//! (`metrics`: the names and definitions of `linetrack-vo`'s `metrics.json`).
 
 pub mod fallback;
 pub mod monitor;
@@ -220,7 +222,17 @@ pub fn run(
     let config_path = prepare_run_dir(config, &run_dir)?;
     let run_id = new_run_id();
     let scope = Scope::new(&run_id);
-    let mut monitor = Monitor::new(config, 0, &run_dir)?;
+    let ground_truth = sequence
+        .frames
+        .iter()
+        .filter_map(|f| {
+            Some(linetrack_trajectory::tum::StampedPose {
+                timestamp_s: f.timestamp_ns as f64 * 1e-9,
+                pose: f.pose?,
+            })
+        })
+        .collect();
+    let mut monitor = Monitor::new(config, 0, &run_dir)?.with_ground_truth(ground_truth);
     let result = match options.mode {
         Mode::Processes | Mode::Threads => Supervisor::new(
             config,

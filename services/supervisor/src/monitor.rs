@@ -14,6 +14,7 @@ use linetrack_run_record::{
     Summary, Tally,
 };
 use linetrack_stage_runtime::detector_from_code;
+use linetrack_trajectory::tum::StampedPose;
 use std::collections::{BTreeMap, BTreeSet, VecDeque};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -93,6 +94,8 @@ pub struct Monitor {
     first_frame: u64,
     source_last: Option<u64>,
     published: Option<u64>,
+    /// The sequence's ground truth (empty without): the summary scores `poses.tum` with it.
+    ground_truth: Vec<StampedPose>,
 }
 
 fn stage_ms(header: &FrameHeader, i: usize) -> f64 {
@@ -132,7 +135,15 @@ impl Monitor {
             first_frame,
             source_last: None,
             published: None,
+            ground_truth: Vec::new(),
         })
+    }
+
+    /// Scores the run's trajectory against `truth` (stamped with the sequence times the
+    /// poses carry) in `summary.json`.
+    pub fn with_ground_truth(mut self, truth: Vec<StampedPose>) -> Self {
+        self.ground_truth = truth;
+        self
     }
 
     /// Keeps the first write error (later records are still attempted).
@@ -436,10 +447,19 @@ impl Monitor {
             RunEnd::Running | RunEnd::Completed => {}
         }
         let report = self.tally.report();
+        let metrics = linetrack_run_record::trajectory_metrics(
+            &self.run_dir.join("poses.tum"),
+            &self.ground_truth,
+        );
+        let metrics = metrics.unwrap_or_else(|e| {
+            self.note(Err(e));
+            None
+        });
         Summary {
             end,
             reason,
             report: report.clone(),
+            metrics,
         }
         .write(&self.run_dir.join("summary.json"))?;
         match self.write_error {

@@ -9,60 +9,186 @@
 //!     timestamp [ns], p_RS_R x y z [m], q_RS w x y z, (velocity, biases…)
 //! ```
 //!
-//! sensor.yaml is OpenCV-flavoured YAML (`%YAML:1.0`); only the keys listed above are read,
-//! with a small reader of `key: value` and `key: [a, b, …]` (lists may span lines).
+//! sensor.yaml is read with a YAML parser (serde-saphyr) into the keys listed above; other
+//! keys (`sensor_type`, `comment`, `camera_model`, …) are ignored. OpenCV writes a
+//! `%YAML:1.0` first line, which is not YAML (the directive is `%YAML 1.0`): that one line
+//! is read as a comment. A key given twice is an error, as is a value of the wrong type or
+//! count; every error names the file, the line where the parser knows it, and the key.
 
 use crate::{
     DatasetError, FrameEntry, PinholeCamera, Rectifier, StereoSequence, parse_error, read_text,
 };
 use linetrack_geometry::StereoRig;
 use nalgebra::{Isometry3, Matrix3, Quaternion, Rotation3, Translation3, UnitQuaternion, Vector3};
+use serde::Deserialize;
 use std::path::{Path, PathBuf};
+
+/// The keys of sensor.yaml that are read.
+#[derive(Debug, Deserialize)]
+struct SensorYaml {
+    /// The camera's pose in the body frame.
+    #[serde(rename = "T_BS")]
+    t_bs: MatrixYaml,
+    /// Frames per second (20 when absent).
+    rate_hz: Option<f64>,
+    /// Width and height, pixels.
+    resolution: Vec<f64>,
+    /// fu, fv, cu, cv.
+    intrinsics: Vec<f64>,
+    /// `radial-tangential` (or `radtan`), or `none`; `none` when absent.
+    distortion_model: Option<String>,
+    /// k1, k2, p1, p2 (for radial-tangential).
+    distortion_coefficients: Option<Vec<f64>>,
+}
+
+/// An OpenCV-style matrix: `rows`, `cols` and row-major `data`.
+#[derive(Debug, Deserialize)]
+struct MatrixYaml {
+    rows: usize,
+    cols: usize,
+    data: Vec<f64>,
+}
+
+/// OpenCV's `%YAML:1.0` first line (not a YAML directive) read as a comment, keeping the
+/// line numbers.
+fn without_opencv_directive(text: &str) -> std::borrow::Cow<'_, str> {
+    if text.starts_with("%YAML:") {
+        std::borrow::Cow::Owned(format!("#{text}"))
+    } else {
+        std::borrow::Cow::Borrowed(text)
+    }
+}
+
+/// Parses sensor.yaml; errors name the file and, where the parser knows it, the line and
+/// the top-level key it belongs to.
+fn parse_sensor_yaml(text: &str, path: &Path) -> Result<SensorYaml, DatasetError> {
+    serde_saphyr::from_str(&without_opencv_directive(text)).map_err(|e| {
+        let line = e
+            .location()
+            .and_then(|l| usize::try_from(l.line()).ok())
+            .unwrap_or(0);
+        // The parser's advice to its caller is no help to whoever wrote the file.
+        let message = e
+            .without_snippet()
+            .to_string()
+            .replace(", set DuplicateKeyPolicy in Options if acceptable", "");
+        match top_level_key_at(text, line) {
+            // A missing field is found at the end of the mapping: no key to blame there.
+            Some(key) if !message.contains(key) && !message.contains("missing field") => {
+                parse_error(path, line, format!("`{key}`: {message}"))
+            }
+            _ => parse_error(path, line, message),
+        }
+    })
+}
+
+/// The top-level key whose value spans 1-based `line` (the last unindented `key:` at or
+/// before it), to name the key in a parser error that gives only a position.
+fn top_level_key_at(text: &str, line: usize) -> Option<&str> {
+    text.lines()
+        .take(line)
+        .filter(|l| !l.starts_with([' ', '\t', '#', '%', '-']))
+        .filter_map(|l| l.split_once(':').map(|(key, _)| key.trim()))
+        .filter(|key| !key.is_empty())
+        .last()
+}
+
+/// `values` when there are `count` of them, all finite; otherwise an error naming `key`.
+fn exactly<const N: usize>(
+    values: &[f64],
+    path: &Path,
+    key: &str,
+) -> Result<[f64; N], DatasetError> {
+    let array: [f64; N] = values.try_into().map_err(|_| {
+        parse_error(
+            path,
+            0,
+            format!("`{key}` has {} values, expected {N}", values.len()),
+        )
+    })?;
+    if array.iter().any(|v| !v.is_finite()) {
+        return Err(parse_error(
+            path,
+            0,
+            format!("`{key}` has a non-finite value"),
+        ));
+    }
+    Ok(array)
+}
 
 /// Reads one camera's sensor.yaml.
 pub fn read_euroc_camera(path: &Path) -> Result<PinholeCamera, DatasetError> {
-    let text = read_text(path)?;
-    let resolution = yaml_numbers(&text, path, "resolution", Some(2))?;
-    let intrinsics = yaml_numbers(&text, path, "intrinsics", Some(4))?;
-    let model = yaml_scalar(&text, "distortion_model").unwrap_or_else(|| "none".to_string());
-    let distortion = match model.as_str() {
-        "radial-tangential" | "radtan" => {
-            yaml_numbers(&text, path, "distortion_coefficients", Some(4))?
-        }
-        "none" => vec![0.0; 4],
+    read_sensor(path).map(|(camera, _)| camera)
+}
+
+/// One camera's sensor.yaml: the camera and its frame rate, if given.
+fn read_sensor(path: &Path) -> Result<(PinholeCamera, Option<f64>), DatasetError> {
+    let yaml = parse_sensor_yaml(&read_text(path)?, path)?;
+    let [w, h] = exactly::<2>(&yaml.resolution, path, "resolution")?;
+    let intrinsics = exactly::<4>(&yaml.intrinsics, path, "intrinsics")?;
+    let distortion = match yaml.distortion_model.as_deref().unwrap_or("none") {
+        "radial-tangential" | "radtan" => exactly::<4>(
+            yaml.distortion_coefficients
+                .as_deref()
+                .ok_or_else(|| parse_error(path, 0, "missing field `distortion_coefficients`"))?,
+            path,
+            "distortion_coefficients",
+        )?,
+        "none" => [0.0; 4],
         other => {
-            let line = line_of(&text, "distortion_model");
             return Err(parse_error(
                 path,
-                line,
+                0,
                 format!("distortion_model {other:?} is not supported (radial-tangential or none)"),
             ));
         }
     };
-    let t_bs = yaml_numbers(&text, path, "data", Some(16))?;
-    let [w, h] = [resolution[0], resolution[1]];
+    let t_bs = &yaml.t_bs;
+    if (t_bs.rows, t_bs.cols) != (4, 4) {
+        return Err(parse_error(
+            path,
+            0,
+            format!("T_BS is {}×{}, expected 4×4", t_bs.rows, t_bs.cols),
+        ));
+    }
+    let t_bs = exactly::<16>(&t_bs.data, path, "T_BS.data")?;
     if !(w >= 1.0 && h >= 1.0 && w.fract() == 0.0 && h.fract() == 0.0 && w <= 1e5 && h <= 1e5) {
         return Err(parse_error(
             path,
-            line_of(&text, "resolution"),
+            0,
             format!("resolution {w}×{h} is not a positive whole size"),
         ));
     }
     let body_from_camera = isometry_from_rows(&t_bs).ok_or_else(|| {
         parse_error(
             path,
-            line_of(&text, "T_BS"),
+            0,
             "T_BS is not a rigid transform (rotation not orthonormal, or last row not 0 0 0 1)",
         )
     })?;
-    Ok(PinholeCamera {
-        width: w as u32,
-        height: h as u32,
-        intrinsics: [intrinsics[0], intrinsics[1], intrinsics[2], intrinsics[3]],
-        distortion: [distortion[0], distortion[1], distortion[2], distortion[3]],
-        body_from_camera,
-    })
+    if let Some(rate) = yaml.rate_hz
+        && !(rate > 0.0 && rate.is_finite())
+    {
+        return Err(parse_error(
+            path,
+            0,
+            format!("rate_hz {rate} is not a positive number"),
+        ));
+    }
+    Ok((
+        PinholeCamera {
+            width: w as u32,
+            height: h as u32,
+            intrinsics,
+            distortion,
+            body_from_camera,
+        },
+        yaml.rate_hz,
+    ))
 }
+
+/// Frames per second when sensor.yaml gives none.
+const DEFAULT_RATE_HZ: f64 = 20.0;
 
 /// A 4×4 row-major rigid transform, checked.
 pub(crate) fn isometry_from_rows(m: &[f64]) -> Option<Isometry3<f64>> {
@@ -80,86 +206,6 @@ pub(crate) fn isometry_from_rows(m: &[f64]) -> Option<Isometry3<f64>> {
         Translation3::new(m[3], m[7], m[11]),
         rotation,
     ))
-}
-
-/// 1-based line of the first occurrence of `key:`, 0 when absent.
-fn line_of(text: &str, key: &str) -> usize {
-    text.lines()
-        .position(|l| {
-            strip_comment(l)
-                .trim_start()
-                .starts_with(&format!("{key}:"))
-        })
-        .map_or(0, |k| k + 1)
-}
-
-fn strip_comment(line: &str) -> &str {
-    line.split('#').next().unwrap_or("")
-}
-
-/// The scalar after `key:` on its line.
-fn yaml_scalar(text: &str, key: &str) -> Option<String> {
-    text.lines().map(strip_comment).find_map(|l| {
-        let rest = l
-            .trim_start()
-            .strip_prefix(key)?
-            .trim_start()
-            .strip_prefix(':')?;
-        Some(rest.trim().trim_matches('"').to_string())
-    })
-}
-
-/// The numbers of the list after `key:` (`[a, b, …]`, possibly over several lines),
-/// checking the count when given.
-fn yaml_numbers(
-    text: &str,
-    path: &Path,
-    key: &str,
-    count: Option<usize>,
-) -> Result<Vec<f64>, DatasetError> {
-    let start = line_of(text, key);
-    if start == 0 {
-        return Err(parse_error(path, 0, format!("missing key `{key}`")));
-    }
-    let mut collected = String::new();
-    for line in text.lines().skip(start - 1).map(strip_comment) {
-        collected.push_str(line);
-        collected.push(' ');
-        if line.contains(']') {
-            break;
-        }
-    }
-    let open = collected.find('[');
-    let close = collected.find(']');
-    let (Some(open), Some(close)) = (open, close) else {
-        return Err(parse_error(path, start, format!("`{key}` is not a [list]")));
-    };
-    let numbers = collected[open + 1..close]
-        .split(',')
-        .map(str::trim)
-        .filter(|v| !v.is_empty())
-        .map(|v| {
-            v.parse::<f64>()
-                .map_err(|_| parse_error(path, start, format!("`{key}`: not a number: {v:?}")))
-        })
-        .collect::<Result<Vec<_>, _>>()?;
-    if let Some(n) = count
-        && numbers.len() != n
-    {
-        return Err(parse_error(
-            path,
-            start,
-            format!("`{key}` has {} values, expected {n}", numbers.len()),
-        ));
-    }
-    if numbers.iter().any(|v| !v.is_finite()) {
-        return Err(parse_error(
-            path,
-            start,
-            format!("`{key}` has a non-finite value"),
-        ));
-    }
-    Ok(numbers)
 }
 
 /// `(timestamp ns, file name, line)` rows of a camera's data.csv, timestamps increasing.
@@ -303,11 +349,9 @@ impl StereoSequence {
                 ),
             });
         }
-        let left = read_euroc_camera(&mav0.join("cam0/sensor.yaml"))?;
+        let (left, rate_hz) = read_sensor(&mav0.join("cam0/sensor.yaml"))?;
+        let rate_hz = rate_hz.unwrap_or(DEFAULT_RATE_HZ);
         let right = read_euroc_camera(&mav0.join("cam1/sensor.yaml"))?;
-        let rate_hz = yaml_scalar(&read_text(&mav0.join("cam0/sensor.yaml"))?, "rate_hz")
-            .and_then(|v| v.parse().ok())
-            .unwrap_or(20.0);
         let rectifier = Rectifier::new(&left, &right)?;
         // An ideal rig (generated data) needs no remapping: keep its exact geometry.
         let (rig, rectifier) = match ideal_rig(&left, &right) {
@@ -413,30 +457,94 @@ mod tests {
         );
     }
 
+    /// sensor.yaml as OpenCV writes it, with `extra` lines added at the end.
+    fn sensor(extra: &str) -> String {
+        format!(
+            "%YAML:1.0\nsensor_type: camera\ncomment: a camera # with a comment\nT_BS:\n  cols: 4\n  rows: 4\n  data: [1, 0, 0, 0.1, # first row\n         0, 1, 0, 0,\n         0, 0, 1, 0,\n         0, 0, 0, 1]\nrate_hz: 30\nresolution: [640, 480]\nintrinsics: [400.0, 401.0, 320.0, 240.0] #fu, fv, cu, cv\ndistortion_model: radial-tangential\ndistortion_coefficients: [-0.1, 0.01, 0, 0]\n{extra}"
+        )
+    }
+
+    fn parse_text(text: &str) -> Result<(PinholeCamera, Option<f64>), String> {
+        let dir =
+            std::env::temp_dir().join(format!("linetrack-sensor-yaml-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).map_err(|e| e.to_string())?;
+        let path = dir.join(format!(
+            "sensor-{:x}.yaml",
+            text.len() * 31 + text.bytes().map(usize::from).sum::<usize>()
+        ));
+        std::fs::write(&path, text).map_err(|e| e.to_string())?;
+        let result = read_sensor(&path).map_err(|e| e.to_string());
+        let _ = std::fs::remove_file(&path);
+        result
+    }
+
     #[test]
-    fn yaml_lists_may_span_lines_and_carry_comments() {
-        let text = "T_BS:\n  cols: 4\n  data: [1, 2, # c\n   3]\nintrinsics: [4.5, 5] #fu\n";
-        let p = Path::new("x.yaml");
-        assert_eq!(
-            yaml_numbers(text, p, "data", Some(3)).unwrap(),
-            vec![1.0, 2.0, 3.0]
+    fn sensor_yaml_reads_the_nested_t_bs_data_and_ignores_other_keys() {
+        // Other `data:` keys, nested elsewhere before and after T_BS: T_BS's is the one read.
+        let text = sensor("after:\n  data: [8, 8]\n").replacen(
+            "T_BS:",
+            "before:\n  rows: 1\n  data: [9, 9]\nT_BS:",
+            1,
         );
-        assert_eq!(
-            yaml_numbers(text, p, "intrinsics", None).unwrap(),
-            vec![4.5, 5.0]
-        );
-        let err = yaml_numbers(text, p, "intrinsics", Some(4))
-            .unwrap_err()
-            .to_string();
-        assert!(
-            err.contains("x.yaml:5") && err.contains("2 values"),
-            "{err}"
-        );
-        assert!(
-            yaml_numbers(text, p, "missing", None)
-                .unwrap_err()
-                .to_string()
-                .contains("missing key `missing`")
-        );
+        let (camera, rate) = parse_text(&text).unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(rate, Some(30.0));
+        assert_eq!((camera.width, camera.height), (640, 480));
+        assert_eq!(camera.intrinsics, [400.0, 401.0, 320.0, 240.0]);
+        assert_eq!(camera.distortion, [-0.1, 0.01, 0.0, 0.0]);
+        assert!((camera.body_from_camera.translation.vector.x - 0.1).abs() < 1e-12);
+        // A standard YAML directive and document start are read too.
+        let standard = sensor("").replacen("%YAML:1.0", "%YAML 1.1\n---", 1);
+        assert!(parse_text(&standard).is_ok());
+    }
+
+    #[test]
+    fn bad_sensor_yaml_names_the_file_and_the_key() {
+        for (text, wants) in [
+            (
+                sensor("intrinsics: [1, 2, 3, 4]\n"),
+                &["sensor-", ":16", "duplicate mapping key: intrinsics"][..],
+            ),
+            (
+                sensor("").replace("data: [1, 0, 0, 0.1,", "data: [1, 0, 0, 0.1, 7,"),
+                &["sensor-", "T_BS.data", "17 values, expected 16"][..],
+            ),
+            (
+                sensor("").replace("400.0, 401.0", "400.0, fifty"),
+                &["sensor-", ":13", "`intrinsics`"][..],
+            ),
+            (
+                sensor("").replace("intrinsics:", "intrinsix:"),
+                &["sensor-", "missing field `intrinsics`"][..],
+            ),
+            (
+                sensor("").replacen(
+                    "intrinsics: [",
+                    "intrinsics: [1, 2, 3, 4]\nintrinsics: [",
+                    1,
+                ),
+                &["sensor-", ":14", "duplicate mapping key: intrinsics"][..],
+            ),
+            (
+                sensor("").replace("resolution: [640, 480]", "resolution: [640]"),
+                &["sensor-", "`resolution` has 1 values, expected 2"][..],
+            ),
+            (
+                sensor("").replace("  rows: 4", "  rows: 3"),
+                &["sensor-", "T_BS is 3×4"][..],
+            ),
+            (
+                sensor("").replace("data: [1, 0, 0, 0.1", "data: [2, 0, 0, 0.1"),
+                &["sensor-", "T_BS is not a rigid transform"][..],
+            ),
+            (
+                "resolution: [1, 2\nintrinsics: ]\n".to_string(),
+                &["sensor-"][..],
+            ),
+        ] {
+            let err = parse_text(&text)
+                .err()
+                .unwrap_or_else(|| panic!("accepted:\n{text}"));
+            assert!(wants.iter().all(|w| err.contains(w)), "{wants:?}: {err}");
+        }
     }
 }

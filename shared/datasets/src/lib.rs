@@ -9,7 +9,6 @@
 //!   `<date>/`; ground truth converted from the OXTS GPS/IMU fixes in `oxts/`).
 //! - [`list_middlebury`]: Middlebury stereo pairs with ground-truth disparity (single
 //!   rectified pairs, no sequence), for scoring stereo matching on real images.
-//! - [`tum`]: TUM-format trajectories (`t tx ty tz qx qy qz qw`), read and written.
 //!
 //! Unrectified rigs are rectified once from the calibration ([`Rectifier`]); every frame is
 //! then remapped with precomputed maps. Ground truth is given as the pose of the
@@ -28,7 +27,6 @@ mod kitti;
 mod kitti_raw;
 mod middlebury;
 mod sequence;
-pub mod tum;
 mod writer;
 
 pub use calib::{PinholeCamera, Rectifier};

@@ -14,11 +14,12 @@
 //! the last good motion, and its own triangulations start the landmarks afresh.
 //!
 //! The back end alone, [`MotionTracker`], takes segments matched elsewhere (the pipeline's
-//! matcher stage) and does the rest. [`metrics`] scores trajectories.
+//! matcher stage) and does the rest. [`metrics`] (from `linetrack-trajectory`) scores
+//! trajectories.
 #![warn(missing_docs)]
 
 mod landmarks;
-pub mod metrics;
+pub use linetrack_trajectory::metrics;
 
 use landmarks::{Geometry, Landmark, sighted};
 use linetrack_geometry::{

@@ -3,9 +3,13 @@
 //! The supervisor writes one [`FrameRecord`] per frame of the sequence to `frames.csv`
 //! (what became of it, per-stage and end-to-end latency, matcher mode) and one
 //! [`EventRecord`] per notable event to `events.csv` (fallbacks, restarts, hot swaps).
-//! [`Report`] turns them into percentiles, deadline misses, drops and counts.
+//! [`Report`] turns them into percentiles, deadline misses, drops and counts. With ground
+//! truth, [`trajectory_metrics`] scores the run's `poses.tum` with the metrics (and names)
+//! `linetrack-vo` writes, for [`Summary::metrics`].
 
 use hdrhistogram::Histogram;
+use linetrack_trajectory::metrics;
+use linetrack_trajectory::tum::{self, StampedPose};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
@@ -32,6 +36,9 @@ pub enum RecordError {
         /// What is wrong.
         message: String,
     },
+    /// `poses.tum` cannot be read back.
+    #[error(transparent)]
+    Trajectory(#[from] linetrack_trajectory::TrajectoryError),
 }
 
 /// The stages with a latency of their own, in pipeline order.
@@ -106,52 +113,134 @@ pub struct EventRecord {
 const FRAME_HEADER: &str = "frame_id,outcome,dropped_by,frame_source_ms,line_detector_ms,matcher_ms,pose_estimator_ms,end_to_end_ms,matcher,detector,stereo_matches,tracked_matches,deadline_miss";
 const EVENT_HEADER: &str = "time_s,kind,stage,frame_id,detail";
 
-fn clean(text: &str) -> String {
-    text.replace([',', '\n', '\r'], ";")
+/// Milliseconds and seconds are written to the microsecond / millisecond: 3 decimals.
+fn three_decimals(v: f64) -> f64 {
+    (v * 1e3).round() / 1e3
 }
 
-fn ms(v: f64) -> String {
-    if v.is_finite() {
-        format!("{v:.3}")
-    } else {
-        String::new()
+/// A latency as written: 3 decimals, empty when the stage did not handle the frame.
+fn ms(v: f64) -> Option<f64> {
+    v.is_finite().then(|| three_decimals(v))
+}
+
+/// One row of `frames.csv`, in [`FRAME_HEADER`] order: a [`FrameRecord`] with its stage
+/// latencies in columns of their own.
+#[derive(Debug, Serialize, Deserialize)]
+struct FrameRow {
+    frame_id: u64,
+    outcome: String,
+    dropped_by: String,
+    frame_source_ms: Option<f64>,
+    line_detector_ms: Option<f64>,
+    matcher_ms: Option<f64>,
+    pose_estimator_ms: Option<f64>,
+    end_to_end_ms: Option<f64>,
+    matcher: String,
+    detector: String,
+    stereo_matches: u32,
+    tracked_matches: u32,
+    /// 0 or 1.
+    deadline_miss: u8,
+}
+
+impl From<&FrameRecord> for FrameRow {
+    fn from(f: &FrameRecord) -> Self {
+        Self {
+            frame_id: f.frame_id,
+            outcome: f.outcome.clone(),
+            dropped_by: f.dropped_by.clone(),
+            frame_source_ms: ms(f.stage_ms[0]),
+            line_detector_ms: ms(f.stage_ms[1]),
+            matcher_ms: ms(f.stage_ms[2]),
+            pose_estimator_ms: ms(f.stage_ms[3]),
+            end_to_end_ms: ms(f.end_to_end_ms),
+            matcher: f.matcher.clone(),
+            detector: f.detector.clone(),
+            stereo_matches: f.stereo_matches,
+            tracked_matches: f.tracked_matches,
+            deadline_miss: u8::from(f.deadline_miss),
+        }
     }
 }
 
-fn frame_row(f: &FrameRecord) -> String {
-    format!(
-        "{},{},{},{},{},{},{},{},{},{},{},{},{}",
-        f.frame_id,
-        clean(&f.outcome),
-        clean(&f.dropped_by),
-        ms(f.stage_ms[0]),
-        ms(f.stage_ms[1]),
-        ms(f.stage_ms[2]),
-        ms(f.stage_ms[3]),
-        ms(f.end_to_end_ms),
-        clean(&f.matcher),
-        clean(&f.detector),
-        f.stereo_matches,
-        f.tracked_matches,
-        u8::from(f.deadline_miss)
-    )
+impl FrameRow {
+    /// The record, or what is wrong with the row (the column and why).
+    fn into_record(self) -> Result<FrameRecord, String> {
+        let latency = |v: Option<f64>, column: &str| match v {
+            None => Ok(f64::NAN),
+            Some(v) if v.is_finite() => Ok(v),
+            Some(v) => Err(format!("{column}: {v} is not a finite number")),
+        };
+        Ok(FrameRecord {
+            frame_id: self.frame_id,
+            outcome: self.outcome,
+            dropped_by: self.dropped_by,
+            stage_ms: [
+                latency(self.frame_source_ms, "frame_source_ms")?,
+                latency(self.line_detector_ms, "line_detector_ms")?,
+                latency(self.matcher_ms, "matcher_ms")?,
+                latency(self.pose_estimator_ms, "pose_estimator_ms")?,
+            ],
+            end_to_end_ms: latency(self.end_to_end_ms, "end_to_end_ms")?,
+            matcher: self.matcher,
+            detector: self.detector,
+            stereo_matches: self.stereo_matches,
+            tracked_matches: self.tracked_matches,
+            deadline_miss: match self.deadline_miss {
+                0 => false,
+                1 => true,
+                v => return Err(format!("deadline_miss: {v} is neither 0 nor 1")),
+            },
+        })
+    }
 }
 
-fn event_row(e: &EventRecord) -> String {
-    let frame = e.frame_id.map(|f| f.to_string()).unwrap_or_default();
-    format!(
-        "{:.3},{},{},{frame},{}",
-        e.time_s,
-        clean(&e.kind),
-        clean(&e.stage),
-        clean(&e.detail)
-    )
+/// A CSV record file written a row at a time, each row handed to the kernel as soon as it
+/// is added (the writer is flushed after every row).
+struct CsvAppender {
+    path: PathBuf,
+    csv: csv::Writer<std::fs::File>,
+}
+
+impl CsvAppender {
+    /// Creates (or empties) `path` and writes `header` (comma-separated column names).
+    fn create(path: PathBuf, header: &str) -> Result<Self, RecordError> {
+        let file = std::fs::File::create(&path).map_err(|source| RecordError::Io {
+            path: path.clone(),
+            source,
+        })?;
+        let mut appender = Self {
+            csv: csv::WriterBuilder::new()
+                .has_headers(false)
+                .from_writer(file),
+            path,
+        };
+        let written = appender.csv.write_record(header.split(','));
+        appender.flushed(written)?;
+        Ok(appender)
+    }
+
+    /// Appends `row`; once this returns, the row survives the process being killed.
+    fn row(&mut self, row: &impl Serialize) -> Result<(), RecordError> {
+        let written = self.csv.serialize(row);
+        self.flushed(written)
+    }
+
+    fn flushed(&mut self, written: csv::Result<()>) -> Result<(), RecordError> {
+        let io = |source| RecordError::Io {
+            path: self.path.clone(),
+            source,
+        };
+        written.map_err(|e| io(e.into()))?;
+        self.csv.flush().map_err(io)
+    }
 }
 
 const POSES_HEADER: &str =
     "# timestamp tx ty tz qx qy qz qw (left camera in the first frame's world)";
 
-/// One line of a record file, written through to the kernel as soon as it is added.
+/// One line of a text record file (`poses.tum`), written through to the kernel as soon as
+/// it is added.
 struct Appender {
     path: PathBuf,
     file: std::fs::File,
@@ -190,8 +279,8 @@ impl Appender {
 /// goes to the kernel when it is added, so the records of a run whose supervisor is killed
 /// are complete up to that moment.
 pub struct RecordWriter {
-    frames: Appender,
-    events: Appender,
+    frames: CsvAppender,
+    events: CsvAppender,
     poses: Appender,
 }
 
@@ -199,20 +288,23 @@ impl RecordWriter {
     /// Creates the three files in `run_dir` (emptying earlier ones) with their headers.
     pub fn create(run_dir: &Path) -> Result<Self, RecordError> {
         Ok(Self {
-            frames: Appender::create(run_dir.join("frames.csv"), FRAME_HEADER)?,
-            events: Appender::create(run_dir.join("events.csv"), EVENT_HEADER)?,
+            frames: CsvAppender::create(run_dir.join("frames.csv"), FRAME_HEADER)?,
+            events: CsvAppender::create(run_dir.join("events.csv"), EVENT_HEADER)?,
             poses: Appender::create(run_dir.join("poses.tum"), POSES_HEADER)?,
         })
     }
 
     /// Appends a frame's row to `frames.csv`.
     pub fn frame(&mut self, frame: &FrameRecord) -> Result<(), RecordError> {
-        self.frames.line(&frame_row(frame))
+        self.frames.row(&FrameRow::from(frame))
     }
 
     /// Appends an event's row to `events.csv`.
     pub fn event(&mut self, event: &EventRecord) -> Result<(), RecordError> {
-        self.events.line(&event_row(event))
+        self.events.row(&EventRecord {
+            time_s: three_decimals(event.time_s),
+            ..event.clone()
+        })
     }
 
     /// Appends a pose (TUM: seconds, position, quaternion x y z w) to `poses.tum`.
@@ -231,86 +323,74 @@ impl RecordWriter {
     }
 }
 
-fn read_rows(
+/// The rows of the CSV record file `path` whose header must be `header`, in file order;
+/// errors name the file, the line and the column.
+fn read_rows<T: serde::de::DeserializeOwned>(
     path: &Path,
     header: &str,
-    columns: usize,
-) -> Result<Vec<(usize, Vec<String>)>, RecordError> {
-    let text = std::fs::read_to_string(path).map_err(|source| RecordError::Io {
+) -> Result<Vec<(usize, T)>, RecordError> {
+    let file = std::fs::File::open(path).map_err(|source| RecordError::Io {
         path: path.to_path_buf(),
         source,
     })?;
-    let mut lines = text.lines().enumerate();
-    match lines.next() {
-        Some((_, first)) if first.trim() == header => {}
-        _ => {
-            return Err(RecordError::Parse {
-                path: path.to_path_buf(),
-                line: 1,
-                message: format!("expected the header {header:?}"),
-            });
-        }
-    }
+    let parse = |line: u64, message: String| RecordError::Parse {
+        path: path.to_path_buf(),
+        line: usize::try_from(line).unwrap_or(usize::MAX),
+        message,
+    };
+    let io = |e: csv::Error| RecordError::Io {
+        path: path.to_path_buf(),
+        source: e.into(),
+    };
+    let mut reader = csv::ReaderBuilder::new().from_reader(file);
+    let columns = match reader.headers() {
+        Ok(found) if found.iter().eq(header.split(',')) => found.clone(),
+        Err(e) if matches!(e.kind(), csv::ErrorKind::Io(_)) => return Err(io(e)),
+        _ => return Err(parse(1, format!("expected the header {header:?}"))),
+    };
     let mut rows = Vec::new();
-    for (i, line) in lines {
-        if line.trim().is_empty() {
-            continue;
+    let mut record = csv::StringRecord::new();
+    loop {
+        match reader.read_record(&mut record) {
+            Ok(true) => {}
+            Ok(false) => break,
+            Err(e) if matches!(e.kind(), csv::ErrorKind::Io(_)) => return Err(io(e)),
+            Err(e) => {
+                let line = e.position().map_or(0, csv::Position::line);
+                return Err(parse(line, e.to_string()));
+            }
         }
-        let fields: Vec<String> = line.split(',').map(|s| s.trim().to_string()).collect();
-        if fields.len() != columns {
-            return Err(RecordError::Parse {
-                path: path.to_path_buf(),
-                line: i + 1,
-                message: format!("{} fields, expected {columns}", fields.len()),
-            });
-        }
-        rows.push((i + 1, fields));
+        let line = record.position().map_or(0, csv::Position::line);
+        let row = record.deserialize::<T>(Some(&columns)).map_err(|e| {
+            let message = match e.kind() {
+                csv::ErrorKind::Deserialize { err, .. } => {
+                    let column = err
+                        .field()
+                        .and_then(|k| columns.get(usize::try_from(k).ok()?))
+                        .unwrap_or("?");
+                    format!("{column}: {}", err.kind())
+                }
+                _ => e.to_string(),
+            };
+            parse(line, message)
+        })?;
+        rows.push((usize::try_from(line).unwrap_or(usize::MAX), row));
     }
     Ok(rows)
 }
 
 /// Reads `frames.csv`, in frame order.
 pub fn read_frames(path: &Path) -> Result<Vec<FrameRecord>, RecordError> {
-    let rows = read_rows(path, FRAME_HEADER, 13)?;
-    let mut frames = Vec::with_capacity(rows.len());
-    for (line, f) in rows {
-        let bad = |what: &str, v: &str| RecordError::Parse {
-            path: path.to_path_buf(),
-            line,
-            message: format!("{what}: {v:?} is not a number"),
-        };
-        let float = |v: &str, what: &str| -> Result<f64, RecordError> {
-            if v.is_empty() {
-                return Ok(f64::NAN);
-            }
-            v.parse::<f64>()
-                .ok()
-                .filter(|x| x.is_finite())
-                .ok_or_else(|| bad(what, v))
-        };
-        let int = |v: &str, what: &str| v.parse::<u32>().map_err(|_| bad(what, v));
-        frames.push(FrameRecord {
-            frame_id: f[0].parse().map_err(|_| bad("frame_id", &f[0]))?,
-            outcome: f[1].clone(),
-            dropped_by: f[2].clone(),
-            stage_ms: [
-                float(&f[3], STAGES[0])?,
-                float(&f[4], STAGES[1])?,
-                float(&f[5], STAGES[2])?,
-                float(&f[6], STAGES[3])?,
-            ],
-            end_to_end_ms: float(&f[7], "end_to_end_ms")?,
-            matcher: f[8].clone(),
-            detector: f[9].clone(),
-            stereo_matches: int(&f[10], "stereo_matches")?,
-            tracked_matches: int(&f[11], "tracked_matches")?,
-            deadline_miss: match f[12].as_str() {
-                "0" => false,
-                "1" => true,
-                v => return Err(bad("deadline_miss", v)),
-            },
-        });
-    }
+    let mut frames = read_rows::<FrameRow>(path, FRAME_HEADER)?
+        .into_iter()
+        .map(|(line, row)| {
+            row.into_record().map_err(|message| RecordError::Parse {
+                path: path.to_path_buf(),
+                line,
+                message,
+            })
+        })
+        .collect::<Result<Vec<_>, _>>()?;
     // Rows are appended as frames complete: a frame lost to a stage crash comes last.
     frames.sort_by_key(|f| f.frame_id);
     Ok(frames)
@@ -318,32 +398,10 @@ pub fn read_frames(path: &Path) -> Result<Vec<FrameRecord>, RecordError> {
 
 /// Reads `events.csv`.
 pub fn read_events(path: &Path) -> Result<Vec<EventRecord>, RecordError> {
-    let rows = read_rows(path, EVENT_HEADER, 5)?;
-    rows.into_iter()
-        .map(|(line, f)| {
-            let bad = |message: String| RecordError::Parse {
-                path: path.to_path_buf(),
-                line,
-                message,
-            };
-            Ok(EventRecord {
-                time_s: f[0]
-                    .parse()
-                    .map_err(|_| bad(format!("time_s {:?}", f[0])))?,
-                kind: f[1].clone(),
-                stage: f[2].clone(),
-                frame_id: if f[3].is_empty() {
-                    None
-                } else {
-                    Some(
-                        f[3].parse()
-                            .map_err(|_| bad(format!("frame_id {:?}", f[3])))?,
-                    )
-                },
-                detail: f[4].clone(),
-            })
-        })
-        .collect()
+    Ok(read_rows::<EventRecord>(path, EVENT_HEADER)?
+        .into_iter()
+        .map(|(_, event)| event)
+        .collect())
 }
 
 /// Percentiles of a latency, milliseconds.
@@ -644,6 +702,24 @@ pub struct Summary {
     /// What the records add up to.
     #[serde(flatten)]
     pub report: Report,
+    /// The trajectory (`poses.tum`) against the sequence's ground truth, when it has some:
+    /// the names and definitions of `linetrack-vo`'s `metrics.json`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub metrics: Option<metrics::Summary>,
+}
+
+/// The metrics of the run's trajectory (`poses`, a `poses.tum` as [`RecordWriter`] writes it)
+/// against `truth` (the sequence's ground truth, stamped with the same sequence times), each
+/// pose compared with the true pose of its frame ([`metrics::Summary::of_stamped`]).
+/// `None` without ground truth or when no pose has one.
+pub fn trajectory_metrics(
+    poses: &Path,
+    truth: &[StampedPose],
+) -> Result<Option<metrics::Summary>, RecordError> {
+    if truth.is_empty() {
+        return Ok(None);
+    }
+    Ok(metrics::Summary::of_stamped(&tum::read(poses)?, truth))
 }
 
 impl Summary {
@@ -728,11 +804,16 @@ mod tests {
             end: RunEnd::Failed,
             reason: Some("matcher died 2 times (restart limit 1): giving up".into()),
             report: Report::new(&[frame(0, "pose", 40.0)], &[]),
+            metrics: None,
         };
         let path = dir.join("summary.json");
         summary.write(&path).unwrap_or_else(|e| panic!("{e}"));
         let text = std::fs::read_to_string(&path).unwrap_or_default();
         assert!(text.contains("\"end\": \"failed\""), "{text}");
+        assert!(
+            !text.contains("metrics"),
+            "no ground truth, no metrics: {text}"
+        );
         assert_eq!(
             Summary::read(&path).unwrap_or_else(|e| panic!("{e}")),
             summary
@@ -747,29 +828,33 @@ mod tests {
         let mut late = frame(2, "dropped-late", f64::NAN);
         late.dropped_by = "matcher".into();
         late.deadline_miss = true;
+        let mut odd = frame(4, "stage-error", f64::NAN);
+        odd.dropped_by = "line-detector, \"lsd\"\r\nsecond line".into();
         let frames = [
             frame(0, "pose", 40.0),
             frame(1, "lost", 60.0),
             late,
             FrameRecord::missing(3),
+            odd,
         ];
+        // Commas, quotes and line breaks are quoted, not mangled.
         let events = [EventRecord {
             time_s: 1.5,
             kind: "fallback".into(),
             stage: "matcher".into(),
             frame_id: Some(1),
-            detail: "too few matches, 3 < 12".into(),
+            detail: "too few matches, 3 < 12;\n\"lbd\" gave up".into(),
         }];
         {
             // Appended as frames complete: the missing frame 3 comes in before frame 2.
             let mut writer = RecordWriter::create(&dir).unwrap_or_else(|e| panic!("{e}"));
-            for f in [&frames[0], &frames[1], &frames[3], &frames[2]] {
+            for f in [&frames[0], &frames[1], &frames[3], &frames[4], &frames[2]] {
                 writer.frame(f).unwrap_or_else(|e| panic!("{e}"));
             }
             writer.event(&events[0]).unwrap_or_else(|e| panic!("{e}"));
             // Every row is on disk while the writer is still open (no flush at the end).
             let now = read_frames(&dir.join("frames.csv")).unwrap_or_else(|e| panic!("{e}"));
-            assert_eq!(now.len(), 4);
+            assert_eq!(now.len(), 5);
             assert_eq!(
                 read_events(&dir.join("events.csv"))
                     .unwrap_or_else(|e| panic!("{e}"))
@@ -780,17 +865,15 @@ mod tests {
         let back = read_frames(&dir.join("frames.csv")).unwrap_or_else(|e| panic!("{e}"));
         assert_eq!(
             back.iter().map(|f| f.frame_id).collect::<Vec<_>>(),
-            [0, 1, 2, 3],
+            [0, 1, 2, 3, 4],
             "read back in frame order"
         );
+        assert_eq!(back[4].dropped_by, frames[4].dropped_by);
         assert_eq!(back[2].dropped_by, "matcher");
         assert!(back[3].end_to_end_ms.is_nan());
         assert_eq!(back[0].end_to_end_ms, 40.0);
         let events_back = read_events(&dir.join("events.csv")).unwrap_or_else(|e| panic!("{e}"));
-        assert_eq!(
-            events_back[0].detail, "too few matches; 3 < 12",
-            "commas cannot break the columns"
-        );
+        assert_eq!(events_back, events, "every field round-trips");
         let report = Report::new(&back, &events_back);
         assert_eq!(
             (
@@ -801,7 +884,7 @@ mod tests {
                 report.deadline_misses,
                 report.fallbacks
             ),
-            (4, 1, 1, 2, 1, 1)
+            (5, 1, 1, 3, 1, 1)
         );
         assert_eq!(report.end_to_end.map(|p| p.max), Some(60.0));
         assert_eq!(
@@ -810,20 +893,112 @@ mod tests {
             "stage latency over the frames with a pose"
         );
         assert!(report.to_text().contains("dropped missing: 1"));
-        // A damaged file names the line.
-        std::fs::write(
-            dir.join("bad.csv"),
-            format!("{FRAME_HEADER}\n0,pose,,x,,,,,,,0,0,0\n"),
-        )
-        .unwrap_or_else(|e| panic!("{e}"));
+        // A damaged file names the line and the column.
+        for (rows, wants) in [
+            ("0,pose,,x,,,,,,,0,0,0\n", "bad.csv:2: frame_source_ms"),
+            (
+                "0,pose,,,,,,,,,0,0,0\n1,pose,,,,,,inf,,,0,0,0\n",
+                "bad.csv:3: end_to_end_ms",
+            ),
+            ("0,pose,,,,,,,,,0,0,2\n", "bad.csv:2: deadline_miss"),
+            ("0,pose,,,,,,,,,0,0\n", "bad.csv:2"),
+        ] {
+            std::fs::write(dir.join("bad.csv"), format!("{FRAME_HEADER}\n{rows}"))
+                .unwrap_or_else(|e| panic!("{e}"));
+            let err = read_frames(&dir.join("bad.csv"))
+                .err()
+                .map(|e| e.to_string())
+                .unwrap_or_default();
+            assert!(err.contains(wants), "{wants}: {err}");
+        }
+        std::fs::write(dir.join("bad.csv"), "frame,outcome\n").unwrap_or_else(|e| panic!("{e}"));
         let err = read_frames(&dir.join("bad.csv"))
             .err()
             .map(|e| e.to_string())
             .unwrap_or_default();
+        assert!(err.contains("bad.csv:1: expected the header"), "{err}");
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn a_run_with_ground_truth_is_scored_under_the_metric_names_of_linetrack_vo() {
+        use nalgebra::{Isometry3, Translation3};
+        let dir =
+            std::env::temp_dir().join(format!("linetrack-run-metrics-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap_or_else(|e| panic!("{e}"));
+        // Ground truth moves 10 cm a frame along x, every 50 ms from a Unix-epoch stamp;
+        // the run's poses 11 cm a frame, and frame 2 never got a pose.
+        let start_ns = 1_403_715_273_262_142_976u64;
+        let stamp_ns = |k: u64| start_ns + k * 50_000_000;
+        let truth: Vec<StampedPose> = (0..20u64)
+            .map(|k| StampedPose {
+                timestamp_s: stamp_ns(k) as f64 * 1e-9,
+                pose: Isometry3::from_parts(
+                    Translation3::new(0.1 * k as f64, 0.0, 0.0),
+                    nalgebra::UnitQuaternion::identity(),
+                ),
+            })
+            .collect();
+        {
+            let mut writer = RecordWriter::create(&dir).unwrap_or_else(|e| panic!("{e}"));
+            for k in (0..20u64).filter(|&k| k != 2) {
+                writer
+                    .pose(
+                        stamp_ns(k),
+                        [0.11 * k as f64, 0.0, 0.0],
+                        [0.0, 0.0, 0.0, 1.0],
+                    )
+                    .unwrap_or_else(|e| panic!("{e}"));
+            }
+        }
+        let poses = dir.join("poses.tum");
+        let scored = trajectory_metrics(&poses, &truth)
+            .unwrap_or_else(|e| panic!("{e}"))
+            .unwrap_or_else(|| panic!("no pose paired with the ground truth"));
+        assert_eq!(scored.poses, 19);
+        // Final error 0.19 m over a 1.9 m path.
         assert!(
-            err.contains("bad.csv:2") && err.contains("frame-source"),
-            "{err}"
+            (scored.drift_percent.unwrap_or(f64::NAN) - 10.0).abs() < 1e-3,
+            "{scored:?}"
         );
+        assert!(
+            trajectory_metrics(&poses, &[])
+                .unwrap_or_else(|e| panic!("{e}"))
+                .is_none()
+        );
+
+        let summary = Summary {
+            end: RunEnd::Completed,
+            reason: None,
+            report: Report::new(&[], &[]),
+            metrics: Some(scored),
+        };
+        let path = dir.join("summary.json");
+        summary.write(&path).unwrap_or_else(|e| panic!("{e}"));
+        let json: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&path).unwrap_or_default())
+                .unwrap_or_else(|e| panic!("{e}"));
+        let mut names: Vec<&str> = json["metrics"]
+            .as_object()
+            .map(|m| m.keys().map(String::as_str).collect())
+            .unwrap_or_default();
+        names.sort_unstable();
+        let mut expected = metrics::METRIC_NAMES.to_vec();
+        expected.sort_unstable();
+        assert_eq!(names, expected, "the names of linetrack-vo's metrics.json");
+        // Read back (JSON keeps the figures to about the last bit, not exactly).
+        let back = Summary::read(&path).unwrap_or_else(|e| panic!("{e}"));
+        let back_metrics = back.metrics.unwrap_or_else(|| panic!("metrics lost"));
+        assert_eq!(back_metrics.poses, 19);
+        assert!((back_metrics.path_m - scored.path_m).abs() < 1e-12);
+
+        // A damaged poses file is named.
+        std::fs::write(&poses, "1 2 3\n").unwrap_or_else(|e| panic!("{e}"));
+        let err = trajectory_metrics(&poses, &truth)
+            .err()
+            .map(|e| e.to_string())
+            .unwrap_or_default();
+        assert!(err.contains("poses.tum:1"), "{err}");
         let _ = std::fs::remove_dir_all(&dir);
     }
 }

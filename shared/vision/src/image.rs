@@ -5,6 +5,17 @@ use opencv::core::{self, Mat, MatTraitConst, MatTraitConstManual, Vector};
 use opencv::{imgcodecs, imgproc};
 use std::path::Path;
 
+/// The paragraph on which images are read that ends the `--help` of every tool reading
+/// images (a macro so that `concat!` can join it to a tool's own text).
+#[macro_export]
+macro_rules! images_help {
+    () => {
+        "IMAGES: grey or colour (colour converted to grey once, 0.299 R + 0.587 G + 0.114 B), 8- or
+16-bit (scaled to 8 bits over the full range: v × 255 / 65535, or v × 255 / maxval for a
+PGM/PPM); two-channel and floating-point images are refused naming the file."
+    };
+}
+
 /// Largest image file read, bytes (512 MiB).
 pub const MAX_FILE_BYTES: u64 = 512 << 20;
 
@@ -52,10 +63,13 @@ impl GrayImage {
         Self::decode(&bytes, &path.display().to_string())
     }
 
-    /// Decodes an encoded image (PNG, JPEG, …) held in memory. Colour images (BGR or BGRA)
-    /// are converted to grey once, by OpenCV's luminance weights (0.299 R + 0.587 G +
+    /// Decodes an encoded image (PNG, JPEG, PGM, …) held in memory. Colour images (BGR or
+    /// BGRA) are converted to grey once, by OpenCV's luminance weights (0.299 R + 0.587 G +
     /// 0.114 B); 16-bit images are scaled to 8 bits over their full range (value × 255 /
-    /// 65535). Other pixel formats (float, two channels) are refused naming what was found.
+    /// 65535: PNG and TIFF store 16-bit samples at full scale). A PGM or PPM says its own
+    /// full scale (its maxval, e.g. 4095 for 12-bit data), which OpenCV does not apply: it
+    /// is scaled by value × 255 / maxval instead, at 8 bits too. Other pixel formats
+    /// (float, two channels) are refused naming what was found.
     pub fn decode(bytes: &[u8], origin: &str) -> Result<Self, VisionError> {
         if bytes.is_empty() {
             return Err(VisionError::Empty {
@@ -87,7 +101,7 @@ impl GrayImage {
                 origin: origin.to_string(),
             });
         }
-        Self::from_mat(to_gray8(mat)?, origin)
+        Self::from_mat(to_gray8(mat, pnm_maxval(bytes))?, origin)
     }
 
     /// Wraps a Mat after checking it is 8-bit, single-channel and not empty.
@@ -225,18 +239,41 @@ impl GrayImage {
     }
 }
 
-/// `mat` as 8-bit grey: colour converted by luminance, 16 bits scaled to 8; anything else
-/// (float pixels, two channels) is returned unchanged for [`GrayImage::from_mat`] to refuse.
-fn to_gray8(mat: Mat) -> Result<Mat, VisionError> {
-    let eight_bit = match mat.depth() {
-        core::CV_8U => mat,
-        core::CV_16U => {
+/// The maxval of a PGM or PPM file (its samples' full scale), `None` for other formats and
+/// for bitmaps (PBM, which OpenCV already reads as 0 and 255).
+fn pnm_maxval(bytes: &[u8]) -> Option<u32> {
+    use image::codecs::pnm::{PnmDecoder, PnmSubtype};
+    if !bytes.starts_with(b"P") {
+        return None;
+    }
+    let decoder = PnmDecoder::new(std::io::Cursor::new(bytes)).ok()?;
+    let header = decoder.header();
+    match header.subtype() {
+        PnmSubtype::Graymap(_) | PnmSubtype::Pixmap(_) => Some(header.maximal_sample()),
+        PnmSubtype::Bitmap(_) | PnmSubtype::ArbitraryMap => None,
+    }
+}
+
+/// `mat` as 8-bit grey: colour converted by luminance, 16 bits scaled to 8 (over
+/// `full_scale` when the file gives one, else over 65535), 8 bits with a smaller full scale
+/// stretched to 255; anything else (float pixels, two channels) is returned unchanged for
+/// [`GrayImage::from_mat`] to refuse.
+fn to_gray8(mat: Mat, full_scale: Option<u32>) -> Result<Mat, VisionError> {
+    let scale = match (mat.depth(), full_scale) {
+        (core::CV_8U, Some(full)) if (1..255).contains(&full) => Some(255.0 / f64::from(full)),
+        (core::CV_8U, _) => None,
+        (core::CV_16U, Some(full)) if full >= 1 => Some(255.0 / f64::from(full)),
+        (core::CV_16U, _) => Some(255.0 / 65535.0),
+        _ => return Ok(mat),
+    };
+    let eight_bit = match scale {
+        Some(scale) => {
             let mut scaled = Mat::default();
-            mat.convert_to(&mut scaled, core::CV_8U, 255.0 / 65535.0, 0.0)
-                .context("scaling a 16-bit image to 8 bits")?;
+            mat.convert_to(&mut scaled, core::CV_8U, scale, 0.0)
+                .context("scaling the image to 8 bits")?;
             scaled
         }
-        _ => return Ok(mat),
+        None => mat,
     };
     let code = match eight_bit.channels() {
         3 => imgproc::COLOR_BGR2GRAY,

@@ -619,3 +619,37 @@ fn borrowed_pixels_are_read_in_place_and_detect_like_owned_ones() {
         .to_string();
     assert!(err.contains("short buffer"), "{err}");
 }
+
+#[test]
+fn a_pgm_is_scaled_by_its_own_maxval() {
+    // A 12-bit PGM (maxval 4095) and a 10-bit one hold their data at their own full
+    // scale; PGM with a small 8-bit maxval too. Written by hand: the format is that simple.
+    for (maxval, value, grey) in [
+        (4095u32, 4095u32, 255u8),
+        (4095, 2048, 128), // 2048 · 255 / 4095 = 127.55
+        (1023, 1023, 255),
+        (65535, 40000, 156),
+        (100, 50, 128), // 50 · 255 / 100 = 127.5, rounded to even by OpenCV
+        (255, 128, 128),
+    ] {
+        let mut bytes = format!("P5\n4 2\n{maxval}\n").into_bytes();
+        for _ in 0..8 {
+            if maxval > 255 {
+                bytes.extend_from_slice(&u16::try_from(value).unwrap().to_be_bytes());
+            } else {
+                bytes.push(u8::try_from(value).unwrap());
+            }
+        }
+        let path =
+            linetrack_test_data::scratch_path("vision", &format!("maxval-{maxval}-{value}.pgm"));
+        std::fs::write(&path, &bytes).unwrap();
+        let image = GrayImage::load(&path).unwrap();
+        assert_eq!((image.width(), image.height()), (4, 2));
+        assert!(
+            image.pixels().unwrap().iter().all(|&p| p == grey),
+            "maxval {maxval}, value {value}: {:?}",
+            image.pixels()
+        );
+        let _ = std::fs::remove_file(path);
+    }
+}

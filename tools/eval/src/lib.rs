@@ -11,6 +11,7 @@ mod tracking;
 use anyhow::Context;
 use clap::Parser;
 use linetrack_datasets::StereoSequence;
+use linetrack_progress::Progress;
 use linetrack_scene_render::{IlluminationConfig, Preset};
 use linetrack_stereo_bench::{Bench, Condition, MatcherEntry};
 use linetrack_vision::{DetectorKind, MatcherKind};
@@ -25,12 +26,12 @@ use tracking::{COMBINATIONS, TrackingResult, median};
     name = "linetrack-eval",
     version,
     about = "Reproduce the paper's tables (tracking, odometry, cost) in one Markdown report with plots.",
-    after_help = "EXAMPLES:
+    after_help = concat!("EXAMPLES:
     linetrack-eval                 # full: 200 frames of every preset + the EuRoC excerpt (tens of minutes)
     linetrack-eval --quick         # CI-sized: 8 frames of three presets + 10 EuRoC frames
 
 Generated sequences are made on first use in <sequences>/<preset> and reused. The report is
-<output>/report.md; plots are PNG files beside it."
+<output>/report.md; plots are PNG files beside it.\n\n", linetrack_progress::progress_help!("work"), "\n\n", linetrack_vision::images_help!())
 )]
 pub struct Args {
     /// Small settings: three presets, 8 frames each (the EuRoC excerpt: 10 frames).
@@ -80,6 +81,10 @@ pub struct Args {
     /// many seconds (default: 2 s, or 0.15 s with --quick).
     #[arg(long)]
     pub jump_period_s: Option<f64>,
+    /// No progress on stderr (by default a bar with the time left on a terminal, a line per
+    /// tenth of the work otherwise); warnings (a data set left out) are still printed.
+    #[arg(long)]
+    pub quiet: bool,
 }
 
 /// A sequence to evaluate.
@@ -110,12 +115,14 @@ fn generated(
         .sequences
         .join(format!("{}-{frames}{suffix}", preset.name()));
     if !dir.join("mav0/cam0/data.csv").is_file() {
-        eprintln!(
-            "generating {} seed {seed} ({frames} frames) in {}",
-            preset.name(),
-            dir.display()
-        );
-        linetrack_synth::generate(preset, seed, frames, &dir)?;
+        if !args.quiet {
+            eprintln!(
+                "generating {} seed {seed} ({frames} frames) in {}",
+                preset.name(),
+                dir.display()
+            );
+        }
+        linetrack_synth::generate(preset, seed, frames, &dir, args.quiet)?;
     }
     let sequence =
         StereoSequence::open(&dir).with_context(|| format!("cannot open {}", dir.display()))?;
@@ -279,9 +286,12 @@ fn middlebury_section(
         detection: config.clone(),
         scorer: Default::default(),
     };
-    let rows = linetrack_stereo_bench::evaluate(&pairs, &bench, |done, total, name| {
-        eprintln!("middlebury: [{done}/{total}] {name}");
+    let progress = Progress::new("middlebury pairs", pairs.len() as u64, args.quiet);
+    let rows = linetrack_stereo_bench::evaluate(&pairs, &bench, |done, _, name| {
+        progress.step(name);
+        progress.set(done as u64);
     })?;
+    progress.finish();
     let aggregates = linetrack_stereo_bench::aggregate(&rows);
     let goals = linetrack_stereo_bench::goals(&aggregates, "l1", "lbd");
     linetrack_stereo_bench::write_csv(&args.output.join("stereo-bench.csv"), &rows)?;
@@ -293,6 +303,26 @@ fn middlebury_section(
          `stereo-bench.csv`.\n\n{}\n![stereo-bench.png](stereo-bench.png)\n",
         linetrack_stereo_bench::markdown(&aggregates, &goals, pairs.len())
     ))
+}
+
+/// The work of Tables I and II in frames (one frame through one configuration), for the
+/// progress: every detector × matcher over each sequence, then every odometry
+/// configuration over each sequence, its starred variant and its further seeds.
+fn work_units(args: &Args, entries: &[Entry]) -> u64 {
+    entries
+        .iter()
+        .map(|entry| {
+            let tracking = COMBINATIONS.len();
+            let odometry = if args.no_odometry {
+                0
+            } else {
+                let runs_per_configuration =
+                    1 + entry.more_seeds.len() + usize::from(entry.perturb);
+                odometry::CONFIGURATIONS.len() * runs_per_configuration
+            };
+            ((tracking + odometry) * entry.frames) as u64
+        })
+        .sum()
 }
 
 /// Runs everything and writes the report; returns a summary.
@@ -340,19 +370,22 @@ pub fn run(args: &Args) -> anyhow::Result<String> {
         String::from("| sequence | P+L, LBD | P+L, ℓ1 | L, LBD | L, ℓ1 |\n|---|---|---|---|---|\n");
     let mut plots = Vec::new();
     let mut baselines = String::new();
+    let progress = Progress::new("eval frames", work_units(args, &entries), args.quiet);
     for entry in &entries {
-        eprintln!("tracking: {} ({} frames)", entry.name, entry.frames);
+        progress.step(format!("tracking {}", entry.name));
         let results: Vec<TrackingResult> = COMBINATIONS
             .iter()
             .map(|c| {
-                tracking::evaluate(
+                let result = tracking::evaluate(
                     &entry.dir,
                     &entry.sequence,
                     &frontend,
                     *c,
                     entry.frames,
                     None,
-                )
+                );
+                progress.inc(entry.frames as u64);
+                result
             })
             .collect::<anyhow::Result<_>>()?;
         for (case, pick) in [("stereo", 0usize), ("frame to frame", 1)] {
@@ -447,7 +480,7 @@ pub fn run(args: &Args) -> anyhow::Result<String> {
         if args.no_odometry {
             continue;
         }
-        eprintln!("odometry: {}", entry.name);
+        progress.step(format!("odometry {}", entry.name));
         let variants: Vec<(String, tracking::Illumination<'_>)> = if entry.perturb {
             vec![
                 (entry.name.clone(), None),
@@ -467,6 +500,7 @@ pub fn run(args: &Args) -> anyhow::Result<String> {
                     entry.frames,
                     illumination,
                 )?;
+                progress.inc(entry.frames as u64);
                 if illumination.is_none()
                     && let Some(m) = &run.metrics
                     && trajectories.is_empty()
@@ -490,6 +524,7 @@ pub fn run(args: &Args) -> anyhow::Result<String> {
                             entry.frames,
                             None,
                         )?);
+                        progress.inc(entry.frames as u64);
                     }
                 }
                 cells.push(odometry::cell(&runs));
@@ -533,6 +568,7 @@ pub fn run(args: &Args) -> anyhow::Result<String> {
         }
     }
 
+    progress.finish();
     // The paper's figures, by combination (it has none for our own detector).
     let paper = |d: DetectorKind, m: MatcherKind| match (d, m) {
         (DetectorKind::Lsd, MatcherKind::Lbd) => ("39.3", "51.3"),

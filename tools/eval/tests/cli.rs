@@ -28,6 +28,14 @@ fn run_report(dir: &Path, extra: &[&str]) -> String {
         "{}",
         String::from_utf8_lossy(&result.stderr)
     );
+    // stderr is a pipe: plain progress lines. The work was counted right: the count
+    // reaches its total exactly once, at the end.
+    let stderr = String::from_utf8_lossy(&result.stderr);
+    let finished = stderr
+        .lines()
+        .filter(|l| l.starts_with("eval frames: ") && l.contains(" (100 %)"))
+        .count();
+    assert_eq!(finished, 1, "{stderr}");
     let report = std::fs::read_to_string(output.join("report.md")).unwrap();
     for line in report.lines().filter(|l| l.starts_with("![")) {
         let name = line.split('(').nth(1).unwrap().trim_end_matches(')');

@@ -26,12 +26,17 @@ const DEFAULT_FRAMES: usize = 100;
     name = "linetrack",
     version,
     about = "Geometric line tracking for stereo visual odometry: the multi-process pipeline.",
-    after_help = "EXAMPLES:
+    after_help = concat!("EXAMPLES:
     linetrack run                                   # generated sequence, live status, report
     linetrack run --dataset ../shared/data/euroc/V1_01_easy_micro --pacing fastest
     linetrack run --single-process                  # same stages on threads (baseline)
     linetrack ctl swap-detector fld                 # while a run is going, from another shell
-    linetrack report out/runs/latest                # latency report + histogram PNG"
+    linetrack report out/runs/latest                # latency report + histogram PNG
+
+A run folder holds frames.csv, events.csv, poses.tum (TUM), summary.json (how the run ended,
+the report, and with ground truth `metrics`: the names of linetrack-vo's metrics.json).
+
+", linetrack_vision::images_help!())
 )]
 pub struct Cli {
     /// What to do.
@@ -77,7 +82,7 @@ pub struct RunArgs {
     /// shared memory.
     #[arg(long)]
     pub single_process: bool,
-    /// No live status line.
+    /// No live status line, and no progress while the default sequence is generated.
     #[arg(long)]
     pub quiet: bool,
 }
@@ -164,11 +169,13 @@ pub fn run(args: &RunArgs) -> anyhow::Result<PathBuf> {
         && !sequence.join("mav0/cam0/data.csv").is_file()
         && sequence.ends_with("out/sequences/pipeline")
     {
-        eprintln!(
-            "generating the default sequence ({DEFAULT_FRAMES} frames, preset normal) in {} (first run only)",
-            sequence.display()
-        );
-        linetrack_synth::generate(Preset::Normal, 1, DEFAULT_FRAMES, sequence)?;
+        if !args.quiet {
+            eprintln!(
+                "generating the default sequence ({DEFAULT_FRAMES} frames, preset normal) in {} (first run only)",
+                sequence.display()
+            );
+        }
+        linetrack_synth::generate(Preset::Normal, 1, DEFAULT_FRAMES, sequence, args.quiet)?;
     }
     let mode = if args.single_process {
         Mode::Threads

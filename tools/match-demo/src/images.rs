@@ -25,7 +25,7 @@ fn dataset_or_default(dataset: Option<&Path>, text: &mut String) -> anyhow::Resu
             "generating the default sequence ({DEFAULT_FRAMES} frames, preset normal) in {} (first run only)",
             dir.display()
         );
-        let summary = linetrack_synth::generate(Preset::Normal, 1, DEFAULT_FRAMES, &dir)?;
+        let summary = linetrack_synth::generate(Preset::Normal, 1, DEFAULT_FRAMES, &dir, false)?;
         writeln!(text, "{summary}")?;
     }
     Ok(dir)

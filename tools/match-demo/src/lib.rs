@@ -31,7 +31,7 @@ use std::time::Instant;
     name = "linetrack-match-demo",
     version,
     about = "Match line segments by geometry alone: on a generated segment scene scored against ground truth, then LBD against l1 on stereo images.",
-    after_help = "EXAMPLES:
+    after_help = concat!("EXAMPLES:
     linetrack-match-demo                          # default scene, both cases, PNGs in out/match-demo
     linetrack-match-demo --seed 7 --case stereo   # another scene, stereo only
     linetrack-match-demo --config configs/l1-matcher-paper.toml   # the method as published
@@ -39,7 +39,9 @@ use std::time::Instant;
     linetrack-match-demo --dataset ../shared/data/euroc/V1_01_easy_micro --detector fld   # real EuRoC images
 
 In the pictures, each correct match has one colour in both images; wrong matches are red,
-unmatched segments grey."
+unmatched segments grey.
+
+", linetrack_vision::images_help!())
 )]
 pub struct Args {
     /// Seed of the generated scene.

@@ -152,7 +152,14 @@ fn image_matches(stdout: &str, case: &str, pair: &str) -> usize {
 fn image_part_runs_lbd_and_l1_on_a_generated_sequence() {
     let dir = linetrack_test_data::scratch_path("match-demo", "images");
     let sequence = dir.join("sequence");
-    linetrack_synth::generate(linetrack_scene_render::Preset::Normal, 2, 3, &sequence).unwrap();
+    linetrack_synth::generate(
+        linetrack_scene_render::Preset::Normal,
+        2,
+        3,
+        &sequence,
+        true,
+    )
+    .unwrap();
     let out = dir.join("out");
     let result = demo(&[
         "--dataset",

@@ -23,7 +23,7 @@ use std::time::Instant;
     name = "linetrack-match-pair",
     version,
     about = "Detect and match line segments between two images; draw the matches and report timings.",
-    after_help = "EXAMPLES:
+    after_help = concat!("EXAMPLES:
     # A EuRoC stereo pair with LSD + LBD (the defaults):
     linetrack-match-pair cam0/data/1403715273262142976.png cam1/data/1403715273262142976.png
 
@@ -37,9 +37,7 @@ OUTPUT: <output>/matches.png (first image left, second right; a match has one co
 both, unmatched segments are grey), <output>/matches.json (everything), <output>/matches.csv
 (one row per match), and one summary line on stdout.
 
-Images may be grey or colour (converted to grey once, by luminance), 8- or 16-bit (scaled to
-8 bits), and must be the same size. They are used as given: rectify stereo pairs first for
-best stereo results."
+", linetrack_vision::images_help!())
 )]
 pub struct Args {
     /// First image (left, or frame k).

@@ -234,7 +234,13 @@ fn bench(args: &Args) -> anyhow::Result<()> {
             args.sequence.display(),
             args.frames.max(100)
         );
-        linetrack_synth::generate(Preset::Normal, 1, args.frames.max(100), &args.sequence)?;
+        linetrack_synth::generate(
+            Preset::Normal,
+            1,
+            args.frames.max(100),
+            &args.sequence,
+            false,
+        )?;
     }
     let mut e2e: [Vec<f64>; 2] = [Vec::new(), Vec::new()];
     let mut stage: [Vec<Vec<f64>>; 2] = [vec![Vec::new(); 4], vec![Vec::new(); 4]];

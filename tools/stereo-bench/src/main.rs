@@ -13,7 +13,7 @@ use std::process::ExitCode;
     name = "linetrack-stereo-bench",
     version,
     about = "Score stereo segment matching (every detector × matcher) on real Middlebury pairs with ground-truth disparity, as photographed and under simulated illumination changes of the right image.",
-    after_help = "EXAMPLES:
+    after_help = concat!("EXAMPLES:
     linetrack-stereo-bench                               # every pair, detector, matcher and condition
     linetrack-stereo-bench --condition as-is --detector lsd
     linetrack-stereo-bench --compare l1-paper=l1:configs/l1-matcher-paper.toml
@@ -28,7 +28,9 @@ matchable left segments (those some detected right segment would correctly match
 
 OUTPUT: <output>/stereo-bench.md (tables and goals), stereo-bench.csv (one row per pair ×
 condition × detector × matcher), stereo-bench.png (precision against correct matches), and
-with --matches, matches.jsonl (every match with its verdict)."
+with --matches, matches.jsonl (every match with its verdict).
+
+", linetrack_progress::progress_help!("pairs"), "\n\n", linetrack_vision::images_help!())
 )]
 struct Args {
     /// Folder of the Middlebury scenes (default: ../shared/data/middlebury beside the workspace).
@@ -57,7 +59,8 @@ struct Args {
     /// Also write every match with its verdict (matches.jsonl).
     #[arg(long)]
     matches: bool,
-    /// No progress on stderr.
+    /// No progress on stderr (by default a bar with the time left on a terminal, a line per
+    /// tenth of the pairs otherwise).
     #[arg(long)]
     quiet: bool,
 }
@@ -129,12 +132,12 @@ fn run() -> anyhow::Result<String> {
         detection: config,
         scorer: Default::default(),
     };
-    let quiet = args.quiet;
-    let rows = linetrack_stereo_bench::evaluate(&pairs, &bench, |done, total, name| {
-        if !quiet {
-            eprintln!("[{done:>2}/{total}] {name}");
-        }
+    let progress = linetrack_progress::Progress::new("pairs", pairs.len() as u64, args.quiet);
+    let rows = linetrack_stereo_bench::evaluate(&pairs, &bench, |done, _, name| {
+        progress.step(name);
+        progress.set(done as u64);
     })?;
+    progress.finish();
     std::fs::create_dir_all(&args.output)
         .with_context(|| format!("cannot create {}", args.output.display()))?;
     let aggregates = aggregate(&rows);

@@ -7,9 +7,9 @@ use anyhow::Context;
 use clap::Parser;
 use linetrack_datasets::EurocWriter;
 use linetrack_datasets::depth::DepthMap;
+use linetrack_progress::Progress;
 use linetrack_scene_render::{Preset, RenderedFrame, SequenceRenderer};
 use std::fmt::Write as _;
-use std::io::{IsTerminal, Write as _};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -19,7 +19,7 @@ use std::time::Instant;
     name = "linetrack-synth",
     version,
     about = "Generate a synthetic indoor stereo sequence with exact ground truth, in the EuRoC layout.",
-    after_help = "PRESETS:
+    after_help = concat!("PRESETS:
     normal                steady light, hand-held motion
     handheld-gain-jumps   gain α ~ U(0.5, 2.5) and bias β ~ U(0, 20) drawn every 2 s (the paper's protocol)
     drone-gain-jumps      the same with faster, wider drone-like motion
@@ -36,7 +36,9 @@ OUTPUT (<output>/): mav0/cam0|cam1 (images, sensor.yaml, data.csv), mav0/depth0|
 (16-bit PNG depth, metres × 5000, 0 = none), mav0/state_groundtruth_estimate0/data.csv (left
 camera pose = body), mav0/scene/segments3d.csv (x0,y0,z0,x1,y1,z1 per 3-D segment, world),
 mav0/scene/illumination.csv (per frame: gain and bias of each camera, light levels),
-mav0/scene/config.json, and contact-sheet.png (six frames at half size)."
+mav0/scene/config.json, and contact-sheet.png (six frames at half size).
+
+", linetrack_progress::progress_help!("frames"))
 )]
 pub struct Args {
     /// Scene, motion and illumination preset.
@@ -51,6 +53,10 @@ pub struct Args {
     /// Output folder (default: out/sequences/<preset>-<seed>).
     #[arg(long)]
     pub output: Option<PathBuf>,
+    /// No progress on stderr (by default a bar with the time left on a terminal, a line per
+    /// tenth of the frames otherwise).
+    #[arg(long)]
+    pub quiet: bool,
 }
 
 /// Writes the sequence; returns the summary to print.
@@ -62,12 +68,19 @@ pub fn run(args: &Args) -> anyhow::Result<String> {
             args.seed
         ))
     });
-    generate(args.preset, args.seed, args.frames, &output)
+    generate(args.preset, args.seed, args.frames, &output, args.quiet)
 }
 
 /// Renders `frames` stereo frames of `preset` with `seed` into `output` (EuRoC layout,
-/// depth, scene files, contact sheet), reporting progress on stderr; returns a summary.
-pub fn generate(preset: Preset, seed: u64, frames: usize, output: &Path) -> anyhow::Result<String> {
+/// depth, scene files, contact sheet), reporting progress on stderr unless `quiet`
+/// (see `linetrack-progress`); returns a summary.
+pub fn generate(
+    preset: Preset,
+    seed: u64,
+    frames: usize,
+    output: &Path,
+    quiet: bool,
+) -> anyhow::Result<String> {
     if frames == 0 {
         anyhow::bail!("--frames must be at least 1");
     }
@@ -76,6 +89,7 @@ pub fn generate(preset: Preset, seed: u64, frames: usize, output: &Path) -> anyh
         seed,
         frames,
         output: Some(output.to_path_buf()),
+        quiet,
     };
     let output = output.to_path_buf();
     let config = args.preset.config(args.seed, args.frames);
@@ -103,7 +117,11 @@ pub fn generate(preset: Preset, seed: u64, frames: usize, output: &Path) -> anyh
     let sheet_frames = sheet_indices(args.frames);
     let mut sheet = Vec::new();
     let started = Instant::now();
-    let mut progress = Progress::new(args.frames);
+    let progress = Progress::new(
+        &format!("rendering {} frames", args.preset.name()),
+        args.frames as u64,
+        args.quiet,
+    );
     for index in 0..args.frames {
         let frame = renderer.render(index);
         let depth = |view: &linetrack_scene_render::View| DepthMap {
@@ -140,8 +158,9 @@ pub fn generate(preset: Preset, seed: u64, frames: usize, output: &Path) -> anyh
         if sheet_frames.contains(&index) {
             sheet.push(half_size(&frame));
         }
-        progress.update(index + 1, started);
+        progress.inc(1);
     }
+    progress.finish();
     writer.finish()?;
     write(&scene_dir.join("illumination.csv"), &illumination)?;
     let sheet_path = output.join("contact-sheet.png");
@@ -205,41 +224,4 @@ fn contact_sheet(images: &[image::GrayImage], w: u32, h: u32) -> image::GrayImag
         image::imageops::overlay(&mut sheet, tile, i64::from(cx), i64::from(cy));
     }
     sheet
-}
-
-/// Progress on stderr: a live line on a terminal, a line per 10 % otherwise.
-struct Progress {
-    total: usize,
-    live: bool,
-    last_tenth: usize,
-}
-
-impl Progress {
-    fn new(total: usize) -> Self {
-        Self {
-            total,
-            live: std::io::stderr().is_terminal(),
-            last_tenth: 0,
-        }
-    }
-
-    fn update(&mut self, done: usize, started: Instant) {
-        let elapsed = started.elapsed().as_secs_f64();
-        let left = elapsed / done as f64 * (self.total - done) as f64;
-        let line = format!(
-            "rendering frame {done}/{} ({:.0} %), {elapsed:.1} s elapsed, ~{left:.0} s left",
-            self.total,
-            100.0 * done as f64 / self.total as f64
-        );
-        let mut stderr = std::io::stderr();
-        if self.live {
-            let _ = write!(stderr, "\r{line}");
-            if done == self.total {
-                let _ = writeln!(stderr);
-            }
-        } else if done * 10 / self.total > self.last_tenth || done == self.total {
-            self.last_tenth = done * 10 / self.total;
-            let _ = writeln!(stderr, "{line}");
-        }
-    }
 }

@@ -38,9 +38,11 @@ fn a_generated_sequence_loads_back_with_its_exact_ground_truth() {
         String::from_utf8_lossy(&result.stdout)
             .contains("wrote 3 stereo frames (left-right-mismatch, seed 4)")
     );
+    // stderr is a pipe here: plain progress lines, the last one at the end.
+    let progress = String::from_utf8_lossy(&result.stderr);
     assert!(
-        String::from_utf8_lossy(&result.stderr).contains("rendering frame 3/3"),
-        "progress is reported"
+        progress.contains("rendering left-right-mismatch frames: 3/3 (100 %)"),
+        "progress is reported: {progress}"
     );
 
     let renderer = SequenceRenderer::new(Preset::LeftRightMismatch.config(4, 3));
@@ -87,21 +89,24 @@ fn a_generated_sequence_loads_back_with_its_exact_ground_truth() {
     let sheet = image::open(out.join("contact-sheet.png")).unwrap();
     assert_eq!(sheet.width(), 3 * 376 + 2 * 4);
 
-    // The same seed again: the same bytes.
+    // The same seed again, quiet: the same bytes, and nothing on stderr.
     let again = linetrack_test_data::scratch_path("synth", "mismatch-again");
-    assert!(
-        synth(&[
-            "--preset",
-            "left-right-mismatch",
-            "--seed",
-            "4",
-            "--frames",
-            "3",
-            "--output",
-            again.to_str().unwrap()
-        ])
-        .status
-        .success()
+    let quiet = synth(&[
+        "--preset",
+        "left-right-mismatch",
+        "--seed",
+        "4",
+        "--frames",
+        "3",
+        "--output",
+        again.to_str().unwrap(),
+        "--quiet",
+    ]);
+    assert!(quiet.status.success());
+    assert_eq!(
+        String::from_utf8_lossy(&quiet.stderr),
+        "",
+        "--quiet says nothing"
     );
     let name = format!("mav0/cam1/data/{}.png", frame.timestamp_ns);
     assert_eq!(

@@ -7,14 +7,14 @@
 use anyhow::Context;
 use clap::Parser;
 use linetrack_datasets::StereoSequence;
-use linetrack_datasets::tum::{self, StampedPose};
 use linetrack_odometry::{Features, FrameResult, Odometry, OdometryConfig, metrics};
+use linetrack_progress::Progress;
 use linetrack_scene_render::IlluminationConfig;
+use linetrack_trajectory::tum::{self, StampedPose};
 use linetrack_vision::{DetectorKind, MatcherKind, perturb};
 use nalgebra::Isometry3;
 use serde::Serialize;
 use std::fmt::Write as _;
-use std::io::IsTerminal;
 use std::path::PathBuf;
 use std::time::Instant;
 
@@ -24,7 +24,7 @@ use std::time::Instant;
     name = "linetrack-vo",
     version,
     about = "Stereo visual odometry with points and line segments over a dataset folder.",
-    after_help = "EXAMPLES:
+    after_help = concat!("EXAMPLES:
     linetrack-vo ../shared/data/euroc/V1_01_easy_micro
     linetrack-vo out/sequences/default --matcher l1 --lines-only
     linetrack-vo out/sequences/normal-1 --gain-jumps 2   # the paper's illumination protocol, every 2 s
@@ -33,7 +33,8 @@ OUTPUT (<output>/): trajectory.txt (TUM: t tx ty tz qx qy qz qw, left camera, wo
 camera), groundtruth.txt (the same frame, when the dataset has ground truth), frames.csv (one
 row per frame: lost, features, matches, inliers, iterations, conditioning, departure from the
 prediction, milliseconds per step), metrics.json (the run's settings, lost frames and, with
-ground truth: path length, RPE, ATE origin- and SE(3)-aligned, drift, zero-motion ATE)."
+ground truth, under `metrics`: poses, path_m, rpe_m, ate_m, ate_aligned_m, drift_percent,
+zero_motion_ate_m — the names `linetrack run` writes to summary.json).\n\n", linetrack_progress::progress_help!("frames"), "\n\n", linetrack_vision::images_help!())
 )]
 pub struct Args {
     /// Dataset folder: EuRoC (holding mav0/), a KITTI odometry sequence, or linetrack-synth output.
@@ -68,6 +69,10 @@ pub struct Args {
     /// Output folder.
     #[arg(long, default_value = "out/vo")]
     pub output: PathBuf,
+    /// No progress on stderr (by default a bar with the time left on a terminal, a line per
+    /// tenth of the frames otherwise). Frames that cannot be loaded are still named.
+    #[arg(long)]
+    pub quiet: bool,
 }
 
 /// One row of frames.csv.
@@ -186,14 +191,15 @@ pub fn run(args: &Args) -> anyhow::Result<String> {
     let (mut estimate, mut truth, mut stamps) = (Vec::new(), Vec::new(), Vec::new());
     let (mut lost, mut skipped, mut busy_ms) = (0usize, Vec::new(), 0.0);
     let started = Instant::now();
-    let live = std::io::stderr().is_terminal();
+    let progress = Progress::new(&format!("{name} frames"), total as u64, args.quiet);
     let mut stream = sequence.into_stream(0, 4);
     for item in stream.by_ref().take(total) {
         let frame = match item {
             Ok(frame) => frame,
             Err(error) => {
-                eprintln!("{error}");
+                progress.warn(&error.to_string());
                 skipped.push(error.index);
+                progress.inc(1);
                 continue;
             }
         };
@@ -216,16 +222,10 @@ pub fn run(args: &Args) -> anyhow::Result<String> {
         estimate.push(result.pose);
         stamps.push(frame.timestamp_ns as f64 * 1e-9);
         truth.push(frame.pose);
-        let done = estimate.len() + skipped.len();
-        if live {
-            eprint!("\rframe {done}/{total}, {lost} lost");
-        } else if done % 50 == 0 {
-            eprintln!("frame {done}/{total}, {lost} lost");
-        }
+        progress.step(format!("{lost} lost"));
+        progress.inc(1);
     }
-    if live {
-        eprintln!();
-    }
+    progress.finish();
     csv.flush()
         .with_context(|| format!("cannot write {}", frames_path.display()))?;
     let stamped = |poses: &[Isometry3<f64>]| -> Vec<StampedPose> {

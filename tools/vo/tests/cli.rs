@@ -3,7 +3,7 @@
 
 #![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failure here is a test failure
 
-use linetrack_datasets::tum;
+use linetrack_trajectory::tum;
 use std::process::{Command, Output};
 
 fn vo(args: &[&str]) -> Output {
@@ -22,6 +22,7 @@ fn a_generated_sequence_gives_trajectory_ground_truth_stats_and_metrics() {
         3,
         8,
         &sequence,
+        true,
     )
     .unwrap();
     let out = dir.join("out");
@@ -65,6 +66,19 @@ fn a_generated_sequence_gives_trajectory_ground_truth_stats_and_metrics() {
     assert_eq!(json["frames"], 8);
     assert_eq!(json["matcher"], "lbd");
     let metrics = &json["metrics"];
+    let mut names: Vec<&str> = metrics
+        .as_object()
+        .unwrap()
+        .keys()
+        .map(String::as_str)
+        .collect();
+    names.sort_unstable();
+    let mut expected = linetrack_trajectory::metrics::METRIC_NAMES.to_vec();
+    expected.sort_unstable();
+    assert_eq!(
+        names, expected,
+        "the names linetrack run's summary.json uses"
+    );
     assert!(metrics["drift_percent"].is_null(), "{metrics}");
     assert!(metrics["ate_m"].as_f64().unwrap() < 0.01, "{metrics}");
     assert!(

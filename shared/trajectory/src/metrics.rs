@@ -15,8 +15,13 @@
 //!   never moves), which a parked-vehicle excerpt needs: there, "no motion" can beat any
 //!   estimator.
 //!
-//! `P` is the estimate, `Q` the ground truth, both camera poses in their worlds.
+//! `P` is the estimate, `Q` the ground truth, both camera poses in their worlds. Two
+//! trajectories with timestamps are paired pose by pose with [`Summary::of_stamped`].
+//!
+//! [`Summary`]'s field names ([`METRIC_NAMES`]) are what `metrics.json` (`linetrack-vo`) and
+//! `summary.json` (`linetrack run`, under `metrics`) call the metrics.
 
+use crate::tum::StampedPose;
 use nalgebra::{Isometry3, Matrix3, Vector3};
 
 /// Translational RPE RMSE over pairs `step` frames apart; `None` without such pairs.
@@ -97,8 +102,24 @@ pub fn path_length(truth: &[Isometry3<f64>]) -> f64 {
         .sum()
 }
 
+/// The names of [`Summary`]'s fields as written to JSON, in order.
+pub const METRIC_NAMES: [&str; 7] = [
+    "poses",
+    "path_m",
+    "rpe_m",
+    "ate_m",
+    "ate_aligned_m",
+    "drift_percent",
+    "zero_motion_ate_m",
+];
+
+/// An estimated pose is compared with the true pose stamped within this of it, seconds
+/// (well under any camera's frame period; TUM files keep the stamps to the nanosecond, the
+/// f64 seconds of a Unix-epoch stamp to about a quarter of a microsecond).
+pub const PAIRING_TOLERANCE_S: f64 = 1e-3;
+
 /// Every metric of one run against its ground truth.
-#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Summary {
     /// Poses compared.
     pub poses: usize,
@@ -130,6 +151,32 @@ impl Summary {
             drift_percent: drift_percent(estimate, truth),
             zero_motion_ate_m: ate_rmse(&still, truth),
         }
+    }
+
+    /// The metrics of the estimated poses that have a true pose stamped within
+    /// [`PAIRING_TOLERANCE_S`] (the nearest one), in time order; `None` when no pose
+    /// pairs up. Both lists must be in increasing time (as [`crate::tum::read`] gives them).
+    pub fn of_stamped(estimate: &[StampedPose], truth: &[StampedPose]) -> Option<Self> {
+        let (mut paired_estimate, mut paired_truth) = (Vec::new(), Vec::new());
+        for e in estimate {
+            let after = truth.partition_point(|t| t.timestamp_s < e.timestamp_s);
+            let nearest = [after.checked_sub(1), Some(after)]
+                .into_iter()
+                .flatten()
+                .filter_map(|k| truth.get(k))
+                .min_by(|a, b| {
+                    (a.timestamp_s - e.timestamp_s)
+                        .abs()
+                        .total_cmp(&(b.timestamp_s - e.timestamp_s).abs())
+                });
+            if let Some(t) = nearest
+                && (t.timestamp_s - e.timestamp_s).abs() <= PAIRING_TOLERANCE_S
+            {
+                paired_estimate.push(e.pose);
+                paired_truth.push(t.pose);
+            }
+        }
+        (!paired_estimate.is_empty()).then(|| Self::new(&paired_estimate, &paired_truth))
     }
 }
 
@@ -205,6 +252,46 @@ mod tests {
         let stretched = walk([0.11, 0.0, 0.055], 0.05, 40);
         let aligned = ate_rmse_aligned(&stretched, &truth).unwrap();
         assert!(aligned > 0.01 && aligned < ate_rmse(&stretched, &truth).unwrap());
+    }
+
+    #[test]
+    fn stamped_trajectories_pair_by_nearest_time_and_serialise_under_the_metric_names() {
+        let truth = walk([0.1, 0.0, 0.0], 0.0, 21);
+        let estimate = walk([0.11, 0.0, 0.0], 0.0, 21);
+        let stamp = |poses: &[Isometry3<f64>], offset_s: f64| -> Vec<StampedPose> {
+            poses
+                .iter()
+                .enumerate()
+                .map(|(k, p)| StampedPose {
+                    timestamp_s: 1.4e9 + 0.05 * k as f64 + offset_s,
+                    pose: *p,
+                })
+                .collect()
+        };
+        // The estimate lacks frames 3 and 4 (dropped) and is stamped 0.2 ms off: the rest
+        // pair with their own true poses.
+        let mut stamped = stamp(&estimate, 2e-4);
+        stamped.drain(3..5);
+        let summary = Summary::of_stamped(&stamped, &stamp(&truth, 0.0)).unwrap();
+        let kept: Vec<usize> = (0..21).filter(|k| !(3..5).contains(k)).collect();
+        let pick = |poses: &[Isometry3<f64>]| kept.iter().map(|&k| poses[k]).collect::<Vec<_>>();
+        assert_eq!(summary, Summary::new(&pick(&estimate), &pick(&truth)));
+        assert_eq!(summary.poses, 19);
+        assert!((summary.drift_percent.unwrap() - 10.0).abs() < 1e-6);
+        // Nothing within a millisecond: no metrics.
+        assert!(Summary::of_stamped(&stamp(&estimate, 0.01), &stamp(&truth, 0.0)).is_none());
+        assert!(Summary::of_stamped(&[], &stamp(&truth, 0.0)).is_none());
+
+        let json = serde_json::to_value(summary).unwrap();
+        let names: Vec<&str> = json
+            .as_object()
+            .unwrap()
+            .keys()
+            .map(String::as_str)
+            .collect();
+        let mut expected = METRIC_NAMES.to_vec();
+        expected.sort_unstable();
+        assert_eq!(names, expected);
     }
 
     #[test]
