@@ -168,3 +168,41 @@ fn an_unwritable_path_is_a_clear_error() {
         .unwrap_or_else(|| panic!("wrote into a missing folder"));
     assert!(err.to_string().contains("x.png"), "{err}");
 }
+
+#[test]
+fn tracks_join_a_group_across_tracks() {
+    let path = scratch("tracks.png");
+    let bar = |track, start, end, group, nested| Bar {
+        track,
+        start,
+        end,
+        group,
+        nested,
+    };
+    let plot = Tracks {
+        title: "spans".to_string(),
+        x_label: "ms".to_string(),
+        tracks: vec!["source".to_string(), "detector".to_string()],
+        bars: vec![
+            bar(0, 0.0, 0.1, 3, false),
+            bar(1, 2.0, 30.0, 3, false),
+            bar(1, 3.0, 20.0, 3, true),
+            bar(0, f64::NAN, 1.0, 4, false),
+            // A microsecond: still drawn, a few pixels wide.
+            bar(0, 10.0, 10.001, 5, false),
+        ],
+        links: vec![(3, vec![(0, 0.0, 0.1), (1, 2.0, 30.0)])],
+    };
+    plot.write(&path).unwrap_or_else(|e| panic!("{e}"));
+    let img = read(&path);
+    assert_eq!(img.height(), 150 + 2 * ROW_HEIGHT);
+    let (r, g, b) = PALETTE[3];
+    let group_pixels = img.pixels().filter(|p| p.0 == [r, g, b]).count();
+    assert!(
+        group_pixels > 500,
+        "bars of group 3 missing: {group_pixels}"
+    );
+    let (r, g, b) = PALETTE[5];
+    let short = img.pixels().filter(|p| p.0 == [r, g, b]).count();
+    assert!(short >= 60, "a microsecond bar is not seen: {short} pixels");
+}

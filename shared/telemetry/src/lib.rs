@@ -315,6 +315,34 @@ pub fn read_spans(run_dir: &Path) -> Result<(Vec<SpanEvent>, usize), TelemetryEr
     Ok((events, skipped))
 }
 
+/// The processes of `events` (sorted by start) as `(pid, process name)`, in order of
+/// their first span: pipeline order, since frames start at the frame source.
+pub fn processes(events: &[SpanEvent]) -> Vec<(u32, String)> {
+    let mut seen = std::collections::BTreeSet::new();
+    events
+        .iter()
+        .filter(|e| seen.insert(e.pid))
+        .map(|e| (e.pid, e.process.clone()))
+        .collect()
+}
+
+/// Each frame's path through the processes: for every frame handled by more than one
+/// process, its frame spans (`frame_depth` 0, one per process that handled it), in time
+/// order.
+pub fn frame_paths(events: &[SpanEvent]) -> std::collections::BTreeMap<u64, Vec<&SpanEvent>> {
+    let mut frames: std::collections::BTreeMap<u64, Vec<&SpanEvent>> = Default::default();
+    for e in events.iter().filter(|e| e.frame_depth == 0) {
+        if let Some(id) = e.frame_id {
+            frames.entry(id).or_default().push(e);
+        }
+    }
+    frames.retain(|_, spans| {
+        spans.sort_by_key(|e| (e.ts_us, e.pid));
+        spans.iter().any(|e| e.pid != spans[0].pid)
+    });
+    frames
+}
+
 /// The Chrome-trace events of `events` (sorted by start): a named track per process
 /// (`process_name` = its stage, ordered by first appearance) and per thread, a complete
 /// event (`X`) per span, and per frame handled by more than one process a flow — `s` on
@@ -323,14 +351,12 @@ pub fn read_spans(run_dir: &Path) -> Result<(Vec<SpanEvent>, usize), TelemetryEr
 pub fn chrome_trace_events(events: &[SpanEvent]) -> Vec<serde_json::Value> {
     use serde_json::json;
     let mut trace = Vec::with_capacity(events.len() + 16);
-    let mut processes = std::collections::BTreeSet::new();
+    for (order, (pid, process)) in processes(events).into_iter().enumerate() {
+        trace.push(json!({"ph": "M", "name": "process_name", "pid": pid, "tid": 0, "args": {"name": process}}));
+        trace.push(json!({"ph": "M", "name": "process_sort_index", "pid": pid, "tid": 0, "args": {"sort_index": order + 1}}));
+    }
     let mut threads = std::collections::BTreeSet::new();
     for e in events {
-        if processes.insert(e.pid) {
-            let order = processes.len();
-            trace.push(json!({"ph": "M", "name": "process_name", "pid": e.pid, "tid": 0, "args": {"name": e.process}}));
-            trace.push(json!({"ph": "M", "name": "process_sort_index", "pid": e.pid, "tid": 0, "args": {"sort_index": order}}));
-        }
         if threads.insert((e.pid, e.tid)) {
             let name = match e.thread.as_str() {
                 "" | "main" => e.process.clone(),
@@ -344,18 +370,7 @@ pub fn chrome_trace_events(events: &[SpanEvent]) -> Vec<serde_json::Value> {
         }
         trace.push(json!({"ph": "X", "cat": e.process, "name": e.name, "pid": e.pid, "tid": e.tid, "ts": e.ts_us, "dur": e.dur_us, "args": args}));
     }
-    // Each process's span of a frame, in time order.
-    let mut frames: std::collections::BTreeMap<u64, Vec<&SpanEvent>> = Default::default();
-    for e in events.iter().filter(|e| e.frame_depth == 0) {
-        if let Some(id) = e.frame_id {
-            frames.entry(id).or_default().push(e);
-        }
-    }
-    for (id, spans) in frames.iter_mut() {
-        spans.sort_by_key(|e| (e.ts_us, e.pid));
-        if spans.iter().all(|e| e.pid == spans[0].pid) {
-            continue;
-        }
+    for (id, spans) in frame_paths(events) {
         let last = spans.len() - 1;
         for (k, e) in spans.iter().enumerate() {
             // Inside the span, so the flow binds to it and not to a neighbour: the flow

@@ -4,9 +4,10 @@
 //!   `--single-process`), with a live status line and the final latency report.
 //! - `linetrack ctl swap-detector fld`: hot-swaps the detector of a running pipeline.
 //! - `linetrack report [RUN_DIR]`: the latency report of a run, with its latency pictures
-//!   ([`latency_plots`]).
+//!   ([`latency_plots`]) and a picture of a few frames of its trace ([`trace_picture`]).
 
 pub mod latency_plots;
+pub mod trace_picture;
 
 use anyhow::{Context, bail};
 use clap::{Parser, Subcommand};
@@ -34,7 +35,7 @@ const DEFAULT_FRAMES: usize = 100;
     linetrack run --dataset ../shared/data/euroc/V1_01_easy_micro --pacing fastest
     linetrack run --single-process                  # same stages on threads (baseline)
     linetrack ctl swap-detector fld                 # while a run is going, from another shell
-    linetrack report out/runs/latest                # latency report + latency pictures"
+    linetrack report out/runs/latest                # latency report + latency and trace pictures"
 )]
 pub struct Cli {
     /// What to do.
@@ -208,7 +209,8 @@ pub fn run(args: &RunArgs) -> anyhow::Result<PathBuf> {
     Ok(outcome.run_dir)
 }
 
-/// `linetrack report`: the text, after writing the latency pictures into the run folder.
+/// `linetrack report`: the text, after writing the latency pictures and the trace overview
+/// into the run folder.
 pub fn report(run_dir: &Path) -> anyhow::Result<String> {
     let frames = read_frames(&run_dir.join("frames.csv"))
         .with_context(|| format!("{} holds no finished run", run_dir.display()))?;
@@ -230,6 +232,7 @@ pub fn report(run_dir: &Path) -> anyhow::Result<String> {
             e.time_s, e.kind, e.stage, e.detail
         ));
     }
+    let overview = trace_picture::write(run_dir)?;
     let trace = run_dir.join("trace.json");
     text.push_str(&format!(
         "latency: {}\nlatency per frame: {}\n",
@@ -241,6 +244,9 @@ pub fn report(run_dir: &Path) -> anyhow::Result<String> {
             "trace (open in ui.perfetto.dev or chrome://tracing): {}\n",
             trace.display()
         ));
+    }
+    if let Some(path) = overview {
+        text.push_str(&format!("trace overview: {}\n", path.display()));
     }
     Ok(text)
 }
