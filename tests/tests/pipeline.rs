@@ -151,6 +151,8 @@ fn every_frame_gets_a_pose_and_the_run_leaves_no_shared_memory() {
     assert_eq!(pids.len(), 4, "frame 5's flow: {flow:?}");
     assert!(run_dir.join("latency.png").is_file());
     assert!(run_dir.join("latency-timeline.png").is_file());
+    // The frames' paths through the four processes, drawn.
+    assert!(run_dir.join("trace-overview.png").is_file());
 }
 
 fn kill_and_recover(stage: &str) {
