@@ -120,12 +120,8 @@ fn every_frame_gets_a_pose_and_the_run_leaves_no_shared_memory() {
     let events = trace["traceEvents"].as_array().cloned().unwrap_or_default();
     let processes: BTreeSet<String> = events
         .iter()
-        .filter(|e| e["ph"] == "M")
-        .filter_map(|e| {
-            e["args"]["name"]
-                .as_str()
-                .map(|n| n.split(' ').next().unwrap_or("").to_string())
-        })
+        .filter(|e| e["ph"] == "M" && e["name"] == "process_name")
+        .filter_map(|e| e["args"]["name"].as_str().map(String::from))
         .collect();
     assert_eq!(
         processes,
@@ -140,7 +136,26 @@ fn every_frame_gets_a_pose_and_the_run_leaves_no_shared_memory() {
             .any(|e| e["name"] == "describe" && e["args"]["frame_id"] == 5),
         "no describe span of frame 5"
     );
-    assert!(run_dir.join("latency-histogram.png").is_file());
+    // Frame 5's flow: from the source through the detector and the matcher to the pose
+    // estimator, one flow event in each process.
+    let flow: Vec<(String, u64)> = events
+        .iter()
+        .filter(|e| e["cat"] == "frame" && e["id"] == 5)
+        .map(|e| {
+            (
+                e["ph"].as_str().unwrap_or("").to_string(),
+                e["pid"].as_u64().unwrap_or(0),
+            )
+        })
+        .collect();
+    let phases: Vec<&str> = flow.iter().map(|(ph, _)| ph.as_str()).collect();
+    assert_eq!(phases, ["s", "t", "t", "f"], "frame 5's flow: {flow:?}");
+    let pids: BTreeSet<u64> = flow.iter().map(|(_, pid)| *pid).collect();
+    assert_eq!(pids.len(), 4, "frame 5's flow: {flow:?}");
+    assert!(run_dir.join("latency.png").is_file());
+    assert!(run_dir.join("latency-timeline.png").is_file());
+    // The frames' paths through the four processes, drawn.
+    assert!(run_dir.join("trace-overview.png").is_file());
 }
 
 fn kill_and_recover(stage: &str) {

@@ -18,7 +18,7 @@ struct Args {
 fn main() -> ExitCode {
     let args = Args::parse();
     let run = || -> anyhow::Result<()> {
-        linetrack_telemetry::init("supervisor", "info", None)?;
+        let _logs = linetrack_telemetry::init("supervisor", "info", None)?;
         let config = PipelineConfig::from_file(&args.config)?;
         let outcome = linetrack_supervisor::run(
             &config,

@@ -544,7 +544,7 @@ fn start(
         .output
         .trace
         .then(|| linetrack_telemetry::span_file(&args.run_dir, stage.name(), pid));
-    linetrack_telemetry::init(stage.name(), "warn", spans.as_deref())?;
+    let _spans = linetrack_telemetry::init(stage.name(), "warn", spans.as_deref())?;
     let shutdown = Shutdown::on_signals()?;
     end_with_parent(&shutdown, args.supervisor_pid)?;
     let bus = Bus::shared_memory(

@@ -3,16 +3,21 @@
 //! - [`init`] sets up `tracing`: human-readable logs on stderr (filter from `RUST_LOG`, or
 //!   the default given), and, when asked, a [`SpanRecorder`] that appends every closed span
 //!   to a JSON-lines file as a complete event: name, process, thread, start (UNIX-epoch
-//!   microseconds, so processes share one clock), duration and the span's `frame_id`.
+//!   microseconds, so processes share one clock), duration and the span's `frame_id`. The
+//!   file is buffered: flushed when a span closes at least [`FLUSH_EVERY`] after the last
+//!   flush, when the buffer fills, and when the [`FlushGuard`] that `init` returns drops, so
+//!   a process killed outright loses at most its last [`FLUSH_EVERY`] of spans.
 //! - [`merge_traces`] joins the span files of all processes of a run into one Chrome trace
-//!   (`trace.json`), which Perfetto and chrome://tracing open on one timeline.
+//!   (`trace.json`), which Perfetto and chrome://tracing open on one timeline: one track per
+//!   process named by its stage, and a flow (arrows) through each frame's spans across the
+//!   processes, so selecting a frame's span shows where the frame went before and after.
 
 use serde::{Deserialize, Serialize};
 use std::fs::File;
 use std::io::{BufRead, BufReader, BufWriter, Write};
 use std::path::{Path, PathBuf};
-use std::sync::Mutex;
-use std::time::{SystemTime, UNIX_EPOCH};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 use tracing::Subscriber;
 use tracing::field::{Field, Visit};
 use tracing::span::{Attributes, Id};
@@ -52,8 +57,15 @@ pub struct SpanEvent {
     pub ts_us: u64,
     /// Duration, microseconds.
     pub dur_us: u64,
-    /// The frame the span worked on, if it says.
+    /// The frame the span worked on, if it or an enclosing span says.
     pub frame_id: Option<u64>,
+    /// The thread's name, when it has one.
+    #[serde(default)]
+    pub thread: String,
+    /// How many enclosing spans carry a frame id of their own: 0 for the span in which
+    /// this process handles a frame (the frame's span here), more for its parts.
+    #[serde(default)]
+    pub frame_depth: u32,
 }
 
 fn epoch_us() -> u64 {
@@ -86,15 +98,64 @@ impl Visit for FrameIdVisitor {
     fn record_debug(&mut self, _field: &Field, _value: &dyn std::fmt::Debug) {}
 }
 
+/// How often at most the span file is flushed while spans close: what a process killed
+/// outright (SIGKILL) can lose.
+pub const FLUSH_EVERY: Duration = Duration::from_millis(500);
+
+/// A span file's buffered writer.
+struct Sink {
+    out: BufWriter<File>,
+    last_flush: Instant,
+    every: Duration,
+}
+
+impl Sink {
+    fn write(&mut self, line: &str) {
+        if writeln!(self.out, "{line}").is_ok() && self.last_flush.elapsed() >= self.every {
+            self.flush();
+        }
+    }
+
+    fn flush(&mut self) {
+        // A span file is a diagnostic: a failing disk must not stop the stage.
+        let _ = self.out.flush();
+        self.last_flush = Instant::now();
+    }
+}
+
+/// Flushes the span file when dropped (returned by [`init`] and
+/// [`SpanRecorder::flush_guard`]): keep it alive for as long as the process records.
+#[must_use = "the span file is flushed when the guard drops"]
+#[derive(Default)]
+pub struct FlushGuard {
+    sink: Option<Arc<Mutex<Sink>>>,
+}
+
+impl FlushGuard {
+    /// Writes what is buffered now.
+    pub fn flush(&self) {
+        if let Some(Ok(mut sink)) = self.sink.as_ref().map(|s| s.lock()) {
+            sink.flush();
+        }
+    }
+}
+
+impl Drop for FlushGuard {
+    fn drop(&mut self) {
+        self.flush();
+    }
+}
+
 /// A `tracing` layer that writes each closed span to a JSON-lines file.
 pub struct SpanRecorder {
     process: String,
     pid: u32,
-    out: Mutex<BufWriter<File>>,
+    sink: Arc<Mutex<Sink>>,
 }
 
 impl SpanRecorder {
-    /// Records the spans of process `process` into `path` (created or truncated).
+    /// Records the spans of process `process` into `path` (created or truncated), flushed
+    /// every [`FLUSH_EVERY`].
     pub fn create(path: &Path, process: &str) -> Result<Self, TelemetryError> {
         if let Some(dir) = path.parent() {
             std::fs::create_dir_all(dir).map_err(|source| TelemetryError::Io {
@@ -109,8 +170,28 @@ impl SpanRecorder {
         Ok(Self {
             process: process.to_string(),
             pid: std::process::id(),
-            out: Mutex::new(BufWriter::new(file)),
+            sink: Arc::new(Mutex::new(Sink {
+                out: BufWriter::new(file),
+                last_flush: Instant::now(),
+                every: FLUSH_EVERY,
+            })),
         })
+    }
+
+    /// The same recorder, flushing when a span closes `every` after the last flush
+    /// (`Duration::ZERO`: at every span).
+    pub fn with_flush_every(self, every: Duration) -> Self {
+        if let Ok(mut sink) = self.sink.lock() {
+            sink.every = every;
+        }
+        self
+    }
+
+    /// A guard that flushes this recorder's file when dropped.
+    pub fn flush_guard(&self) -> FlushGuard {
+        FlushGuard {
+            sink: Some(Arc::clone(&self.sink)),
+        }
     }
 }
 
@@ -140,11 +221,11 @@ impl<S: Subscriber + for<'a> LookupSpan<'a>> Layer<S> for SpanRecorder {
             return;
         };
         // A span without its own frame id inherits its parent's.
-        let frame_id = timing.frame_id.or_else(|| {
-            span.scope()
-                .skip(1)
-                .find_map(|p| p.extensions().get::<Timing>().and_then(|t| t.frame_id))
-        });
+        let ancestor_frames: Vec<u64> = span
+            .scope()
+            .skip(1)
+            .filter_map(|p| p.extensions().get::<Timing>().and_then(|t| t.frame_id))
+            .collect();
         let event = SpanEvent {
             name: span.name().to_string(),
             process: self.process.clone(),
@@ -152,22 +233,24 @@ impl<S: Subscriber + for<'a> LookupSpan<'a>> Layer<S> for SpanRecorder {
             tid: thread_number(),
             ts_us: timing.start_us,
             dur_us: epoch_us().saturating_sub(timing.start_us),
-            frame_id,
+            frame_id: timing.frame_id.or(ancestor_frames.first().copied()),
+            thread: std::thread::current().name().unwrap_or("").to_string(),
+            frame_depth: ancestor_frames.len() as u32,
         };
-        if let (Ok(line), Ok(mut out)) = (serde_json::to_string(&event), self.out.lock()) {
-            // Flushed per span: a stage killed mid-run keeps what it recorded.
-            let _ = writeln!(out, "{line}").and_then(|_| out.flush());
+        if let (Ok(line), Ok(mut sink)) = (serde_json::to_string(&event), self.sink.lock()) {
+            sink.write(&line);
         }
     }
 }
 
 /// Installs the process's `tracing` subscriber: logs to stderr at `default_filter` (or
-/// `RUST_LOG`), and spans to `span_file` when given.
+/// `RUST_LOG`), and spans to `span_file` when given. The guard flushes the span file when
+/// dropped: hold it until the process's work is done.
 pub fn init(
     process: &str,
     default_filter: &str,
     span_file: Option<&Path>,
-) -> Result<(), TelemetryError> {
+) -> Result<FlushGuard, TelemetryError> {
     let filter =
         EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new(default_filter));
     let logs = tracing_subscriber::fmt::layer()
@@ -178,11 +261,16 @@ pub fn init(
         Some(path) => Some(SpanRecorder::create(path, process)?),
         None => None,
     };
+    let guard = recorder
+        .as_ref()
+        .map(SpanRecorder::flush_guard)
+        .unwrap_or_default();
     tracing_subscriber::registry()
         .with(logs)
         .with(recorder)
         .try_init()
-        .map_err(|_| TelemetryError::AlreadyInitialised)
+        .map_err(|_| TelemetryError::AlreadyInitialised)?;
+    Ok(guard)
 }
 
 /// The span file of process `process` (pid `pid`) in `run_dir`.
@@ -227,30 +315,98 @@ pub fn read_spans(run_dir: &Path) -> Result<(Vec<SpanEvent>, usize), TelemetryEr
     Ok((events, skipped))
 }
 
-/// Writes `events` as a Chrome trace (JSON object format) to `path`; returns the number of
-/// span events written.
-pub fn write_chrome_trace(events: &[SpanEvent], path: &Path) -> Result<usize, TelemetryError> {
-    let mut trace = Vec::with_capacity(events.len() + 8);
-    let mut named = std::collections::BTreeSet::new();
+/// The processes of `events` (sorted by start) as `(pid, process name)`, in order of
+/// their first span: pipeline order, since frames start at the frame source.
+pub fn processes(events: &[SpanEvent]) -> Vec<(u32, String)> {
+    let mut seen = std::collections::BTreeSet::new();
+    events
+        .iter()
+        .filter(|e| seen.insert(e.pid))
+        .map(|e| (e.pid, e.process.clone()))
+        .collect()
+}
+
+/// Each frame's path through the processes: for every frame handled by more than one
+/// process, its frame spans (`frame_depth` 0, one per process that handled it), in time
+/// order.
+pub fn frame_paths(events: &[SpanEvent]) -> std::collections::BTreeMap<u64, Vec<&SpanEvent>> {
+    let mut frames: std::collections::BTreeMap<u64, Vec<&SpanEvent>> = Default::default();
+    for e in events.iter().filter(|e| e.frame_depth == 0) {
+        if let Some(id) = e.frame_id {
+            frames.entry(id).or_default().push(e);
+        }
+    }
+    frames.retain(|_, spans| {
+        spans.sort_by_key(|e| (e.ts_us, e.pid));
+        spans.iter().any(|e| e.pid != spans[0].pid)
+    });
+    frames
+}
+
+/// The Chrome-trace events of `events` (sorted by start): a named track per process
+/// (`process_name` = its stage, ordered by first appearance) and per thread, a complete
+/// event (`X`) per span, and per frame handled by more than one process a flow — `s` on
+/// its first process's frame span, `t` on each next one, `f` on the last, all with the
+/// frame id as flow id — binding the frame's spans across processes.
+pub fn chrome_trace_events(events: &[SpanEvent]) -> Vec<serde_json::Value> {
+    use serde_json::json;
+    let mut trace = Vec::with_capacity(events.len() + 16);
+    for (order, (pid, process)) in processes(events).into_iter().enumerate() {
+        trace.push(json!({"ph": "M", "name": "process_name", "pid": pid, "tid": 0, "args": {"name": process}}));
+        trace.push(json!({"ph": "M", "name": "process_sort_index", "pid": pid, "tid": 0, "args": {"sort_index": order + 1}}));
+    }
+    let mut threads = std::collections::BTreeSet::new();
     for e in events {
-        if named.insert(e.pid) {
-            trace.push(serde_json::json!({"ph": "M", "name": "process_name", "pid": e.pid, "tid": 0, "args": {"name": format!("{} ({})", e.process, e.pid)}}));
+        if threads.insert((e.pid, e.tid)) {
+            let name = match e.thread.as_str() {
+                "" | "main" => e.process.clone(),
+                thread => format!("{}: {thread}", e.process),
+            };
+            trace.push(json!({"ph": "M", "name": "thread_name", "pid": e.pid, "tid": e.tid, "args": {"name": name}}));
         }
         let mut args = serde_json::Map::new();
         if let Some(id) = e.frame_id {
             args.insert("frame_id".to_string(), id.into());
         }
-        trace.push(serde_json::json!({"ph": "X", "cat": e.process, "name": e.name, "pid": e.pid, "tid": e.tid, "ts": e.ts_us, "dur": e.dur_us, "args": args}));
+        trace.push(json!({"ph": "X", "cat": e.process, "name": e.name, "pid": e.pid, "tid": e.tid, "ts": e.ts_us, "dur": e.dur_us, "args": args}));
     }
-    let json = serde_json::json!({"traceEvents": trace, "displayTimeUnit": "ms"});
-    let file = File::create(path).map_err(|source| TelemetryError::Io {
+    for (id, spans) in frame_paths(events) {
+        let last = spans.len() - 1;
+        for (k, e) in spans.iter().enumerate() {
+            // Inside the span, so the flow binds to it and not to a neighbour: the flow
+            // leaves the first span where it ends and enters the others where they start.
+            let inside = |at: u64| at.clamp(e.ts_us, e.ts_us + e.dur_us.saturating_sub(1));
+            let mut flow =
+                json!({"cat": "frame", "name": "frame", "id": id, "pid": e.pid, "tid": e.tid});
+            let (ph, ts) = match k {
+                0 => ("s", inside(e.ts_us + e.dur_us.saturating_sub(1))),
+                k if k == last => ("f", inside(e.ts_us + 1)),
+                _ => ("t", inside(e.ts_us + 1)),
+            };
+            flow["ph"] = ph.into();
+            flow["ts"] = ts.into();
+            if ph != "s" {
+                flow["bp"] = "e".into();
+            }
+            trace.push(flow);
+        }
+    }
+    trace
+}
+
+/// Writes `events` as a Chrome trace (JSON object format, [`chrome_trace_events`]) to
+/// `path`; returns the number of span events written.
+pub fn write_chrome_trace(events: &[SpanEvent], path: &Path) -> Result<usize, TelemetryError> {
+    let json =
+        serde_json::json!({"traceEvents": chrome_trace_events(events), "displayTimeUnit": "ms"});
+    let io_error = |source| TelemetryError::Io {
         path: path.to_path_buf(),
         source,
-    })?;
-    serde_json::to_writer(BufWriter::new(file), &json).map_err(|e| TelemetryError::Io {
-        path: path.to_path_buf(),
-        source: e.into(),
-    })?;
+    };
+    let file = File::create(path).map_err(io_error)?;
+    let mut out = BufWriter::new(file);
+    serde_json::to_writer(&mut out, &json).map_err(|e| io_error(e.into()))?;
+    out.flush().map_err(io_error)?;
     Ok(events.len())
 }
 
@@ -272,6 +428,7 @@ mod tests {
         let _ = std::fs::remove_dir_all(&dir);
         let path = span_file(&dir, "matcher", std::process::id());
         let recorder = SpanRecorder::create(&path, "matcher").unwrap_or_else(|e| panic!("{e}"));
+        let guard = recorder.flush_guard();
         let subscriber = tracing_subscriber::registry().with(recorder);
         tracing::subscriber::with_default(subscriber, || {
             let frame = info_span!("match", frame_id = 17u64);
@@ -280,6 +437,7 @@ mod tests {
             let _in = inner.enter();
             std::thread::sleep(std::time::Duration::from_millis(2));
         });
+        drop(guard);
         // A torn last line, as from a killed process.
         std::fs::OpenOptions::new()
             .append(true)
@@ -299,28 +457,190 @@ mod tests {
             "inherits the frame of its parent"
         );
         assert!(describe.dur_us >= 2000);
+        assert_eq!(describe.frame_depth, 1, "a part of the frame's span");
         let outer = events
             .iter()
             .find(|e| e.name == "match")
             .unwrap_or_else(|| panic!("no match span"));
         assert!(outer.ts_us <= describe.ts_us && outer.dur_us >= describe.dur_us);
+        assert_eq!(outer.frame_depth, 0, "the frame's span in this process");
         assert_eq!(merge_traces(&dir).unwrap_or_else(|e| panic!("{e}")), 2);
         let trace: serde_json::Value = serde_json::from_str(
             &std::fs::read_to_string(dir.join("trace.json")).unwrap_or_default(),
         )
         .unwrap_or_default();
         let events = trace["traceEvents"].as_array().cloned().unwrap_or_default();
-        let name = format!("matcher ({})", std::process::id());
         assert!(
             events
                 .iter()
-                .any(|e| e["ph"] == "M" && e["args"]["name"] == name.as_str())
+                .any(|e| e["name"] == "process_name" && e["args"]["name"] == "matcher")
         );
         assert!(
             events
                 .iter()
                 .any(|e| e["ph"] == "X" && e["name"] == "describe" && e["args"]["frame_id"] == 17)
         );
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    fn span_file_lines(path: &Path) -> usize {
+        std::fs::read_to_string(path)
+            .unwrap_or_default()
+            .lines()
+            .count()
+    }
+
+    #[test]
+    fn spans_are_buffered_until_due_and_flushed_by_the_guard() {
+        let dir = std::env::temp_dir().join(format!("linetrack-flush-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        for (every, written_at_once) in [(Duration::MAX, 0), (Duration::ZERO, 1)] {
+            let path = span_file(&dir, "detector", every.as_secs() as u32);
+            let recorder = SpanRecorder::create(&path, "detector")
+                .unwrap_or_else(|e| panic!("{e}"))
+                .with_flush_every(every);
+            let guard = recorder.flush_guard();
+            let subscriber = tracing_subscriber::registry().with(recorder);
+            tracing::subscriber::with_default(subscriber, || {
+                drop(info_span!("detect", frame_id = 3u64).entered());
+                // What a process killed now would leave in its file.
+                assert_eq!(
+                    span_file_lines(&path),
+                    written_at_once,
+                    "flush every {every:?}"
+                );
+                guard.flush();
+                assert_eq!(span_file_lines(&path), 1, "flushed by the guard");
+                drop(info_span!("detect", frame_id = 4u64).entered());
+                drop(guard);
+                assert_eq!(span_file_lines(&path), 2, "flushed when the guard drops");
+            });
+        }
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    fn span(process: &str, pid: u32, name: &str, ts_us: u64, dur_us: u64) -> SpanEvent {
+        SpanEvent {
+            name: name.to_string(),
+            process: process.to_string(),
+            pid,
+            tid: 1,
+            ts_us,
+            dur_us,
+            frame_id: Some(7),
+            thread: "main".to_string(),
+            frame_depth: 0,
+        }
+    }
+
+    #[test]
+    fn a_frame_is_one_flow_through_the_processes_on_tracks_named_by_stage() {
+        let dir = std::env::temp_dir().join(format!("linetrack-flow-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        let mut describe = span("matcher", 300, "describe", 2_100, 50);
+        describe.frame_depth = 1;
+        let mut other_frame = span("frame-source", 100, "publish_frame", 3_000, 10);
+        other_frame.frame_id = Some(8);
+        let mut helper = span("line-detector", 200, "detect", 1_050, 100);
+        (helper.tid, helper.thread, helper.frame_id) = (2, "standby".to_string(), None);
+        let files = [
+            (
+                "frame-source",
+                100,
+                vec![
+                    span("frame-source", 100, "publish_frame", 1_000, 20),
+                    other_frame,
+                ],
+            ),
+            (
+                "line-detector",
+                200,
+                vec![span("line-detector", 200, "frame", 1_040, 900), helper],
+            ),
+            (
+                "matcher",
+                300,
+                vec![span("matcher", 300, "match", 2_000, 400), describe],
+            ),
+        ];
+        for (process, pid, events) in &files {
+            let path = span_file(&dir, process, *pid);
+            let _ = std::fs::create_dir_all(dir.join("spans"));
+            let lines: Vec<String> = events
+                .iter()
+                .map(|e| serde_json::to_string(e).unwrap_or_default())
+                .collect();
+            std::fs::write(&path, lines.join("\n")).unwrap_or_else(|e| panic!("{e}"));
+        }
+        assert_eq!(merge_traces(&dir).unwrap_or_else(|e| panic!("{e}")), 6);
+        let trace: serde_json::Value = serde_json::from_str(
+            &std::fs::read_to_string(dir.join("trace.json")).unwrap_or_default(),
+        )
+        .unwrap_or_default();
+        let events = trace["traceEvents"].as_array().cloned().unwrap_or_default();
+        let meta = |name: &str| -> Vec<(u64, u64, String)> {
+            events
+                .iter()
+                .filter(|e| e["ph"] == "M" && e["name"] == name)
+                .map(|e| {
+                    (
+                        e["pid"].as_u64().unwrap_or(0),
+                        e["tid"].as_u64().unwrap_or(0),
+                        e["args"]["name"].as_str().unwrap_or("").to_string(),
+                    )
+                })
+                .collect()
+        };
+        assert_eq!(
+            meta("process_name"),
+            vec![
+                (100, 0, "frame-source".to_string()),
+                (200, 0, "line-detector".to_string()),
+                (300, 0, "matcher".to_string()),
+            ]
+        );
+        let threads = meta("thread_name");
+        assert!(
+            threads.contains(&(200, 1, "line-detector".to_string())),
+            "{threads:?}"
+        );
+        assert!(
+            threads.contains(&(200, 2, "line-detector: standby".to_string())),
+            "{threads:?}"
+        );
+        let flows: Vec<&serde_json::Value> = events
+            .iter()
+            .filter(|e| ["s", "t", "f"].iter().any(|ph| e["ph"] == *ph))
+            .collect();
+        let path: Vec<(String, u64)> = flows
+            .iter()
+            .map(|e| {
+                assert_eq!(e["id"], 7, "one flow per frame, the frame id its id: {e}");
+                (
+                    e["ph"].as_str().unwrap_or("").to_string(),
+                    e["pid"].as_u64().unwrap_or(0),
+                )
+            })
+            .collect();
+        assert_eq!(
+            path,
+            vec![
+                ("s".to_string(), 100),
+                ("t".to_string(), 200),
+                ("f".to_string(), 300)
+            ],
+            "frame 7 goes source -> detector -> matcher; frame 8 met one process only"
+        );
+        // Each flow event lies inside the frame's span it binds to.
+        let within = |e: &serde_json::Value, start: u64, dur: u64| {
+            let ts = e["ts"].as_u64().unwrap_or(0);
+            assert!(ts >= start && ts < start + dur, "{e} outside {start}+{dur}");
+        };
+        within(flows[0], 1_000, 20);
+        within(flows[1], 1_040, 900);
+        within(flows[2], 2_000, 400);
+        assert_eq!(flows[1]["bp"], "e");
+        assert_eq!(flows[2]["bp"], "e");
         let _ = std::fs::remove_dir_all(&dir);
     }
 }

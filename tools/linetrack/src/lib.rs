@@ -3,14 +3,18 @@
 //! - `linetrack run`: the pipeline end to end (one process per stage over shared memory, or
 //!   `--single-process`), with a live status line and the final latency report.
 //! - `linetrack ctl swap-detector fld`: hot-swaps the detector of a running pipeline.
-//! - `linetrack report [RUN_DIR]`: the latency report of a run, with its histogram PNG.
+//! - `linetrack report [RUN_DIR]`: the latency report of a run, with its latency pictures
+//!   ([`latency_plots`]) and a picture of a few frames of its trace ([`trace_picture`]).
+
+pub mod latency_plots;
+pub mod trace_picture;
 
 use anyhow::{Context, bail};
 use clap::{Parser, Subcommand};
 use linetrack_ipc::{Bus, Scope, Shutdown};
 use linetrack_msgs::{Command, Control, FrameHeader, StageKind, Topic};
 use linetrack_pipeline_config::{Pacing, PipelineConfig};
-use linetrack_run_record::{Report, STAGES, read_events, read_frames};
+use linetrack_run_record::{Report, read_events, read_frames};
 use linetrack_scene_render::Preset;
 use linetrack_supervisor::{LiveStatus, Mode, RunOptions};
 use linetrack_vision::DetectorKind;
@@ -31,7 +35,7 @@ const DEFAULT_FRAMES: usize = 100;
     linetrack run --dataset ../shared/data/euroc/V1_01_easy_micro --pacing fastest
     linetrack run --single-process                  # same stages on threads (baseline)
     linetrack ctl swap-detector fld                 # while a run is going, from another shell
-    linetrack report out/runs/latest                # latency report + histogram PNG
+    linetrack report out/runs/latest                # latency report + latency and trace pictures
 
 A run folder holds frames.csv, events.csv, poses.tum (TUM), summary.json (how the run ended,
 the report, and with ground truth `metrics`: the names of linetrack-vo's metrics.json).
@@ -118,9 +122,6 @@ pub struct ReportArgs {
     /// Run folder (default: the newest run).
     #[arg(default_value = "out/runs/latest")]
     pub run_dir: PathBuf,
-    /// Histogram bin width, milliseconds.
-    #[arg(long, default_value_t = 5.0)]
-    pub bin_ms: f64,
 }
 
 /// Runs a command.
@@ -129,7 +130,7 @@ pub fn main(cli: Cli) -> anyhow::Result<()> {
         Cmd::Run(args) => run(&args).map(|_| ()),
         Cmd::Ctl(args) => ctl(&args),
         Cmd::Report(args) => {
-            print!("{}", report(&args.run_dir, args.bin_ms)?);
+            print!("{}", report(&args.run_dir)?);
             Ok(())
         }
     }
@@ -162,7 +163,7 @@ pub fn effective_config(args: &RunArgs) -> anyhow::Result<PipelineConfig> {
 
 /// `linetrack run`: returns the run folder.
 pub fn run(args: &RunArgs) -> anyhow::Result<PathBuf> {
-    linetrack_telemetry::init("supervisor", "info", None)?;
+    let _logs = linetrack_telemetry::init("supervisor", "info", None)?;
     let config = effective_config(args)?;
     let sequence = &config.source.sequence;
     if args.dataset.is_none()
@@ -209,53 +210,25 @@ pub fn run(args: &RunArgs) -> anyhow::Result<PathBuf> {
     };
     let outcome = linetrack_supervisor::run(&config, &options, &Shutdown::on_signals()?)?;
     println!();
-    print!("{}", report(&outcome.run_dir, 5.0)?);
+    print!("{}", report(&outcome.run_dir)?);
     if outcome.interrupted {
         println!("(interrupted)");
     }
     Ok(outcome.run_dir)
 }
 
-/// `linetrack report`: the text, after writing `latency-histogram.png` into the run folder.
-pub fn report(run_dir: &Path, bin_ms: f64) -> anyhow::Result<String> {
+/// `linetrack report`: the text, after writing the latency pictures and the trace overview
+/// into the run folder.
+pub fn report(run_dir: &Path) -> anyhow::Result<String> {
     let frames = read_frames(&run_dir.join("frames.csv"))
         .with_context(|| format!("{} holds no finished run", run_dir.display()))?;
     let events = read_events(&run_dir.join("events.csv"))?;
     let report = Report::new(&frames, &events);
-    let mut series: Vec<(String, Vec<f64>)> = STAGES
-        .iter()
-        .enumerate()
-        .map(|(i, s)| {
-            (
-                s.to_string(),
-                frames
-                    .iter()
-                    .filter(|f| f.has_pose())
-                    .map(|f| f.stage_ms[i])
-                    .collect(),
-            )
-        })
-        .collect();
-    series.push((
-        "end-to-end".to_string(),
-        frames
-            .iter()
-            .filter(|f| f.has_pose())
-            .map(|f| f.end_to_end_ms)
-            .collect(),
-    ));
     let budget = PipelineConfig::from_file(&run_dir.join("pipeline.toml"))
-        .map(|c| c.budget.end_to_end_ms)
+        .map(|c| c.budget)
         .ok();
-    let png = run_dir.join("latency-histogram.png");
-    linetrack_plot::histogram(
-        &png,
-        "latency per frame (dashed: end-to-end budget)",
-        "milliseconds",
-        &series,
-        bin_ms,
-        budget.as_slice(),
-    )?;
+    let [distributions, timeline] =
+        latency_plots::write(run_dir, &frames, &events, budget.as_ref())?;
     let mut text = format!("run {}\n{}", run_dir.display(), report.to_text());
     for e in events.iter().filter(|e| e.kind != "stale-cleanup") {
         let at = e
@@ -267,13 +240,21 @@ pub fn report(run_dir: &Path, bin_ms: f64) -> anyhow::Result<String> {
             e.time_s, e.kind, e.stage, e.detail
         ));
     }
+    let overview = trace_picture::write(run_dir)?;
     let trace = run_dir.join("trace.json");
-    text.push_str(&format!("histogram: {}\n", png.display()));
+    text.push_str(&format!(
+        "latency: {}\nlatency per frame: {}\n",
+        distributions.display(),
+        timeline.display()
+    ));
     if trace.is_file() {
         text.push_str(&format!(
             "trace (open in ui.perfetto.dev or chrome://tracing): {}\n",
             trace.display()
         ));
+    }
+    if let Some(path) = overview {
+        text.push_str(&format!("trace overview: {}\n", path.display()));
     }
     Ok(text)
 }

@@ -325,5 +325,6 @@ pub fn plot(path: &Path, aggregates: &[Aggregate]) -> anyhow::Result<()> {
         "correct matches",
         "precision",
         &series,
-    )
+    )?;
+    Ok(())
 }
