@@ -253,6 +253,8 @@ impl<S: Stage> Runner<'_, S> {
                 break;
             }
             self.one_frame(input, k + 1 < count, ports)?;
+            // A long batch on a loaded machine must not look like a hang.
+            ports.reporter.beat(self.processed);
         }
         Ok(())
     }
