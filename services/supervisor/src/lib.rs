@@ -916,6 +916,11 @@ impl<'m> Supervisor<'m> {
                 Err(e) => tracing::warn!("cannot poll {} (pid {}): {e}", p.stage, p.pid),
             }
         }
+        if !exited.is_empty() {
+            // What a stage said before it ended (a hand-over, the source's last frame) is
+            // queued by now: read it before its exit is judged.
+            self.handle_status()?;
+        }
         for (i, status, success) in exited.into_iter().rev() {
             let mut p = self.processes.remove(i);
             p.child.reap();
