@@ -336,7 +336,7 @@ impl Default for PipelineConfig {
         Self {
             source: SourceConfig::default(),
             detector: DetectorKind::Lsd,
-            detect_sides_in_parallel: true,
+            detect_sides_in_parallel: false,
             matcher: MatcherConfig::default(),
             budget: BudgetConfig::default(),
             supervisor: SupervisorConfig::default(),
