@@ -17,7 +17,7 @@ fn bench(args: &[&str]) -> Output {
 #[test]
 fn every_detector_is_scored_on_a_generated_sequence() {
     let out = linetrack_test_data::scratch_path("detector-bench", "normal");
-    linetrack_synth::generate(Preset::Normal, 0, 2, &out).unwrap();
+    linetrack_synth::generate(Preset::Normal, 0, 2, &out, true).unwrap();
     let result = bench(&[out.to_str().unwrap()]);
     let stdout = String::from_utf8_lossy(&result.stdout);
     assert!(
