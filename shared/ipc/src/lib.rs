@@ -492,6 +492,7 @@ impl Bus {
                     .map_err(|e| setup("subscriber", &service_name)(format!("{e:?}")))?;
                 Ok(Inlet {
                     service_name,
+                    limit: topic.queue_depth(),
                     inner: InletInner::Shm(subscriber),
                 })
             }
@@ -506,6 +507,7 @@ impl Bus {
                 local.subscribers.push(tx);
                 Ok(Inlet {
                     service_name: topic.name().to_string(),
+                    limit: topic.queue_depth(),
                     inner: InletInner::Local(rx, std::marker::PhantomData),
                 })
             }
@@ -696,6 +698,9 @@ enum InletInner<P: Record> {
 /// Receives messages on one topic.
 pub struct Inlet<P: Record> {
     service_name: String,
+    /// Messages it may hold at once: the topic's queue depth, which is also the
+    /// subscriber's borrow limit.
+    limit: usize,
     inner: InletInner<P>,
 }
 
@@ -745,13 +750,22 @@ impl<P: Record> Inlet<P> {
         }
     }
 
-    /// Every waiting message, oldest first.
+    /// The waiting messages, oldest first, at most [`Inlet::limit`] of them: a publisher
+    /// that keeps sending while they are taken can never push the subscriber past its
+    /// borrow limit. A full batch may leave more waiting.
     pub fn receive_all(&mut self) -> Result<Vec<Received<P>>, IpcError> {
         let mut all = Vec::new();
-        while let Some(m) = self.receive()? {
+        while all.len() < self.limit
+            && let Some(m) = self.receive()?
+        {
             all.push(m);
         }
         Ok(all)
+    }
+
+    /// The most messages [`Inlet::receive_all`] returns (and a subscriber may borrow).
+    pub fn limit(&self) -> usize {
+        self.limit
     }
 
     /// The service name.

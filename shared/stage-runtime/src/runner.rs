@@ -158,6 +158,7 @@ pub fn run_stage<S: Stage>(
             let overflow = runner.images.receive(frames)?;
             ports.reporter.overflow(overflow);
         }
+        let mut more = false;
         match runner.role {
             Role::Standby => {
                 let overflow = runner.waiting.receive(&mut ports.input)?;
@@ -167,7 +168,7 @@ pub fn run_stage<S: Stage>(
                     ready_sent = true;
                 }
             }
-            Role::Active | Role::HandingOver { .. } => runner.process_waiting(&mut ports)?,
+            Role::Active | Role::HandingOver { .. } => more = runner.process_waiting(&mut ports)?,
         }
         if let Role::HandingOver { at } = runner.role
             && runner.next_unpublished >= at
@@ -182,6 +183,10 @@ pub fn run_stage<S: Stage>(
             return Ok(());
         }
         ports.reporter.beat(runner.processed);
+        if more {
+            // A full batch: more may be queued, whose wake-up was already spent.
+            continue;
+        }
         ports
             .wake
             .wait(ports.reporter.until_due().max(Duration::from_millis(1)))?;
@@ -237,10 +242,11 @@ impl<S: Stage> Runner<'_, S> {
         Ok(())
     }
 
-    /// Processes every waiting input, stopping at the hand-over frame.
-    fn process_waiting(&mut self, ports: &mut Ports<S>) -> anyhow::Result<()> {
-        // The whole queue fits the subscriber's borrow limit.
+    /// Processes the waiting inputs (at most the subscriber's borrow limit at once),
+    /// stopping at the hand-over frame; returns whether the batch was full (more may wait).
+    fn process_waiting(&mut self, ports: &mut Ports<S>) -> anyhow::Result<bool> {
         let batch = ports.input.receive_all()?;
+        let full = batch.len() >= ports.input.limit();
         let count = batch.len();
         for (k, input) in batch.iter().enumerate() {
             let id = input.header().frame_id;
@@ -256,7 +262,7 @@ impl<S: Stage> Runner<'_, S> {
             // A long batch on a loaded machine must not look like a hang.
             ports.reporter.beat(self.processed);
         }
-        Ok(())
+        Ok(full)
     }
 
     /// Takes one frame through the stage and publishes the result.
