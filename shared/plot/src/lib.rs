@@ -443,6 +443,40 @@ fn chart_builder<'a, 'b>(area: &'a Area<'b>) -> ChartBuilder<'a, 'b, BitMapBacke
     builder
 }
 
+/// A chart with one horizontal row per name, the first at the top, over `axis`: the row
+/// names as y labels, the mesh drawn.
+fn rows_chart<'a, 'b>(
+    area: &'a Area<'b>,
+    axis: &Axis,
+    names: &[String],
+    x_label: &str,
+) -> Result<Plot<'a, 'b>, DrawError> {
+    let n = names.len().max(1);
+    let centres: Vec<f64> = (0..n).map(|i| i as f64 + 0.5).collect();
+    let mut chart = chart_builder(area)
+        .y_label_area_size(150)
+        .build_cartesian_2d(
+            axis.coord(),
+            axis::Ticked::new(0.0..n as f64, centres, Vec::new()),
+        )?;
+    let name_of = |t: &f64| {
+        let row = n - 1 - (t.floor().max(0.0) as usize).min(n - 1);
+        names.get(row).cloned().unwrap_or_default()
+    };
+    chart
+        .configure_mesh()
+        .x_desc(x_label)
+        .x_label_formatter(&|t| axis.label(*t))
+        .y_label_formatter(&name_of)
+        .disable_y_mesh()
+        .label_style(text_style(LABEL_SIZE))
+        .axis_desc_style(text_style(LABEL_SIZE))
+        .bold_line_style(RGBColor(215, 215, 215))
+        .light_line_style(RGBColor(240, 240, 240))
+        .draw()?;
+    Ok(chart)
+}
+
 /// One unbroken stretch of a line series; a lone point as a dot.
 fn draw_run(
     chart: &mut Plot<'_, '_>,
@@ -655,35 +689,13 @@ impl Distributions {
         let main = root.titled(&self.title, text_style(TITLE_SIZE))?;
         let axis = self.axis();
         let n = self.rows.len().max(1);
-        let row_centres: Vec<f64> = (0..n).map(|i| i as f64 + 0.5).collect();
-        let mut chart = ChartBuilder::on(&main)
-            .margin(14)
-            .x_label_area_size(48)
-            .y_label_area_size(150)
-            .build_cartesian_2d(
-                axis.coord(),
-                axis::Ticked::new(0.0..n as f64, row_centres, Vec::new()),
-            )?;
-        let name_of = |t: &f64| {
-            let i = n - 1 - (t.floor().max(0.0) as usize).min(n - 1);
-            self.rows.get(i).map(|r| r.name.clone()).unwrap_or_default()
-        };
+        let names: Vec<String> = self.rows.iter().map(|r| r.name.clone()).collect();
         let x_label = if axis.log {
             format!("{} (log scale)", self.x_label)
         } else {
             self.x_label.clone()
         };
-        chart
-            .configure_mesh()
-            .x_desc(x_label)
-            .x_label_formatter(&|t| axis.label(*t))
-            .y_label_formatter(&name_of)
-            .disable_y_mesh()
-            .label_style(text_style(LABEL_SIZE))
-            .axis_desc_style(text_style(LABEL_SIZE))
-            .bold_line_style(RGBColor(215, 215, 215))
-            .light_line_style(RGBColor(240, 240, 240))
-            .draw()?;
+        let mut chart = rows_chart(&main, &axis, &names, &x_label)?;
         let (t0, t1) = axis.ends();
         let bin = (t1 - t0) / BINS as f64;
         for (i, row) in self.rows.iter().enumerate() {
@@ -808,28 +820,7 @@ impl Tracks {
         let axis = Axis::fit(&ends, Scale::Linear, false);
         let n = self.tracks.len().max(1);
         let row_of = |track: usize| (n - 1 - track.min(n - 1)) as f64;
-        let centres: Vec<f64> = (0..n).map(|i| i as f64 + 0.5).collect();
-        let mut chart = chart_builder(&main)
-            .y_label_area_size(150)
-            .build_cartesian_2d(
-                axis.coord(),
-                axis::Ticked::new(0.0..n as f64, centres, Vec::new()),
-            )?;
-        let name_of = |t: &f64| {
-            let track = n - 1 - (t.floor().max(0.0) as usize).min(n - 1);
-            self.tracks.get(track).cloned().unwrap_or_default()
-        };
-        chart
-            .configure_mesh()
-            .x_desc(self.x_label.as_str())
-            .x_label_formatter(&|t| axis.label(*t))
-            .y_label_formatter(&name_of)
-            .disable_y_mesh()
-            .label_style(text_style(LABEL_SIZE))
-            .axis_desc_style(text_style(LABEL_SIZE))
-            .bold_line_style(RGBColor(215, 215, 215))
-            .light_line_style(RGBColor(240, 240, 240))
-            .draw()?;
+        let mut chart = rows_chart(&main, &axis, &self.tracks, &self.x_label)?;
         // A bar at least `MIN_BAR_PX` wide (a span of microseconds is still seen), and a
         // label per linked group's bar, left out where it would cover another.
         let (lo, hi) = axis.ends();
