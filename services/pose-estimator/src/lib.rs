@@ -11,12 +11,15 @@ use anyhow::Context;
 use linetrack_geometry::{Segment, StereoRig};
 use linetrack_ipc::{Bus, Inlet, Received, Shutdown};
 use linetrack_msgs::{FrameHeader, NO_FRAME, PoseRecord, RigRecord, StageKind, Topic, TrackedLine};
-use linetrack_odometry::{Features, FrameStats, MatchedLines, MotionTracker, OdometryConfig};
+use linetrack_odometry::{
+    Features, FrameStats, MatchedLines, MotionTracker, OdometryConfig, PreparedImages,
+};
 use linetrack_stage_runtime::{
-    Stage, StageContext, rig_from_record, run_stage, stereo_views, to_segment,
+    Stage, StageContext, held_capacity, rig_from_record, run_stage, stereo_views, to_segment,
 };
 use linetrack_vision::FeatureMatch;
 use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion};
+use std::collections::VecDeque;
 
 /// A pose as a record.
 pub fn pose_record(pose: &Isometry3<f64>) -> PoseRecord {
@@ -107,6 +110,8 @@ pub struct PoseTracker {
     resume: Option<Resume>,
     /// After a restart: the frame of the last recorded pose, until the first frame is tracked.
     resumed_after: Option<u64>,
+    /// Frames whose images were prepared before their segments arrived, oldest first.
+    prepared: VecDeque<(u64, PreparedImages)>,
 }
 
 impl PoseTracker {
@@ -126,6 +131,7 @@ impl PoseTracker {
             last_frame: NO_FRAME,
             resumed_after: resume.map(|r| r.frame),
             resume,
+            prepared: VecDeque::new(),
         })
     }
 
@@ -155,6 +161,7 @@ impl PoseTracker {
         );
         self.tracker = Some(tracker);
         self.rig = Some(rig);
+        self.prepared.clear();
         self.last_frame = NO_FRAME;
         Ok(())
     }
@@ -168,7 +175,34 @@ impl PoseTracker {
         }
     }
 
-    /// Tracks one frame.
+    /// Stretches frame `header`'s images and finds their corners ahead of its segments
+    /// (nothing before a rig arrived); kept for [`PoseTracker::track`] of the same frame.
+    pub fn prepare(&mut self, header: &FrameHeader, frame: &Received<u8>) -> anyhow::Result<()> {
+        let Some(tracker) = &mut self.tracker else {
+            return Ok(());
+        };
+        let (left, right) = stereo_views(frame)?;
+        let prepared = tracker.prepare(&left, &right)?;
+        if self.prepared.len() >= held_capacity(Topic::Frames) {
+            self.prepared.pop_front();
+        }
+        self.prepared.push_back((header.frame_id, prepared));
+        Ok(())
+    }
+
+    /// What was prepared for frame `frame_id`, if it was (older entries are let go).
+    fn take_prepared(&mut self, frame_id: u64) -> Option<PreparedImages> {
+        while self.prepared.front().is_some_and(|(id, _)| *id < frame_id) {
+            self.prepared.pop_front();
+        }
+        self.prepared
+            .front()
+            .is_some_and(|(id, _)| *id == frame_id)
+            .then(|| self.prepared.pop_front().map(|(_, p)| p))
+            .flatten()
+    }
+
+    /// Tracks one frame (with what was prepared from its images, if anything).
     pub fn track(
         &mut self,
         header: &FrameHeader,
@@ -218,6 +252,7 @@ impl PoseTracker {
             None => None,
         };
         let images = views.as_ref().map(|(l, r)| (&**l, &**r));
+        let prepared = self.take_prepared(header.frame_id);
         // The first frame after a restart: the motion across the gap is predicted (the
         // last motion per frame), and the pose says so.
         let tracker = self
@@ -228,7 +263,12 @@ impl PoseTracker {
         if let Some(frame) = resumed {
             tracker.predict_frames(header.frame_id.saturating_sub(frame));
         }
-        let result = tracker.update(images, matched, FrameStats::default())?;
+        let result = match (images, prepared) {
+            (Some(images), Some(prepared)) => {
+                tracker.update_prepared(Some((images, prepared)), matched, FrameStats::default())?
+            }
+            (images, _) => tracker.update(images, matched, FrameStats::default())?,
+        };
         self.last_frame = header.frame_id;
         let mut record = pose_record(&result.pose);
         record.lost = u32::from(result.lost || resumed.is_some());
@@ -283,6 +323,13 @@ impl Stage for PoseStage {
                 Ok(rig) => self.tracker.set_rig(rig)?,
                 Err(e) => tracing::error!("{e}"),
             }
+        }
+        Ok(())
+    }
+
+    fn prepare(&mut self, header: &FrameHeader, images: &Received<u8>) -> anyhow::Result<()> {
+        if self.points {
+            self.tracker.prepare(header, images)?;
         }
         Ok(())
     }

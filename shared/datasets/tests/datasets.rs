@@ -7,8 +7,7 @@
 use linetrack_datasets::StereoSequence;
 use linetrack_geometry::MatchCase;
 use linetrack_vision::{
-    AppearanceGates, GrayImage, HammingMatcher, OrbExtractor, OrbOptions, PointFeatures,
-    match_points,
+    AppearanceGates, GrayImage, OrbExtractor, OrbOptions, PointFeatures, PointMatcher,
 };
 use nalgebra::{Isometry3, Vector3};
 use std::path::{Path, PathBuf};
@@ -62,15 +61,7 @@ fn row_differences(left: &GrayImage, right: &GrayImage) -> Vec<f64> {
         ..Default::default()
     };
     let mut out = Vec::new();
-    match_points(
-        &mut HammingMatcher::new(),
-        MatchCase::Stereo,
-        &a,
-        &b,
-        &gates,
-        2.0,
-        &mut out,
-    );
+    PointMatcher::new().match_points(MatchCase::Stereo, &a, &b, &gates, 2.0, &mut out);
     let mut dy: Vec<f64> = out
         .iter()
         .map(|m| (a.points[m.query].y - b.points[m.train].y).abs())

@@ -31,10 +31,10 @@ use linetrack_stereo_vo::{
     estimate_motion, estimate_motion_near, triangulate_point, triangulate_segment,
 };
 use linetrack_vision::{
-    AppearanceGates, DetectorKind, FeatureMatch, FrontendConfig, GrayImage, HammingMatcher,
-    LineDetector, LineFeatures, MatcherKind, OrbExtractor, OrbOptions, PointFeatures,
-    SegmentMatcher, VisionError, create_detector, create_segment_matcher, match_points,
-    refine_stereo_column, stretch_contrast,
+    AppearanceGates, DetectorKind, FeatureMatch, FrontendConfig, GrayImage, LineDetector,
+    LineFeatures, MatcherKind, OrbExtractor, OrbOptions, PointFeatures, PointMatcher,
+    SegmentMatcher, VisionError, create_detector, create_segment_matcher, refine_stereo_column,
+    stretch_contrast,
 };
 use nalgebra::{Isometry3, Point3};
 use serde::{Deserialize, Serialize};
@@ -279,6 +279,17 @@ pub struct MatchedLines<'a> {
     pub tracked: Option<&'a [FeatureMatch]>,
 }
 
+/// What [`MotionTracker::prepare`] made of a frame's images before its segments arrived.
+#[derive(Debug, Clone, Default)]
+pub struct PreparedImages {
+    /// The left and right images stretched (`None`: the original is used as it is).
+    stretched: [Option<GrayImage>; 2],
+    /// ORB points of the left and right image (empty when the odometry uses lines only).
+    points: [PointFeatures; 2],
+    /// Milliseconds it took.
+    ms: f64,
+}
+
 /// A frame's features as the next frame will look for them.
 struct Reference {
     /// The frame's pose (camera to world).
@@ -312,7 +323,7 @@ pub struct MotionTracker {
     config: OdometryConfig,
     rig: StereoRig,
     orb: OrbExtractor,
-    hamming: HammingMatcher,
+    point_matcher: PointMatcher,
     reference: Option<Reference>,
     pose: Isometry3<f64>,
     last_motion: Isometry3<f64>,
@@ -325,7 +336,7 @@ impl MotionTracker {
     pub fn new(config: OdometryConfig, rig: StereoRig) -> Result<Self, OdometryError> {
         Ok(Self {
             orb: OrbExtractor::new(&config.frontend.orb)?,
-            hamming: HammingMatcher::new(),
+            point_matcher: PointMatcher::new(),
             reference: None,
             pose: Isometry3::identity(),
             last_motion: Isometry3::identity(),
@@ -380,23 +391,83 @@ impl MotionTracker {
         lines: MatchedLines<'_>,
         stats: FrameStats,
     ) -> Result<FrameResult, OdometryError> {
-        // Dark images are stretched for the corner detector as for the segment detector.
-        let stretched = match images {
-            Some((left, right)) => Some(stretch_pair(left, right, self.config.max_contrast_gain)?),
+        let prepared = match images {
+            Some((left, right)) => Some(self.prepare(left, right)?),
             None => None,
         };
-        let images = images
-            .zip(stretched.as_ref())
-            .map(|((left, right), (l, r))| {
-                (l.as_ref().unwrap_or(left), r.as_ref().unwrap_or(right))
-            });
-        self.update_stretched(images, lines, stats)
+        self.update_prepared(images.zip(prepared), lines, stats)
     }
 
-    /// [`MotionTracker::update`] on images already stretched.
+    /// The part of a frame's work that needs only its images, not its segments: dark images
+    /// stretched (for the corner detector as for the segment detector) and their ORB points
+    /// found. The pipeline's pose stage does it while the frame's segments are still being
+    /// detected and matched; [`MotionTracker::update_prepared`] finishes the frame.
+    pub fn prepare(
+        &mut self,
+        left: &GrayImage,
+        right: &GrayImage,
+    ) -> Result<PreparedImages, OdometryError> {
+        let started = Instant::now();
+        let (left_stretched, right_stretched) =
+            stretch_pair(left, right, self.config.max_contrast_gain)?;
+        let mut prepared = self.prepare_stretched(left_stretched, right_stretched, left, right)?;
+        prepared.ms = since(started);
+        Ok(prepared)
+    }
+
+    /// [`MotionTracker::prepare`] after the stretch: finds the points in the stretched
+    /// images (or the originals, `None` where not stretched).
+    fn prepare_stretched(
+        &mut self,
+        left_stretched: Option<GrayImage>,
+        right_stretched: Option<GrayImage>,
+        left: &GrayImage,
+        right: &GrayImage,
+    ) -> Result<PreparedImages, OdometryError> {
+        let started = Instant::now();
+        let mut points = [PointFeatures::default(), PointFeatures::default()];
+        if self.config.features == Features::PointsAndLines {
+            self.orb
+                .extract(left_stretched.as_ref().unwrap_or(left), &mut points[0])?;
+            self.orb
+                .extract(right_stretched.as_ref().unwrap_or(right), &mut points[1])?;
+        }
+        Ok(PreparedImages {
+            stretched: [left_stretched, right_stretched],
+            points,
+            ms: since(started),
+        })
+    }
+
+    /// Tracks one frame whose images were [prepared](MotionTracker::prepare) (`images`:
+    /// the originals, with what was prepared from them); without images the frame is
+    /// tracked on its lines.
+    pub fn update_prepared(
+        &mut self,
+        images: Option<((&GrayImage, &GrayImage), PreparedImages)>,
+        lines: MatchedLines<'_>,
+        mut stats: FrameStats,
+    ) -> Result<FrameResult, OdometryError> {
+        let Some(((left, right), prepared)) = images else {
+            return self.update_stretched(None, lines, stats);
+        };
+        let PreparedImages {
+            stretched: [left_stretched, right_stretched],
+            points,
+            ms,
+        } = prepared;
+        stats.ms[0] += ms;
+        let seen = (
+            left_stretched.as_ref().unwrap_or(left),
+            right_stretched.as_ref().unwrap_or(right),
+        );
+        self.update_stretched(Some((seen, points)), lines, stats)
+    }
+
+    /// [`MotionTracker::update`] on images already stretched, with their points.
     fn update_stretched(
         &mut self,
-        images: Option<(&GrayImage, &GrayImage)>,
+        images: Option<((&GrayImage, &GrayImage), [PointFeatures; 2])>,
         lines: MatchedLines<'_>,
         mut stats: FrameStats,
     ) -> Result<FrameResult, OdometryError> {
@@ -404,16 +475,13 @@ impl MotionTracker {
             min_sin_from_horizontal: self.config.min_line_angle_deg.to_radians().sin(),
             ..TriangulationLimits::default()
         };
-        let images = images.filter(|_| self.config.features == Features::PointsAndLines);
+        let (images, [points_l, points_r]) = match images {
+            Some((images, points)) if self.config.features == Features::PointsAndLines => {
+                (Some(images), points)
+            }
+            _ => (None, Default::default()),
+        };
         let use_points = images.is_some();
-
-        let started = Instant::now();
-        let (mut points_l, mut points_r) = (PointFeatures::default(), PointFeatures::default());
-        if let Some((left, right)) = images {
-            self.orb.extract(left, &mut points_l)?;
-            self.orb.extract(right, &mut points_r)?;
-        }
-        stats.ms[0] += since(started);
         stats.points = [points_l.points.len(), points_r.points.len()];
 
         // Stereo triangulation.
@@ -422,8 +490,7 @@ impl MotionTracker {
         let mut point_positions = vec![None; points_l.points.len()];
         if let Some((left_image, right_image)) = images {
             let gates = &self.config.frontend.appearance_gates;
-            match_points(
-                &mut self.hamming,
+            self.point_matcher.match_points(
                 MatchCase::Stereo,
                 &points_l,
                 &points_r,
@@ -738,8 +805,7 @@ impl MotionTracker {
                 *point = p;
             }
         }
-        match_points(
-            &mut self.hamming,
+        self.point_matcher.match_points(
             MatchCase::FrameToFrame,
             &previous.points,
             current,
@@ -858,6 +924,13 @@ impl Odometry {
         let started = Instant::now();
         let (left_stretched, right_stretched) =
             stretch_pair(left, right, self.tracker.config.max_contrast_gain)?;
+        let PreparedImages {
+            stretched: [left_stretched, right_stretched],
+            points,
+            ..
+        } = self
+            .tracker
+            .prepare_stretched(left_stretched, right_stretched, left, right)?;
         // Stretched once, for the detectors and the back end's corners alike.
         let seen_left = left_stretched.as_ref().unwrap_or(left);
         let seen_right = right_stretched.as_ref().unwrap_or(right);
@@ -889,9 +962,9 @@ impl Odometry {
             stereo: &stereo,
             tracked: self.previous_lines.as_ref().map(|_| tracked.as_slice()),
         };
-        let result = self
-            .tracker
-            .update_stretched(Some((seen_left, seen_right)), lines, stats);
+        let result =
+            self.tracker
+                .update_stretched(Some(((seen_left, seen_right), points)), lines, stats);
         self.previous_lines = Some(lines_l);
         result
     }

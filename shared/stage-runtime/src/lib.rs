@@ -405,6 +405,11 @@ impl<P: Record> Held<P> {
         }
     }
 
+    /// The held messages, oldest first.
+    pub fn iter(&self) -> impl Iterator<Item = &Received<P>> {
+        self.held.iter()
+    }
+
     /// Takes the oldest held message.
     pub fn take_next(&mut self) -> Option<Received<P>> {
         self.held.pop_front()

@@ -51,6 +51,15 @@ pub trait Stage {
         images: Option<&Received<u8>>,
     ) -> anyhow::Result<Vec<Self::Output>>;
 
+    /// Work on a frame's images that need not wait for its input (the pose estimator's
+    /// corners): called once per frame whose images arrived before its input, when no
+    /// input is waiting, so that it runs while the stages upstream work on the same frame.
+    /// [`Stage::process`] must still work for a frame that was not prepared. An error is
+    /// logged and the frame goes on to `process`.
+    fn prepare(&mut self, _header: &FrameHeader, _images: &Received<u8>) -> anyhow::Result<()> {
+        Ok(())
+    }
+
     /// What is published for a frame that was dropped or failed (nothing by default).
     fn placeholder(&self) -> Vec<Self::Output> {
         Vec::new()
@@ -99,6 +108,8 @@ struct Runner<'a, S: Stage> {
     images: Held<u8>,
     gaps: GapWatch,
     next_unpublished: u64,
+    /// Frames below this were prepared (or processed) already.
+    next_unprepared: u64,
     processed: u64,
 }
 
@@ -141,6 +152,7 @@ pub fn run_stage<S: Stage>(
         images: Held::new(Topic::Frames),
         gaps: GapWatch::default(),
         next_unpublished: 0,
+        next_unprepared: 0,
         processed: 0,
     };
     let mut ready_sent = false;
@@ -168,7 +180,12 @@ pub fn run_stage<S: Stage>(
                     ready_sent = true;
                 }
             }
-            Role::Active | Role::HandingOver { .. } => more = runner.process_waiting(&mut ports)?,
+            Role::Active | Role::HandingOver { .. } => {
+                more = runner.process_waiting(&mut ports)?;
+                if !more {
+                    runner.prepare_held();
+                }
+            }
         }
         if let Role::HandingOver { at } = runner.role
             && runner.next_unpublished >= at
@@ -263,6 +280,27 @@ impl<S: Stage> Runner<'_, S> {
             ports.reporter.beat(self.processed);
         }
         Ok(full)
+    }
+
+    /// Prepares the held images of frames not yet prepared nor processed.
+    fn prepare_held(&mut self) {
+        let from = self.next_unprepared.max(self.next_unpublished);
+        for images in self.images.iter() {
+            let header = images.header();
+            if header.frame_id < from {
+                continue;
+            }
+            let span = info_span!(
+                "prepare",
+                frame_id = header.frame_id,
+                stage = S::KIND.name()
+            );
+            let _entered = span.enter();
+            if let Err(e) = self.stage.prepare(header, images) {
+                tracing::warn!("frame {}: preparing: {e:#}", header.frame_id);
+            }
+            self.next_unprepared = header.frame_id + 1;
+        }
     }
 
     /// Takes one frame through the stage and publishes the result.
@@ -471,5 +509,133 @@ mod tests {
                 .unwrap_or_else(|e| panic!("{e}"))
                 .is_empty()
         );
+    }
+
+    /// A stage joining images that prepares them ahead: it notes which frames it prepared
+    /// and answers each frame with whether it had been prepared.
+    struct Ahead {
+        prepared: std::sync::Arc<std::sync::Mutex<Vec<u64>>>,
+    }
+
+    impl Stage for Ahead {
+        type Input = SegmentRecord;
+        type Output = linetrack_msgs::TrackedLine;
+        const KIND: StageKind = StageKind::Matcher;
+        const INPUT: Topic = Topic::Segments;
+        const OUTPUT: Topic = Topic::Tracks;
+        const OUTPUT_LEN: usize = 1;
+
+        fn joins_images(&self) -> bool {
+            true
+        }
+
+        fn prepare(&mut self, header: &FrameHeader, images: &Received<u8>) -> anyhow::Result<()> {
+            anyhow::ensure!(images.payload().first() != Some(&0), "a blank image");
+            self.prepared
+                .lock()
+                .map_err(|_| anyhow::anyhow!("poisoned"))?
+                .push(header.frame_id);
+            Ok(())
+        }
+
+        fn process(
+            &mut self,
+            header: &mut FrameHeader,
+            _input: &Received<SegmentRecord>,
+            images: Option<&Received<u8>>,
+        ) -> anyhow::Result<Vec<linetrack_msgs::TrackedLine>> {
+            let prepared = self
+                .prepared
+                .lock()
+                .map_err(|_| anyhow::anyhow!("poisoned"))?
+                .contains(&header.frame_id);
+            Ok(vec![linetrack_msgs::TrackedLine {
+                has_stereo: u32::from(prepared),
+                previous: i32::from(images.is_some()),
+                ..Default::default()
+            }])
+        }
+    }
+
+    #[test]
+    fn images_that_arrive_before_their_input_are_prepared_once_while_the_stage_waits() {
+        let hub = linetrack_ipc::LocalHub::default();
+        let bus = hub.bus();
+        let mut frames = bus
+            .outlet::<u8>(Topic::Frames, 4)
+            .unwrap_or_else(|e| panic!("{e}"));
+        let mut segments = bus
+            .outlet::<SegmentRecord>(Topic::Segments, 1)
+            .unwrap_or_else(|e| panic!("{e}"));
+        let mut control = bus
+            .outlet::<Control>(Topic::Control, 1)
+            .unwrap_or_else(|e| panic!("{e}"));
+        let mut out = bus
+            .inlet::<linetrack_msgs::TrackedLine>(Topic::Tracks)
+            .unwrap_or_else(|e| panic!("{e}"));
+        let mut status = bus
+            .inlet::<StatusReport>(Topic::Status)
+            .unwrap_or_else(|e| panic!("{e}"));
+        let prepared = std::sync::Arc::new(std::sync::Mutex::new(Vec::new()));
+        let stage = Ahead {
+            prepared: prepared.clone(),
+        };
+        let runner = {
+            let hub = hub.clone();
+            std::thread::spawn(move || {
+                let mut ctx = context(7, false);
+                ctx.stage = StageKind::Matcher;
+                run_stage(&ctx, &hub.bus(), stage, &Shutdown::default())
+            })
+        };
+        let prepared_ids = || prepared.lock().map(|p| p.clone()).unwrap_or_default();
+        let deadline = Instant::now() + Duration::from_secs(60);
+        let mut ready = false;
+        while !ready {
+            assert!(Instant::now() < deadline, "never ready");
+            ready = status
+                .receive_all()
+                .unwrap_or_else(|e| panic!("{e}"))
+                .iter()
+                .any(|r| r.payload()[0].kind() == Some(StatusKind::Ready));
+            std::thread::sleep(Duration::from_millis(2));
+        }
+        // Frames 0–2's images, one of them blank (its preparation fails): the stage
+        // prepares them while no segments are waiting.
+        for id in 0..3u64 {
+            let pixel = u8::from(id != 1);
+            frames
+                .publish(&FrameHeader::new(id, 0, 1), &[&[pixel]])
+                .unwrap_or_else(|e| panic!("{e}"));
+        }
+        while prepared_ids().len() < 2 {
+            assert!(Instant::now() < deadline, "prepared {:?}", prepared_ids());
+            std::thread::sleep(Duration::from_millis(2));
+        }
+        for id in 0..3u64 {
+            segments
+                .publish(&FrameHeader::new(id, 0, 1), &[&[SegmentRecord::default()]])
+                .unwrap_or_else(|e| panic!("{e}"));
+        }
+        let results = collect(&mut out, 3);
+        control
+            .publish(
+                &FrameHeader::default(),
+                &[&[Control::new(Command::Shutdown, StageKind::Matcher, 7, 0, 0)]],
+            )
+            .unwrap_or_else(|e| panic!("{e}"));
+        let ended = runner.join().map_err(|_| "panicked");
+        assert!(matches!(ended, Ok(Ok(()))), "{ended:?}");
+        // Each frame prepared once (the failed one not at all), then processed with its
+        // images.
+        assert_eq!(prepared_ids(), vec![0, 2]);
+        let seen: Vec<(u64, u32, i32)> = results
+            .iter()
+            .map(|m| {
+                let r = m.payload()[0];
+                (m.header().frame_id, r.has_stereo, r.previous)
+            })
+            .collect();
+        assert_eq!(seen, vec![(0, 1, 1), (1, 0, 1), (2, 1, 1)]);
     }
 }

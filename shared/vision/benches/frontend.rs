@@ -26,7 +26,8 @@ use criterion::{Criterion, criterion_group, criterion_main};
 use linetrack_geometry::MatchCase;
 use linetrack_vision::{
     DetectorKind, FrontendConfig, GrayImage, HammingMatcher, LineFeatures, MatcherKind,
-    OrbExtractor, PointFeatures, create_detector, create_segment_matcher, match_points,
+    OrbExtractor, PointFeatures, PointMatcher, create_detector, create_segment_matcher,
+    points_may_match,
 };
 use opencv::core::{Vec4f, Vector};
 use opencv::ximgproc::{self, EdgeDrawingTrait};
@@ -149,20 +150,41 @@ fn bench_frontend(c: &mut Criterion) {
     });
     orb.extract(&left, &mut p_left).expect("orb");
     orb.extract(&right, &mut p_right).expect("orb");
+    // Every pair compared (the matcher before the grid) against the grid's candidates:
+    // the same matches.
     let mut hamming = HammingMatcher::new();
-    group.bench_function("orb/match/stereo", |b| {
-        b.iter(|| {
-            match_points(
-                &mut hamming,
-                MatchCase::Stereo,
-                &p_left,
-                &p_right,
-                &config.appearance_gates,
-                config.orb.min_distance_ratio,
-                &mut out,
-            )
-        })
-    });
+    let mut point_matcher = PointMatcher::new();
+    for (case, name, second) in [
+        (MatchCase::Stereo, "stereo", &p_right),
+        (MatchCase::FrameToFrame, "frame-to-frame", &p_left),
+    ] {
+        let gates = &config.appearance_gates;
+        let admit =
+            |i: usize, j: usize| points_may_match(case, gates, p_left.points[i], second.points[j]);
+        group.bench_function(format!("orb/match/{name}/every-pair"), |b| {
+            b.iter(|| {
+                hamming.match_mutual(
+                    &p_left.descriptors,
+                    &second.descriptors,
+                    config.orb.min_distance_ratio,
+                    admit,
+                    &mut out,
+                )
+            })
+        });
+        group.bench_function(format!("orb/match/{name}/grid"), |b| {
+            b.iter(|| {
+                point_matcher.match_points(
+                    case,
+                    black_box(&p_left),
+                    black_box(second),
+                    gates,
+                    config.orb.min_distance_ratio,
+                    &mut out,
+                )
+            })
+        });
+    }
     group.finish();
 }
 

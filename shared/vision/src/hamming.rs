@@ -95,8 +95,12 @@ pub(crate) fn hamming(a: &[u8], b: &[u8]) -> u32 {
 /// Mutual-best Hamming matcher with a second-best ratio test; keeps its buffers.
 #[derive(Debug, Clone, Default)]
 pub struct HammingMatcher {
-    distances: Vec<u32>,
-    best_query_of_train: Vec<Option<usize>>,
+    /// Per first feature: its nearest admitted second feature, that distance and the
+    /// second-nearest distance.
+    nearest: Vec<(Option<usize>, u32, u32)>,
+    /// Per second feature: the distance to its nearest first feature and which one.
+    nearest_query_of_train: Vec<(u32, Option<usize>)>,
+    candidates: Vec<usize>,
 }
 
 const NO_PAIR: u32 = u32::MAX;
@@ -109,7 +113,7 @@ impl HammingMatcher {
 
     /// Replaces `out` with the pairs (i, j) such that, among the pairs `admit` allows,
     /// j is i's nearest descriptor, i is j's nearest, and i's second-nearest is at least
-    /// `min_ratio` times farther than j.
+    /// `min_ratio` times farther than j. Every pair is compared.
     pub fn match_mutual(
         &mut self,
         first: &BinaryDescriptors,
@@ -118,43 +122,73 @@ impl HammingMatcher {
         admit: impl Fn(usize, usize) -> bool,
         out: &mut Vec<FeatureMatch>,
     ) {
+        let n = second.len();
+        self.match_mutual_among(
+            first,
+            second,
+            min_ratio,
+            |_, candidates| candidates.extend(0..n),
+            admit,
+            out,
+        );
+    }
+
+    /// [`HammingMatcher::match_mutual`] comparing feature i of `first` only with the
+    /// features `candidates(i, list)` puts in the list (in any order, each once): the
+    /// caller's spatial index in place of every pair. The result is the one
+    /// `match_mutual` gives when every pair `admit` allows is among the candidates;
+    /// ties go to the lower index, as there (and a tie for the nearest fails the ratio
+    /// test, as there).
+    pub fn match_mutual_among(
+        &mut self,
+        first: &BinaryDescriptors,
+        second: &BinaryDescriptors,
+        min_ratio: f64,
+        mut candidates: impl FnMut(usize, &mut Vec<usize>),
+        admit: impl Fn(usize, usize) -> bool,
+        out: &mut Vec<FeatureMatch>,
+    ) {
         out.clear();
         let (m, n) = (first.len(), second.len());
-        self.distances.clear();
-        self.distances.resize(m * n, NO_PAIR);
+        self.nearest.clear();
+        self.nearest.resize(m, (None, NO_PAIR, NO_PAIR));
+        self.nearest_query_of_train.clear();
+        self.nearest_query_of_train.resize(n, (NO_PAIR, None));
         for i in 0..m {
             let Some(a) = first.row(i) else { continue };
-            for j in 0..n {
-                if let Some(b) = second.row(j)
-                    && a.len() == b.len()
-                    && admit(i, j)
-                {
-                    self.distances[i * n + j] = hamming(a, b);
-                }
-            }
-        }
-        self.best_query_of_train.clear();
-        self.best_query_of_train.extend((0..n).map(|j| {
-            (0..m)
-                .filter(|&i| self.distances[i * n + j] != NO_PAIR)
-                .min_by_key(|&i| self.distances[i * n + j])
-        }));
-        for i in 0..m {
-            let row = &self.distances[i * n..(i + 1) * n];
+            self.candidates.clear();
+            candidates(i, &mut self.candidates);
             let (mut best, mut best_d, mut second_d) = (None, NO_PAIR, NO_PAIR);
-            for (j, &d) in row.iter().enumerate() {
+            for &j in &self.candidates {
+                let Some(b) = second.row(j) else { continue };
+                if a.len() != b.len() || !admit(i, j) {
+                    continue;
+                }
+                let d = hamming(a, b);
                 if d < best_d {
                     second_d = best_d;
                     best_d = d;
                     best = Some(j);
-                } else if d < second_d {
-                    second_d = d;
+                } else {
+                    if d == best_d && best.is_some_and(|b| j < b) {
+                        best = Some(j);
+                    }
+                    second_d = second_d.min(d);
+                }
+                // Rows are visited in increasing i: a strict improvement keeps the
+                // lowest i among equals.
+                let of_train = &mut self.nearest_query_of_train[j];
+                if d < of_train.0 {
+                    *of_train = (d, Some(i));
                 }
             }
+            self.nearest[i] = (best, best_d, second_d);
+        }
+        for (i, &(best, best_d, second_d)) in self.nearest.iter().enumerate() {
             let Some(j) = best else { continue };
             let distinct = second_d == NO_PAIR
                 || (second_d > best_d && f64::from(second_d) >= min_ratio * f64::from(best_d));
-            if distinct && self.best_query_of_train[j] == Some(i) {
+            if distinct && self.nearest_query_of_train[j].1 == Some(i) {
                 out.push(FeatureMatch {
                     query: i,
                     train: j,

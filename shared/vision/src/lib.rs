@@ -8,8 +8,9 @@
 //!   ([`DetectorKind`]); all keep the N longest segments above a length.
 //! - [`SegmentMatcher`]: the appearance baseline LBD (line_descriptor descriptors, mutual
 //!   best + ratio test) and the geometric ℓ1 matcher behind one trait ([`MatcherKind`]).
-//! - [`OrbExtractor`] and [`HammingMatcher`]: ORB points matched mutual-best with a
-//!   second-best distance ratio, stereo and frame to frame.
+//! - [`OrbExtractor`] and [`PointMatcher`]: ORB points matched mutual-best with a
+//!   second-best distance ratio ([`HammingMatcher`]), stereo and frame to frame, among the
+//!   candidates a grid over the second image's points gives.
 //!
 //! The algorithms of `linetrack-l1-matcher` stay free of OpenCV; this crate is where the
 //! two meet. Images are not rectified here (the datasets crate does that).
@@ -39,7 +40,7 @@ pub use matchers::{
     L1SegmentMatcher, LbdSegmentMatcher, LineFeatures, MatcherKind, SegmentMatcher,
     create_segment_matcher,
 };
-pub use orb::{OrbExtractor, PointFeatures, match_points, refine_stereo_column};
+pub use orb::{OrbExtractor, PointFeatures, PointMatcher, points_may_match, refine_stereo_column};
 pub use pair::{LinePairMatcher, PairResult, PairTimings};
 
 use std::path::PathBuf;

@@ -213,8 +213,7 @@ fn orb_points_match_at_the_true_disparity() {
     orb.extract(&right, &mut b).unwrap();
     assert!(a.points.len() > 50 && a.descriptors.count_present() == a.points.len());
     let mut out = Vec::new();
-    match_points(
-        &mut HammingMatcher::new(),
+    PointMatcher::new().match_points(
         MatchCase::Stereo,
         &a,
         &b,
@@ -652,4 +651,105 @@ fn a_pgm_is_scaled_by_its_own_maxval() {
         );
         let _ = std::fs::remove_file(path);
     }
+}
+
+#[test]
+fn point_grid_finds_exactly_the_matches_of_comparing_every_pair() {
+    // 1500 ORB points a side on a real EuRoC pair, stereo and frame to frame (the right
+    // image standing in for the next frame), wide and narrow windows: the matcher that
+    // compares only the grid's candidates returns the very matches of the one comparing
+    // every pair the gates admit.
+    let (left, right) = euroc_stereo_pair(0).unwrap_or_else(|e| panic!("{e}"));
+    let (left, right) = (
+        GrayImage::load(&left).unwrap(),
+        GrayImage::load(&right).unwrap(),
+    );
+    let options = OrbOptions {
+        features: 1500,
+        ..OrbOptions::default()
+    };
+    let mut orb = OrbExtractor::new(&options).unwrap();
+    let (mut a, mut b) = (PointFeatures::default(), PointFeatures::default());
+    orb.extract(&left, &mut a).unwrap();
+    orb.extract(&right, &mut b).unwrap();
+    assert!(a.points.len() > 1000 && b.points.len() > 1000);
+    let (mut grid, mut every_pair) = (PointMatcher::new(), HammingMatcher::new());
+    let (mut from_grid, mut from_every_pair) = (Vec::new(), Vec::new());
+    let mut compared = 0;
+    for (case, gates) in [
+        (MatchCase::Stereo, AppearanceGates::default()),
+        (
+            MatchCase::Stereo,
+            AppearanceGates {
+                max_row_difference_px: 0.5,
+                min_disparity_px: 3.0,
+                max_disparity_px: 40.0,
+                ..AppearanceGates::default()
+            },
+        ),
+        (MatchCase::FrameToFrame, AppearanceGates::default()),
+        (
+            MatchCase::FrameToFrame,
+            AppearanceGates {
+                max_displacement_px: 7.5,
+                ..AppearanceGates::default()
+            },
+        ),
+        (
+            MatchCase::FrameToFrame,
+            AppearanceGates {
+                max_displacement_px: 2000.0,
+                ..AppearanceGates::default()
+            },
+        ),
+    ] {
+        grid.match_points(case, &a, &b, &gates, 1.25, &mut from_grid);
+        every_pair.match_mutual(
+            &a.descriptors,
+            &b.descriptors,
+            1.25,
+            |i, j| points_may_match(case, &gates, a.points[i], b.points[j]),
+            &mut from_every_pair,
+        );
+        assert_eq!(from_grid, from_every_pair, "{case:?} {gates:?}");
+        compared += from_grid.len();
+    }
+    assert!(compared > 200, "{compared} matches in all");
+}
+
+#[test]
+fn point_grid_skips_non_finite_points_and_an_empty_side() {
+    let mut orb = OrbExtractor::new(&OrbOptions::default()).unwrap();
+    let (left, _) = euroc_stereo_pair(0).unwrap_or_else(|e| panic!("{e}"));
+    let left = GrayImage::load(&left).unwrap();
+    let mut a = PointFeatures::default();
+    orb.extract(&left, &mut a).unwrap();
+    let mut b = a.clone();
+    // A corrupt position never matches, and the rest still match themselves.
+    b.points[0] = linetrack_geometry::Point::new(f64::NAN, 3.0);
+    b.points[1] = linetrack_geometry::Point::new(f64::INFINITY, f64::NEG_INFINITY);
+    let gates = AppearanceGates {
+        max_displacement_px: 1.0,
+        ..AppearanceGates::default()
+    };
+    let mut out = Vec::new();
+    let mut matcher = PointMatcher::new();
+    matcher.match_points(MatchCase::FrameToFrame, &a, &b, &gates, 1.0, &mut out);
+    assert!(out.iter().all(|m| m.train > 1));
+    assert!(
+        out.len() > a.points.len() / 2,
+        "{} of {}",
+        out.len(),
+        a.points.len()
+    );
+    // No points at all on one side.
+    matcher.match_points(
+        MatchCase::Stereo,
+        &a,
+        &PointFeatures::default(),
+        &gates,
+        1.0,
+        &mut out,
+    );
+    assert!(out.is_empty());
 }

@@ -9,8 +9,8 @@ use clap::{Parser, ValueEnum};
 use linetrack_draw::{Side, SideBySide, palette, segment_matches};
 use linetrack_geometry::{MatchCase, Point, Segment};
 use linetrack_vision::{
-    DetectorKind, FeatureMatch, FrontendConfig, GrayImage, HammingMatcher, LineFeatures,
-    LinePairMatcher, MatcherKind, OrbExtractor, PairTimings, PointFeatures, match_points, perturb,
+    DetectorKind, FeatureMatch, FrontendConfig, GrayImage, LineFeatures, LinePairMatcher,
+    MatcherKind, OrbExtractor, PairTimings, PointFeatures, PointMatcher, perturb,
 };
 use serde::Serialize;
 use std::fmt::Write as _;
@@ -170,8 +170,7 @@ pub fn run(args: &Args) -> anyhow::Result<String> {
         orb.extract(&first, &mut a)?;
         orb.extract(&second, &mut b)?;
         let gates = &config.appearance_gates;
-        match_points(
-            &mut HammingMatcher::new(),
+        PointMatcher::new().match_points(
             args.mode.case(),
             &a,
             &b,
