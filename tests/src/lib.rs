@@ -121,7 +121,8 @@ pub struct Run {
 }
 
 /// Writes a pipeline config for `sequence` into `dir` with `extra` TOML appended to the
-/// test defaults (10 Hz, quick supervision), and starts `linetrack run` on it.
+/// test defaults (LSD, the LBD→ℓ1 policy, 10 Hz, quick supervision), and starts
+/// `linetrack run` on it.
 pub fn start(dir: &Path, sequence: &Path, extra: &str) -> Run {
     let prefix = format!(
         "lte2e{}_{}_",
@@ -149,8 +150,10 @@ fn launch(dir: &Path, sequence: &Path, extra: &str, prefix: &str, args: &[&str])
     let prefix = prefix.to_string();
     let run_dir = dir.join("run");
     let config = dir.join("pipeline.toml");
+    // The tests check LSD's hot swap to FLD and LBD's fallback to l1: they pin the detector
+    // and the matcher policy (the shipped defaults are edgelines and l1).
     let text = format!(
-        "{extra}\n[source]\nsequence = {:?}\nrate_hz = 10.0\n[output]\nrun_dir = {:?}\n",
+        "detector = \"lsd\"\n[matcher]\nmode = \"auto\"\n{extra}\n[source]\nsequence = {:?}\nrate_hz = 10.0\n[output]\nrun_dir = {:?}\n",
         sequence.display().to_string(),
         run_dir.display().to_string()
     );

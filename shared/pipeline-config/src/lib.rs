@@ -152,7 +152,7 @@ impl MatcherConfig {
 impl Default for MatcherConfig {
     fn default() -> Self {
         Self {
-            mode: MatcherPolicy::Auto,
+            mode: MatcherPolicy::L1,
             fallback: FallbackConfig::default(),
         }
     }
@@ -180,11 +180,11 @@ pub struct BudgetConfig {
 impl Default for BudgetConfig {
     fn default() -> Self {
         Self {
-            end_to_end_ms: 250.0,
+            end_to_end_ms: 100.0,
             frame_source_ms: 30.0,
-            line_detector_ms: 80.0,
-            matcher_ms: 80.0,
-            pose_estimator_ms: 60.0,
+            line_detector_ms: 50.0,
+            matcher_ms: 50.0,
+            pose_estimator_ms: 50.0,
             drop_late: true,
         }
     }
@@ -335,7 +335,7 @@ impl Default for PipelineConfig {
     fn default() -> Self {
         Self {
             source: SourceConfig::default(),
-            detector: DetectorKind::Lsd,
+            detector: DetectorKind::EdgeLines,
             detect_sides_in_parallel: false,
             matcher: MatcherConfig::default(),
             budget: BudgetConfig::default(),

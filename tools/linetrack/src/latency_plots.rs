@@ -325,13 +325,21 @@ mod tests {
             "events without a frame are not placed"
         );
         assert_eq!(chart.references.len(), 1);
-        assert_eq!(chart.references[0].y, 250.0);
+        assert_eq!(
+            chart.references[0].y,
+            BudgetConfig::default().end_to_end_ms
+        );
     }
 
     #[test]
     fn distributions_mark_p50_p99_and_each_stage_budget() {
         let (frames, _) = run();
-        let plot = distributions_of(&frames, Some(&BudgetConfig::default()));
+        let budget = BudgetConfig {
+            line_detector_ms: 80.0,
+            end_to_end_ms: 250.0,
+            ..BudgetConfig::default()
+        };
+        let plot = distributions_of(&frames, Some(&budget));
         let names: Vec<&str> = plot.rows.iter().map(|r| r.name.as_str()).collect();
         assert_eq!(
             names,
