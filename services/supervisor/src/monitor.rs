@@ -107,6 +107,21 @@ fn stage_ms(header: &FrameHeader, i: usize) -> f64 {
     }
 }
 
+/// Milliseconds between the stage before stage `i` publishing the frame (its capture, for
+/// the source) and stage `i` taking it; NaN when either stamp is missing.
+fn wait_ms(header: &FrameHeader, i: usize) -> f64 {
+    let ready = match i {
+        0 => header.capture_ns,
+        _ => header.stamps[i - 1].end_ns,
+    };
+    let taken = header.stamps[i].start_ns;
+    if ready == 0 || taken == 0 || taken < ready {
+        f64::NAN
+    } else {
+        (taken - ready) as f64 * 1e-6
+    }
+}
+
 impl Monitor {
     /// A monitor for a run of `config` starting at frame `first_frame`, recording into
     /// `run_dir` (its record files are created, empty, now).
@@ -195,10 +210,8 @@ impl Monitor {
             FrameStatus::Ok => "pose",
             other => other.name(),
         };
-        let mut stage = [f64::NAN; 4];
-        for (i, slot) in stage.iter_mut().enumerate() {
-            *slot = stage_ms(header, i);
-        }
+        let stage: [f64; 4] = std::array::from_fn(|i| stage_ms(header, i));
+        let wait: [f64; 4] = std::array::from_fn(|i| wait_ms(header, i));
         let pose_end = header.stamps[3].end_ns;
         let end_to_end_ms = if pose_end >= header.capture_ns && header.capture_ns > 0 {
             header.age_ms(pose_end)
@@ -221,6 +234,7 @@ impl Monitor {
                     .unwrap_or_default()
             },
             stage_ms: stage,
+            wait_ms: wait,
             end_to_end_ms,
             matcher: if status == FrameStatus::Ok {
                 MatcherMode::from_code(header.matcher_mode)
@@ -476,6 +490,32 @@ mod tests {
 
     fn scratch(name: &str) -> PathBuf {
         linetrack_test_data::scratch_dir("supervisor", name).unwrap_or_else(|e| panic!("{e}"))
+    }
+
+    #[test]
+    fn each_stage_waits_from_the_stage_before_publishing_to_taking_the_frame() {
+        let ms = |v: f64| (v * 1e6) as u64;
+        let mut header = FrameHeader::new(7, 0, ms(1.0));
+        for (stamp, [start, end]) in header.stamps.iter_mut().zip([
+            [1.0, 2.0],
+            [3.0, 10.0],
+            [10.5, 12.0],
+            [15.0, 20.0],
+        ]) {
+            stamp.start_ns = ms(start);
+            stamp.end_ns = ms(end);
+        }
+        let waits: Vec<f64> = (0..4).map(|i| wait_ms(&header, i)).collect();
+        let expected = [0.0, 1.0, 0.5, 3.0];
+        assert!(
+            waits.iter().zip(expected).all(|(w, e)| (w - e).abs() < 1e-9),
+            "{waits:?}"
+        );
+        // A stage that never took the frame, or stamps out of order: no wait.
+        header.stamps[2].start_ns = 0;
+        assert!(wait_ms(&header, 2).is_nan());
+        header.stamps[3].start_ns = ms(11.0);
+        assert!(wait_ms(&header, 3).is_nan());
     }
 
     fn pose_of(monitor: &mut Monitor, frame_id: u64) {

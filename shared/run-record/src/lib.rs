@@ -58,6 +58,10 @@ pub struct FrameRecord {
     /// Per stage in [`STAGES`] order: milliseconds from taking the frame to publishing
     /// (NaN when the stage did not handle it).
     pub stage_ms: [f64; 4],
+    /// Per stage in [`STAGES`] order: milliseconds from the stage before it publishing the
+    /// frame (the frame's capture, for the source) to this stage taking it — transport and
+    /// the time the frame queued while the stage was busy (NaN when not handled).
+    pub wait_ms: [f64; 4],
     /// Capture to pose published, milliseconds (NaN for a missing frame).
     pub end_to_end_ms: f64,
     /// Matcher mode used: `lbd`, `l1` or empty.
@@ -80,6 +84,7 @@ impl FrameRecord {
             outcome: "missing".to_string(),
             dropped_by: String::new(),
             stage_ms: [f64::NAN; 4],
+            wait_ms: [f64::NAN; 4],
             end_to_end_ms: f64::NAN,
             matcher: String::new(),
             detector: String::new(),
@@ -110,7 +115,7 @@ pub struct EventRecord {
     pub detail: String,
 }
 
-const FRAME_HEADER: &str = "frame_id,outcome,dropped_by,frame_source_ms,line_detector_ms,matcher_ms,pose_estimator_ms,end_to_end_ms,matcher,detector,stereo_matches,tracked_matches,deadline_miss";
+const FRAME_HEADER: &str = "frame_id,outcome,dropped_by,frame_source_ms,line_detector_ms,matcher_ms,pose_estimator_ms,end_to_end_ms,matcher,detector,stereo_matches,tracked_matches,deadline_miss,frame_source_wait_ms,line_detector_wait_ms,matcher_wait_ms,pose_estimator_wait_ms";
 const EVENT_HEADER: &str = "time_s,kind,stage,frame_id,detail";
 
 /// Milliseconds and seconds are written to the microsecond / millisecond: 3 decimals.
@@ -141,6 +146,10 @@ struct FrameRow {
     tracked_matches: u32,
     /// 0 or 1.
     deadline_miss: u8,
+    frame_source_wait_ms: Option<f64>,
+    line_detector_wait_ms: Option<f64>,
+    matcher_wait_ms: Option<f64>,
+    pose_estimator_wait_ms: Option<f64>,
 }
 
 impl From<&FrameRecord> for FrameRow {
@@ -159,6 +168,10 @@ impl From<&FrameRecord> for FrameRow {
             stereo_matches: f.stereo_matches,
             tracked_matches: f.tracked_matches,
             deadline_miss: u8::from(f.deadline_miss),
+            frame_source_wait_ms: ms(f.wait_ms[0]),
+            line_detector_wait_ms: ms(f.wait_ms[1]),
+            matcher_wait_ms: ms(f.wait_ms[2]),
+            pose_estimator_wait_ms: ms(f.wait_ms[3]),
         }
     }
 }
@@ -180,6 +193,12 @@ impl FrameRow {
                 latency(self.line_detector_ms, "line_detector_ms")?,
                 latency(self.matcher_ms, "matcher_ms")?,
                 latency(self.pose_estimator_ms, "pose_estimator_ms")?,
+            ],
+            wait_ms: [
+                latency(self.frame_source_wait_ms, "frame_source_wait_ms")?,
+                latency(self.line_detector_wait_ms, "line_detector_wait_ms")?,
+                latency(self.matcher_wait_ms, "matcher_wait_ms")?,
+                latency(self.pose_estimator_wait_ms, "pose_estimator_wait_ms")?,
             ],
             end_to_end_ms: latency(self.end_to_end_ms, "end_to_end_ms")?,
             matcher: self.matcher,
@@ -758,6 +777,7 @@ mod tests {
             outcome: outcome.to_string(),
             end_to_end_ms: e2e,
             stage_ms: [1.0, 2.0, 3.0, 4.0],
+            wait_ms: [0.0, 0.5, 0.25, 0.125],
             matcher: "lbd".into(),
             detector: "lsd".into(),
             ..FrameRecord::missing(id)
@@ -895,13 +915,14 @@ mod tests {
         assert!(report.to_text().contains("dropped missing: 1"));
         // A damaged file names the line and the column.
         for (rows, wants) in [
-            ("0,pose,,x,,,,,,,0,0,0\n", "bad.csv:2: frame_source_ms"),
+            ("0,pose,,x,,,,,,,0,0,0,,,,\n", "bad.csv:2: frame_source_ms"),
             (
-                "0,pose,,,,,,,,,0,0,0\n1,pose,,,,,,inf,,,0,0,0\n",
+                "0,pose,,,,,,,,,0,0,0,,,,\n1,pose,,,,,,inf,,,0,0,0,,,,\n",
                 "bad.csv:3: end_to_end_ms",
             ),
-            ("0,pose,,,,,,,,,0,0,2\n", "bad.csv:2: deadline_miss"),
-            ("0,pose,,,,,,,,,0,0\n", "bad.csv:2"),
+            ("0,pose,,,,,,,,,0,0,2,,,,\n", "bad.csv:2: deadline_miss"),
+            ("0,pose,,,,,,,,,0,0,0,,,nan,\n", "bad.csv:2: matcher_wait_ms"),
+            ("0,pose,,,,,,,,,0,0,0,,,\n", "bad.csv:2"),
         ] {
             std::fs::write(dir.join("bad.csv"), format!("{FRAME_HEADER}\n{rows}"))
                 .unwrap_or_else(|e| panic!("{e}"));

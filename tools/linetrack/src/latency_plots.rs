@@ -237,6 +237,7 @@ mod tests {
             outcome: outcome.to_string(),
             dropped_by: String::new(),
             stage_ms,
+            wait_ms: [0.0; 4],
             end_to_end_ms: stage_ms.iter().copied().filter(|v| v.is_finite()).sum(),
             matcher: "lbd".to_string(),
             detector: "lsd".to_string(),
