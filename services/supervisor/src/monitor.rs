@@ -496,19 +496,22 @@ mod tests {
     fn each_stage_waits_from_the_stage_before_publishing_to_taking_the_frame() {
         let ms = |v: f64| (v * 1e6) as u64;
         let mut header = FrameHeader::new(7, 0, ms(1.0));
-        for (stamp, [start, end]) in header.stamps.iter_mut().zip([
-            [1.0, 2.0],
-            [3.0, 10.0],
-            [10.5, 12.0],
-            [15.0, 20.0],
-        ]) {
+        for (stamp, [start, end]) in
+            header
+                .stamps
+                .iter_mut()
+                .zip([[1.0, 2.0], [3.0, 10.0], [10.5, 12.0], [15.0, 20.0]])
+        {
             stamp.start_ns = ms(start);
             stamp.end_ns = ms(end);
         }
         let waits: Vec<f64> = (0..4).map(|i| wait_ms(&header, i)).collect();
         let expected = [0.0, 1.0, 0.5, 3.0];
         assert!(
-            waits.iter().zip(expected).all(|(w, e)| (w - e).abs() < 1e-9),
+            waits
+                .iter()
+                .zip(expected)
+                .all(|(w, e)| (w - e).abs() < 1e-9),
             "{waits:?}"
         );
         // A stage that never took the frame, or stamps out of order: no wait.

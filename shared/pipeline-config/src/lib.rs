@@ -138,14 +138,32 @@ pub struct MatcherConfig {
     pub fallback: FallbackConfig,
 }
 
-impl MatcherConfig {
-    /// `auto`, `lbd` or `l1`.
-    pub fn mode_name(&self) -> &'static str {
-        match self.mode {
+impl MatcherPolicy {
+    /// `auto`, `lbd` or `l1`, as in configs and on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
             MatcherPolicy::Auto => "auto",
             MatcherPolicy::Lbd => "lbd",
             MatcherPolicy::L1 => "l1",
         }
+    }
+}
+
+impl std::str::FromStr for MatcherPolicy {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, String> {
+        [MatcherPolicy::L1, MatcherPolicy::Lbd, MatcherPolicy::Auto]
+            .into_iter()
+            .find(|p| p.name() == s)
+            .ok_or_else(|| format!("{s:?}: expected l1, lbd or auto"))
+    }
+}
+
+impl MatcherConfig {
+    /// `auto`, `lbd` or `l1`.
+    pub fn mode_name(&self) -> &'static str {
+        self.mode.name()
     }
 }
 

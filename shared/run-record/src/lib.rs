@@ -921,7 +921,10 @@ mod tests {
                 "bad.csv:3: end_to_end_ms",
             ),
             ("0,pose,,,,,,,,,0,0,2,,,,\n", "bad.csv:2: deadline_miss"),
-            ("0,pose,,,,,,,,,0,0,0,,,nan,\n", "bad.csv:2: matcher_wait_ms"),
+            (
+                "0,pose,,,,,,,,,0,0,0,,,nan,\n",
+                "bad.csv:2: matcher_wait_ms",
+            ),
             ("0,pose,,,,,,,,,0,0,0,,,\n", "bad.csv:2"),
         ] {
             std::fs::write(dir.join("bad.csv"), format!("{FRAME_HEADER}\n{rows}"))

@@ -18,7 +18,7 @@ use std::time::Duration;
 use tracing::info_span;
 
 /// How many frames from the next one to process [`Stage::prepare`] may run ahead.
-const PREPARED_AHEAD: u64 = 2;
+const PREPARED_AHEAD: u64 = 1;
 
 /// One processing stage's per-frame work.
 pub trait Stage {
@@ -57,7 +57,7 @@ pub trait Stage {
     /// Work on a frame's images that need not wait for its input (the pose estimator's
     /// corners): called once per frame whose images arrived before its input, when no
     /// input is waiting, so that it runs while the stages upstream work on the same frame
-    /// (for the next two frames to process only).
+    /// (for the next frame to process only).
     /// [`Stage::process`] must still work for a frame that was not prepared. An error is
     /// logged and the frame goes on to `process`.
     fn prepare(&mut self, _header: &FrameHeader, _images: &Received<u8>) -> anyhow::Result<()> {
@@ -286,9 +286,10 @@ impl<S: Stage> Runner<'_, S> {
         Ok(full)
     }
 
-    /// Prepares the held images of the next frame to process and of the one after it, if
-    /// not done yet. Frames further ahead are left alone: when the stages upstream lag that
-    /// far they drop frames, and preparing those would take the processor from them.
+    /// Prepares the held images of the next frame to process, if not done yet. Frames
+    /// further ahead are left alone: when the stages upstream lag they drop frames, and
+    /// preparing those would take the processor from them (and a frame whose input arrives
+    /// while a later one is being prepared would wait for it).
     fn prepare_held(&mut self) {
         let from = self.next_unprepared.max(self.next_unpublished);
         let until = self.next_unpublished.saturating_add(PREPARED_AHEAD);
@@ -608,7 +609,7 @@ mod tests {
             std::thread::sleep(Duration::from_millis(2));
         }
         // Frames 0–3's images, frame 1's blank (its preparation fails): the stage prepares
-        // the next two while no segments are waiting, not the ones after.
+        // the next frame to process while no segments are waiting, not the ones after.
         for id in 0..4u64 {
             let pixel = u8::from(id != 1);
             frames
@@ -619,21 +620,25 @@ mod tests {
             assert!(Instant::now() < deadline, "prepared {:?}", prepared_ids());
             std::thread::sleep(Duration::from_millis(2));
         }
-        // Frame 0's segments: frames 2 is prepared next (frame 1 was tried).
-        segments
-            .publish(&FrameHeader::new(0, 0, 1), &[&[SegmentRecord::default()]])
-            .unwrap_or_else(|e| panic!("{e}"));
-        let mut results = collect(&mut out, 1);
+        // Frame 0's segments, then frame 1's (frame 1 was tried once 0 was done): frame 2
+        // is prepared next.
+        let mut results = Vec::new();
+        for id in 0..2u64 {
+            segments
+                .publish(&FrameHeader::new(id, 0, 1), &[&[SegmentRecord::default()]])
+                .unwrap_or_else(|e| panic!("{e}"));
+            results.extend(collect(&mut out, 1));
+        }
         while prepared_ids().len() < 2 {
             assert!(Instant::now() < deadline, "prepared {:?}", prepared_ids());
             std::thread::sleep(Duration::from_millis(2));
         }
-        for id in 1..4u64 {
+        for id in 2..4u64 {
             segments
                 .publish(&FrameHeader::new(id, 0, 1), &[&[SegmentRecord::default()]])
                 .unwrap_or_else(|e| panic!("{e}"));
         }
-        results.extend(collect(&mut out, 3));
+        results.extend(collect(&mut out, 2));
         control
             .publish(
                 &FrameHeader::default(),
@@ -642,8 +647,8 @@ mod tests {
             .unwrap_or_else(|e| panic!("{e}"));
         let ended = runner.join().map_err(|_| "panicked");
         assert!(matches!(ended, Ok(Ok(()))), "{ended:?}");
-        // Frames prepared once each, two at most ahead (the failed one not at all; frame 3
-        // maybe, if its turn came before its segments), then processed with their images.
+        // Frames prepared once each, one ahead (the failed one not at all; frame 3 maybe,
+        // if its turn came before its segments), then processed with their images.
         let ids = prepared_ids();
         assert!(
             ids == vec![0, 2] || ids == vec![0, 2, 3],

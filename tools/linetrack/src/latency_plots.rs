@@ -326,10 +326,7 @@ mod tests {
             "events without a frame are not placed"
         );
         assert_eq!(chart.references.len(), 1);
-        assert_eq!(
-            chart.references[0].y,
-            BudgetConfig::default().end_to_end_ms
-        );
+        assert_eq!(chart.references[0].y, BudgetConfig::default().end_to_end_ms);
     }
 
     #[test]

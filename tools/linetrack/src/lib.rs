@@ -13,7 +13,7 @@ use anyhow::{Context, bail};
 use clap::{Parser, Subcommand};
 use linetrack_ipc::{Bus, Scope, Shutdown};
 use linetrack_msgs::{Command, Control, FrameHeader, StageKind, Topic};
-use linetrack_pipeline_config::{Pacing, PipelineConfig};
+use linetrack_pipeline_config::{MatcherPolicy, Pacing, PipelineConfig};
 use linetrack_run_record::{Report, read_events, read_frames};
 use linetrack_scene_render::Preset;
 use linetrack_supervisor::{LiveStatus, Mode, RunOptions};
@@ -75,9 +75,12 @@ pub struct RunArgs {
     /// realtime (the sequence's rate) or fastest.
     #[arg(long)]
     pub pacing: Option<String>,
-    /// Start with this detector (lsd, fld or edgelines).
+    /// Start with this detector (edgelines, lsd or fld).
     #[arg(long)]
     pub detector: Option<DetectorKind>,
+    /// Matcher policy: l1, lbd, or auto (LBD falling back to l1).
+    #[arg(long)]
+    pub matcher: Option<MatcherPolicy>,
     /// Run folder (default: a new dated folder under the config's `output.runs_dir`, with
     /// `latest` pointing at it).
     #[arg(long)]
@@ -154,6 +157,9 @@ pub fn effective_config(args: &RunArgs) -> anyhow::Result<PipelineConfig> {
     }
     if let Some(detector) = args.detector {
         config.detector = detector;
+    }
+    if let Some(policy) = args.matcher {
+        config.matcher.mode = policy;
     }
     if let Some(dir) = &args.run_dir {
         config.output.run_dir = Some(dir.clone());

@@ -8,10 +8,12 @@ use anyhow::{Context, bail};
 use clap::Parser;
 use linetrack_ipc::{Bus, Scope, Shutdown};
 use linetrack_msgs::{FrameHeader, PoseRecord, StageKind, Topic, now_ns};
-use linetrack_pipeline_config::{Pacing, PipelineConfig};
-use linetrack_run_record::{Percentiles, read_frames};
+use linetrack_odometry::Features;
+use linetrack_pipeline_config::{MatcherPolicy, Pacing, PipelineConfig};
+use linetrack_run_record::{FrameRecord, Percentiles, read_frames};
 use linetrack_scene_render::Preset;
 use linetrack_supervisor::{Mode, RunOptions};
+use linetrack_vision::DetectorKind;
 use std::fmt::Write as _;
 use std::path::PathBuf;
 use std::process::{Command, ExitCode, Stdio};
@@ -19,7 +21,18 @@ use std::time::{Duration, Instant};
 
 /// Benchmarks the pipeline's transport and end-to-end latency.
 #[derive(Parser)]
-#[command(after_help = "Writes the tables to stdout and to <output>/pipeline-bench.md.")]
+#[command(
+    after_help = "Writes the tables to stdout and to <output>/pipeline-bench.md.
+
+EXAMPLES:
+    linetrack-pipeline-bench --sequence ../shared/data/euroc/V1_01_easy_micro --frames 95
+    linetrack-pipeline-bench --sequence ../shared/data/euroc/V1_01_easy_micro --detector lsd --matcher lbd
+
+The critical path: a frame's end-to-end latency is the sum, over the four stages, of the time
+it waited before the stage took it (transport, and queueing while the stage was busy with an
+earlier frame) and the stage's own work on it. For each frame the largest of these eight parts
+is its bottleneck; the table counts the frames per bottleneck."
+)]
 struct Args {
     /// Round trips per transport for the hop cost.
     #[arg(long, default_value_t = 500)]
@@ -30,9 +43,19 @@ struct Args {
     /// Pipeline runs per mode (alternating).
     #[arg(long, default_value_t = 2)]
     repeats: usize,
-    /// Generated sequence to use (rendered if missing).
+    /// Generated sequence to use (rendered if missing), or any EuRoC / KITTI sequence folder
+    /// (e.g. ../shared/data/euroc/V1_01_easy_micro).
     #[arg(long, default_value = "out/sequences/pipeline")]
     sequence: PathBuf,
+    /// Pipeline config to run with (default: the built-in defaults, as configs/pipeline.toml).
+    #[arg(long)]
+    config: Option<PathBuf>,
+    /// Line detector, overriding the config's: edgelines, lsd or fld.
+    #[arg(long)]
+    detector: Option<DetectorKind>,
+    /// Matcher policy, overriding the config's: l1, lbd or auto.
+    #[arg(long)]
+    matcher: Option<MatcherPolicy>,
     /// Output folder.
     #[arg(long, default_value = "out/bench")]
     output: PathBuf,
@@ -178,6 +201,41 @@ fn hop_local(round_trips: usize) -> anyhow::Result<Vec<f64>> {
     result
 }
 
+/// The eight parts of the frames' end-to-end paths (waiting for and working in each
+/// stage): how many frames each was the largest part of, and its mean share of the frame's
+/// end to end, in path order.
+fn bottlenecks(frames: &[&FrameRecord]) -> Vec<(String, usize, f64)> {
+    let mut parts: Vec<(String, usize, f64)> = linetrack_run_record::STAGES
+        .iter()
+        .flat_map(|name| [format!("waiting for {name}"), format!("{name} working")])
+        .map(|part| (part, 0, 0.0))
+        .collect();
+    let mut counted = 0;
+    for f in frames {
+        let values: Vec<f64> = (0..4).flat_map(|i| [f.wait_ms[i], f.stage_ms[i]]).collect();
+        let total: f64 = values.iter().filter(|v| v.is_finite()).sum();
+        if total <= 0.0 {
+            continue;
+        }
+        counted += 1;
+        let largest = (0..values.len())
+            .filter(|&k| values[k].is_finite())
+            .max_by(|&a, &b| values[a].total_cmp(&values[b]));
+        if let Some(k) = largest {
+            parts[k].1 += 1;
+        }
+        for (part, v) in parts.iter_mut().zip(&values) {
+            if v.is_finite() {
+                part.2 += v / total;
+            }
+        }
+    }
+    for part in &mut parts {
+        part.2 /= f64::from(counted.max(1));
+    }
+    parts
+}
+
 fn row(out: &mut String, name: &str, p: &Percentiles, unit: &str) {
     let _ = writeln!(
         out,
@@ -228,7 +286,8 @@ fn bench(args: &Args) -> anyhow::Result<()> {
         shm.p50 / local.p50
     );
 
-    if !args.sequence.join("mav0/cam0/data.csv").is_file() {
+    let is_dataset = args.sequence.join("mav0").is_dir() || args.sequence.join("image_0").is_dir();
+    if !is_dataset {
         eprintln!(
             "generating {} ({} frames)",
             args.sequence.display(),
@@ -242,12 +301,20 @@ fn bench(args: &Args) -> anyhow::Result<()> {
             false,
         )?;
     }
-    let mut e2e: [Vec<f64>; 2] = [Vec::new(), Vec::new()];
-    let mut stage: [Vec<Vec<f64>>; 2] = [vec![Vec::new(); 4], vec![Vec::new(); 4]];
-    let mut drops = [0usize; 2];
+    let mut base = match &args.config {
+        Some(path) => PipelineConfig::from_file(path)?,
+        None => PipelineConfig::default(),
+    };
+    if let Some(detector) = args.detector {
+        base.detector = detector;
+    }
+    if let Some(policy) = args.matcher {
+        base.matcher.mode = policy;
+    }
+    let mut runs: [Vec<FrameRecord>; 2] = [Vec::new(), Vec::new()];
     for repeat in 0..args.repeats {
         for (m, mode) in [Mode::Processes, Mode::Threads].into_iter().enumerate() {
-            let mut config = PipelineConfig::default();
+            let mut config = base.clone();
             config.source.sequence = args.sequence.clone();
             config.source.max_frames = args.frames;
             config.source.pacing = Pacing::Realtime;
@@ -266,56 +333,84 @@ fn bench(args: &Args) -> anyhow::Result<()> {
                 },
                 &Shutdown::default(),
             )?;
-            let frames = read_frames(&outcome.run_dir.join("frames.csv"))?;
-            for f in &frames {
-                if f.has_pose() {
-                    e2e[m].push(f.end_to_end_ms);
-                    for (i, ms) in f.stage_ms.iter().enumerate() {
-                        stage[m][i].push(*ms);
-                    }
-                } else {
-                    drops[m] += 1;
-                }
-            }
+            runs[m].extend(read_frames(&outcome.run_dir.join("frames.csv"))?);
         }
     }
     let _ = writeln!(
         out,
-        "## End to end, {} frames × {} runs per mode, {WIDTH}×{HEIGHT} stereo at 20 Hz (generated `normal`), LSD + LBD, points and lines, ms\n",
-        args.frames, args.repeats
-    );
-    let _ = writeln!(
-        out,
-        "| mode | stage | n | p50 | p90 | p99 | max |\n|---|---|---|---|---|---|---|"
+        "## End to end, {} frames × {} runs per mode, `{}` at its own rate, {} + {}, {}, ms\n",
+        args.frames,
+        args.repeats,
+        args.sequence.display(),
+        base.detector.name(),
+        base.matcher.mode.name(),
+        match base.odometry.features {
+            Features::PointsAndLines => "points and lines",
+            Features::LinesOnly => "lines only",
+        }
     );
     let names = [
         "one process per stage (iceoryx2)",
         "one process, threads (channels)",
     ];
     let mut medians = [f64::NAN; 2];
-    for m in 0..2 {
-        for (i, name) in linetrack_run_record::STAGES.iter().enumerate() {
-            if let Some(p) = Percentiles::of(stage[m][i].iter().copied()) {
-                let _ = writeln!(
-                    out,
-                    "| {} | {name} | {} | {:.2} | {:.2} | {:.2} | {:.2} |",
-                    names[m], p.count, p.p50, p.p90, p.p99, p.max
-                );
-            }
-        }
-        let p = Percentiles::of(e2e[m].iter().copied()).context("no frame reached the end")?;
-        medians[m] = p.p50;
+    for (m, frames) in runs.iter().enumerate() {
+        let _ = writeln!(out, "### {}\n", names[m]);
         let _ = writeln!(
             out,
-            "| {} | **end to end** | {} | {:.2} | {:.2} | {:.2} | {:.2} |",
-            names[m], p.count, p.p50, p.p90, p.p99, p.max
+            "| stage | n | work p50 | work p99 | waited p50 | waited p99 | deadline misses |\n|---|---|---|---|---|---|---|"
         );
+        let posed: Vec<&FrameRecord> = frames.iter().filter(|f| f.has_pose()).collect();
+        let budget = &base.budget;
+        for (i, name) in linetrack_run_record::STAGES.iter().enumerate() {
+            let work = Percentiles::of(posed.iter().map(|f| f.stage_ms[i]));
+            let waited = Percentiles::of(posed.iter().map(|f| f.wait_ms[i]));
+            let misses = budget
+                .stage_ms(name)
+                .map_or(0, |b| posed.iter().filter(|f| f.stage_ms[i] > b).count());
+            let cell = |p: &Option<Percentiles>, f: fn(&Percentiles) -> f64| {
+                p.as_ref()
+                    .map_or("–".to_string(), |p| format!("{:.2}", f(p)))
+            };
+            let _ = writeln!(
+                out,
+                "| {name} | {} | {} | {} | {} | {} | {misses} |",
+                work.as_ref().map_or(0, |p| p.count),
+                cell(&work, |p| p.p50),
+                cell(&work, |p| p.p99),
+                cell(&waited, |p| p.p50),
+                cell(&waited, |p| p.p99),
+            );
+        }
+        let p = Percentiles::of(posed.iter().map(|f| f.end_to_end_ms))
+            .context("no frame reached the end")?;
+        medians[m] = p.p50;
+        let e2e_misses = posed
+            .iter()
+            .filter(|f| f.end_to_end_ms > budget.end_to_end_ms)
+            .count();
+        let _ = writeln!(
+            out,
+            "| **end to end** | {} | {:.2} | {:.2} | | | {e2e_misses} |",
+            p.count, p.p50, p.p99
+        );
+        let dropped = frames.len() - posed.len();
+        let _ = writeln!(
+            out,
+            "\nframes: {} with a pose, {dropped} dropped or missing; end to end p90 {:.2}, max {:.2} ms\n",
+            posed.len(),
+            p.p90,
+            p.max
+        );
+        let _ = writeln!(
+            out,
+            "Critical path: frames per bottleneck (the largest part of the frame's end to end), and the parts' mean share of it\n\n| part | frames | mean share |\n|---|---|---|"
+        );
+        for (part, frames, share) in bottlenecks(&posed) {
+            let _ = writeln!(out, "| {part} | {frames} | {:.0} % |", 100.0 * share);
+        }
+        let _ = writeln!(out);
     }
-    let _ = writeln!(
-        out,
-        "\nframes dropped by policy: processes {}, threads {}",
-        drops[0], drops[1]
-    );
     let _ = writeln!(
         out,
         "end-to-end median, processes / threads: {:.3}",
