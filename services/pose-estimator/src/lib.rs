@@ -112,6 +112,16 @@ pub struct PoseTracker {
     resumed_after: Option<u64>,
     /// Frames whose images were prepared before their segments arrived, oldest first.
     prepared: VecDeque<(u64, PreparedImages)>,
+    buffers: FrameBuffers,
+}
+
+/// A frame's segments and matches as the back end takes them.
+#[derive(Default)]
+struct FrameBuffers {
+    left: Vec<Segment>,
+    right: Vec<Segment>,
+    stereo: Vec<FeatureMatch>,
+    tracked: Vec<FeatureMatch>,
 }
 
 impl PoseTracker {
@@ -132,6 +142,7 @@ impl PoseTracker {
             resumed_after: resume.map(|r| r.frame),
             resume,
             prepared: VecDeque::new(),
+            buffers: FrameBuffers::default(),
         })
     }
 
@@ -209,18 +220,26 @@ impl PoseTracker {
         lines: &[TrackedLine],
         frame: Option<&Received<u8>>,
     ) -> anyhow::Result<PoseRecord> {
-        let left: Vec<Segment> = lines.iter().map(|t| to_segment(&t.left)).collect();
-        let right: Vec<Segment> = lines
-            .iter()
-            .filter(|t| t.has_stereo == 1)
-            .map(|t| to_segment(&t.right))
-            .collect();
-        let mut stereo = Vec::new();
-        let mut tracked = Vec::new();
+        let prepared = self.take_prepared(header.frame_id);
+        // The frame's segments and matches, in buffers kept from frame to frame.
+        let buffers = &mut self.buffers;
+        buffers.left.clear();
+        buffers
+            .left
+            .extend(lines.iter().map(|t| to_segment(&t.left)));
+        buffers.right.clear();
+        buffers.right.extend(
+            lines
+                .iter()
+                .filter(|t| t.has_stereo == 1)
+                .map(|t| to_segment(&t.right)),
+        );
+        buffers.stereo.clear();
+        buffers.tracked.clear();
         let mut r = 0;
         for (i, t) in lines.iter().enumerate() {
             if t.has_stereo == 1 {
-                stereo.push(FeatureMatch {
+                buffers.stereo.push(FeatureMatch {
                     query: i,
                     train: r,
                     distance: 0.0,
@@ -228,7 +247,7 @@ impl PoseTracker {
                 r += 1;
             }
             if let Ok(previous) = usize::try_from(t.previous) {
-                tracked.push(FeatureMatch {
+                buffers.tracked.push(FeatureMatch {
                     query: previous,
                     train: i,
                     distance: 0.0,
@@ -238,10 +257,10 @@ impl PoseTracker {
         let continues =
             header.previous_frame_id != NO_FRAME && header.previous_frame_id == self.last_frame;
         let matched = MatchedLines {
-            left: &left,
-            right: &right,
-            stereo: &stereo,
-            tracked: continues.then_some(tracked.as_slice()),
+            left: &self.buffers.left,
+            right: &self.buffers.right,
+            stereo: &self.buffers.stereo,
+            tracked: continues.then_some(self.buffers.tracked.as_slice()),
         };
         let views = match frame.map(stereo_views) {
             Some(Ok(v)) => Some(v),
@@ -252,7 +271,6 @@ impl PoseTracker {
             None => None,
         };
         let images = views.as_ref().map(|(l, r)| (&**l, &**r));
-        let prepared = self.take_prepared(header.frame_id);
         // The first frame after a restart: the motion across the gap is predicted (the
         // last motion per frame), and the pose says so.
         let tracker = self

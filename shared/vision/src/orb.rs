@@ -312,31 +312,32 @@ pub fn refine_stereo_column(
     if !(rows_inside && inside(ul) && inside(ur - SEARCH) && inside(ur + SEARCH)) {
         return None;
     }
-    let window = |pixels: &[u8], u: i64| -> Vec<i32> {
-        let mut values = Vec::with_capacity(((2 * HALF + 1) * (2 * HALF + 1)) as usize);
-        for y in v - HALF..=v + HALF {
+    const SIDE: usize = (2 * HALF + 1) as usize;
+    // The window around column `u`, mean removed (on the stack: this runs for every stereo
+    // point match of every frame).
+    let window = |pixels: &[u8], u: i64| -> [i32; SIDE * SIDE] {
+        let mut values = [0i32; SIDE * SIDE];
+        for (row_values, y) in values.chunks_exact_mut(SIDE).zip(v - HALF..=v + HALF) {
             let row = (y * width) as usize;
-            values.extend(
-                pixels[row + (u - HALF) as usize..=row + (u + HALF) as usize]
-                    .iter()
-                    .map(|&p| i32::from(p)),
-            );
+            let pixels = &pixels[row + (u - HALF) as usize..=row + (u + HALF) as usize];
+            for (value, &p) in row_values.iter_mut().zip(pixels) {
+                *value = i32::from(p);
+            }
         }
         let mean = values.iter().sum::<i32>() / values.len() as i32;
         values.iter_mut().for_each(|p| *p -= mean);
         values
     };
     let reference = window(lp, ul);
-    let costs: Vec<f64> = (-SEARCH..=SEARCH)
-        .map(|shift| {
-            let candidate = window(rp, ur + shift);
-            reference
-                .iter()
-                .zip(&candidate)
-                .map(|(a, b)| f64::from((a - b).abs()))
-                .sum()
-        })
-        .collect();
+    let mut costs = [0.0f64; (2 * SEARCH + 1) as usize];
+    for (cost, shift) in costs.iter_mut().zip(-SEARCH..=SEARCH) {
+        let candidate = window(rp, ur + shift);
+        *cost = reference
+            .iter()
+            .zip(&candidate)
+            .map(|(a, b)| f64::from((a - b).abs()))
+            .sum();
+    }
     let best = (0..costs.len()).min_by(|&a, &b| costs[a].total_cmp(&costs[b]))?;
     if best == 0 || best == costs.len() - 1 {
         return None;
