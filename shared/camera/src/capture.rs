@@ -186,7 +186,7 @@ fn to_gray(frame: &Mat) -> Result<Mat, opencv::Error> {
     Ok(gray)
 }
 
-/// The two halves of a side-by-side frame (left half, right half). An odd or empty width is
+/// The two halves of a side-by-side frame (left half, right half), copied. An odd or empty width is
 /// refused.
 pub fn split_side_by_side(frame: &Mat) -> Result<(Mat, Mat), CameraError> {
     let (w, h) = (frame.cols(), frame.rows());
@@ -264,11 +264,15 @@ impl StereoCamera {
         let (left_raw, driver_ms) = self.left.read()?;
         let (left, right) = match &mut self.right {
             None => {
+                let layout = format!(
+                    " (its two {}×{} images side by side)",
+                    self.size.0, self.size.1
+                );
                 check_size(
                     &left_raw,
                     (2 * self.size.0, self.size.1),
                     &self.left,
-                    "side-by-side ",
+                    &layout,
                 )?;
                 split_side_by_side(&left_raw)?
             }
@@ -389,6 +393,85 @@ mod tests {
             .map(|e| e.to_string())
             .unwrap_or_default();
         assert!(err.contains("7×2"), "{err}");
+    }
+
+    /// An ideal 752×480 rig: focal 400 px, 10 cm baseline, no distortion.
+    fn ideal_rectifier() -> std::sync::Arc<Rectifier> {
+        let camera = |x_m: f64| linetrack_datasets::PinholeCamera {
+            width: 752,
+            height: 480,
+            intrinsics: [400.0, 400.0, 376.0, 240.0],
+            distortion: [0.0; 4],
+            body_from_camera: nalgebra::Isometry3::translation(x_m, 0.0, 0.0),
+        };
+        std::sync::Arc::new(
+            Rectifier::new(&camera(0.0), &camera(0.1)).unwrap_or_else(|e| panic!("{e}")),
+        )
+    }
+
+    #[test]
+    fn a_gstreamer_side_by_side_stream_gives_rectified_pairs_with_growing_driver_time() {
+        // The right half is the left one shifted 8 px: `spokes` cropped on either side.
+        let src = |crop: &str| {
+            format!(
+                "videotestsrc num-buffers=3 pattern=spokes ! video/x-raw,width=760,height=480,framerate=20/1 ! videocrop {crop}=8 ! c."
+            )
+        };
+        let pipeline = format!(
+            "compositor name=c sink_1::xpos=752 ! video/x-raw,width=1504,height=480 ! videoconvert ! video/x-raw,format=GRAY8 ! appsink {} {}",
+            src("right"),
+            src("left")
+        );
+        let mut camera = StereoCamera::open(&pipeline, None, ideal_rectifier())
+            .unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(camera.driver_fps(), Some(20.0));
+        let pairs: Vec<StereoImages> = (0..3)
+            .map(|_| camera.read().unwrap_or_else(|e| panic!("{e}")))
+            .collect();
+        let times: Vec<f64> = pairs.iter().filter_map(|p| p.driver_ms).collect();
+        assert_eq!(times, [0.0, 50.0, 100.0]);
+        let pair = &pairs[0];
+        assert_eq!((pair.left.width(), pair.left.height()), (752, 480));
+        let (Some(left), Some(right)) = (pair.left.pixels(), pair.right.pixels()) else {
+            panic!("images not continuous");
+        };
+        // Away from the borders, right(x) = left(x + 8): disparity 8 px.
+        let mut differing = 0;
+        for y in 100..380 {
+            for x in 100..600 {
+                if left[y * 752 + x + 8] != right[y * 752 + x] {
+                    differing += 1;
+                }
+            }
+        }
+        assert!(differing < 100, "{differing} pixels differ");
+        // The stream ends after 3 buffers: the next read fails, naming the pipeline.
+        let err = camera
+            .read()
+            .err()
+            .map(|e| e.to_string())
+            .unwrap_or_default();
+        assert!(
+            err.contains("videotestsrc") && err.contains("read failed"),
+            "{err}"
+        );
+    }
+
+    #[test]
+    fn frames_of_another_size_than_the_calibration_are_refused_naming_both() {
+        let pipeline =
+            "videotestsrc num-buffers=1 ! video/x-raw,format=GRAY8,width=1280,height=480 ! appsink";
+        let mut camera =
+            StereoCamera::open(pipeline, None, ideal_rectifier()).unwrap_or_else(|e| panic!("{e}"));
+        let err = camera
+            .read()
+            .err()
+            .map(|e| e.to_string())
+            .unwrap_or_default();
+        assert!(
+            err.contains("1280×480") && err.contains("1504×480") && err.contains("side by side"),
+            "{err}"
+        );
     }
 
     #[test]

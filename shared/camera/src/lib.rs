@@ -54,7 +54,7 @@ pub enum CameraError {
     },
     /// A frame is not the size the calibration is for.
     #[error(
-        "{device} delivers {got_width}×{got_height} {layout}frames but the calibration is for {expected_width}×{expected_height}"
+        "{device} delivers {got_width}×{got_height} frames but the calibration needs {expected_width}×{expected_height}{layout}"
     )]
     Size {
         /// The device, described.
@@ -67,7 +67,7 @@ pub enum CameraError {
         expected_width: i32,
         /// The height the calibration needs.
         expected_height: i32,
-        /// `"side-by-side "` or empty.
+        /// How the needed size comes from the calibration (side by side), or empty.
         layout: String,
     },
     /// A frame cannot be split or wrapped.
