@@ -9,7 +9,7 @@
 //!
 //! - published with its pixels, stamped with the driver's capture time
 //!   ([`linetrack_camera::timing`]);
-//! - `capture-dropped` (a marker, no pixels): lost in a gap of the driver's timestamps, or
+//! - `capture-dropped` (a marker, no pixels): lost in a gap of a V4L2 driver's timestamps, or
 //!   not taken because the hand-over queue was full (the publishing loop was behind);
 //! - `capture-late` (a marker): it waited more than `camera.late_ms` longer than the
 //!   least-delayed frame, and `budget.drop_late` is on (not judged when `source.rate_hz`
@@ -146,7 +146,9 @@ impl CaptureThread {
             } else {
                 camera.driver_fps()
             })
-            .map(|fps| (1e9 / fps).round() as u64);
+            .map(|fps| (1e9 / fps).round() as u64)
+            // Gaps count as lost frames only where each frame carries its own time.
+            .filter(|_| camera.stamps_each_frame());
             let mut frame_clock = FrameClock::new(period_ns);
             let mut first: Option<(Instant, u64)> = None;
             let mut k = 0u64;
@@ -178,7 +180,7 @@ impl CaptureThread {
                     failures = 0;
                 }
                 backoff.reset();
-                let stamp = frame_clock.stamp(images.driver_ms, self.clock.now_ns());
+                let mut stamp = frame_clock.stamp(images.driver_ms, self.clock.now_ns());
                 // Pacing for captures that are not live (files): like a sequence.
                 let (began, first_ns) = *first.get_or_insert((Instant::now(), stamp.timestamp_ns));
                 let due = began
@@ -190,7 +192,13 @@ impl CaptureThread {
                         k as usize,
                     );
                 k += 1;
-                self.sleep(due.saturating_duration_since(Instant::now()));
+                let wait = due.saturating_duration_since(Instant::now());
+                if !wait.is_zero() {
+                    // A capture read ahead of its time (not live): it is captured, for
+                    // the latency, when the source lets it through.
+                    self.sleep(wait);
+                    stamp.capture_ns = self.clock.now_ns();
+                }
                 match self.frames.try_send(Captured::Frame { images, stamp }) {
                     Ok(()) => {}
                     Err(TrySendError::Full(_)) => {

@@ -817,8 +817,13 @@ impl<'m> Supervisor<'m> {
                 }
                 Some(StatusKind::SourceFinished) => {
                     process.retiring = true;
-                    self.monitor.published(report.frame_id);
-                    self.monitor.source_finished(report.frame_id);
+                    if report.value == 0 && report.frame_id == 0 && !self.monitor.any_published() {
+                        // A camera that never delivered: no frame to wait for.
+                        self.monitor.source_finished_empty();
+                    } else {
+                        self.monitor.published(report.frame_id);
+                        self.monitor.source_finished(report.frame_id);
+                    }
                 }
                 Some(StatusKind::CameraLost) => {
                     let failure = linetrack_msgs::CameraFailure::from_code(report.detail);
