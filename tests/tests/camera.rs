@@ -97,11 +97,8 @@ fn outcomes(records: &Records, outcome: &str) -> usize {
         .count()
 }
 
-/// The sequence path the harness writes into `[source]`: not read in camera mode.
-fn unused_sequence(dir: &Path) -> PathBuf {
-    dir.join("no-sequence")
-}
-
+/// Starts `linetrack run` with `extra` config; the sequence the harness writes into
+/// `[source]` is not read in camera mode.
 fn start_camera(dir: &Path, extra: &str, args: &[&str]) -> Run {
     start_with_args(dir, &dir.join("no-sequence"), extra, args)
 }

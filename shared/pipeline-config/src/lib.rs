@@ -569,6 +569,22 @@ mod tests {
     }
 
     #[test]
+    fn a_camera_needs_a_calibration_and_a_right_camera_a_left_one() {
+        let err = refusal("[camera]\ncapture = \"0\"\n");
+        assert!(err.contains("camera.calibration"), "{err}");
+        let err = refusal("[camera]\ncapture_right = \"1\"\n");
+        assert!(err.contains("camera.capture "), "{err}");
+        let ok = PipelineConfig::from_toml_str(
+            "[camera]\ncapture = \"0\"\ncapture_right = \"/dev/video1\"\ncalibration = \"camchain.yaml\"\n",
+            "x.toml",
+        )
+        .unwrap_or_else(|e| panic!("{e}"));
+        assert!(ok.camera.enabled());
+        assert_eq!(ok.camera.right(), Some("/dev/video1"));
+        assert!(!PipelineConfig::default().camera.enabled());
+    }
+
+    #[test]
     fn unknown_keys_and_bad_values_are_named() {
         let err = PipelineConfig::from_toml_str("[budget]\nend_to_end_mz = 3\n", "x.toml")
             .err()
@@ -631,8 +647,6 @@ mod tests {
                 "[camera]\nretry_ms = 900\nretry_max_ms = 800\n",
                 "camera.retry_max_ms",
             ),
-            ("[camera]\ncapture = \"0\"\n", "camera.calibration"),
-            ("[camera]\ncapture_right = \"1\"\n", "camera.capture"),
             (
                 "[source]\nmax_frames = 9223372036854775807\n",
                 "source.max_frames",
