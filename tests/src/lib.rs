@@ -140,6 +140,19 @@ pub fn start_with_prefix(dir: &Path, sequence: &Path, extra: &str, prefix: &str)
     launch(dir, sequence, extra, prefix, &[])
 }
 
+/// [`start`] with more `linetrack run` arguments (`--frames 30`, ...).
+pub fn start_with_args(dir: &Path, sequence: &Path, extra: &str, args: &[&str]) -> Run {
+    let prefix = format!(
+        "lte2e{}_{}_",
+        std::process::id(),
+        dir.file_name()
+            .and_then(|n| n.to_str())
+            .unwrap_or("x")
+            .replace('-', "")
+    );
+    launch(dir, sequence, extra, &prefix, args)
+}
+
 /// [`start`] with the stages on threads of one process (`--single-process`).
 pub fn start_single_process(dir: &Path, sequence: &Path, extra: &str) -> Run {
     let prefix = format!("lte2e{}_threads_", std::process::id());

@@ -2,6 +2,9 @@
 //! and publishes each frame's two images into one shared-memory message, paced at the
 //! sequence's rate or as fast as it can. A frame that cannot be read is published as a
 //! `corrupt` marker (no pixels) so that downstream stages and the records count it.
+//! With `[camera]` set, it reads a live stereo camera instead ([`camera`]).
+
+pub mod camera;
 
 use anyhow::Context;
 use linetrack_datasets::StereoSequence;
@@ -15,7 +18,7 @@ use std::time::{Duration, Instant};
 use tracing::info_span;
 
 /// The source's connections.
-struct Ports {
+pub struct Ports {
     frames: Outlet<u8>,
     rig: Outlet<RigRecord>,
     control: Inlet<Control>,
@@ -37,7 +40,7 @@ impl Ports {
 }
 
 /// When frame `k` (0-based from the first one published) is due, from the start.
-fn due_offset(
+pub(crate) fn due_offset(
     pacing: Pacing,
     rate_hz: f64,
     first_ns: u64,
@@ -52,7 +55,7 @@ fn due_offset(
 }
 
 /// Whether a shutdown command arrived.
-fn shutdown_ordered(control: &mut Inlet<Control>, pid: u32) -> anyhow::Result<bool> {
+pub(crate) fn shutdown_ordered(control: &mut Inlet<Control>, pid: u32) -> anyhow::Result<bool> {
     Ok(control.receive_all()?.iter().any(|c| {
         let c = c.payload().first().copied().unwrap_or_default();
         c.command() == Some(Command::Shutdown) && c.is_for(StageKind::FrameSource, pid)
@@ -66,6 +69,9 @@ pub fn run(ctx: &StageContext, bus: &Bus, shutdown: &Shutdown) -> anyhow::Result
 }
 
 fn publish(ctx: &StageContext, mut ports: Ports, shutdown: &Shutdown) -> anyhow::Result<()> {
+    if ctx.config.camera.enabled() {
+        return camera::publish(ctx, ports, shutdown);
+    }
     let source = &ctx.config.source;
     let sequence = StereoSequence::open(&source.sequence)
         .with_context(|| format!("opening sequence {}", source.sequence.display()))?;

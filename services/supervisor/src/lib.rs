@@ -17,6 +17,7 @@
 //! sequence has ground truth, `summary.json` also scores the run's `poses.tum` against it
 //! (`metrics`: the names and definitions of `linetrack-vo`'s `metrics.json`).
 
+mod camera_check;
 pub mod fallback;
 pub mod monitor;
 pub mod run_dir;
@@ -201,14 +202,14 @@ pub fn run(
     config
         .validate()
         .map_err(|e| anyhow::anyhow!("pipeline config: {e}"))?;
-    // Refuse a sequence no stage could open before starting any.
-    let sequence = linetrack_datasets::StereoSequence::open(&config.source.sequence)
-        .with_context(|| format!("source.sequence {}", config.source.sequence.display()))?;
-    anyhow::ensure!(
-        !sequence.frames.is_empty(),
-        "source.sequence {}: no frames",
-        config.source.sequence.display()
-    );
+    // Refuse a sequence no stage could open, or a camera whose calibration or frame size
+    // is wrong, before starting any stage.
+    let ground_truth = if config.camera.enabled() {
+        camera_check::preflight(&config.camera)?;
+        Vec::new()
+    } else {
+        sequence_ground_truth(&config.source.sequence)?
+    };
     let run_dir = run_dir::resolve(&config.output, std::time::SystemTime::now())?;
     // Held until the run is over; released by the kernel if this process dies.
     let _lock = run_dir::lock(&run_dir)?;
@@ -222,16 +223,6 @@ pub fn run(
     let config_path = prepare_run_dir(config, &run_dir)?;
     let run_id = new_run_id();
     let scope = Scope::new(&run_id);
-    let ground_truth = sequence
-        .frames
-        .iter()
-        .filter_map(|f| {
-            Some(linetrack_trajectory::tum::StampedPose {
-                timestamp_s: f.timestamp_ns as f64 * 1e-9,
-                pose: f.pose?,
-            })
-        })
-        .collect();
     let mut monitor = Monitor::new(config, 0, &run_dir)?.with_ground_truth(ground_truth);
     let result = match options.mode {
         Mode::Processes | Mode::Threads => Supervisor::new(
@@ -271,6 +262,29 @@ pub fn run(
         report,
         interrupted,
     })
+}
+
+/// Opens the sequence (refusing one no stage could open) and returns its ground truth.
+fn sequence_ground_truth(
+    path: &Path,
+) -> anyhow::Result<Vec<linetrack_trajectory::tum::StampedPose>> {
+    let sequence = linetrack_datasets::StereoSequence::open(path)
+        .with_context(|| format!("source.sequence {}", path.display()))?;
+    anyhow::ensure!(
+        !sequence.frames.is_empty(),
+        "source.sequence {}: no frames",
+        path.display()
+    );
+    Ok(sequence
+        .frames
+        .iter()
+        .filter_map(|f| {
+            Some(linetrack_trajectory::tum::StampedPose {
+                timestamp_s: f.timestamp_ns as f64 * 1e-9,
+                pose: f.pose?,
+            })
+        })
+        .collect())
 }
 
 /// The last `status.json` of a run: no stage left, how it ended. The detector is the one
@@ -803,9 +817,39 @@ impl<'m> Supervisor<'m> {
                 }
                 Some(StatusKind::SourceFinished) => {
                     process.retiring = true;
-                    self.monitor.published(report.frame_id);
-                    self.monitor.source_finished(report.frame_id);
+                    if report.value == 0 && report.frame_id == 0 && !self.monitor.any_published() {
+                        // A camera that never delivered: no frame to wait for.
+                        self.monitor.source_finished_empty();
+                    } else {
+                        self.monitor.published(report.frame_id);
+                        self.monitor.source_finished(report.frame_id);
+                    }
                 }
+                Some(StatusKind::CameraLost) => {
+                    let failure = linetrack_msgs::CameraFailure::from_code(report.detail);
+                    self.monitor.event(
+                        "camera-lost",
+                        stage.name(),
+                        Some(report.frame_id),
+                        format!(
+                            "{} {}; reopening (attempt {}, backoff from {} ms)",
+                            camera_check::describe(&self.config.camera),
+                            failure.describe(),
+                            report.value,
+                            self.config.camera.retry_ms
+                        ),
+                    );
+                }
+                Some(StatusKind::CameraBack) => self.monitor.event(
+                    "camera-back",
+                    stage.name(),
+                    Some(report.frame_id),
+                    format!(
+                        "{} delivers again after {} failed attempts",
+                        camera_check::describe(&self.config.camera),
+                        report.value
+                    ),
+                ),
                 Some(StatusKind::Overflow) => self.monitor.event(
                     "overflow",
                     stage.name(),

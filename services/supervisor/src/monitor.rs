@@ -93,6 +93,8 @@ pub struct Monitor {
     previous_pose: Option<(u64, PoseRecord)>,
     first_frame: u64,
     source_last: Option<u64>,
+    /// The source finished without publishing any frame (a camera that never opened).
+    source_empty: bool,
     published: Option<u64>,
     /// The sequence's ground truth (empty without): the summary scores `poses.tum` with it.
     ground_truth: Vec<StampedPose>,
@@ -149,6 +151,7 @@ impl Monitor {
             previous_pose: None,
             first_frame,
             source_last: None,
+            source_empty: false,
             published: None,
             ground_truth: Vec::new(),
         })
@@ -328,9 +331,19 @@ impl Monitor {
         self.source_last = Some(last_frame);
     }
 
+    /// The source finished without publishing a single frame.
+    pub fn source_finished_empty(&mut self) {
+        self.source_empty = true;
+    }
+
     /// Whether the source has finished.
     pub fn source_done(&self) -> bool {
-        self.source_last.is_some()
+        self.source_last.is_some() || self.source_empty
+    }
+
+    /// Whether the source has published any frame.
+    pub fn any_published(&self) -> bool {
+        self.published.is_some()
     }
 
     /// The source published frame `frame_id`.
@@ -362,6 +375,9 @@ impl Monitor {
 
     /// Whether every frame the source published has an outcome.
     pub fn complete(&self) -> bool {
+        if self.source_empty && self.source_last.is_none() && self.published.is_none() {
+            return true;
+        }
         self.source_last.is_some_and(|last| {
             self.accounted.all_up_to(last)
                 || (self.accounted.below..=last)

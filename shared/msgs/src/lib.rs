@@ -195,6 +195,12 @@ pub enum FrameStatus {
     StageError = 3,
     /// A stage dropped it because its queue was behind (a newer frame was waiting).
     DroppedBehind = 4,
+    /// The camera delivered it but the source could not take it (a gap in the driver's
+    /// timestamps, or the source's hand-over queue was full): no pixels.
+    CaptureDropped = 5,
+    /// The camera's frame waited in a buffer longer than `camera.late_ms`: dropped by the
+    /// source (with `budget.drop_late`).
+    CaptureLate = 6,
 }
 
 impl FrameStatus {
@@ -211,6 +217,8 @@ impl FrameStatus {
             FrameStatus::DroppedLate => "dropped-late",
             FrameStatus::StageError => "stage-error",
             FrameStatus::DroppedBehind => "dropped-behind",
+            FrameStatus::CaptureDropped => "capture-dropped",
+            FrameStatus::CaptureLate => "capture-late",
         }
     }
 }
@@ -386,6 +394,43 @@ pub enum StatusKind {
     /// Frames never arrived on a stage's input: `value` frames from `frame_id` on were
     /// skipped (overwritten in its full queue while it was stopped or slow).
     QueueGap = 6,
+    /// The frame source's camera failed and is being reopened: `frame_id` = the next
+    /// frame's id, `value` = the attempt (1, 2, …), `detail` = a [`CameraFailure`] code.
+    CameraLost = 7,
+    /// The frame source's camera delivers again: `frame_id` = the next frame's id,
+    /// `value` = the attempts it took.
+    CameraBack = 8,
+}
+
+/// Why a camera failed ([`StatusKind::CameraLost`]'s `detail`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, TryFromPrimitive, IntoPrimitive)]
+#[repr(u32)]
+pub enum CameraFailure {
+    /// It could not be opened (no such device, busy, a pipeline that does not start).
+    Open = 0,
+    /// A read failed: the device is gone or the stream ended.
+    Read = 1,
+    /// Its frames are not the size the calibration is for.
+    Size = 2,
+    /// Anything else (a frame that cannot be split, rectified or converted).
+    Other = 3,
+}
+
+impl CameraFailure {
+    /// The failure with this code (unknown codes read as `Other`).
+    pub fn from_code(code: u32) -> Self {
+        Self::try_from(code).unwrap_or(Self::Other)
+    }
+
+    /// What happened, for the event's text.
+    pub fn describe(self) -> &'static str {
+        match self {
+            CameraFailure::Open => "cannot be opened",
+            CameraFailure::Read => "read failed (device gone or stream ended)",
+            CameraFailure::Size => "delivers frames of another size than the calibration's",
+            CameraFailure::Other => "delivered a frame that could not be used",
+        }
+    }
 }
 
 impl StatusKind {

@@ -72,6 +72,60 @@ impl Default for SourceConfig {
     }
 }
 
+/// A live stereo camera in place of the sequence (`[camera]`): off while `capture` is empty.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct CameraConfig {
+    /// The capture: a V4L2 device (`0`, `/dev/video0`), a GStreamer pipeline ending in
+    /// `appsink`, or a numbered image pattern (`dir/%06d.png`). Side by side (left half,
+    /// right half) unless `capture_right` is set, then the left camera. Empty: no camera.
+    pub capture: String,
+    /// The right camera's capture when the two are separate devices; empty: side by side.
+    pub capture_right: String,
+    /// Kalibr `camchain.yaml`, or a folder with EuRoC `cam0/sensor.yaml` and `cam1/sensor.yaml`.
+    pub calibration: PathBuf,
+    /// Frames per second the camera delivers, to count frames lost in gaps of the driver's
+    /// timestamps; 0 = the rate the driver announces (no count when it announces none).
+    pub fps: f64,
+    /// A frame read more than this long after it could have been (it waited in a buffer)
+    /// is late: with `budget.drop_late` it is dropped as `capture-late`.
+    pub late_ms: f64,
+    /// Stop after this many seconds; 0 = until stopped (Ctrl-C, `source.max_frames`).
+    pub duration_s: f64,
+    /// A camera that fails is reopened after this long, doubling per failure ...
+    pub retry_ms: u64,
+    /// ... up to this.
+    pub retry_max_ms: u64,
+}
+
+impl Default for CameraConfig {
+    fn default() -> Self {
+        Self {
+            capture: String::new(),
+            capture_right: String::new(),
+            calibration: PathBuf::new(),
+            fps: 0.0,
+            late_ms: 100.0,
+            duration_s: 0.0,
+            retry_ms: 500,
+            retry_max_ms: 5000,
+        }
+    }
+}
+
+impl CameraConfig {
+    /// Whether a camera replaces the sequence.
+    pub fn enabled(&self) -> bool {
+        !self.capture.trim().is_empty()
+    }
+
+    /// The right camera's capture, when separate.
+    pub fn right(&self) -> Option<&str> {
+        let right = self.capture_right.trim();
+        (!right.is_empty()).then_some(right)
+    }
+}
+
 /// Which segment matcher the matcher stage uses.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
@@ -306,6 +360,8 @@ const MIN_STARTUP_MS: u64 = 100;
 const MAX_WAIT_MS: u64 = 600_000;
 /// The most restarts per stage.
 const MAX_RESTARTS: u32 = 1000;
+/// The longest camera run, seconds (a year).
+const MAX_DURATION_S: f64 = 31_536_000.0;
 /// The longest live-status period, milliseconds (an hour).
 const MAX_STATUS_EVERY_MS: u64 = 3_600_000;
 
@@ -332,6 +388,8 @@ fn in_range<T: PartialOrd + std::fmt::Debug>(
 pub struct PipelineConfig {
     /// Frame source.
     pub source: SourceConfig,
+    /// A live camera in place of the sequence.
+    pub camera: CameraConfig,
     /// Line detector at start (swappable at run time).
     pub detector: DetectorKind,
     /// Detect the left and the right image at the same time, on two threads.
@@ -353,6 +411,7 @@ impl Default for PipelineConfig {
     fn default() -> Self {
         Self {
             source: SourceConfig::default(),
+            camera: CameraConfig::default(),
             detector: DetectorKind::EdgeLines,
             detect_sides_in_parallel: false,
             matcher: MatcherConfig::default(),
@@ -408,6 +467,29 @@ impl PipelineConfig {
                 .map_err(|e| format!("{e} (or 0 = the sequence's rate)"))?;
         }
         in_range("source.max_frames", src.max_frames, 0..=MAX_FRAMES)?;
+        let cam = &self.camera;
+        if cam.fps != 0.0 {
+            in_range("camera.fps", cam.fps, RATE_HZ)
+                .map_err(|e| format!("{e} (or 0 = the driver's rate)"))?;
+        }
+        in_range("camera.late_ms", cam.late_ms, BUDGET_MS)?;
+        in_range("camera.duration_s", cam.duration_s, 0.0..=MAX_DURATION_S)?;
+        in_range("camera.retry_ms", cam.retry_ms, 1..=MAX_WAIT_MS)?;
+        in_range(
+            "camera.retry_max_ms",
+            cam.retry_max_ms,
+            cam.retry_ms..=MAX_WAIT_MS,
+        )
+        .map_err(|e| format!("{e}: at least retry_ms"))?;
+        if cam.enabled() && cam.calibration.as_os_str().is_empty() {
+            return Err(
+                "camera.capture is set but camera.calibration is empty: the rig comes from a calibration file (Kalibr camchain.yaml or a folder of EuRoC sensor.yaml)"
+                    .to_string(),
+            );
+        }
+        if !cam.enabled() && cam.right().is_some() {
+            return Err("camera.capture_right is set but camera.capture is empty".to_string());
+        }
         let f = &self.matcher.fallback;
         in_range(
             "matcher.fallback.min_stereo_matches",
@@ -505,6 +587,22 @@ mod tests {
     }
 
     #[test]
+    fn a_camera_needs_a_calibration_and_a_right_camera_a_left_one() {
+        let err = refusal("[camera]\ncapture = \"0\"\n");
+        assert!(err.contains("camera.calibration"), "{err}");
+        let err = refusal("[camera]\ncapture_right = \"1\"\n");
+        assert!(err.contains("camera.capture "), "{err}");
+        let ok = PipelineConfig::from_toml_str(
+            "[camera]\ncapture = \"0\"\ncapture_right = \"/dev/video1\"\ncalibration = \"camchain.yaml\"\n",
+            "x.toml",
+        )
+        .unwrap_or_else(|e| panic!("{e}"));
+        assert!(ok.camera.enabled());
+        assert_eq!(ok.camera.right(), Some("/dev/video1"));
+        assert!(!PipelineConfig::default().camera.enabled());
+    }
+
+    #[test]
     fn unknown_keys_and_bad_values_are_named() {
         let err = PipelineConfig::from_toml_str("[budget]\nend_to_end_mz = 3\n", "x.toml")
             .err()
@@ -559,6 +657,14 @@ mod tests {
             ),
             ("[source]\nrate_hz = 1e-300\n", "source.rate_hz"),
             ("[source]\nrate_hz = nan\n", "source.rate_hz"),
+            ("[camera]\nfps = 5000.0\n", "camera.fps"),
+            ("[camera]\nlate_ms = nan\n", "camera.late_ms"),
+            ("[camera]\nduration_s = -1.0\n", "camera.duration_s"),
+            ("[camera]\nretry_ms = 0\n", "camera.retry_ms"),
+            (
+                "[camera]\nretry_ms = 900\nretry_max_ms = 800\n",
+                "camera.retry_max_ms",
+            ),
             (
                 "[source]\nmax_frames = 9223372036854775807\n",
                 "source.max_frames",

@@ -603,6 +603,7 @@ impl Tally {
             recoveries: self.events_of("recover"),
             restarts: self.events_of("restart"),
             swaps: self.events_of("swap"),
+            camera_losses: self.events_of("camera-lost"),
         }
     }
 }
@@ -634,6 +635,9 @@ pub struct Report {
     pub restarts: usize,
     /// Detector hot swaps.
     pub swaps: usize,
+    /// Times the live camera failed and was reopened (`camera-lost` events).
+    #[serde(default)]
+    pub camera_losses: usize,
 }
 
 impl Report {
@@ -693,6 +697,13 @@ impl Report {
             self.restarts,
             self.swaps
         );
+        if self.camera_losses > 0 {
+            let _ = writeln!(
+                out,
+                "camera lost {} times (reopened with backoff; events.csv names the device)",
+                self.camera_losses
+            );
+        }
         out
     }
 }

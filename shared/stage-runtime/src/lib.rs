@@ -130,11 +130,17 @@ impl Reporter {
 
     /// Sends an event.
     pub fn report(&mut self, kind: StatusKind, frame_id: u64, value: u64) {
+        self.report_detail(kind, frame_id, value, self.detail);
+    }
+
+    /// Sends an event with its own `detail` code in place of the stage's (the reason of a
+    /// `CameraLost`).
+    pub fn report_detail(&mut self, kind: StatusKind, frame_id: u64, value: u64, detail: u32) {
         let report = StatusReport {
             stage: self.stage.code(),
             pid: self.pid,
             kind: kind.into(),
-            detail: self.detail,
+            detail,
             frame_id,
             value,
         };

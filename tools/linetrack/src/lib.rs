@@ -34,6 +34,8 @@ const DEFAULT_FRAMES: usize = 100;
     linetrack run                                   # generated sequence, live status, report
     linetrack run --dataset ../shared/data/euroc/V1_01_easy_micro --pacing fastest
     linetrack run --single-process                  # same stages on threads (baseline)
+    linetrack run --camera 'v4l2src ! videoconvert ! video/x-raw,format=GRAY8 ! appsink' \\
+        --calibration camchain.yaml --duration 60   # a live side-by-side stereo camera
     linetrack ctl swap-detector fld                 # while a run is going, from another shell
     linetrack report out/runs/latest                # latency report + latency and trace pictures
 
@@ -69,6 +71,22 @@ pub struct RunArgs {
     /// sequence is rendered on first use).
     #[arg(long)]
     pub dataset: Option<PathBuf>,
+    /// A live stereo camera instead of a sequence: a V4L2 device (0, /dev/video0), a
+    /// GStreamer pipeline ending in appsink, or numbered images (dir/%06d.png); both images
+    /// side by side in one frame unless --camera-right is given. Needs --calibration.
+    #[arg(long, value_name = "CAPTURE")]
+    pub camera: Option<String>,
+    /// The right camera, when left and right are two devices (--camera is then the left).
+    #[arg(long, value_name = "CAPTURE", requires = "camera")]
+    pub camera_right: Option<String>,
+    /// The camera's calibration: a Kalibr camchain.yaml, or a folder with EuRoC
+    /// cam0/sensor.yaml and cam1/sensor.yaml.
+    #[arg(long, value_name = "FILE")]
+    pub calibration: Option<PathBuf>,
+    /// With a camera: stop after this many seconds (default: the config's camera.duration_s;
+    /// 0 = until Ctrl-C).
+    #[arg(long, value_name = "SECONDS", requires = "camera")]
+    pub duration: Option<f64>,
     /// Stop after this many frames.
     #[arg(long)]
     pub frames: Option<usize>,
@@ -145,6 +163,25 @@ pub fn effective_config(args: &RunArgs) -> anyhow::Result<PipelineConfig> {
     if let Some(dataset) = &args.dataset {
         config.source.sequence = dataset.clone();
     }
+    if let Some(camera) = &args.camera {
+        anyhow::ensure!(
+            args.dataset.is_none(),
+            "--camera and --dataset exclude each other: a run reads one source"
+        );
+        config.camera.capture = camera.clone();
+        config.camera.capture_right = args.camera_right.clone().unwrap_or_default();
+    }
+    if let Some(calibration) = &args.calibration {
+        config.camera.calibration = calibration.clone();
+    }
+    if let Some(duration) = args.duration {
+        config.camera.duration_s = duration;
+    }
+    // The overrides are checked like the file (`camera.duration_s` range, a camera
+    // without a calibration, ...).
+    config
+        .validate()
+        .map_err(|e| anyhow::anyhow!("{}: {e}", args.config.display()))?;
     if let Some(frames) = args.frames {
         config.source.max_frames = frames;
     }
@@ -172,7 +209,8 @@ pub fn run(args: &RunArgs) -> anyhow::Result<PathBuf> {
     let _logs = linetrack_telemetry::init("supervisor", "info", None)?;
     let config = effective_config(args)?;
     let sequence = &config.source.sequence;
-    if args.dataset.is_none()
+    if !config.camera.enabled()
+        && args.dataset.is_none()
         && !sequence.join("mav0/cam0/data.csv").is_file()
         && sequence.ends_with("out/sequences/pipeline")
     {
@@ -196,7 +234,24 @@ pub fn run(args: &RunArgs) -> anyhow::Result<PathBuf> {
         } else {
             "one process per stage"
         },
-        sequence.display(),
+        if config.camera.enabled() {
+            format!(
+                "camera {:?}{} ({}, calibration {})",
+                config.camera.capture,
+                config
+                    .camera
+                    .right()
+                    .map_or_else(|| " side by side".to_string(), |r| format!(" + {r:?}")),
+                if config.camera.duration_s > 0.0 {
+                    format!("{} s", config.camera.duration_s)
+                } else {
+                    "until Ctrl-C".to_string()
+                },
+                config.camera.calibration.display()
+            )
+        } else {
+            sequence.display().to_string()
+        },
         match config.source.pacing {
             Pacing::Realtime => "realtime",
             Pacing::Fastest => "fastest",

@@ -15,12 +15,16 @@ use anyhow::{Context, bail};
 use std::process::{Command, ExitCode};
 
 /// Debian packages the workspace builds against: OpenCV with its contrib modules
-/// (LSD, FLD, LBD, ORB) and libclang for the `opencv` crate's binding generator.
+/// (LSD, FLD, LBD, ORB) and libclang for the `opencv` crate's binding generator; and
+/// GStreamer's base and good plugins, which the live camera source's GStreamer pipelines
+/// (`videotestsrc`, `compositor`, `appsink`, `videocrop`, `v4l2src`) and its tests need.
 const SYSTEM_PACKAGES: &[&str] = &[
     "libopencv-dev",
     "libopencv-contrib-dev",
     "clang",
     "libclang-dev",
+    "gstreamer1.0-plugins-base",
+    "gstreamer1.0-plugins-good",
 ];
 
 const USAGE: &str = "usage: cargo xtask <demo|match-demo|test|setup> [ARGS…]
@@ -249,8 +253,16 @@ fn install_system_packages() -> anyhow::Result<()> {
         }
         Ok(())
     };
-    run_apt(&["update", "-qq"])?;
-    let mut install = vec!["install", "-y", "-qq", "--no-install-recommends"];
+    // Another apt (an engineer's, unattended upgrades) may hold the lock: wait for it.
+    run_apt(&["-o", "DPkg::Lock::Timeout=600", "update", "-qq"])?;
+    let mut install = vec![
+        "-o",
+        "DPkg::Lock::Timeout=600",
+        "install",
+        "-y",
+        "-qq",
+        "--no-install-recommends",
+    ];
     install.extend(&missing);
     run_apt(&install)?;
     let still_missing: Vec<&str> = missing.into_iter().filter(|p| !is_installed(p)).collect();
