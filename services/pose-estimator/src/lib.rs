@@ -345,11 +345,13 @@ impl Stage for PoseStage {
         Ok(())
     }
 
+    fn prepares(&self) -> bool {
+        // Corners are found ahead; segments-only odometry has nothing to prepare.
+        self.points
+    }
+
     fn prepare(&mut self, header: &FrameHeader, images: &Received<u8>) -> anyhow::Result<()> {
-        if self.points {
-            self.tracker.prepare(header, images)?;
-        }
-        Ok(())
+        self.tracker.prepare(header, images)
     }
 
     fn process(

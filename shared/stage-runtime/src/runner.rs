@@ -64,6 +64,11 @@ pub trait Stage {
         Ok(())
     }
 
+    /// Whether [`Stage::prepare`] does anything (the runtime calls it only then).
+    fn prepares(&self) -> bool {
+        false
+    }
+
     /// What is published for a frame that was dropped or failed (nothing by default).
     fn placeholder(&self) -> Vec<Self::Output> {
         Vec::new()
@@ -186,7 +191,7 @@ pub fn run_stage<S: Stage>(
             }
             Role::Active | Role::HandingOver { .. } => {
                 more = runner.process_waiting(&mut ports)?;
-                if !more {
+                if !more && runner.stage.prepares() {
                     runner.prepare_held();
                 }
             }
@@ -299,7 +304,7 @@ impl<S: Stage> Runner<'_, S> {
                 continue;
             }
             let span = info_span!(
-                "prepare",
+                linetrack_telemetry::PREPARE_SPAN,
                 frame_id = header.frame_id,
                 stage = S::KIND.name()
             );
@@ -534,6 +539,10 @@ mod tests {
         const OUTPUT_LEN: usize = 1;
 
         fn joins_images(&self) -> bool {
+            true
+        }
+
+        fn prepares(&self) -> bool {
             true
         }
 

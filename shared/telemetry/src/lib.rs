@@ -326,12 +326,19 @@ pub fn processes(events: &[SpanEvent]) -> Vec<(u32, String)> {
         .collect()
 }
 
+/// Name of the span in which a stage works on a frame's images ahead of the frame's turn
+/// (the pose estimator's corners): part of the frame's record, not of its path.
+pub const PREPARE_SPAN: &str = "prepare";
+
 /// Each frame's path through the processes: for every frame handled by more than one
-/// process, its frame spans (`frame_depth` 0, one per process that handled it), in time
-/// order.
+/// process, its frame spans (`frame_depth` 0, one per process that handled it, the work
+/// done ahead of its turn left out), in time order.
 pub fn frame_paths(events: &[SpanEvent]) -> std::collections::BTreeMap<u64, Vec<&SpanEvent>> {
     let mut frames: std::collections::BTreeMap<u64, Vec<&SpanEvent>> = Default::default();
-    for e in events.iter().filter(|e| e.frame_depth == 0) {
+    for e in events
+        .iter()
+        .filter(|e| e.frame_depth == 0 && e.name != PREPARE_SPAN)
+    {
         if let Some(id) = e.frame_id {
             frames.entry(id).or_default().push(e);
         }
@@ -531,6 +538,19 @@ mod tests {
             thread: "main".to_string(),
             frame_depth: 0,
         }
+    }
+
+    #[test]
+    fn work_ahead_of_a_frames_turn_is_not_part_of_its_path() {
+        let events = [
+            span("frame-source", 100, "publish_frame", 1_000, 20),
+            span("pose-estimator", 400, PREPARE_SPAN, 1_030, 500),
+            span("line-detector", 200, "frame", 1_040, 900),
+            span("pose-estimator", 400, "frame", 2_000, 400),
+        ];
+        let paths = frame_paths(&events);
+        let path: Vec<&str> = paths[&7].iter().map(|e| e.process.as_str()).collect();
+        assert_eq!(path, ["frame-source", "line-detector", "pose-estimator"]);
     }
 
     #[test]
