@@ -20,6 +20,7 @@
 pub mod fallback;
 pub mod monitor;
 pub mod run_dir;
+pub mod stage_runner;
 
 use anyhow::{Context, bail};
 use linetrack_ipc::{Bus, Inlet, LocalHub, Outlet, Scope, Shutdown, Wake};
@@ -33,8 +34,9 @@ use linetrack_stage_runtime::{StageContext, detector_code, detector_from_code};
 use linetrack_vision::DetectorKind;
 use monitor::Monitor;
 use serde::Serialize;
+use stage_runner::StageRunner;
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command as Process, Stdio};
+use std::process::{Child, Stdio};
 use std::time::{Duration, Instant};
 
 /// How the stages run.
@@ -408,6 +410,8 @@ struct Supervisor<'m> {
     run_dir: PathBuf,
     config_path: PathBuf,
     bin_dir: PathBuf,
+    /// What the stage binaries are started through (`LINETRACK_STAGE_RUNNER`).
+    stage_runner: StageRunner,
     bus: Bus,
     ports: Ports,
     monitor: &'m mut Monitor,
@@ -450,6 +454,10 @@ impl<'m> Supervisor<'m> {
                 );
             }
         }
+        let stage_runner = StageRunner::from_env()?;
+        if !stage_runner.is_direct() {
+            tracing::info!("stages start through {stage_runner}");
+        }
         let scope = scope.clone();
         // Nodes of killed runs are cleaned when a node starts (or by the explicit call).
         let dead_before = scope.dead_nodes()?;
@@ -479,6 +487,7 @@ impl<'m> Supervisor<'m> {
             run_dir: run_dir.to_path_buf(),
             config_path,
             bin_dir,
+            stage_runner,
             bus,
             ports,
             monitor,
@@ -562,7 +571,7 @@ impl<'m> Supervisor<'m> {
         start_frame: u64,
     ) -> anyhow::Result<(Launch, u32)> {
         let bin = self.bin_dir.join(format!("linetrack-{}", stage.name()));
-        let mut command = Process::new(&bin);
+        let mut command = self.stage_runner.command(&bin);
         command
             .arg("--config")
             .arg(&self.config_path)
@@ -587,9 +596,13 @@ impl<'m> Supervisor<'m> {
         if start_frame > 0 {
             command.arg("--start-frame").arg(start_frame.to_string());
         }
-        let child = command
-            .spawn()
-            .with_context(|| format!("starting {}", bin.display()))?;
+        let child = command.spawn().with_context(|| {
+            if self.stage_runner.is_direct() {
+                format!("starting {}", bin.display())
+            } else {
+                format!("starting {} through {}", bin.display(), self.stage_runner)
+            }
+        })?;
         let pid = child.id();
         Ok((Launch::Process(child), pid))
     }
