@@ -2,7 +2,9 @@
 //!
 //! In multi-process mode ([`Mode::Processes`]) it starts one process per stage
 //! (`linetrack-line-detector`, `linetrack-matcher`, `linetrack-pose-estimator`, then, once
-//! those report ready, `linetrack-frame-source`), watches their heartbeats and exits,
+//! those report ready, `linetrack-frame-source`; found beside this program or in
+//! `LINETRACK_BIN_DIR`, started through `LINETRACK_STAGE_RUNNER` when it is set, see
+//! [`stage_runner`]), watches their heartbeats and exits,
 //! restarts a stage that crashed or hung (with exponential backoff, up to a limit), hot-swaps
 //! the detector on command, steers the matcher between LBD and ℓ1, and shuts everything
 //! down on SIGINT/SIGTERM or when every frame has an outcome. In single-process mode
