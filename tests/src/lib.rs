@@ -159,7 +159,31 @@ pub fn start_single_process(dir: &Path, sequence: &Path, extra: &str) -> Run {
     launch(dir, sequence, extra, &prefix, &["--single-process"])
 }
 
+/// [`start`] with the stages started through `runner` (`LINETRACK_STAGE_RUNNER`).
+pub fn start_through_runner(dir: &Path, sequence: &Path, extra: &str, runner: &str) -> Run {
+    let prefix = format!("lte2e{}_runner_", std::process::id());
+    launch_with(
+        dir,
+        sequence,
+        extra,
+        &prefix,
+        &[],
+        &[("LINETRACK_STAGE_RUNNER", runner)],
+    )
+}
+
 fn launch(dir: &Path, sequence: &Path, extra: &str, prefix: &str, args: &[&str]) -> Run {
+    launch_with(dir, sequence, extra, prefix, args, &[])
+}
+
+fn launch_with(
+    dir: &Path,
+    sequence: &Path,
+    extra: &str,
+    prefix: &str,
+    args: &[&str],
+    env: &[(&str, &str)],
+) -> Run {
     let prefix = prefix.to_string();
     let run_dir = dir.join("run");
     let config = dir.join("pipeline.toml");
@@ -177,6 +201,7 @@ fn launch(dir: &Path, sequence: &Path, extra: &str, prefix: &str, args: &[&str])
         .arg("--config")
         .arg(&config)
         .env(Scope::PREFIX_VAR, &prefix)
+        .envs(env.iter().copied())
         .stdin(Stdio::null())
         .stdout(Stdio::piped())
         .stderr(Stdio::inherit())

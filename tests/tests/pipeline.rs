@@ -411,6 +411,77 @@ fn single_process_mode_is_supervised_the_same_way() {
     hot_swap(run);
 }
 
+#[test]
+fn stages_start_through_the_stage_runner() {
+    // LINETRACK_STAGE_RUNNER puts a command before each stage binary (qemu-aarch64-static
+    // for aarch64 binaries on x86, see `cargo xtask cross`). Here the runner is a shell that
+    // notes the binary and execs it: the stage keeps the pid the supervisor started.
+    let dir = scratch("runner");
+    let log = dir.join("runner.log");
+    let runner = format!(
+        "sh -c 'echo \"$0\" >> {}; exec \"$0\" \"$@\"'",
+        log.display()
+    );
+    let run = start_through_runner(&dir, &base_sequence(FRAMES), &quick(), &runner);
+    let (status, out, records) = run.finish(RUN_TIMEOUT);
+    assert!(status.success(), "{status}\n{out}");
+    assert_every_frame_accounted(&records);
+    assert!(records.frames.iter().any(|f| f.has_pose()), "{out}");
+    assert!(
+        records.events_of("restart").is_empty(),
+        "{:?}",
+        records.events
+    );
+    let text = std::fs::read_to_string(&log).unwrap_or_else(|e| panic!("{}: {e}", log.display()));
+    let mut started: Vec<String> = text
+        .lines()
+        .map(|l| {
+            std::path::Path::new(l)
+                .file_name()
+                .map(|n| n.to_string_lossy().into_owned())
+                .unwrap_or_default()
+        })
+        .collect();
+    started.sort();
+    assert_eq!(
+        started,
+        [
+            "linetrack-frame-source",
+            "linetrack-line-detector",
+            "linetrack-matcher",
+            "linetrack-pose-estimator"
+        ],
+        "each stage started once, through the runner"
+    );
+}
+
+#[test]
+fn an_unparsable_stage_runner_is_refused_naming_the_variable() {
+    let dir = scratch("bad-runner");
+    let config = dir.join("pipeline.toml");
+    std::fs::write(&config, SUPERVISION).unwrap_or_else(|e| panic!("{e}"));
+    let output = std::process::Command::new(bin_dir().join("linetrack"))
+        .args(["run", "--quiet", "--frames", "2", "--config"])
+        .arg(&config)
+        .arg("--dataset")
+        .arg(base_sequence(FRAMES))
+        .arg("--run-dir")
+        .arg(dir.join("run"))
+        .env(
+            linetrack_ipc::Scope::PREFIX_VAR,
+            format!("lte2e{}_badrunner_", std::process::id()),
+        )
+        .env("LINETRACK_STAGE_RUNNER", "sh -c 'exec")
+        .output()
+        .unwrap_or_else(|e| panic!("starting linetrack: {e}"));
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(!output.status.success(), "{stderr}");
+    assert!(
+        stderr.contains("LINETRACK_STAGE_RUNNER") && stderr.contains("unbalanced quotes"),
+        "the error names the variable and the fault:\n{stderr}"
+    );
+}
+
 fn hot_swap(mut run: Run) {
     run.wait_for("8 frames", RUN_TIMEOUT, |s| s.frames >= 8);
     let ctl = std::process::Command::new(bin_dir().join("linetrack"))

@@ -2,7 +2,9 @@
 //!
 //! In multi-process mode ([`Mode::Processes`]) it starts one process per stage
 //! (`linetrack-line-detector`, `linetrack-matcher`, `linetrack-pose-estimator`, then, once
-//! those report ready, `linetrack-frame-source`), watches their heartbeats and exits,
+//! those report ready, `linetrack-frame-source`; found beside this program or in
+//! `LINETRACK_BIN_DIR`, started through `LINETRACK_STAGE_RUNNER` when it is set, see
+//! [`stage_runner`]), watches their heartbeats and exits,
 //! restarts a stage that crashed or hung (with exponential backoff, up to a limit), hot-swaps
 //! the detector on command, steers the matcher between LBD and ℓ1, and shuts everything
 //! down on SIGINT/SIGTERM or when every frame has an outcome. In single-process mode
@@ -21,6 +23,7 @@ mod camera_check;
 pub mod fallback;
 pub mod monitor;
 pub mod run_dir;
+pub mod stage_runner;
 
 use anyhow::{Context, bail};
 use linetrack_ipc::{Bus, Inlet, LocalHub, Outlet, Scope, Shutdown, Wake};
@@ -34,8 +37,9 @@ use linetrack_stage_runtime::{StageContext, detector_code, detector_from_code};
 use linetrack_vision::DetectorKind;
 use monitor::Monitor;
 use serde::Serialize;
+use stage_runner::StageRunner;
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command as Process, Stdio};
+use std::process::{Child, Stdio};
 use std::time::{Duration, Instant};
 
 /// How the stages run.
@@ -422,6 +426,8 @@ struct Supervisor<'m> {
     run_dir: PathBuf,
     config_path: PathBuf,
     bin_dir: PathBuf,
+    /// What the stage binaries are started through (`LINETRACK_STAGE_RUNNER`).
+    stage_runner: StageRunner,
     bus: Bus,
     ports: Ports,
     monitor: &'m mut Monitor,
@@ -464,6 +470,10 @@ impl<'m> Supervisor<'m> {
                 );
             }
         }
+        let stage_runner = StageRunner::from_env()?;
+        if !stage_runner.is_direct() {
+            tracing::info!("stages start through {stage_runner}");
+        }
         let scope = scope.clone();
         // Nodes of killed runs are cleaned when a node starts (or by the explicit call).
         let dead_before = scope.dead_nodes()?;
@@ -493,6 +503,7 @@ impl<'m> Supervisor<'m> {
             run_dir: run_dir.to_path_buf(),
             config_path,
             bin_dir,
+            stage_runner,
             bus,
             ports,
             monitor,
@@ -576,7 +587,7 @@ impl<'m> Supervisor<'m> {
         start_frame: u64,
     ) -> anyhow::Result<(Launch, u32)> {
         let bin = self.bin_dir.join(format!("linetrack-{}", stage.name()));
-        let mut command = Process::new(&bin);
+        let mut command = self.stage_runner.command(&bin);
         command
             .arg("--config")
             .arg(&self.config_path)
@@ -601,9 +612,13 @@ impl<'m> Supervisor<'m> {
         if start_frame > 0 {
             command.arg("--start-frame").arg(start_frame.to_string());
         }
-        let child = command
-            .spawn()
-            .with_context(|| format!("starting {}", bin.display()))?;
+        let child = command.spawn().with_context(|| {
+            if self.stage_runner.is_direct() {
+                format!("starting {}", bin.display())
+            } else {
+                format!("starting {} through {}", bin.display(), self.stage_runner)
+            }
+        })?;
         let pid = child.id();
         Ok((Launch::Process(child), pid))
     }

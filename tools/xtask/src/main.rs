@@ -8,8 +8,13 @@
 //!   end-to-end tests start, then run the whole test suite with cargo-nextest (or `cargo
 //!   test` where nextest is not installed).
 //! - `cargo xtask setup` — only install the system packages.
+//! - `cargo xtask cross [--no-run]` — aarch64 release binaries of every service and tool,
+//!   run under qemu on the EuRoC excerpt and compared with the native build ([`cross`]).
 //!
 //! Every command can be run again: packages already installed are not touched.
+
+mod cross;
+mod pose_diff;
 
 use anyhow::{Context, bail};
 use std::process::{Command, ExitCode};
@@ -31,7 +36,8 @@ const USAGE: &str = "usage: cargo xtask <demo|match-demo|test|setup> [ARGS…]
   demo        run the pipeline: `linetrack run ARGS…` (try `cargo xtask demo --help`)
   match-demo  the l1 matcher demo (ARGS are passed on)
   test        run the whole test suite (ARGS are passed to cargo nextest run / cargo test)
-  setup       install the system packages only";
+  setup       install the system packages only
+  cross       aarch64 release binaries, checked under qemu (try `cargo xtask cross --help`)";
 
 fn main() -> ExitCode {
     match run() {
@@ -137,6 +143,7 @@ fn run() -> anyhow::Result<ExitCode> {
                 )
             }
         }
+        "cross" => cross::run(&rest),
         "-h" | "--help" | "help" => {
             println!("{USAGE}");
             Ok(ExitCode::SUCCESS)
@@ -215,7 +222,13 @@ fn has_nextest() -> bool {
 /// Installs the missing ones of [`SYSTEM_PACKAGES`] with apt-get (through sudo when not
 /// root). Does nothing when all are installed.
 fn install_system_packages() -> anyhow::Result<()> {
-    let missing: Vec<&str> = SYSTEM_PACKAGES
+    install_packages(SYSTEM_PACKAGES)
+}
+
+/// Installs the missing ones of `packages` with apt-get (through sudo when not root),
+/// waiting for another apt-get's lock. Does nothing when all are installed.
+fn install_packages(packages: &[&str]) -> anyhow::Result<()> {
+    let missing: Vec<&str> = packages
         .iter()
         .copied()
         .filter(|p| !is_installed(p))
@@ -244,6 +257,7 @@ fn install_system_packages() -> anyhow::Result<()> {
             command.arg("apt-get");
         }
         let status = command
+            .args(["-o", "DPkg::Lock::Timeout=600"])
             .args(apt_args)
             .env("DEBIAN_FRONTEND", "noninteractive")
             .status()
