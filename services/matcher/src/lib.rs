@@ -33,6 +33,9 @@ pub struct FrameMatcher {
     lbd: Box<dyn SegmentMatcher>,
     l1: Box<dyn SegmentMatcher>,
     mode: MatcherMode,
+    /// Whether ℓ1 frames probe LBD (the `auto` policy only: under `l1` nothing would come
+    /// of a probe but its cost).
+    probes: bool,
     probe_every: u32,
     frames_in_l1: u32,
     previous: Option<Previous>,
@@ -52,12 +55,22 @@ impl FrameMatcher {
             lbd: create_segment_matcher(MatcherKind::Lbd, frontend)?,
             l1: create_segment_matcher(MatcherKind::L1, frontend)?,
             mode,
+            probes: ctx.config.matcher.mode == MatcherPolicy::Auto,
             probe_every: ctx.config.matcher.fallback.probe_every,
             frames_in_l1: 0,
             previous: None,
             stereo: Vec::new(),
             tracked: Vec::new(),
         })
+    }
+
+    /// Whether a frame matched in `mode` also tries LBD: every `probe_every`-th ℓ1 frame
+    /// under the `auto` policy.
+    fn probes_now(&self, mode: MatcherMode) -> bool {
+        self.probes
+            && mode == MatcherMode::L1
+            && self.mode == MatcherMode::L1
+            && self.frames_in_l1.is_multiple_of(self.probe_every)
     }
 
     /// The mode for the next frames.
@@ -111,10 +124,7 @@ impl FrameMatcher {
         if mode == MatcherMode::Lbd && views.is_none() {
             mode = MatcherMode::L1;
         }
-        let probe = mode == MatcherMode::L1
-            && self.mode == MatcherMode::L1
-            && views.is_some()
-            && self.frames_in_l1.is_multiple_of(self.probe_every);
+        let probe = views.is_some() && self.probes_now(mode);
         let mut described = false;
         if let Some((l, r)) = &views {
             let span = info_span!("describe");
@@ -230,4 +240,35 @@ impl Stage for FrameMatcher {
 /// Runs the matcher stage until shutdown.
 pub fn run(ctx: &StageContext, bus: &Bus, shutdown: &Shutdown) -> anyhow::Result<()> {
     run_stage(ctx, bus, FrameMatcher::new(ctx)?, shutdown)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use linetrack_pipeline_config::PipelineConfig;
+
+    fn matcher(policy: MatcherPolicy) -> FrameMatcher {
+        let mut config = PipelineConfig::default();
+        config.matcher.mode = policy;
+        let ctx = StageContext::in_process(StageKind::Matcher, config, std::path::PathBuf::new());
+        FrameMatcher::new(&ctx).unwrap_or_else(|e| panic!("{e}"))
+    }
+
+    #[test]
+    fn only_the_auto_policy_probes_lbd_from_l1() {
+        // Under `auto`, fallen back to ℓ1: the first ℓ1 frame and every probe_every-th.
+        let mut auto = matcher(MatcherPolicy::Auto);
+        auto.set_mode(MatcherMode::L1);
+        assert!(auto.probes_now(MatcherMode::L1));
+        auto.frames_in_l1 = 1;
+        assert!(!auto.probes_now(MatcherMode::L1));
+        auto.frames_in_l1 = auto.probe_every;
+        assert!(auto.probes_now(MatcherMode::L1));
+        // ℓ1 only: never (each probe cost an LBD description, ~15 ms, every 5th frame).
+        let mut l1 = matcher(MatcherPolicy::L1);
+        for frames in 0..10 {
+            l1.frames_in_l1 = frames;
+            assert!(!l1.probes_now(MatcherMode::L1), "frame {frames}");
+        }
+    }
 }
