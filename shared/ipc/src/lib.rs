@@ -116,6 +116,18 @@ impl Scope {
         Self::with_prefix(&prefix, run_id)
     }
 
+    /// This scope with its root folder from the config (see [`Scope::root_from`]).
+    pub fn with_configured_root(mut self, configured: Option<&Path>) -> Self {
+        self.root = Self::root_from(configured);
+        self
+    }
+
+    /// This scope with an explicit root folder (`linetrack ctl` reaching a recorded run).
+    pub fn with_root(mut self, root: PathBuf) -> Self {
+        self.root = root;
+        self
+    }
+
     /// A scope with an explicit prefix (tests, `linetrack ctl` reaching a recorded run).
     pub fn with_prefix(prefix: &str, run_id: &str) -> Self {
         Self {
@@ -127,12 +139,19 @@ impl Scope {
 
     /// This user's root folder for iceoryx2's bookkeeping.
     pub fn default_root() -> PathBuf {
+        Self::root_from(None)
+    }
+
+    /// The root folder: `LINETRACK_IPC_ROOT`, else `configured` (the config's `ipc.root`),
+    /// else `$XDG_RUNTIME_DIR/linetrack-iceoryx2`, else `/tmp/linetrack-<uid>/iceoryx2`.
+    pub fn root_from(configured: Option<&Path>) -> PathBuf {
         let from_env = |var: &str| {
             std::env::var_os(var)
                 .filter(|v| !v.is_empty())
                 .map(PathBuf::from)
         };
         from_env(Self::ROOT_VAR)
+            .or_else(|| configured.map(Path::to_path_buf))
             .or_else(|| {
                 from_env("XDG_RUNTIME_DIR")
                     .filter(|dir| dir.is_dir())

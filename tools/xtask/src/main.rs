@@ -8,8 +8,11 @@
 //!   end-to-end tests start, then run the whole test suite with cargo-nextest (or `cargo
 //!   test` where nextest is not installed).
 //! - `cargo xtask setup` — only install the system packages.
+//! - `cargo xtask deb [--target TRIPLE] [--check]` — the Debian package ([`deb`]).
 //!
 //! Every command can be run again: packages already installed are not touched.
+
+mod deb;
 
 use anyhow::{Context, bail};
 use std::process::{Command, ExitCode};
@@ -27,7 +30,8 @@ const USAGE: &str = "usage: cargo xtask <demo|match-demo|test|setup> [ARGS…]
   demo        run the pipeline: `linetrack run ARGS…` (try `cargo xtask demo --help`)
   match-demo  the l1 matcher demo (ARGS are passed on)
   test        run the whole test suite (ARGS are passed to cargo nextest run / cargo test)
-  setup       install the system packages only";
+  setup       install the system packages only
+  deb         the Debian package; --check unpacks and checks it (`cargo xtask deb --help`)";
 
 fn main() -> ExitCode {
     match run() {
@@ -133,6 +137,11 @@ fn run() -> anyhow::Result<ExitCode> {
                 )
             }
         }
+        "deb" => {
+            install_system_packages()?;
+            deb::run(&rest, install_packages)?;
+            Ok(ExitCode::SUCCESS)
+        }
         "-h" | "--help" | "help" => {
             println!("{USAGE}");
             Ok(ExitCode::SUCCESS)
@@ -211,7 +220,13 @@ fn has_nextest() -> bool {
 /// Installs the missing ones of [`SYSTEM_PACKAGES`] with apt-get (through sudo when not
 /// root). Does nothing when all are installed.
 fn install_system_packages() -> anyhow::Result<()> {
-    let missing: Vec<&str> = SYSTEM_PACKAGES
+    install_packages(SYSTEM_PACKAGES)
+}
+
+/// Installs the missing ones of `packages` with apt-get (through sudo when not root),
+/// waiting up to 10 minutes for another apt to finish. Does nothing when all are installed.
+fn install_packages(packages: &[&str]) -> anyhow::Result<()> {
+    let missing: Vec<&str> = packages
         .iter()
         .copied()
         .filter(|p| !is_installed(p))
@@ -240,6 +255,7 @@ fn install_system_packages() -> anyhow::Result<()> {
             command.arg("apt-get");
         }
         let status = command
+            .args(["-o", "DPkg::Lock::Timeout=600"])
             .args(apt_args)
             .env("DEBIAN_FRONTEND", "noninteractive")
             .status()
