@@ -44,7 +44,9 @@ fn thread_status(pid: u32, name: &str) -> Option<PathBuf> {
 #[test]
 fn a_stage_pinned_to_cpu_0_runs_there_and_the_ipc_root_comes_from_the_config() {
     let dir = scratch("pinned");
-    let ipc_root = dir.join("iceoryx2");
+    // Short: iceoryx2's event sockets live under it, and a socket path holds 107 bytes.
+    let ipc_root = std::env::temp_dir().join(format!("lte2e{}-ipc", std::process::id()));
+    let _ = std::fs::remove_dir_all(&ipc_root);
     let extra = format!(
         "{QUICK}[stages.line-detector]\ncpus = [0]\n[ipc]\nroot = {:?}\n",
         ipc_root.display().to_string()
@@ -89,6 +91,7 @@ fn a_stage_pinned_to_cpu_0_runs_there_and_the_ipc_root_comes_from_the_config() {
         "{:?}",
         records.events
     );
+    let _ = std::fs::remove_dir_all(&ipc_root);
 }
 
 #[test]
