@@ -5,7 +5,9 @@
 //! - `cargo xtask deb` builds the release binaries and `target/debian/linetrack_<v>_amd64.deb`.
 //! - `cargo xtask deb --target aarch64-unknown-linux-gnu` packages the aarch64 binaries
 //!   already in `target/aarch64-unknown-linux-gnu/release` (built by `cargo xtask cross`),
-//!   without building or stripping them (the host's `strip` cannot read them).
+//!   without building or stripping them (the host's `strip` cannot read them), with the
+//!   dependencies the `cross` variant of the metadata names (dpkg-shlibdeps cannot see a
+//!   cross sysroot's libraries).
 //! - `cargo xtask deb --check [--profile test-release]` packages the binaries of that
 //!   profile (CI: the test build `cargo xtask test` made, no second build), unpacks the
 //!   package with `dpkg-deb -x` into a scratch root, checks the tree (every binary, the
@@ -57,6 +59,7 @@ const USAGE: &str = "usage: cargo xtask deb [--target TRIPLE] [--profile PROFILE
   --target TRIPLE  package prebuilt binaries of TRIPLE (e.g. aarch64-unknown-linux-gnu, from
                    `cargo xtask cross`) found in target/TRIPLE/release; nothing is built
   --profile NAME   package the binaries of this cargo profile (default release)
+  --output DIR     write the package into DIR (default target/debian, or target/TRIPLE/debian)
   --check          package, then unpack into a scratch root and check the tree, the unit
                    (systemd-analyze verify) and a run of the installed binaries";
 
@@ -65,6 +68,7 @@ const USAGE: &str = "usage: cargo xtask deb [--target TRIPLE] [--profile PROFILE
 struct Options {
     target: Option<String>,
     profile: Option<String>,
+    output: Option<PathBuf>,
     check: bool,
 }
 
@@ -78,6 +82,11 @@ fn parse(args: &[String]) -> anyhow::Result<Option<Options>> {
             }
             "--profile" => {
                 options.profile = Some(args.next().context("--profile needs a name")?.clone());
+            }
+            "--output" => {
+                options.output = Some(PathBuf::from(
+                    args.next().context("--output needs a folder")?,
+                ));
             }
             "--check" => options.check = true,
             "-h" | "--help" => return Ok(None),
@@ -130,8 +139,15 @@ pub fn run(args: &[String], install: impl Fn(&[&str]) -> anyhow::Result<()>) -> 
                 dir.display(),
                 missing.join(", ")
             );
-            // The host's strip cannot read another architecture's binaries.
-            deb_args.extend(["--target".into(), triple.clone(), "--no-strip".into()]);
+            // The host's strip cannot read another architecture's binaries, nor can
+            // dpkg-shlibdeps find their libraries: the `cross` variant names them.
+            deb_args.extend([
+                "--target".into(),
+                triple.clone(),
+                "--no-strip".into(),
+                "--variant".into(),
+                "cross".into(),
+            ]);
         }
         None => {
             let mut build = vec!["build", "--workspace", "--bins", "--quiet"];
@@ -142,6 +158,13 @@ pub fn run(args: &[String], install: impl Fn(&[&str]) -> anyhow::Result<()>) -> 
     if options.check {
         let out = target_dir.join("debian-check");
         let _ = std::fs::remove_dir_all(&out);
+        // A package only unpacked here: the fast compression.
+        deb_args.extend([
+            "--output".into(),
+            out.display().to_string(),
+            "--fast".into(),
+        ]);
+    } else if let Some(out) = &options.output {
         deb_args.extend(["--output".into(), out.display().to_string()]);
     }
     let deb = cargo_deb(&deb_args)?;
