@@ -372,7 +372,7 @@ fn check(deb: &Path, root: &Path) -> anyhow::Result<()> {
 }
 
 /// Runs the installed `linetrack run` for a few frames of a small generated sequence, with
-/// the installed config (its paths moved into the scratch root).
+/// the installed config (its run folder and shared-memory root moved into scratch folders).
 fn run_installed(root: &Path, checks: &mut Checks) -> anyhow::Result<()> {
     let bin = root.join("usr/bin");
     let work = root.join("var/lib/linetrack");
@@ -387,6 +387,16 @@ fn run_installed(root: &Path, checks: &mut Checks) -> anyhow::Result<()> {
     // iceoryx2's event sockets live under the root: a unix socket's path is limited to
     // 108 bytes, so a short folder outside the scratch tree (the service's is
     // /run/linetrack/iceoryx2).
+    // The installed config, with every frame processed however late: on a loaded machine
+    // the drop policy could leave nothing tracked (a failed run) in 8 frames.
+    let config = work.join("pipeline.toml");
+    let installed = std::fs::read_to_string(root.join("etc/linetrack/pipeline.toml"))
+        .context("reading the installed config")?;
+    std::fs::write(
+        &config,
+        format!("{installed}\n[budget]\ndrop_late = false\n"),
+    )
+    .with_context(|| format!("writing {}", config.display()))?;
     let ipc_root = std::env::temp_dir().join(format!("ltdeb-{}", std::process::id()));
     let run_dir = work.join("runs/check");
     let (ok, text) = run_output(
@@ -395,7 +405,7 @@ fn run_installed(root: &Path, checks: &mut Checks) -> anyhow::Result<()> {
             .arg(&sequence)
             .arg("--run-dir")
             .arg(&run_dir)
-            .env("LINETRACK_CONFIG", root.join("etc/linetrack/pipeline.toml"))
+            .env("LINETRACK_CONFIG", &config)
             .env("LINETRACK_IPC_ROOT", &ipc_root)
             .env(
                 "LINETRACK_IPC_PREFIX",
