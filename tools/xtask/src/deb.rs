@@ -54,7 +54,8 @@ const CONFFILES: &[&str] = &["/etc/linetrack/pipeline.toml", "/etc/default/linet
 /// Where the unit is installed.
 const UNIT: &str = "usr/lib/systemd/system/linetrack.service";
 
-const USAGE: &str = "usage: cargo xtask deb [--target TRIPLE] [--profile PROFILE] [--check]
+const USAGE: &str =
+    "usage: cargo xtask deb [--target TRIPLE] [--profile PROFILE] [--output DIR] [--check]
   (no option)      build the release binaries and target/debian/linetrack_<version>_amd64.deb
   --target TRIPLE  package prebuilt binaries of TRIPLE (e.g. aarch64-unknown-linux-gnu, from
                    `cargo xtask cross`) found in target/TRIPLE/release; nothing is built
