@@ -154,6 +154,9 @@ pub fn run(args: &[String], install: impl Fn(&[&str]) -> anyhow::Result<()>) -> 
             let mut build = vec!["build", "--workspace", "--bins", "--quiet"];
             build.extend(["--profile", profile]);
             cargo(&build)?;
+            // The release profile keeps line tables (`debug = "line-tables-only"`), which
+            // cargo-deb would then package: 135 MB instead of a stripped package.
+            deb_args.push("--strip".into());
         }
     }
     if options.check {
