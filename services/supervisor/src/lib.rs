@@ -126,6 +126,9 @@ pub struct LiveStatus {
     pub run_id: String,
     /// The shared-memory prefix.
     pub ipc_prefix: String,
+    /// The folder of iceoryx2's bookkeeping (absent in runs recorded before it was kept).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub ipc_root: Option<PathBuf>,
     /// The supervisor's pid.
     pub supervisor_pid: u32,
     /// The running stages.
@@ -214,6 +217,12 @@ pub fn run(
     } else {
         sequence_ground_truth(&config.source.sequence)?
     };
+    // Each stage's CPUs and policy, tried on a passing thread: a CPU this process may not
+    // use ends the run before any stage starts; a refused privilege is a warning.
+    let mut refused = Vec::new();
+    for (stage, settings) in config.stages.all() {
+        refused.extend(linetrack_sched::probe(stage, settings)?);
+    }
     let run_dir = run_dir::resolve(&config.output, std::time::SystemTime::now())?;
     // Held until the run is over; released by the kernel if this process dies.
     let _lock = run_dir::lock(&run_dir)?;
@@ -226,8 +235,17 @@ pub fn run(
     };
     let config_path = prepare_run_dir(config, &run_dir)?;
     let run_id = new_run_id();
-    let scope = Scope::new(&run_id);
+    let scope = Scope::new(&run_id).with_configured_root(config.ipc.root.as_deref());
     let mut monitor = Monitor::new(config, 0, &run_dir)?.with_ground_truth(ground_truth);
+    for refusal in refused {
+        tracing::warn!("{refusal}");
+        monitor.event(
+            "sched-refused",
+            &refusal.stage.clone(),
+            None,
+            refusal.to_string(),
+        );
+    }
     let result = match options.mode {
         Mode::Processes | Mode::Threads => Supervisor::new(
             config,
@@ -309,6 +327,7 @@ fn final_status(
     LiveStatus {
         run_id: run_id.to_string(),
         ipc_prefix: scope.prefix.clone(),
+        ipc_root: Some(scope.root.clone()),
         supervisor_pid: std::process::id(),
         stages: Vec::new(),
         detector,
@@ -544,9 +563,22 @@ impl<'m> Supervisor<'m> {
                 let code = stage_code(stage).context("the supervisor is no stage")?;
                 let stop = Shutdown::default();
                 let (hub, flag) = (hub.clone(), stop.clone());
+                let settings = self
+                    .config
+                    .stages
+                    .of(stage.name())
+                    .cloned()
+                    .unwrap_or_default();
                 let handle = std::thread::Builder::new()
                     .name(stage.name().to_string())
-                    .spawn(move || code(&ctx, &hub.bus(), &flag))
+                    .spawn(move || {
+                        // The stage's CPUs and policy, on its own thread (and the threads
+                        // it starts).
+                        for refusal in linetrack_sched::apply(stage.name(), &settings)? {
+                            tracing::warn!("{refusal}");
+                        }
+                        code(&ctx, &hub.bus(), &flag)
+                    })
                     .with_context(|| format!("starting the {stage} thread"))?;
                 (
                     Launch::Thread {
@@ -598,6 +630,7 @@ impl<'m> Supervisor<'m> {
             .arg("--supervisor-pid")
             .arg(std::process::id().to_string())
             .env(Scope::PREFIX_VAR, &self.scope.prefix)
+            .env(Scope::ROOT_VAR, &self.scope.root)
             .stdin(Stdio::null())
             .stdout(Stdio::null());
         if let Some(kind) = detector {
@@ -627,6 +660,7 @@ impl<'m> Supervisor<'m> {
         LiveStatus {
             run_id: self.run_id.clone(),
             ipc_prefix: self.scope.prefix.clone(),
+            ipc_root: Some(self.scope.root.clone()),
             supervisor_pid: std::process::id(),
             stages: self
                 .processes

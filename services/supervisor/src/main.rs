@@ -11,7 +11,11 @@ use std::process::ExitCode;
 #[derive(Parser)]
 struct Args {
     /// Pipeline config.
-    #[arg(long, default_value = "configs/pipeline.toml")]
+    #[arg(
+        long,
+        env = "LINETRACK_CONFIG",
+        default_value = "configs/pipeline.toml"
+    )]
     config: PathBuf,
 }
 

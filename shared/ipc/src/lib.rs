@@ -101,6 +101,12 @@ pub struct Scope {
 /// Where POSIX shared memory lives on Linux.
 const SHM_DIR: &str = "/dev/shm";
 
+/// The longest path a unix socket may have (`sun_path`, less its closing NUL).
+const SOCKET_PATH_MAX: usize = 107;
+/// What iceoryx2 adds to the root folder and the prefix for an event's socket: `/`, a
+/// decimal 128-bit hash (up to 39 digits) and `.event`.
+const EVENT_SOCKET_SUFFIX: usize = 1 + 39 + ".event".len();
+
 impl Scope {
     /// The environment variable that overrides the prefix.
     pub const PREFIX_VAR: &'static str = "LINETRACK_IPC_PREFIX";
@@ -116,6 +122,18 @@ impl Scope {
         Self::with_prefix(&prefix, run_id)
     }
 
+    /// This scope with its root folder from the config (see [`Scope::root_from`]).
+    pub fn with_configured_root(mut self, configured: Option<&Path>) -> Self {
+        self.root = Self::root_from(configured);
+        self
+    }
+
+    /// This scope with an explicit root folder (`linetrack ctl` reaching a recorded run).
+    pub fn with_root(mut self, root: PathBuf) -> Self {
+        self.root = root;
+        self
+    }
+
     /// A scope with an explicit prefix (tests, `linetrack ctl` reaching a recorded run).
     pub fn with_prefix(prefix: &str, run_id: &str) -> Self {
         Self {
@@ -127,12 +145,19 @@ impl Scope {
 
     /// This user's root folder for iceoryx2's bookkeeping.
     pub fn default_root() -> PathBuf {
+        Self::root_from(None)
+    }
+
+    /// The root folder: `LINETRACK_IPC_ROOT`, else `configured` (the config's `ipc.root`),
+    /// else `$XDG_RUNTIME_DIR/linetrack-iceoryx2`, else `/tmp/linetrack-<uid>/iceoryx2`.
+    pub fn root_from(configured: Option<&Path>) -> PathBuf {
         let from_env = |var: &str| {
             std::env::var_os(var)
                 .filter(|v| !v.is_empty())
                 .map(PathBuf::from)
         };
         from_env(Self::ROOT_VAR)
+            .or_else(|| configured.map(Path::to_path_buf))
             .or_else(|| {
                 from_env("XDG_RUNTIME_DIR")
                     .filter(|dir| dir.is_dir())
@@ -151,6 +176,17 @@ impl Scope {
     /// when missing).
     pub fn config(&self) -> Result<Config, IpcError> {
         let root = self.root.to_string_lossy();
+        let socket_len = root.trim_end_matches('/').len() + self.prefix.len() + EVENT_SOCKET_SUFFIX;
+        if socket_len > SOCKET_PATH_MAX {
+            return Err(setup("iceoryx2 root folder", &root)(format!(
+                "too long for iceoryx2's event sockets: the folder and the prefix {:?} take {} bytes \
+                 of a socket path's {SOCKET_PATH_MAX}, {EVENT_SOCKET_SUFFIX} are needed after them; \
+                 choose a shorter folder (`[ipc] root` in the config, or {})",
+                self.prefix,
+                socket_len - EVENT_SOCKET_SUFFIX,
+                Self::ROOT_VAR
+            )));
+        }
         private_dir(&self.root).map_err(|message| setup("iceoryx2 root folder", &root)(message))?;
         let mut config = Config::default();
         config.global.prefix = FileName::new(self.prefix.as_bytes())
@@ -805,6 +841,21 @@ impl Wake {
 
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn a_root_too_long_for_a_socket_path_is_refused_naming_it() {
+        let long = format!("/tmp/{}", "d".repeat(80));
+        let err = super::Scope::with_prefix("linetrack_u1000_", "run")
+            .with_root(std::path::PathBuf::from(&long))
+            .config()
+            .err()
+            .map(|e| e.to_string())
+            .unwrap_or_default();
+        assert!(
+            err.contains(&long) && err.contains("too long") && err.contains("[ipc] root"),
+            "{err}"
+        );
+    }
+
     use super::*;
     use linetrack_msgs::SegmentRecord;
 

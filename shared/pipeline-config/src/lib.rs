@@ -1,9 +1,12 @@
 //! The pipeline's configuration (`configs/pipeline.toml`): what the frame source reads and
 //! how fast, which detector and matcher run, the latency budgets and drop policy, when the
 //! matcher falls back to ℓ1 and comes back, and how the supervisor watches and restarts
-//! stages. Every field has a default; [`PipelineConfig::validate`] names the first bad one.
+//! stages, each stage's CPUs and scheduling policy (`[stages.<name>]`, applied by
+//! `linetrack-sched`), and where the shared memory's bookkeeping lives (`[ipc]`). Every
+//! field has a default; [`PipelineConfig::validate`] names the first bad one.
 
 use linetrack_odometry::OdometryConfig;
+pub use linetrack_sched::{Policy, SchedSettings};
 use linetrack_vision::DetectorKind;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
@@ -340,6 +343,56 @@ impl Default for OutputConfig {
     }
 }
 
+/// Each stage's CPUs and scheduling policy (`[stages.line-detector]` ...); a stage left out
+/// keeps what it inherits from the supervisor. Unknown stage names are refused.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default, rename_all = "kebab-case")]
+pub struct StagesConfig {
+    /// `[stages.frame-source]`.
+    #[serde(skip_serializing_if = "SchedSettings::is_empty")]
+    pub frame_source: SchedSettings,
+    /// `[stages.line-detector]` (a standby detector of a hot swap too).
+    #[serde(skip_serializing_if = "SchedSettings::is_empty")]
+    pub line_detector: SchedSettings,
+    /// `[stages.matcher]`.
+    #[serde(skip_serializing_if = "SchedSettings::is_empty")]
+    pub matcher: SchedSettings,
+    /// `[stages.pose-estimator]`.
+    #[serde(skip_serializing_if = "SchedSettings::is_empty")]
+    pub pose_estimator: SchedSettings,
+}
+
+impl StagesConfig {
+    /// The stage names, in pipeline order, with their settings.
+    pub fn all(&self) -> [(&'static str, &SchedSettings); 4] {
+        [
+            ("frame-source", &self.frame_source),
+            ("line-detector", &self.line_detector),
+            ("matcher", &self.matcher),
+            ("pose-estimator", &self.pose_estimator),
+        ]
+    }
+
+    /// The settings of the stage named `stage_name` (`frame-source`, `line-detector`, ...).
+    pub fn of(&self, stage_name: &str) -> Option<&SchedSettings> {
+        self.all()
+            .into_iter()
+            .find(|(name, _)| *name == stage_name)
+            .map(|(_, settings)| settings)
+    }
+}
+
+/// Shared memory.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct IpcConfig {
+    /// The folder of iceoryx2's node and service descriptions (created owner-only). Unset:
+    /// `$XDG_RUNTIME_DIR/linetrack-iceoryx2`, else `/tmp/linetrack-<uid>/iceoryx2`. The
+    /// environment variable `LINETRACK_IPC_ROOT` overrides it.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub root: Option<PathBuf>,
+}
+
 /// Allowed latency budgets, milliseconds: above zero, at most a minute.
 const BUDGET_MS: std::ops::RangeInclusive<f64> = 0.001..=60_000.0;
 /// Allowed realtime rates, frames per second (0 = the sequence's own rate).
@@ -402,6 +455,10 @@ pub struct PipelineConfig {
     pub supervisor: SupervisorConfig,
     /// Records.
     pub output: OutputConfig,
+    /// Each stage's CPUs and scheduling policy.
+    pub stages: StagesConfig,
+    /// Shared memory.
+    pub ipc: IpcConfig,
     /// Front end and motion estimation (its `detector` and `matcher` keys are ignored:
     /// the ones above rule).
     pub odometry: OdometryConfig,
@@ -418,6 +475,8 @@ impl Default for PipelineConfig {
             budget: BudgetConfig::default(),
             supervisor: SupervisorConfig::default(),
             output: OutputConfig::default(),
+            stages: StagesConfig::default(),
+            ipc: IpcConfig::default(),
             odometry: OdometryConfig::default(),
         }
     }
@@ -560,6 +619,17 @@ impl PipelineConfig {
             s.status_every_ms,
             0..=MAX_STATUS_EVERY_MS,
         )?;
+        for (name, settings) in self.stages.all() {
+            settings.validate(&format!("stages.{name}"))?;
+        }
+        if let Some(root) = &self.ipc.root
+            && !root.is_absolute()
+        {
+            return Err(format!(
+                "ipc.root = {:?}: an absolute folder (every stage must find the same one)",
+                root.display().to_string()
+            ));
+        }
         self.odometry
             .validate()
             .map_err(|e| format!("odometry.{e}"))?;
@@ -600,6 +670,17 @@ mod tests {
         assert!(ok.camera.enabled());
         assert_eq!(ok.camera.right(), Some("/dev/video1"));
         assert!(!PipelineConfig::default().camera.enabled());
+    }
+
+    #[test]
+    fn the_packaged_config_is_the_default_with_the_installed_layout() {
+        // /etc/linetrack/pipeline.toml of the Debian package (packaging/etc).
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../packaging/etc/pipeline.toml");
+        let packaged = PipelineConfig::from_file(&path).unwrap_or_else(|e| panic!("{e}"));
+        let mut expected = PipelineConfig::default();
+        expected.output.runs_dir = PathBuf::from("/var/lib/linetrack/runs");
+        expected.ipc.root = Some(PathBuf::from("/run/linetrack/iceoryx2"));
+        assert_eq!(packaged, expected);
     }
 
     #[test]
@@ -771,6 +852,49 @@ mod tests {
         if let Err(e) = PipelineConfig::from_toml_str(slow, "slow.toml") {
             panic!("{e}");
         }
+    }
+
+    #[test]
+    fn stage_settings_are_read_checked_and_survive_the_run_folder_copy() {
+        let text = "[stages.line-detector]\ncpus = [1]\npolicy = \"fifo\"\npriority = 20\n\
+            [stages.pose-estimator]\nnice = 5\n[ipc]\nroot = \"/run/linetrack/iceoryx2\"\n";
+        let config = PipelineConfig::from_toml_str(text, "x").unwrap_or_else(|e| panic!("{e}"));
+        let detector = config
+            .stages
+            .of("line-detector")
+            .cloned()
+            .unwrap_or_default();
+        assert_eq!(detector.cpus, Some(vec![1]));
+        assert_eq!(detector.policy, Some(Policy::Fifo));
+        assert_eq!(detector.priority, Some(20));
+        assert_eq!(config.stages.pose_estimator.nice, Some(5));
+        assert!(config.stages.matcher.is_empty());
+        assert_eq!(config.stages.of("supervisor"), None);
+        assert_eq!(
+            config.ipc.root.as_deref(),
+            Some(Path::new("/run/linetrack/iceoryx2"))
+        );
+        // The supervisor hands the stages the config through a copy it writes.
+        let copy = toml::to_string(&config).unwrap_or_else(|e| panic!("{e}"));
+        let back = PipelineConfig::from_toml_str(&copy, "copy").unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(back, config);
+    }
+
+    #[test]
+    fn unknown_stages_and_bad_stage_settings_are_refused_by_name() {
+        let err = refusal("[stages.line-dectector]\ncpus = [1]\n");
+        assert!(err.contains("line-dectector"), "{err}");
+        let err = refusal("[stages.supervisor]\ncpus = [1]\n");
+        assert!(err.contains("supervisor"), "{err}");
+        let err = refusal("[stages.matcher]\npolicy = \"fifo\"\npriority = 120\n");
+        assert!(
+            err.contains("x.toml") && err.contains("stages.matcher.priority = 120"),
+            "{err}"
+        );
+        let err = refusal("[stages.frame-source]\ncpus = []\n");
+        assert!(err.contains("stages.frame-source.cpus"), "{err}");
+        let err = refusal("[ipc]\nroot = \"relative/iceoryx2\"\n");
+        assert!(err.contains("ipc.root"), "{err}");
     }
 
     #[test]

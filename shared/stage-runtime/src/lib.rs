@@ -550,16 +550,28 @@ fn start(
     run: fn(&StageContext, &Bus, &Shutdown) -> anyhow::Result<()>,
 ) -> anyhow::Result<()> {
     let config = PipelineConfig::from_file(&args.config)?;
+    // The stage's CPUs and policy first, so that every thread started from here on
+    // (telemetry, iceoryx2, OpenCV) inherits them; refusals are logged once logging is up.
+    let refused = linetrack_sched::apply(
+        stage.name(),
+        config
+            .stages
+            .of(stage.name())
+            .unwrap_or(&Default::default()),
+    )?;
     let pid = std::process::id();
     let spans = config
         .output
         .trace
         .then(|| linetrack_telemetry::span_file(&args.run_dir, stage.name(), pid));
     let _spans = linetrack_telemetry::init(stage.name(), "warn", spans.as_deref())?;
+    for refusal in refused {
+        tracing::warn!("{refusal}");
+    }
     let shutdown = Shutdown::on_signals()?;
     end_with_parent(&shutdown, args.supervisor_pid)?;
     let bus = Bus::shared_memory(
-        &Scope::new(&args.run_id),
+        &Scope::new(&args.run_id).with_configured_root(config.ipc.root.as_deref()),
         &format!("{}-{pid}", stage.name()),
     )?;
     let ctx = StageContext {

@@ -64,8 +64,12 @@ pub enum Cmd {
 /// `linetrack run`.
 #[derive(Debug, clap::Args)]
 pub struct RunArgs {
-    /// Pipeline config.
-    #[arg(long, default_value = "configs/pipeline.toml")]
+    /// Pipeline config (the service's: /etc/linetrack/pipeline.toml).
+    #[arg(
+        long,
+        env = "LINETRACK_CONFIG",
+        default_value = "configs/pipeline.toml"
+    )]
     pub config: PathBuf,
     /// A EuRoC, KITTI odometry or KITTI raw sequence folder (default: the config's; the generated default
     /// sequence is rendered on first use).
@@ -115,8 +119,9 @@ pub struct RunArgs {
 /// `linetrack ctl`.
 #[derive(Debug, clap::Args)]
 pub struct CtlArgs {
-    /// The running pipeline's run folder (default: the newest run).
-    #[arg(long, default_value = "out/runs/latest")]
+    /// The running pipeline's run folder (default: the newest run; the service's:
+    /// /var/lib/linetrack/runs/latest).
+    #[arg(long, env = "LINETRACK_RUN_DIR", default_value = "out/runs/latest")]
     pub run_dir: PathBuf,
     /// The command.
     #[command(subcommand)]
@@ -140,8 +145,8 @@ pub enum CtlAction {
 /// `linetrack report`.
 #[derive(Debug, clap::Args)]
 pub struct ReportArgs {
-    /// Run folder (default: the newest run).
-    #[arg(default_value = "out/runs/latest")]
+    /// Run folder (default: the newest run; the service's: /var/lib/linetrack/runs/latest).
+    #[arg(env = "LINETRACK_RUN_DIR", default_value = "out/runs/latest")]
     pub run_dir: PathBuf,
 }
 
@@ -345,7 +350,10 @@ pub fn ctl(args: &CtlArgs) -> anyhow::Result<()> {
                 println!("detector is already {}", detector.name());
                 return Ok(());
             }
-            let scope = Scope::with_prefix(&status.ipc_prefix, &status.run_id);
+            let mut scope = Scope::with_prefix(&status.ipc_prefix, &status.run_id);
+            if let Some(root) = &status.ipc_root {
+                scope = scope.with_root(root.clone());
+            }
             let bus = Bus::shared_memory(&scope, &format!("ctl-{}", std::process::id()))?;
             let mut control = bus.outlet::<Control>(Topic::Control, 1)?;
             let request = Control::new(

@@ -10,10 +10,12 @@
 //! - `cargo xtask setup` — only install the system packages.
 //! - `cargo xtask cross [--no-run]` — aarch64 release binaries of every service and tool,
 //!   run under qemu on the EuRoC excerpt and compared with the native build ([`cross`]).
+//! - `cargo xtask deb [--target TRIPLE] [--check]` — the Debian package ([`deb`]).
 //!
 //! Every command can be run again: packages already installed are not touched.
 
 mod cross;
+mod deb;
 mod pose_diff;
 
 use anyhow::{Context, bail};
@@ -37,7 +39,8 @@ const USAGE: &str = "usage: cargo xtask <demo|match-demo|test|setup> [ARGS…]
   match-demo  the l1 matcher demo (ARGS are passed on)
   test        run the whole test suite (ARGS are passed to cargo nextest run / cargo test)
   setup       install the system packages only
-  cross       aarch64 release binaries, checked under qemu (try `cargo xtask cross --help`)";
+  cross       aarch64 release binaries, checked under qemu (try `cargo xtask cross --help`)
+  deb         the Debian package; --check unpacks and checks it (`cargo xtask deb --help`)";
 
 fn main() -> ExitCode {
     match run() {
@@ -144,6 +147,11 @@ fn run() -> anyhow::Result<ExitCode> {
             }
         }
         "cross" => cross::run(&rest),
+        "deb" => {
+            install_system_packages()?;
+            deb::run(&rest, install_packages)?;
+            Ok(ExitCode::SUCCESS)
+        }
         "-h" | "--help" | "help" => {
             println!("{USAGE}");
             Ok(ExitCode::SUCCESS)
@@ -226,7 +234,7 @@ fn install_system_packages() -> anyhow::Result<()> {
 }
 
 /// Installs the missing ones of `packages` with apt-get (through sudo when not root),
-/// waiting for another apt-get's lock. Does nothing when all are installed.
+/// waiting up to 10 minutes for another apt to finish. Does nothing when all are installed.
 fn install_packages(packages: &[&str]) -> anyhow::Result<()> {
     let missing: Vec<&str> = packages
         .iter()
