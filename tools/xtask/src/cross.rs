@@ -42,7 +42,8 @@ const HOST_PACKAGES: &[&str] = &[
 
 /// arm64 packages unpacked into the sysroot, with their dependencies: the C and C++ headers
 /// and libraries, and the OpenCV modules of the workspace's `opencv` features (core, imgproc,
-/// flann, features2d, calib3d, imgcodecs; ximgproc and line_descriptor are in contrib406).
+/// flann, features2d, calib3d, imgcodecs, videoio; ximgproc and line_descriptor are in
+/// contrib406).
 const SYSROOT_PACKAGES: &[&str] = &[
     "libc6-dev",
     "libstdc++-12-dev",
@@ -52,6 +53,7 @@ const SYSROOT_PACKAGES: &[&str] = &[
     "libopencv-features2d-dev",
     "libopencv-calib3d-dev",
     "libopencv-imgcodecs-dev",
+    "libopencv-videoio-dev",
     "libopencv-contrib406",
 ];
 
@@ -87,6 +89,7 @@ const OPENCV_LIBS: &[&str] = &[
     "opencv_features2d",
     "opencv_calib3d",
     "opencv_imgcodecs",
+    "opencv_videoio",
     "opencv_ximgproc",
     "opencv_line_descriptor",
 ];
