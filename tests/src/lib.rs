@@ -305,3 +305,32 @@ pub fn signal(pid: u32, signal: &str) {
         .unwrap_or_else(|e| panic!("kill: {e}"));
     assert!(status.success(), "kill -{signal} {pid} failed");
 }
+
+/// Frame ids 0..n appear once each, in order, each with an outcome a dataset run records or
+/// one of `also` (a camera's `capture-dropped`, `capture-late`).
+pub fn assert_ids_accounted(records: &Records, n: u64, also: &[&str]) {
+    let ids: Vec<u64> = records.frames.iter().map(|f| f.frame_id).collect();
+    assert_eq!(
+        ids,
+        (0..n).collect::<Vec<_>>(),
+        "every frame once, in order"
+    );
+    let known = [
+        "pose",
+        "lost",
+        "corrupt",
+        "dropped-late",
+        "dropped-behind",
+        "stage-error",
+        "skipped",
+        "missing",
+    ];
+    for f in &records.frames {
+        let outcome = f.outcome.as_str();
+        assert!(
+            known.contains(&outcome) || also.contains(&outcome),
+            "frame {}: outcome {outcome:?}",
+            f.frame_id
+        );
+    }
+}

@@ -21,41 +21,7 @@ fn ids(records: &Records) -> Vec<u64> {
 
 /// Every frame of the sequence appears exactly once, with a pose or a counted drop.
 fn assert_every_frame_accounted(records: &Records) {
-    assert_eq!(
-        ids(records),
-        (0..FRAMES as u64).collect::<Vec<_>>(),
-        "every frame once, in order"
-    );
-    let known = [
-        "pose",
-        "lost",
-        "corrupt",
-        "dropped-late",
-        "dropped-behind",
-        "stage-error",
-        "skipped",
-        "missing",
-    ];
-    for f in &records.frames {
-        assert!(
-            known.contains(&f.outcome.as_str()),
-            "frame {}: outcome {:?}",
-            f.frame_id,
-            f.outcome
-        );
-        if f.has_pose() {
-            assert!(
-                f.end_to_end_ms.is_finite() && f.end_to_end_ms > 0.0,
-                "frame {} has a pose but no latency",
-                f.frame_id
-            );
-        }
-    }
-    assert!(
-        records.events_of("duplicate").is_empty(),
-        "{:?}",
-        records.events
-    );
+    linetrack_e2e::assert_ids_accounted(records, FRAMES as u64, &[]);
 }
 
 #[test]

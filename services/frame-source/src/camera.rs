@@ -283,20 +283,27 @@ pub fn publish(ctx: &StageContext, mut ports: Ports, shutdown: &Shutdown) -> any
         Some(published) => published,
         None => return Ok(()),
     };
-    ports.reporter.report(
-        StatusKind::SourceFinished,
-        (start + published).saturating_sub(1),
-        published,
-    );
-    tracing::info!("finished: {published} frames");
-    while !shutdown.requested() && !shutdown_ordered(&mut ports.control, ctx.pid)? {
-        ports.rig.update_connections()?;
-        ports.reporter.beat(published);
-        ports
-            .wake
-            .wait(ports.reporter.until_due().max(Duration::from_millis(1)))?;
+    crate::stay_until_the_run_ends(ctx, &mut ports, shutdown, start, published)
+}
+
+/// Publishes `count` `capture-dropped` markers from frame `first` on; returns `count`.
+fn publish_dropped(
+    ports: &mut Ports,
+    ctx: &StageContext,
+    first: u64,
+    timestamp_ns: u64,
+    count: u64,
+) -> anyhow::Result<u64> {
+    for k in 0..count {
+        publish_marker(
+            ports,
+            ctx,
+            first + k,
+            timestamp_ns,
+            FrameStatus::CaptureDropped,
+        )?;
     }
-    Ok(())
+    Ok(count)
 }
 
 /// The publishing loop: `Some(frame ids published)` when the duration or frame limit is
@@ -323,6 +330,11 @@ fn publish_frames(
     let mut reported = 0u64;
     let mut last_timestamp_ns = 0u64;
     let limit_reached = |published: u64| max_frames > 0 && published >= max_frames;
+    // How many more frames the limit allows.
+    let room = |published: u64| match max_frames {
+        0 => u64::MAX,
+        m => m.saturating_sub(published),
+    };
     loop {
         if shutdown.requested() || shutdown_ordered(&mut ports.control, ctx.pid)? {
             tracing::info!("shutdown after {published} frames");
@@ -332,35 +344,24 @@ fn publish_frames(
             return Ok(Some(published));
         }
         // Frames the queue could not take, in the order they were lost.
-        for _ in 0..not_taken.swap(0, Ordering::SeqCst) {
-            if limit_reached(published) {
-                break;
-            }
-            publish_marker(
-                ports,
-                ctx,
-                start + published,
-                last_timestamp_ns,
-                FrameStatus::CaptureDropped,
-            )?;
-            published += 1;
-        }
+        let lost = not_taken.swap(0, Ordering::SeqCst);
+        published += publish_dropped(
+            ports,
+            ctx,
+            start + published,
+            last_timestamp_ns,
+            lost.min(room(published)),
+        )?;
         let wait = POLL.min(ports.reporter.until_due().max(Duration::from_millis(1)));
         match rx.recv_timeout(wait) {
             Ok(Captured::Frame { images, stamp }) => {
-                for _ in 0..stamp.dropped_before {
-                    if limit_reached(published) {
-                        break;
-                    }
-                    publish_marker(
-                        ports,
-                        ctx,
-                        start + published,
-                        last_timestamp_ns,
-                        FrameStatus::CaptureDropped,
-                    )?;
-                    published += 1;
-                }
+                published += publish_dropped(
+                    ports,
+                    ctx,
+                    start + published,
+                    last_timestamp_ns,
+                    stamp.dropped_before.min(room(published)),
+                )?;
                 if limit_reached(published) {
                     continue;
                 }

@@ -155,14 +155,24 @@ fn publish(ctx: &StageContext, mut ports: Ports, shutdown: &Shutdown) -> anyhow:
         // A stage that (re)started since gets the rig.
         ports.rig.update_connections()?;
     }
+    stay_until_the_run_ends(ctx, &mut ports, shutdown, start as u64, published)
+}
+
+/// Reports the source finished after `published` frames from `start`, then stays until the
+/// run ends: it holds the rig, which a stage restarted after the last frame still needs.
+fn stay_until_the_run_ends(
+    ctx: &StageContext,
+    ports: &mut Ports,
+    shutdown: &Shutdown,
+    start: u64,
+    published: u64,
+) -> anyhow::Result<()> {
     ports.reporter.report(
         StatusKind::SourceFinished,
-        (start as u64 + published).saturating_sub(1),
+        (start + published).saturating_sub(1),
         published,
     );
     tracing::info!("finished: {published} frames published");
-    // The source stays until the run ends: it holds the rig, which a stage restarted after
-    // the last frame still needs.
     while !shutdown.requested() && !shutdown_ordered(&mut ports.control, ctx.pid)? {
         ports.rig.update_connections()?;
         ports.reporter.beat(published);
