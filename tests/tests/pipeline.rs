@@ -27,8 +27,15 @@ fn assert_every_frame_accounted(records: &Records) {
 #[test]
 fn every_frame_gets_a_pose_and_the_run_leaves_no_shared_memory() {
     let dir = scratch("plain");
-    // The default drop policy: a frame late under load is a counted drop.
-    let run = start(&dir, &base_sequence(FRAMES), SUPERVISION);
+    // The default drop policy, with an end-to-end budget no load reaches: a frame with a
+    // newer one queued behind it is a counted drop, and the last frame always goes through
+    // (with the 100 ms default, a heavily loaded machine dropped all 40 as late and the run
+    // failed with nothing tracked — the right verdict for the run, not for this test).
+    let run = start(
+        &dir,
+        &base_sequence(FRAMES),
+        &format!("{SUPERVISION}[budget]\nend_to_end_ms = 60000.0\n"),
+    );
     let run_dir = run.run_dir.clone();
     let (status, out, records) = run.finish(RUN_TIMEOUT);
     assert!(status.success(), "{status}\n{out}");
@@ -38,7 +45,7 @@ fn every_frame_gets_a_pose_and_the_run_leaves_no_shared_memory() {
         .iter()
         .filter(|f| f.outcome == "pose")
         .count();
-    // Under load the policy drops late frames (counted above); of the frames that reached
+    // Under load the policy drops frames left behind (counted above); of the frames that reached
     // the pose estimator, most are tracked.
     let estimated = records.frames.iter().filter(|f| f.has_pose()).count();
     assert!(

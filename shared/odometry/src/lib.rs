@@ -23,7 +23,7 @@ pub use linetrack_trajectory::metrics;
 
 use landmarks::{Geometry, Landmark, sighted};
 use linetrack_geometry::{
-    MatchCase, Segment, SegmentFeatures, StereoRig, direction_angle, length_ratio, overlap,
+    MatchCase, Point, Segment, SegmentFeatures, StereoRig, direction_angle, length_ratio, overlap,
 };
 use linetrack_stereo_vo::motion::{line_residual, point_residual};
 use linetrack_stereo_vo::{
@@ -71,6 +71,11 @@ pub struct OdometryConfig {
     /// searched for within this of where the last motion (constant velocity) projects
     /// them, pixels.
     pub predicted_window_px: f64,
+    /// Frame to frame once a motion is known: match the last frame's segments at the
+    /// positions the last motion predicts for them (each one with a 3-D position), not
+    /// where they were. The matcher's own gates (LBD: displacement; ℓ1: overlap, angle,
+    /// flow) then compare like with like.
+    pub predicted_matching: bool,
     /// Frame to frame, ORB points: the second-best Hamming distance must be at least this
     /// times the best (the stereo ratio is the front end's `orb.min_distance_ratio`).
     pub frame_to_frame_ratio: f64,
@@ -122,6 +127,7 @@ impl Default for OdometryConfig {
             motion: MotionConfig::default(),
             max_displacement_px: 60.0,
             predicted_window_px: 30.0,
+            predicted_matching: true,
             frame_to_frame_ratio: 1.5,
             reject_look_alikes: true,
             subpixel_stereo: true,
@@ -370,6 +376,61 @@ impl MotionTracker {
     /// The last frame-to-frame motion.
     pub fn last_motion(&self) -> Isometry3<f64> {
         self.last_motion
+    }
+
+    /// Where the last frame's left segments (`previous`, as given to the last update) should
+    /// lie in the next frame: each one that stands for a landmark is lifted onto the
+    /// landmark's 3-D line, moved by the last motion and projected; the others stay where
+    /// they were. Returns false, leaving `out` empty, before a motion is known or without a
+    /// last frame (nothing to predict with).
+    pub fn predict_segments(&self, previous: &[Segment], out: &mut Vec<Segment>) -> bool {
+        out.clear();
+        let Some(reference) = self.reference.as_ref().filter(|_| self.motion_known) else {
+            return false;
+        };
+        let to_previous = reference.pose.inverse();
+        out.extend(previous.iter().enumerate().map(|(k, seen)| {
+            reference
+                .line_landmarks
+                .get(k)
+                .and_then(Option::as_ref)
+                .and_then(|landmark| {
+                    let line = landmark.world.transformed(&to_previous);
+                    let lift = |p: &Point| self.lift_onto(p, &line);
+                    let [a, b] = [lift(&seen.start)?, lift(&seen.end)?]
+                        .map(|x| self.rig.project_left(&(self.last_motion * x)));
+                    Some(Segment::new(a?, b?))
+                })
+                .unwrap_or(*seen)
+        }));
+        true
+    }
+
+    /// The point of the 3-D line through `line` (left camera frame) nearest to the ray
+    /// through pixel `p`; `None` when the two are (nearly) parallel or it lies behind.
+    fn lift_onto(&self, p: &Point, line: &[Point3<f64>; 2]) -> Option<Point3<f64>> {
+        let rig = &self.rig;
+        let ray = nalgebra::Vector3::new(
+            (p.x - rig.cx_px) / rig.focal_px,
+            (p.y - rig.cy_px) / rig.focal_px,
+            1.0,
+        );
+        let direction = line[1] - line[0];
+        let origin = line[0].coords;
+        // Closest points of o + t·d (the line) and s·r (the ray).
+        let (dd, dr, rr) = (
+            direction.dot(&direction),
+            direction.dot(&ray),
+            ray.dot(&ray),
+        );
+        let (od, or) = (origin.dot(&direction), origin.dot(&ray));
+        let det = dd * rr - dr * dr;
+        if det <= 1e-9 * dd * rr {
+            return None;
+        }
+        let t = (dr * or - rr * od) / det;
+        let x = line[0] + direction * t;
+        (x.z > 0.0).then_some(x)
     }
 
     /// How far from its previous position a feature is searched for in the next frame:
@@ -951,9 +1012,21 @@ impl Odometry {
         stats.ms[2] = since(started);
         let started = Instant::now();
         let mut tracked = Vec::new();
-        if let Some(previous) = &self.previous_lines {
+        if let Some(previous) = &mut self.previous_lines {
+            // Matched where the last motion puts them, when it is known.
+            let mut predicted = Vec::new();
+            let moved = self.tracker.config.predicted_matching
+                && self
+                    .tracker
+                    .predict_segments(&previous.segments, &mut predicted);
+            if moved {
+                std::mem::swap(&mut previous.segments, &mut predicted);
+            }
             self.matcher
                 .match_lines(MatchCase::FrameToFrame, previous, &lines_l, &mut tracked);
+            if moved {
+                std::mem::swap(&mut previous.segments, &mut predicted);
+            }
         }
         stats.ms[3] = since(started);
         let lines = MatchedLines {
@@ -973,6 +1046,44 @@ impl Odometry {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn segments_are_predicted_where_the_last_motion_moves_their_landmarks() {
+        let rig = StereoRig::default();
+        let mut tracker = MotionTracker::new(OdometryConfig::default(), rig).unwrap();
+        // A 3-D segment 3 m ahead, seen by a camera at a pose off the origin; the left
+        // image shows only its middle half (the landmark keeps its first sighting's extent).
+        let pose = Isometry3::translation(0.2, -0.1, 0.5);
+        let local = [Point3::new(-0.4, -0.3, 3.0), Point3::new(0.3, 0.4, 3.6)];
+        let at = |t: f64| local[0] + (local[1] - local[0]) * t;
+        let project = |x: Point3<f64>| rig.project_left(&x).unwrap();
+        let seen = Segment::new(project(at(0.25)), project(at(0.75)));
+        let elsewhere = Segment::new(Point::new(10.0, 10.0), Point::new(40.0, 12.0));
+        tracker.reference = Some(Reference {
+            pose,
+            points: PointFeatures::default(),
+            point_landmarks: Vec::new(),
+            line_landmarks: vec![Some(sighted(&pose, &local, 1.0)), None],
+        });
+        let previous = [seen, elsewhere];
+        let mut out = Vec::new();
+        // No motion measured yet: nothing to predict with.
+        assert!(!tracker.predict_segments(&previous, &mut out));
+        assert!(out.is_empty());
+
+        let motion = Isometry3::from_parts(
+            nalgebra::Translation3::new(0.05, 0.0, -0.1),
+            nalgebra::UnitQuaternion::from_euler_angles(0.0, 0.02, 0.01),
+        );
+        tracker.last_motion = motion;
+        tracker.motion_known = true;
+        assert!(tracker.predict_segments(&previous, &mut out));
+        let expected = [at(0.25), at(0.75)].map(|x| project(motion * x));
+        assert!((out[0].start - expected[0]).norm() < 1e-9, "{:?}", out[0]);
+        assert!((out[0].end - expected[1]).norm() < 1e-9, "{:?}", out[0]);
+        // Without a landmark a segment stays where it was.
+        assert_eq!(out[1], elsewhere);
+    }
 
     #[test]
     fn a_resumed_tracker_predicts_across_the_frames_it_missed() {

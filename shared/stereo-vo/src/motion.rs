@@ -64,7 +64,11 @@ pub struct MotionConfig {
     pub huber_px: f64,
     /// After the first pass, observations with a residual above this are outliers, pixels.
     pub outlier_px: f64,
-    /// Fewer inlier observations (points + lines) than this: the frame is lost.
+    /// Fewer inlier observations (points + lines) than this: the frame is lost. Six lines
+    /// (two equations each) already fix the six degrees of freedom, and the motion prior
+    /// holds what they leave weak: on the generated `lights-switching` sequence (seed 1, LBD,
+    /// lines only) 8 lost 4 frames that had 6–7 good lines (ATE 4.4 cm), 6 lost none
+    /// (3.3 cm).
     pub min_inliers: usize,
     /// Smallest eigenvalue of the normal matrix relative to the largest below this:
     /// the motion is not constrained (degenerate), the frame is lost. Translations are
@@ -93,7 +97,7 @@ impl Default for MotionConfig {
             min_step: 1e-9,
             huber_px: 1.0,
             outlier_px: 3.0,
-            min_inliers: 8,
+            min_inliers: 6,
             min_relative_eigenvalue: 1e-5,
             ransac_draws: 200,
             ransac_threshold_px: 2.0,
