@@ -7,7 +7,10 @@
 //! - `cargo xtask test [ARGS…]` — install system packages if missing, build the binaries the
 //!   end-to-end tests start, then run the whole test suite with cargo-nextest (or `cargo
 //!   test` where nextest is not installed).
-//! - `cargo xtask setup` — only install the system packages.
+//! - `cargo xtask test-ros2 [ARGS…]` — the ROS 2 output (cargo feature `ros2`): install the
+//!   DDS peer if missing ([`dds_peer`]), build `linetrack-ros2`, run its crate's tests and
+//!   the end-to-end test in which Cyclone DDS receives the poses, and clippy with the feature.
+//! - `cargo xtask setup` — only install the system packages and the DDS peer.
 //! - `cargo xtask cross [--no-run]` — aarch64 release binaries of every service and tool,
 //!   run under qemu on the EuRoC excerpt and compared with the native build ([`cross`]).
 //! - `cargo xtask deb [--target TRIPLE] [--check]` — the Debian package ([`deb`]).
@@ -15,6 +18,7 @@
 //! Every command can be run again: packages already installed are not touched.
 
 mod cross;
+mod dds_peer;
 mod deb;
 mod pose_diff;
 
@@ -38,7 +42,8 @@ const USAGE: &str = "usage: cargo xtask <demo|match-demo|test|setup> [ARGS…]
   demo        run the pipeline: `linetrack run ARGS…` (try `cargo xtask demo --help`)
   match-demo  the l1 matcher demo (ARGS are passed on)
   test        run the whole test suite (ARGS are passed to cargo nextest run / cargo test)
-  setup       install the system packages only
+  test-ros2   the ROS 2 output's tests (feature `ros2`) against a Cyclone DDS subscriber
+  setup       install the system packages and the DDS peer of test-ros2
   cross       aarch64 release binaries, checked under qemu (try `cargo xtask cross --help`)
   deb         the Debian package; --check unpacks and checks it (`cargo xtask deb --help`)";
 
@@ -59,7 +64,15 @@ fn run() -> anyhow::Result<ExitCode> {
     match command.as_str() {
         "setup" => {
             install_system_packages()?;
+            install_packages(dds_peer::SYSTEM_PACKAGES)?;
+            dds_peer::install()?;
             Ok(ExitCode::SUCCESS)
+        }
+        "test-ros2" => {
+            install_system_packages()?;
+            install_packages(dds_peer::SYSTEM_PACKAGES)?;
+            dds_peer::install()?;
+            test_ros2(&rest)
         }
         "demo" => {
             install_system_packages()?;
@@ -158,6 +171,92 @@ fn run() -> anyhow::Result<ExitCode> {
         }
         other => bail!("unknown command {other:?}\n{USAGE}"),
     }
+}
+
+/// The ROS 2 output's checks: the binaries the end-to-end test starts (the bridge with its
+/// `ros2` feature), its crate's tests and the end-to-end test, then clippy on the feature's
+/// code (the default clippy run does not see it).
+fn test_ros2(rest: &[String]) -> anyhow::Result<ExitCode> {
+    let profile = ["--profile", "test-release"];
+    let steps: [&[&str]; 3] = [
+        &["build", "--workspace", "--bins", profile[0], profile[1]],
+        &[
+            "build",
+            "--package",
+            "linetrack-ros2-bridge",
+            "--features",
+            "ros2",
+            "--bins",
+            profile[0],
+            profile[1],
+        ],
+        &[
+            "clippy",
+            "--package",
+            "linetrack-ros2-bridge",
+            "--package",
+            "linetrack-e2e",
+            "--all-targets",
+            "--features",
+            "linetrack-ros2-bridge/ros2,linetrack-e2e/ros2",
+            profile[0],
+            profile[1],
+            "--",
+            "-D",
+            "warnings",
+        ],
+    ];
+    for step in &steps[..2] {
+        let built = cargo(step, &[])?;
+        if built != ExitCode::SUCCESS {
+            return Ok(built);
+        }
+    }
+    let packages = [
+        "--package",
+        "linetrack-ros2-bridge",
+        "--package",
+        "linetrack-e2e",
+    ];
+    let features = [
+        "--features",
+        "linetrack-ros2-bridge/ros2,linetrack-e2e/ros2",
+    ];
+    let tested = if has_nextest() {
+        let mut fixed = vec!["nextest", "run", "--cargo-profile", "test-release"];
+        fixed.extend(packages);
+        fixed.extend(features);
+        fixed.extend(["-E", "package(linetrack-ros2-bridge) | binary(ros2)"]);
+        cargo(&fixed, rest)?
+    } else {
+        let mut fixed = vec![
+            "test",
+            profile[0],
+            profile[1],
+            "--package",
+            "linetrack-ros2-bridge",
+        ];
+        fixed.extend(features);
+        let unit = cargo(&fixed, rest)?;
+        if unit != ExitCode::SUCCESS {
+            return Ok(unit);
+        }
+        let mut fixed = vec![
+            "test",
+            profile[0],
+            profile[1],
+            "--package",
+            "linetrack-e2e",
+            "--test",
+            "ros2",
+        ];
+        fixed.extend(features);
+        cargo(&fixed, rest)?
+    };
+    if tested != ExitCode::SUCCESS {
+        return Ok(tested);
+    }
+    cargo(steps[2], &[])
 }
 
 /// The real data the `real_data_*` tests read: what it is, the environment variable that
