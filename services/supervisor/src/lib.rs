@@ -86,6 +86,8 @@ struct Ports {
     /// Single-process mode with an output process: the poses, passed on to shared memory
     /// (where the output reads them).
     forward_poses: Option<Outlet<PoseRecord>>,
+    /// Single-process mode with an output process: its reports (on shared memory).
+    output_status: Option<Inlet<StatusReport>>,
 }
 
 impl Ports {
@@ -99,6 +101,7 @@ impl Ports {
             control: stages.outlet(Topic::Control, 1)?,
             wake: stages.wake(StageKind::Supervisor)?,
             forward_poses: None,
+            output_status: None,
         })
     }
 
@@ -520,6 +523,7 @@ impl<'m> Supervisor<'m> {
         };
         if hub.is_some() && ros2_binary.is_some() {
             ports.forward_poses = Some(bus.outlet(Topic::Poses, 1)?);
+            ports.output_status = Some(bus.inlet(Topic::Status)?);
         }
         if stale > 0 {
             monitor.event(
@@ -628,6 +632,25 @@ impl<'m> Supervisor<'m> {
         Ok(())
     }
 
+    /// The command that starts `bin` as a child of this run (a stage or an output): through
+    /// the stage runner, with the run's config, id, this process's pid and the run's
+    /// shared-memory scope.
+    fn child_command(&self, bin: &Path) -> std::process::Command {
+        let mut command = self.stage_runner.command(bin);
+        command
+            .arg("--config")
+            .arg(&self.config_path)
+            .arg("--run-id")
+            .arg(&self.run_id)
+            .arg("--supervisor-pid")
+            .arg(std::process::id().to_string())
+            .env(Scope::PREFIX_VAR, &self.scope.prefix)
+            .env(Scope::ROOT_VAR, &self.scope.root)
+            .stdin(Stdio::null())
+            .stdout(Stdio::null());
+        command
+    }
+
     /// Starts `stage`'s binary as a child process.
     fn spawn_process(
         &self,
@@ -638,20 +661,8 @@ impl<'m> Supervisor<'m> {
         start_frame: u64,
     ) -> anyhow::Result<(Launch, u32)> {
         let bin = self.bin_dir.join(format!("linetrack-{}", stage.name()));
-        let mut command = self.stage_runner.command(&bin);
-        command
-            .arg("--config")
-            .arg(&self.config_path)
-            .arg("--run-id")
-            .arg(&self.run_id)
-            .arg("--run-dir")
-            .arg(&self.run_dir)
-            .arg("--supervisor-pid")
-            .arg(std::process::id().to_string())
-            .env(Scope::PREFIX_VAR, &self.scope.prefix)
-            .env(Scope::ROOT_VAR, &self.scope.root)
-            .stdin(Stdio::null())
-            .stdout(Stdio::null());
+        let mut command = self.child_command(&bin);
+        command.arg("--run-dir").arg(&self.run_dir);
         if let Some(kind) = detector {
             command.arg("--detector").arg(kind.name());
         }
@@ -727,13 +738,8 @@ impl<'m> Supervisor<'m> {
     /// The main loop; returns whether it was interrupted.
     fn supervise(&mut self, shutdown: &Shutdown) -> anyhow::Result<bool> {
         if let Some(bin) = &self.ros2_binary {
-            let launch = outputs::Launch {
-                runner: &self.stage_runner,
-                config_path: &self.config_path,
-                run_id: &self.run_id,
-                scope: &self.scope,
-            };
-            self.ros2 = outputs::Output::start(bin, &launch, self.monitor);
+            let command = self.child_command(bin);
+            self.ros2 = outputs::Output::start(command, bin, self.monitor);
         }
         for stage in [
             StageKind::LineDetector,
@@ -818,7 +824,11 @@ impl<'m> Supervisor<'m> {
     }
 
     fn handle_status(&mut self) -> anyhow::Result<()> {
-        for message in self.ports.status.receive_all()? {
+        let mut messages = self.ports.status.receive_all()?;
+        if let Some(outputs) = &mut self.ports.output_status {
+            messages.extend(outputs.receive_all()?);
+        }
+        for message in messages {
             let Some(&report) = message.payload().first() else {
                 continue;
             };

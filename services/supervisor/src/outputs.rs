@@ -8,11 +8,9 @@
 //! publishes what is still queued, and is killed after the grace period.
 
 use crate::monitor::Monitor;
-use crate::stage_runner::StageRunner;
 use anyhow::Context;
-use linetrack_ipc::Scope;
 use std::path::{Path, PathBuf};
-use std::process::{Child, Stdio};
+use std::process::{Child, Command};
 use std::time::{Duration, Instant};
 
 /// The ROS 2 output's binary (built with the cargo feature `ros2`).
@@ -39,33 +37,10 @@ pub struct Output {
     ready: bool,
 }
 
-/// What starting an output needs to pass.
-pub struct Launch<'a> {
-    /// What stage binaries are started through.
-    pub runner: &'a StageRunner,
-    /// The run's effective config.
-    pub config_path: &'a Path,
-    /// The run id.
-    pub run_id: &'a str,
-    /// The run's shared-memory scope.
-    pub scope: &'a Scope,
-}
-
 impl Output {
-    /// Starts `bin`; a failure to start is recorded and gives `None`.
-    pub fn start(bin: &Path, launch: &Launch, monitor: &mut Monitor) -> Option<Self> {
-        let mut command = launch.runner.command(bin);
-        command
-            .arg("--config")
-            .arg(launch.config_path)
-            .arg("--run-id")
-            .arg(launch.run_id)
-            .arg("--supervisor-pid")
-            .arg(std::process::id().to_string())
-            .env(Scope::PREFIX_VAR, &launch.scope.prefix)
-            .env(Scope::ROOT_VAR, &launch.scope.root)
-            .stdin(Stdio::null())
-            .stdout(Stdio::null());
+    /// Starts `bin` with `command` (the supervisor's, for a child of this run); a failure
+    /// to start is recorded and gives `None`.
+    pub fn start(mut command: Command, bin: &Path, monitor: &mut Monitor) -> Option<Self> {
         match command
             .spawn()
             .with_context(|| format!("starting {}", bin.display()))
