@@ -265,3 +265,36 @@ fn a_cyclone_dds_subscriber_receives_the_poses_and_the_path_of_poses_tum() {
         "iceoryx2 nodes or services left behind"
     );
 }
+
+#[test]
+fn a_bridge_that_cannot_join_dds_is_recorded_and_the_run_goes_on() {
+    let dir = scratch("ros2-failing");
+    // No domain in the config and one the bridge must refuse in the environment: it exits
+    // before it is ready, as it would on any DDS setup failure.
+    let extra = "[supervisor]\nstatus_every_ms = 0\n[budget]\ndrop_late = false\n\
+                 [ros2]\nenabled = true\nlocalhost_only = true\n";
+    let run = start_with_env(
+        &dir,
+        &base_sequence(FRAMES),
+        extra,
+        &[("ROS_DOMAIN_ID", "not-a-domain")],
+    );
+    let (status, _, records) = run.finish(RUN_TIMEOUT);
+    assert!(status.success(), "the run failed: {status}");
+    let exits = records.events_of("output-exit");
+    assert_eq!(exits.len(), 1, "{:?}", records.events);
+    assert_eq!(exits[0].stage, "ros2");
+    assert!(
+        exits[0].detail.contains("exit status: 1"),
+        "{}",
+        exits[0].detail
+    );
+    assert_ids_accounted(&records, FRAMES as u64, &[]);
+    // The pipeline went on: poses after the bridge was gone (how many depends on the load).
+    assert!(records.frames.iter().any(|f| f.outcome == "pose"));
+    assert_eq!(
+        records.leftovers,
+        Default::default(),
+        "iceoryx2 nodes or services left behind"
+    );
+}

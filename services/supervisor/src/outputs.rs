@@ -134,7 +134,7 @@ impl Output {
                 tracing::info!("{ROS2_NAME} output (pid {}) exited: {status}", self.pid);
                 return;
             }
-            std::thread::sleep(Duration::from_millis(10));
+            std::thread::sleep(Duration::from_millis(20));
         }
         tracing::warn!(
             "{ROS2_NAME} output (pid {}) did not exit in time: killing it",
@@ -142,5 +142,28 @@ impl Output {
         );
         let _ = self.child.kill();
         let _ = self.child.wait();
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_missing_bridge_binary_is_refused_saying_how_to_build_it() {
+        let dir = std::env::temp_dir().join(format!("ltsup-outputs-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap_or_else(|e| panic!("{e}"));
+        let err = ros2_binary(&dir)
+            .err()
+            .map(|e| e.to_string())
+            .unwrap_or_default();
+        assert!(
+            err.contains("linetrack-ros2 is not there")
+                && err.contains("--features linetrack-ros2-bridge/ros2"),
+            "{err}"
+        );
+        std::fs::write(dir.join(ROS2_BINARY), "").unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(ros2_binary(&dir).ok(), Some(dir.join(ROS2_BINARY)));
+        let _ = std::fs::remove_dir_all(&dir);
     }
 }
