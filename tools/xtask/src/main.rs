@@ -174,89 +174,66 @@ fn run() -> anyhow::Result<ExitCode> {
 }
 
 /// The ROS 2 output's checks: the binaries the end-to-end test starts (the bridge with its
-/// `ros2` feature), its crate's tests and the end-to-end test, then clippy on the feature's
-/// code (the default clippy run does not see it).
+/// `ros2` feature), its crate's tests, the end-to-end test, then clippy on the feature's
+/// code (the default clippy run does not see it). The bridge and the end-to-end tests go
+/// in separate cargo calls: together, ros2-client's dependencies would unify features with
+/// the workspace's and rebuild most of it.
 fn test_ros2(rest: &[String]) -> anyhow::Result<ExitCode> {
-    let profile = ["--profile", "test-release"];
-    let steps: [&[&str]; 3] = [
-        &["build", "--workspace", "--bins", profile[0], profile[1]],
-        &[
-            "build",
-            "--package",
-            "linetrack-ros2-bridge",
-            "--features",
-            "ros2",
-            "--bins",
-            profile[0],
-            profile[1],
-        ],
-        &[
-            "clippy",
-            "--package",
-            "linetrack-ros2-bridge",
-            "--package",
-            "linetrack-e2e",
-            "--all-targets",
-            "--features",
-            "linetrack-ros2-bridge/ros2,linetrack-e2e/ros2",
-            profile[0],
-            profile[1],
-            "--",
-            "-D",
-            "warnings",
-        ],
-    ];
-    for step in &steps[..2] {
-        let built = cargo(step, &[])?;
-        if built != ExitCode::SUCCESS {
-            return Ok(built);
+    const PROFILE: [&str; 2] = ["--profile", "test-release"];
+    const BRIDGE: [&str; 4] = ["--package", "linetrack-ros2-bridge", "--features", "ros2"];
+    const E2E: [&str; 4] = ["--package", "linetrack-e2e", "--features", "ros2"];
+    let nextest = has_nextest();
+    let test = |package: &[&str], filter: &[&str]| -> Vec<String> {
+        let mut args: Vec<&str> = if nextest {
+            vec!["nextest", "run", "--cargo-profile", "test-release"]
+        } else {
+            let mut test = vec!["test"];
+            test.extend(PROFILE);
+            test
+        };
+        args.extend(package);
+        if nextest {
+            args.extend(filter);
+        } else if filter.contains(&"binary(ros2)") {
+            args.extend(["--test", "ros2"]);
         }
-    }
-    let packages = [
-        "--package",
-        "linetrack-ros2-bridge",
-        "--package",
-        "linetrack-e2e",
-    ];
-    let features = [
-        "--features",
-        "linetrack-ros2-bridge/ros2,linetrack-e2e/ros2",
-    ];
-    let tested = if has_nextest() {
-        let mut fixed = vec!["nextest", "run", "--cargo-profile", "test-release"];
-        fixed.extend(packages);
-        fixed.extend(features);
-        fixed.extend(["-E", "package(linetrack-ros2-bridge) | binary(ros2)"]);
-        cargo(&fixed, rest)?
-    } else {
-        let mut fixed = vec![
-            "test",
-            profile[0],
-            profile[1],
-            "--package",
-            "linetrack-ros2-bridge",
-        ];
-        fixed.extend(features);
-        let unit = cargo(&fixed, rest)?;
-        if unit != ExitCode::SUCCESS {
-            return Ok(unit);
-        }
-        let mut fixed = vec![
-            "test",
-            profile[0],
-            profile[1],
-            "--package",
-            "linetrack-e2e",
-            "--test",
-            "ros2",
-        ];
-        fixed.extend(features);
-        cargo(&fixed, rest)?
+        args.into_iter()
+            .map(String::from)
+            .chain(rest.iter().cloned())
+            .collect()
     };
-    if tested != ExitCode::SUCCESS {
-        return Ok(tested);
+    let fixed = |parts: &[&[&str]]| -> Vec<String> {
+        parts
+            .iter()
+            .flat_map(|p| p.iter().map(|s| s.to_string()))
+            .collect()
+    };
+    let steps: Vec<Vec<String>> = vec![
+        fixed(&[&["build", "--workspace", "--bins"], &PROFILE]),
+        fixed(&[&["build", "--bins"], &BRIDGE, &PROFILE]),
+        test(&BRIDGE, &[]),
+        test(&E2E, &["-E", "binary(ros2)"]),
+        fixed(&[
+            &["clippy", "--all-targets"],
+            &BRIDGE,
+            &PROFILE,
+            &["--", "-D", "warnings"],
+        ]),
+        fixed(&[
+            &["clippy", "--all-targets"],
+            &E2E,
+            &PROFILE,
+            &["--", "-D", "warnings"],
+        ]),
+    ];
+    for step in &steps {
+        let args: Vec<&str> = step.iter().map(String::as_str).collect();
+        let code = cargo(&args, &[])?;
+        if code != ExitCode::SUCCESS {
+            return Ok(code);
+        }
     }
-    cargo(steps[2], &[])
+    Ok(ExitCode::SUCCESS)
 }
 
 /// The real data the `real_data_*` tests read: what it is, the environment variable that
