@@ -161,7 +161,18 @@ fn assert_matches(what: &str, got: &Stamped, expected: &[Stamped]) {
 
 #[test]
 fn a_cyclone_dds_subscriber_receives_the_poses_and_the_path_of_poses_tum() {
-    let dir = scratch("ros2");
+    received_poses_match_poses_tum("ros2", false);
+}
+
+#[test]
+fn in_single_process_mode_the_subscriber_receives_the_poses_too() {
+    received_poses_match_poses_tum("ros2-threads", true);
+}
+
+/// A run with the bridge (stages as processes, or as threads with `single_process`) and
+/// the subscriber: what it received is what `poses.tum` holds.
+fn received_poses_match_poses_tum(name: &str, single_process: bool) {
+    let dir = scratch(name);
     // Own domain per test process: 1..=232 from the pid.
     let domain = 1 + (std::process::id() % 232) as u16;
     let listener = Listener::start(&dir, domain);
@@ -172,7 +183,11 @@ fn a_cyclone_dds_subscriber_receives_the_poses_and_the_path_of_poses_tum() {
          [ros2]\nenabled = true\ndomain_id = {domain}\nlocalhost_only = true\nframe_id = \"map\"\n\
          convention = \"camera\"\nstamp = \"sequence\"\npublish_lost = true\n"
     );
-    let run = start(&dir, &base_sequence(FRAMES), &extra);
+    let run = if single_process {
+        start_single_process(&dir, &base_sequence(FRAMES), &extra)
+    } else {
+        start(&dir, &base_sequence(FRAMES), &extra)
+    };
     let run_dir = run.run_dir.clone();
     let (status, _, records) = run.finish(RUN_TIMEOUT);
     assert!(status.success(), "the run failed: {status}");
