@@ -172,6 +172,12 @@ pub fn start_through_runner(dir: &Path, sequence: &Path, extra: &str, runner: &s
     )
 }
 
+/// [`start`] with more environment variables for the supervisor and its children.
+pub fn start_with_env(dir: &Path, sequence: &Path, extra: &str, env: &[(&str, &str)]) -> Run {
+    let prefix = format!("lte2e{}_env_", std::process::id());
+    launch_with(dir, sequence, extra, &prefix, &[], env)
+}
+
 fn launch(dir: &Path, sequence: &Path, extra: &str, prefix: &str, args: &[&str]) -> Run {
     launch_with(dir, sequence, extra, prefix, args, &[])
 }

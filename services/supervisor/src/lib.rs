@@ -22,6 +22,7 @@
 mod camera_check;
 pub mod fallback;
 pub mod monitor;
+pub mod outputs;
 pub mod run_dir;
 pub mod stage_runner;
 
@@ -82,6 +83,11 @@ struct Ports {
     control_in: Inlet<Control>,
     control: Outlet<Control>,
     wake: Wake,
+    /// Single-process mode with an output process: the poses, passed on to shared memory
+    /// (where the output reads them).
+    forward_poses: Option<Outlet<PoseRecord>>,
+    /// Single-process mode with an output process: its reports (on shared memory).
+    output_status: Option<Inlet<StatusReport>>,
 }
 
 impl Ports {
@@ -94,6 +100,8 @@ impl Ports {
             control_in: requests.inlet(Topic::Control)?,
             control: stages.outlet(Topic::Control, 1)?,
             wake: stages.wake(StageKind::Supervisor)?,
+            forward_poses: None,
+            output_status: None,
         })
     }
 
@@ -454,6 +462,10 @@ struct Supervisor<'m> {
     restarts: [Restarts; 4],
     detector: DetectorKind,
     swap_to: Option<DetectorKind>,
+    /// The ROS 2 output's binary, when `[ros2] enabled`.
+    ros2_binary: Option<PathBuf>,
+    /// The ROS 2 output process, while it runs.
+    ros2: Option<outputs::Output>,
 }
 
 fn stage_slot(stage: StageKind) -> usize {
@@ -489,6 +501,11 @@ impl<'m> Supervisor<'m> {
                 );
             }
         }
+        let ros2_binary = config
+            .ros2
+            .enabled
+            .then(|| outputs::ros2_binary(&bin_dir))
+            .transpose()?;
         let stage_runner = StageRunner::from_env()?;
         if !stage_runner.is_direct() {
             tracing::info!("stages start through {stage_runner}");
@@ -500,10 +517,14 @@ impl<'m> Supervisor<'m> {
         bus.remove_stale_resources();
         let stale = dead_before.saturating_sub(scope.dead_nodes()?);
         let hub = (options.mode == Mode::Threads).then(LocalHub::default);
-        let ports = match &hub {
+        let mut ports = match &hub {
             Some(hub) => Ports::open(&hub.bus(), &bus)?,
             None => Ports::open(&bus, &bus)?,
         };
+        if hub.is_some() && ros2_binary.is_some() {
+            ports.forward_poses = Some(bus.outlet(Topic::Poses, 1)?);
+            ports.output_status = Some(bus.inlet(Topic::Status)?);
+        }
         if stale > 0 {
             monitor.event(
                 "stale-cleanup",
@@ -530,6 +551,8 @@ impl<'m> Supervisor<'m> {
             restarts: [Restarts::default(); 4],
             detector: config.detector,
             swap_to: None,
+            ros2_binary,
+            ros2: None,
         })
     }
 
@@ -609,6 +632,25 @@ impl<'m> Supervisor<'m> {
         Ok(())
     }
 
+    /// The command that starts `bin` as a child of this run (a stage or an output): through
+    /// the stage runner, with the run's config, id, this process's pid and the run's
+    /// shared-memory scope.
+    fn child_command(&self, bin: &Path) -> std::process::Command {
+        let mut command = self.stage_runner.command(bin);
+        command
+            .arg("--config")
+            .arg(&self.config_path)
+            .arg("--run-id")
+            .arg(&self.run_id)
+            .arg("--supervisor-pid")
+            .arg(std::process::id().to_string())
+            .env(Scope::PREFIX_VAR, &self.scope.prefix)
+            .env(Scope::ROOT_VAR, &self.scope.root)
+            .stdin(Stdio::null())
+            .stdout(Stdio::null());
+        command
+    }
+
     /// Starts `stage`'s binary as a child process.
     fn spawn_process(
         &self,
@@ -619,20 +661,8 @@ impl<'m> Supervisor<'m> {
         start_frame: u64,
     ) -> anyhow::Result<(Launch, u32)> {
         let bin = self.bin_dir.join(format!("linetrack-{}", stage.name()));
-        let mut command = self.stage_runner.command(&bin);
-        command
-            .arg("--config")
-            .arg(&self.config_path)
-            .arg("--run-id")
-            .arg(&self.run_id)
-            .arg("--run-dir")
-            .arg(&self.run_dir)
-            .arg("--supervisor-pid")
-            .arg(std::process::id().to_string())
-            .env(Scope::PREFIX_VAR, &self.scope.prefix)
-            .env(Scope::ROOT_VAR, &self.scope.root)
-            .stdin(Stdio::null())
-            .stdout(Stdio::null());
+        let mut command = self.child_command(&bin);
+        command.arg("--run-dir").arg(&self.run_dir);
         if let Some(kind) = detector {
             command.arg("--detector").arg(kind.name());
         }
@@ -707,6 +737,10 @@ impl<'m> Supervisor<'m> {
 
     /// The main loop; returns whether it was interrupted.
     fn supervise(&mut self, shutdown: &Shutdown) -> anyhow::Result<bool> {
+        if let Some(bin) = &self.ros2_binary {
+            let command = self.child_command(bin);
+            self.ros2 = outputs::Output::start(command, bin, self.monitor);
+        }
         for stage in [
             StageKind::LineDetector,
             StageKind::Matcher,
@@ -733,11 +767,17 @@ impl<'m> Supervisor<'m> {
             self.handle_requests()?;
             self.check_processes(shutdown)?;
             if !source_started {
-                if self.all_ready(&[
-                    StageKind::LineDetector,
-                    StageKind::Matcher,
-                    StageKind::PoseEstimator,
-                ]) {
+                let outputs_settled = self
+                    .ros2
+                    .as_mut()
+                    .is_none_or(|o| o.settled(startup, self.monitor));
+                if outputs_settled
+                    && self.all_ready(&[
+                        StageKind::LineDetector,
+                        StageKind::Matcher,
+                        StageKind::PoseEstimator,
+                    ])
+                {
                     self.spawn(StageKind::FrameSource, None, false)?;
                     source_started = true;
                 } else if waiting_since.elapsed() > startup {
@@ -784,10 +824,20 @@ impl<'m> Supervisor<'m> {
     }
 
     fn handle_status(&mut self) -> anyhow::Result<()> {
-        for message in self.ports.status.receive_all()? {
+        let mut messages = self.ports.status.receive_all()?;
+        if let Some(outputs) = &mut self.ports.output_status {
+            messages.extend(outputs.receive_all()?);
+        }
+        for message in messages {
             let Some(&report) = message.payload().first() else {
                 continue;
             };
+            if let Some(output) = self.ros2.as_mut().filter(|o| o.pid() == report.pid) {
+                if report.kind() == Some(StatusKind::Ready) {
+                    output.set_ready();
+                }
+                continue;
+            }
             let Some(process) = self.process_mut(report.pid) else {
                 continue;
             };
@@ -942,6 +992,14 @@ impl<'m> Supervisor<'m> {
             let Some(&pose) = message.payload().first() else {
                 continue;
             };
+            if let Some(forward) = &mut self.ports.forward_poses
+                && let Err(e) = forward.publish(message.header(), &[&[pose]])
+            {
+                tracing::warn!(
+                    "pose of frame {} not passed to the outputs: {e}",
+                    message.header().frame_id
+                );
+            }
             if let Some(switch) = self.monitor.on_pose(message.header(), &pose) {
                 self.ports.send(
                     StageKind::Matcher,
@@ -988,6 +1046,11 @@ impl<'m> Supervisor<'m> {
     }
 
     fn check_processes(&mut self, shutdown: &Shutdown) -> anyhow::Result<()> {
+        if let Some(output) = &mut self.ros2
+            && !output.alive(self.monitor)
+        {
+            self.ros2 = None;
+        }
         let hang = Duration::from_millis(self.config.supervisor.hang_timeout_ms);
         let startup = Duration::from_millis(self.config.supervisor.startup_timeout_ms);
         let mut exited = Vec::new();
@@ -1123,6 +1186,12 @@ impl<'m> Supervisor<'m> {
                 break;
             }
             let _ = self.ports.wake.wait(Duration::from_millis(20));
+        }
+        // The outputs last: the stages' last poses are queued for them by now.
+        if let Some(output) = self.ros2.take() {
+            output.stop(Duration::from_millis(
+                self.config.supervisor.shutdown_grace_ms,
+            ));
         }
         let cleaned = self.bus.remove_stale_resources();
         if cleaned > 0 {

@@ -2,12 +2,16 @@
 //! how fast, which detector and matcher run, the latency budgets and drop policy, when the
 //! matcher falls back to ℓ1 and comes back, and how the supervisor watches and restarts
 //! stages, each stage's CPUs and scheduling policy (`[stages.<name>]`, applied by
-//! `linetrack-sched`), and where the shared memory's bookkeeping lives (`[ipc]`). Every
+//! `linetrack-sched`), where the shared memory's bookkeeping lives (`[ipc]`), and the
+//! optional ROS 2 output (`[ros2]`). Every
 //! field has a default; [`PipelineConfig::validate`] names the first bad one.
+
+mod ros2;
 
 use linetrack_odometry::OdometryConfig;
 pub use linetrack_sched::{Policy, SchedSettings};
 use linetrack_vision::DetectorKind;
+pub use ros2::{Convention, MAX_DOMAIN_ID, Ros2Config, StampSource};
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
@@ -462,6 +466,8 @@ pub struct PipelineConfig {
     /// Front end and motion estimation (its `detector` and `matcher` keys are ignored:
     /// the ones above rule).
     pub odometry: OdometryConfig,
+    /// The ROS 2 output process.
+    pub ros2: Ros2Config,
 }
 
 impl Default for PipelineConfig {
@@ -478,6 +484,7 @@ impl Default for PipelineConfig {
             stages: StagesConfig::default(),
             ipc: IpcConfig::default(),
             odometry: OdometryConfig::default(),
+            ros2: Ros2Config::default(),
         }
     }
 }
@@ -633,6 +640,7 @@ impl PipelineConfig {
         self.odometry
             .validate()
             .map_err(|e| format!("odometry.{e}"))?;
+        self.ros2.validate()?;
         Ok(())
     }
 

@@ -1,0 +1,219 @@
+//! The DDS side (cargo feature `ros2`): a ROS 2 node with ros2-client over RustDDS that
+//! publishes the poses and the path.
+//!
+//! QoS: the pose topic is reliable, keep-last 10, volatile (ROS 2's default for a
+//! publisher: a late subscriber does not get old poses, a slow one gets them all up to 10
+//! behind); the path is reliable, keep-last 1, transient-local, so that a subscriber that
+//! starts mid-run (RViz, `ros2 topic echo`) gets the trajectory so far at once. A writer
+//! whose subscriber does not keep up waits at most [`WRITE_WAIT`] and the write is
+//! counted as failed: the bridge falls behind, never the pipeline.
+
+use crate::ros_msgs::{PATH_TYPE, POSE_STAMPED_TYPE, Path, PoseStamped};
+use crate::{BridgeError, PoseSink};
+use linetrack_pipeline_config::{MAX_DOMAIN_ID, Ros2Config};
+use ros2_client::dds::rustdds::DomainParticipantBuilder;
+use ros2_client::qos::{Durability, History, WhenFull};
+use ros2_client::{
+    Context, MessageTypeName, Name, Node, NodeName, NodeOptions, Publisher, QosProfile,
+};
+use std::net::{IpAddr, Ipv4Addr};
+use std::time::Duration;
+
+/// The longest a write waits for room in a reliable writer's window.
+pub const WRITE_WAIT: Duration = Duration::from_millis(20);
+/// How long the node stays after the last write, so that reliable writers can deliver
+/// (and repair) their last samples before the participant leaves.
+pub const LINGER: Duration = Duration::from_millis(500);
+/// History depth of the pose topic.
+pub const POSE_DEPTH: usize = 10;
+
+/// The domain id: the config's, else `ROS_DOMAIN_ID`, else 0.
+pub fn domain_id(config: &Ros2Config) -> Result<u16, BridgeError> {
+    if let Some(id) = config.domain_id {
+        return Ok(id);
+    }
+    match std::env::var("ROS_DOMAIN_ID") {
+        Ok(text) if !text.trim().is_empty() => text
+            .trim()
+            .parse::<u16>()
+            .ok()
+            .filter(|id| *id <= MAX_DOMAIN_ID)
+            .ok_or(BridgeError::DomainEnv(text)),
+        _ => Ok(0),
+    }
+}
+
+/// Whether discovery and traffic stay on the loopback interface: the config's
+/// `localhost_only`, or `ROS_LOCALHOST_ONLY=1`.
+pub fn localhost_only(config: &Ros2Config) -> bool {
+    config.localhost_only || std::env::var("ROS_LOCALHOST_ONLY").is_ok_and(|v| v.trim() == "1")
+}
+
+/// A ROS 2 node with the pose and path writers.
+pub struct DdsSink {
+    pose_topic: String,
+    path_topic: String,
+    poses: Publisher<PoseStamped>,
+    path: Option<Publisher<Path>>,
+    // Dropped last: the writers belong to it.
+    _node: Node,
+}
+
+fn setup(what: &'static str) -> impl FnOnce(String) -> BridgeError {
+    move |message| BridgeError::Setup { what, message }
+}
+
+fn name(
+    key: &'static str,
+    value: &str,
+    made: Result<Name, impl std::fmt::Display>,
+) -> Result<Name, BridgeError> {
+    made.map_err(|e| BridgeError::Name {
+        key,
+        value: value.to_string(),
+        message: e.to_string(),
+    })
+}
+
+/// Splits a topic `/a/b/c` into ros2-client's namespace `/a/b` and base name `c`.
+fn topic_name(key: &'static str, topic: &str) -> Result<Name, BridgeError> {
+    let absolute = if topic.starts_with('/') {
+        topic.to_string()
+    } else {
+        format!("/{topic}")
+    };
+    let (namespace, base) = absolute.rsplit_once('/').unwrap_or(("", &absolute));
+    let namespace = if namespace.is_empty() { "/" } else { namespace };
+    name(key, topic, Name::new(namespace, base))
+}
+
+impl DdsSink {
+    /// Joins the domain and makes the node, topics and writers `config` names.
+    pub fn new(config: &Ros2Config) -> Result<Self, BridgeError> {
+        let domain = domain_id(config)?;
+        let mut participant = DomainParticipantBuilder::new(domain);
+        if localhost_only(config) {
+            participant = participant.with_only_networks([IpAddr::V4(Ipv4Addr::LOCALHOST)]);
+        }
+        let participant = participant
+            .build()
+            .map_err(|e| setup("participant")(e.to_string()))?;
+        let context = Context::from_domain_participant(participant)
+            .map_err(|e| setup("context")(e.to_string()))?;
+        let node_name = NodeName::new("/", &config.node_name).map_err(|e| BridgeError::Name {
+            key: "node_name",
+            value: config.node_name.clone(),
+            message: e.to_string(),
+        })?;
+        let mut node = context
+            .new_node(node_name, NodeOptions::new().enable_rosout(false))
+            .map_err(|e| setup("node")(e.to_string()))?;
+        let reliable =
+            QosProfile::publisher_default().reliability_reliable(WhenFull::Wait(WRITE_WAIT));
+        let pose_qos = reliable
+            .clone()
+            .durability(Durability::Volatile)
+            .history(History::KeepLast { depth: POSE_DEPTH });
+        let pose_topic = node
+            .create_topic(
+                &topic_name("pose_topic", &config.pose_topic)?,
+                MessageTypeName::new(POSE_STAMPED_TYPE.0, POSE_STAMPED_TYPE.1),
+                &pose_qos,
+            )
+            .map_err(|e| setup("pose topic")(e.to_string()))?;
+        let poses = node
+            .create_publisher::<PoseStamped>(&pose_topic, None)
+            .map_err(|e| setup("pose writer")(e.to_string()))?;
+        let path = if config.path_topic.is_empty() {
+            None
+        } else {
+            let path_qos = reliable
+                .durability(Durability::TransientLocal)
+                .history(History::KeepLast { depth: 1 });
+            let topic = node
+                .create_topic(
+                    &topic_name("path_topic", &config.path_topic)?,
+                    MessageTypeName::new(PATH_TYPE.0, PATH_TYPE.1),
+                    &path_qos,
+                )
+                .map_err(|e| setup("path topic")(e.to_string()))?;
+            Some(
+                node.create_publisher::<Path>(&topic, None)
+                    .map_err(|e| setup("path writer")(e.to_string()))?,
+            )
+        };
+        tracing::info!(
+            "ROS 2 node {} on domain {domain}{}: {} and {}",
+            config.node_name,
+            if localhost_only(config) {
+                " (localhost only)"
+            } else {
+                ""
+            },
+            config.pose_topic,
+            if config.path_topic.is_empty() {
+                "no path"
+            } else {
+                &config.path_topic
+            }
+        );
+        Ok(Self {
+            pose_topic: config.pose_topic.clone(),
+            path_topic: config.path_topic.clone(),
+            poses,
+            path,
+            _node: node,
+        })
+    }
+}
+
+impl PoseSink for DdsSink {
+    fn pose(&mut self, message: PoseStamped) -> Result<(), BridgeError> {
+        self.poses.publish(message).map_err(|e| BridgeError::Write {
+            topic: self.pose_topic.clone(),
+            message: e.to_string(),
+        })
+    }
+
+    fn path(&mut self, message: Path) -> Result<(), BridgeError> {
+        match &self.path {
+            Some(writer) => writer.publish(message).map_err(|e| BridgeError::Write {
+                topic: self.path_topic.clone(),
+                message: e.to_string(),
+            }),
+            None => Ok(()),
+        }
+    }
+
+    fn wants_path(&self) -> bool {
+        self.path.is_some()
+    }
+
+    fn finish(&mut self) {
+        std::thread::sleep(LINGER);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn topics_split_into_namespace_and_name() {
+        for (topic, dds) in [
+            ("/linetrack/pose", "rt/linetrack/pose"),
+            ("pose", "rt/pose"),
+            ("/a/b/path", "rt/a/b/path"),
+        ] {
+            let name = topic_name("pose_topic", topic).unwrap_or_else(|e| panic!("{e}"));
+            assert_eq!(
+                name.to_dds_name(
+                    "rt",
+                    &NodeName::new("/", "n").unwrap_or_else(|e| panic!("{e}")),
+                    ""
+                ),
+                dds
+            );
+        }
+    }
+}

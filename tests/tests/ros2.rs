@@ -1,0 +1,315 @@
+//! The ROS 2 output on the real pipeline (cargo feature `ros2`; `cargo xtask test-ros2`):
+//! `linetrack run` with `[ros2] enabled = true` starts `linetrack-ros2`, and an independent
+//! DDS subscriber — Eclipse Cyclone DDS through its Python binding (`tests/ros2/listen.py`,
+//! installed by `cargo xtask setup` into `target/dds-peer`), with the ROS 2 types under
+//! their DDS names — receives `geometry_msgs/msg/PoseStamped` on `/linetrack/pose` and
+//! `nav_msgs/msg/Path` on `/linetrack/path`. Each test uses its own domain id (from the
+//! process id) and loopback-only discovery, so parallel runs do not cross.
+
+use linetrack_e2e::*;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+const FRAMES: usize = 40;
+const RUN_TIMEOUT: Duration = Duration::from_secs(120);
+/// How long the subscriber may take to start, and to get the last path after the run.
+const PEER_TIMEOUT: Duration = Duration::from_secs(30);
+/// `poses.tum` has 6 decimals: a value read back is within half a unit of the 6th.
+const TUM_PRECISION: f64 = 0.5e-6 + 1e-12;
+/// Stamps of one frame agree within this (`poses.tum`'s seconds are printed from an f64).
+const STAMP_TOLERANCE_NS: i128 = 1_000;
+
+/// The Python with Cyclone DDS: `LINETRACK_DDS_PYTHON`, else `target/dds-peer/bin/python3`.
+fn peer_python() -> PathBuf {
+    let python = std::env::var_os("LINETRACK_DDS_PYTHON").map_or_else(
+        || {
+            bin_dir()
+                .parent()
+                .map(|target| target.join("dds-peer/bin/python3"))
+                .unwrap_or_default()
+        },
+        PathBuf::from,
+    );
+    assert!(
+        python.is_file(),
+        "{} is missing: the DDS peer is installed by `cargo xtask setup` (or set LINETRACK_DDS_PYTHON to a python with the cyclonedds package)",
+        python.display()
+    );
+    python
+}
+
+/// The subscriber process; killed when dropped.
+struct Listener {
+    child: Child,
+    out: PathBuf,
+}
+
+impl Drop for Listener {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+impl Listener {
+    fn start(dir: &Path, domain: u16) -> Self {
+        let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("ros2/listen.py");
+        let (out, ready) = (dir.join("received.jsonl"), dir.join("listener.ready"));
+        let child = Command::new(peer_python())
+            .arg(&script)
+            .args(["--domain", &domain.to_string(), "--timeout", "300"])
+            .arg("--out")
+            .arg(&out)
+            .arg("--ready")
+            .arg(&ready)
+            .stdin(Stdio::null())
+            .spawn()
+            .unwrap_or_else(|e| panic!("starting {}: {e}", script.display()));
+        let mut listener = Self { child, out };
+        let deadline = Instant::now() + PEER_TIMEOUT;
+        while !ready.is_file() {
+            if let Ok(Some(status)) = listener.child.try_wait() {
+                panic!("the DDS subscriber exited ({status}) before it was ready");
+            }
+            assert!(
+                Instant::now() < deadline,
+                "the DDS subscriber not ready within {PEER_TIMEOUT:?}"
+            );
+            std::thread::sleep(Duration::from_millis(50));
+        }
+        listener
+    }
+
+    /// The messages received so far.
+    fn received(&self) -> Vec<serde_json::Value> {
+        std::fs::read_to_string(&self.out)
+            .unwrap_or_default()
+            .lines()
+            .filter_map(|l| serde_json::from_str(l).ok())
+            .collect()
+    }
+}
+
+/// One pose: stamp in ns, position, orientation x y z w.
+#[derive(Debug, Clone, Copy)]
+struct Stamped {
+    ns: i128,
+    position: [f64; 3],
+    orientation: [f64; 4],
+}
+
+fn from_json(v: &serde_json::Value) -> Stamped {
+    let num = |v: &serde_json::Value| v.as_f64().unwrap_or(f64::NAN);
+    let list = |key: &str| -> Vec<f64> {
+        v[key]
+            .as_array()
+            .map(|a| a.iter().map(num).collect())
+            .unwrap_or_default()
+    };
+    let (p, q) = (list("position"), list("orientation"));
+    assert_eq!((p.len(), q.len()), (3, 4), "{v}");
+    Stamped {
+        ns: i128::from(v["sec"].as_i64().unwrap_or(-1)) * 1_000_000_000
+            + i128::from(v["nanosec"].as_i64().unwrap_or(-1)),
+        position: [p[0], p[1], p[2]],
+        orientation: [q[0], q[1], q[2], q[3]],
+    }
+}
+
+/// `poses.tum` as the run wrote it (the seconds parsed as text: no float rounding).
+fn tum(run_dir: &Path) -> Vec<Stamped> {
+    let text = std::fs::read_to_string(run_dir.join("poses.tum"))
+        .unwrap_or_else(|e| panic!("poses.tum: {e}"));
+    text.lines()
+        .filter(|l| !l.starts_with('#') && !l.trim().is_empty())
+        .map(|l| {
+            let v: Vec<&str> = l.split_whitespace().collect();
+            assert_eq!(v.len(), 8, "{l}");
+            let (sec, frac) = v[0].split_once('.').unwrap_or((v[0], "0"));
+            let frac = format!("{frac:0<9}");
+            let ns = sec.parse::<i128>().unwrap_or(-1) * 1_000_000_000
+                + frac[..9].parse::<i128>().unwrap_or(-1);
+            let f = |i: usize| v[i].parse::<f64>().unwrap_or(f64::NAN);
+            Stamped {
+                ns,
+                position: [f(1), f(2), f(3)],
+                orientation: [f(4), f(5), f(6), f(7)],
+            }
+        })
+        .collect()
+}
+
+fn assert_matches(what: &str, got: &Stamped, expected: &[Stamped]) {
+    let line = expected
+        .iter()
+        .find(|e| (e.ns - got.ns).abs() <= STAMP_TOLERANCE_NS)
+        .unwrap_or_else(|| panic!("{what}: stamp {} ns is no frame of poses.tum", got.ns));
+    for (a, b) in got
+        .position
+        .iter()
+        .zip(line.position)
+        .chain(got.orientation.iter().zip(line.orientation))
+    {
+        assert!(
+            (a - b).abs() <= TUM_PRECISION,
+            "{what} at {} ns: {got:?} vs poses.tum {line:?}",
+            got.ns
+        );
+    }
+}
+
+#[test]
+fn a_cyclone_dds_subscriber_receives_the_poses_and_the_path_of_poses_tum() {
+    received_poses_match_poses_tum("ros2", false);
+}
+
+#[test]
+fn in_single_process_mode_the_subscriber_receives_the_poses_too() {
+    received_poses_match_poses_tum("ros2-threads", true);
+}
+
+/// A run with the bridge (stages as processes, or as threads with `single_process`) and
+/// the subscriber: what it received is what `poses.tum` holds.
+fn received_poses_match_poses_tum(name: &str, single_process: bool) {
+    let dir = scratch(name);
+    // Own domain per test process: 1..=232 from the pid.
+    let domain = 1 + (std::process::id() % 232) as u16;
+    let listener = Listener::start(&dir, domain);
+    // Camera axes and sequence stamps: what poses.tum holds, so the two compare directly;
+    // lost predictions too (poses.tum has them).
+    let extra = format!(
+        "[supervisor]\nstatus_every_ms = 0\n[budget]\ndrop_late = false\n\
+         [ros2]\nenabled = true\ndomain_id = {domain}\nlocalhost_only = true\nframe_id = \"map\"\n\
+         convention = \"camera\"\nstamp = \"sequence\"\npublish_lost = true\n"
+    );
+    let run = if single_process {
+        start_single_process(&dir, &base_sequence(FRAMES), &extra)
+    } else {
+        start(&dir, &base_sequence(FRAMES), &extra)
+    };
+    let run_dir = run.run_dir.clone();
+    let (status, _, records) = run.finish(RUN_TIMEOUT);
+    assert!(status.success(), "the run failed: {status}");
+    assert!(
+        records.events_of("output-exit").is_empty()
+            && records.events_of("output-not-ready").is_empty(),
+        "{:?}",
+        records.events
+    );
+    let expected = tum(&run_dir);
+    assert!(
+        expected.len() >= FRAMES / 2,
+        "only {} poses in poses.tum",
+        expected.len()
+    );
+    let last_tum = expected
+        .iter()
+        .max_by_key(|p| p.ns)
+        .copied()
+        .unwrap_or_else(|| panic!("no pose"));
+
+    // The path is transient-local and re-sent with every pose: wait for the one that holds
+    // every pose of the run.
+    let deadline = Instant::now() + PEER_TIMEOUT;
+    let (poses, path) = loop {
+        let received = listener.received();
+        let path = received
+            .iter()
+            .filter(|m| m["topic"] == "path")
+            .max_by_key(|m| m["poses"].as_array().map_or(0, Vec::len))
+            .cloned();
+        let full = path
+            .as_ref()
+            .is_some_and(|p| p["poses"].as_array().map_or(0, Vec::len) >= expected.len());
+        if full || Instant::now() > deadline {
+            let poses: Vec<serde_json::Value> = received
+                .into_iter()
+                .filter(|m| m["topic"] == "pose")
+                .collect();
+            break (
+                poses,
+                path.unwrap_or_else(|| panic!("no Path message received on domain {domain}")),
+            );
+        }
+        std::thread::sleep(Duration::from_millis(100));
+    };
+
+    // Poses: every one received is a line of poses.tum, in frame "map".
+    assert!(
+        !poses.is_empty(),
+        "no PoseStamped received on domain {domain}"
+    );
+    for p in &poses {
+        assert_eq!(p["frame_id"], "map");
+        assert_matches("PoseStamped", &from_json(p), &expected);
+    }
+    eprintln!(
+        "received {} of {} poses, path of {}",
+        poses.len(),
+        expected.len(),
+        path["poses"].as_array().map_or(0, Vec::len)
+    );
+
+    // The path: all of poses.tum, in order, ending at its last pose.
+    assert_eq!(path["frame_id"], "map");
+    let path_poses: Vec<Stamped> = path["poses"]
+        .as_array()
+        .map(|a| a.iter().map(from_json).collect())
+        .unwrap_or_default();
+    assert_eq!(
+        path_poses.len(),
+        expected.len(),
+        "the path holds every pose of the run"
+    );
+    for p in &path_poses {
+        assert_matches("Path pose", p, &expected);
+    }
+    assert!(
+        path_poses.windows(2).all(|w| w[0].ns < w[1].ns),
+        "the path is in time order"
+    );
+    let last = path_poses
+        .last()
+        .copied()
+        .unwrap_or_else(|| panic!("empty path"));
+    assert_matches("the path's last pose", &last, &[last_tum]);
+    assert_eq!(
+        records.leftovers,
+        Default::default(),
+        "iceoryx2 nodes or services left behind"
+    );
+}
+
+#[test]
+fn a_bridge_that_cannot_join_dds_is_recorded_and_the_run_goes_on() {
+    let dir = scratch("ros2-failing");
+    // No domain in the config and one the bridge must refuse in the environment: it exits
+    // before it is ready, as it would on any DDS setup failure.
+    let extra = "[supervisor]\nstatus_every_ms = 0\n[budget]\ndrop_late = false\n\
+                 [ros2]\nenabled = true\nlocalhost_only = true\n";
+    let run = start_with_env(
+        &dir,
+        &base_sequence(FRAMES),
+        extra,
+        &[("ROS_DOMAIN_ID", "not-a-domain")],
+    );
+    let (status, _, records) = run.finish(RUN_TIMEOUT);
+    assert!(status.success(), "the run failed: {status}");
+    let exits = records.events_of("output-exit");
+    assert_eq!(exits.len(), 1, "{:?}", records.events);
+    assert_eq!(exits[0].stage, "ros2");
+    assert!(
+        exits[0].detail.contains("exit status: 1"),
+        "{}",
+        exits[0].detail
+    );
+    assert_ids_accounted(&records, FRAMES as u64, &[]);
+    // The pipeline went on: poses after the bridge was gone (how many depends on the load).
+    assert!(records.frames.iter().any(|f| f.outcome == "pose"));
+    assert_eq!(
+        records.leftovers,
+        Default::default(),
+        "iceoryx2 nodes or services left behind"
+    );
+}
