@@ -17,7 +17,8 @@ const RUN_TIMEOUT: Duration = Duration::from_secs(240);
 /// Runs whose poses are compared: nothing may depend on time (as `configs/emulation.toml`):
 /// every frame processed however late, the matcher switched on match counts only, and at
 /// fastest pacing at most 11 frames (what a stage holds), so both runs process every frame.
-const DETERMINISTIC: &str = "[budget]\ndrop_late = false\n[matcher.fallback]\nover_budget = false\n[record]\nmcap = true\n";
+const DETERMINISTIC: &str =
+    "[budget]\ndrop_late = false\n[matcher.fallback]\nover_budget = false\n[record]\nmcap = true\n";
 const COMPARED_FRAMES: usize = 10;
 
 /// The recorder's binary, built with the `mcap` feature.
@@ -80,7 +81,11 @@ fn check(file: &Path) -> Checked {
         .output()
         .unwrap_or_else(|e| panic!("running the checker: {e}"));
     let stderr = String::from_utf8_lossy(&out.stderr);
-    assert!(out.status.success(), "the checker refused {}: {stderr}", file.display());
+    assert!(
+        out.status.success(),
+        "the checker refused {}: {stderr}",
+        file.display()
+    );
     let json: serde_json::Value = serde_json::from_slice(&out.stdout)
         .unwrap_or_else(|e| panic!("checker output: {e}: {stderr}"));
     Checked { json }
@@ -92,7 +97,11 @@ fn check(file: &Path) -> Checked {
 fn assert_recording_matches(checked: &Checked, records: &Records, n: u64) {
     let json = &checked.json;
     assert_eq!(json["summary"], true, "no summary: the file was not closed");
-    assert_eq!(json["errors"], serde_json::json!([]), "undecodable messages");
+    assert_eq!(
+        json["errors"],
+        serde_json::json!([]),
+        "undecodable messages"
+    );
     let schemas = [
         ("/cam0/image", "foxglove.RawImage"),
         ("/cam1/image", "foxglove.RawImage"),
@@ -115,7 +124,11 @@ fn assert_recording_matches(checked: &Checked, records: &Records, n: u64) {
     assert_eq!(checked.count("/cam0/calibration"), 1);
     let with_pose = records.frames.iter().filter(|f| f.has_pose()).count() as u64;
     assert!(with_pose > 0);
-    assert_eq!(checked.count("/pose"), with_pose, "poses against frames.csv");
+    assert_eq!(
+        checked.count("/pose"),
+        with_pose,
+        "poses against frames.csv"
+    );
     assert_eq!(
         checked.count("/latency"),
         records.frames.len() as u64,
@@ -152,7 +165,13 @@ fn poses(run_dir: &Path) -> BTreeMap<String, Vec<f64>> {
 }
 
 /// Runs `linetrack replay FILE` with `config`'s settings into `run_dir`.
-fn replay(file: &Path, config: &Path, run_dir: &Path, prefix: &str, frames: Option<usize>) -> std::process::Output {
+fn replay(
+    file: &Path,
+    config: &Path,
+    run_dir: &Path,
+    prefix: &str,
+    frames: Option<usize>,
+) -> std::process::Output {
     let mut command = Command::new(bin_dir().join("linetrack"));
     command
         .arg("replay")
@@ -192,8 +211,18 @@ fn record_check_and_replay(name: &str, sequence: &Path) -> PathBuf {
     assert_recording_matches(&checked, &records, COMPARED_FRAMES as u64);
 
     let replay_dir = dir.join("replay");
-    let prefix = format!("lte2e{}_{}replay_", std::process::id(), name.replace('-', ""));
-    let out = replay(&file, &dir.join("pipeline.toml"), &replay_dir, &prefix, None);
+    let prefix = format!(
+        "lte2e{}_{}replay_",
+        std::process::id(),
+        name.replace('-', "")
+    );
+    let out = replay(
+        &file,
+        &dir.join("pipeline.toml"),
+        &replay_dir,
+        &prefix,
+        None,
+    );
     assert!(
         out.status.success(),
         "replay failed: {}{}",
@@ -219,7 +248,10 @@ fn record_check_and_replay(name: &str, sequence: &Path) -> PathBuf {
     );
     // poses.tum is written to 1 µm and 1e-6 per quaternion component: a replay that took
     // any other decision (another inlier set, another matcher mode) would differ by more.
-    assert!(max_difference <= 1e-6, "replayed poses differ by {max_difference}");
+    assert!(
+        max_difference <= 1e-6,
+        "replayed poses differ by {max_difference}"
+    );
     // The replay recorded itself too (the same config): the same frames.
     let rechecked = check(&replay_dir.join("recording.mcap"));
     assert_recording_matches(&rechecked, &replayed, COMPARED_FRAMES as u64);
@@ -270,26 +302,24 @@ fn real_data_euroc_excerpt_recorded_checked_and_replayed_gives_the_same_poses() 
 /// The pid of `parent`'s child process named `name` (its first 15 bytes, as /proc has it).
 fn child_named(parent: u32, name: &str) -> Option<u32> {
     let comm: String = name.chars().take(15).collect();
-    std::fs::read_dir("/proc").ok()?.flatten().find_map(|entry| {
-        let pid: u32 = entry.file_name().to_str()?.parse().ok()?;
-        let stat = std::fs::read_to_string(entry.path().join("stat")).ok()?;
-        // "pid (comm) state ppid ..."
-        let (head, rest) = stat.rsplit_once(") ")?;
-        let ppid: u32 = rest.split_whitespace().nth(1)?.parse().ok()?;
-        (ppid == parent && head.ends_with(&format!("({comm}"))).then_some(pid)
-    })
+    std::fs::read_dir("/proc")
+        .ok()?
+        .flatten()
+        .find_map(|entry| {
+            let pid: u32 = entry.file_name().to_str()?.parse().ok()?;
+            let stat = std::fs::read_to_string(entry.path().join("stat")).ok()?;
+            // "pid (comm) state ppid ..."
+            let (head, rest) = stat.rsplit_once(") ")?;
+            let ppid: u32 = rest.split_whitespace().nth(1)?.parse().ok()?;
+            (ppid == parent && head.ends_with(&format!("({comm}"))).then_some(pid)
+        })
 }
 
 #[test]
 fn a_killed_recorder_is_recorded_and_the_run_goes_on() {
     recorder_built();
     let dir = scratch("record-killed");
-    let mut run = start_with_args(
-        &dir,
-        &base_sequence(40),
-        "[record]\nmcap = true\n",
-        &[],
-    );
+    let mut run = start_with_args(&dir, &base_sequence(40), "[record]\nmcap = true\n", &[]);
     // The source starts once the recorder is ready: frames flowing means it is up.
     run.wait_for("frames", Duration::from_secs(120), |s| s.frames >= 5);
     let supervisor = run.status().map(|s| s.supervisor_pid).unwrap_or_default();
@@ -302,7 +332,11 @@ fn a_killed_recorder_is_recorded_and_the_run_goes_on() {
     linetrack_e2e::assert_ids_accounted(&records, 40, &[]);
     let exited = records.events_of("recorder-exited");
     assert_eq!(exited.len(), 1, "{:?}", records.events);
-    assert!(exited[0].detail.contains(&recorder.to_string()), "{:?}", exited[0]);
+    assert!(
+        exited[0].detail.contains(&recorder.to_string()),
+        "{:?}",
+        exited[0]
+    );
     assert_eq!(records.leftovers, Default::default(), "shared memory left");
     // Its file was left unfinished: a replay refuses it.
     let out = replay(

@@ -71,7 +71,10 @@ pub fn run(ctx: &StageContext, bus: &Bus, shutdown: &Shutdown) -> anyhow::Result
         "images_decimated".to_string(),
         counts.images_decimated.to_string(),
     );
-    values.insert("frames_missed".to_string(), losses.frames_missed.to_string());
+    values.insert(
+        "frames_missed".to_string(),
+        losses.frames_missed.to_string(),
+    );
     values.insert("poses".to_string(), counts.poses.to_string());
     values.insert("latencies".to_string(), counts.latencies.to_string());
     values.insert("every_nth_image".to_string(), every.to_string());
@@ -120,7 +123,10 @@ fn drain(
     for message in inlets.frames.receive_all()? {
         let header = message.header();
         if let Some((first, count)) = losses.frames.observe(header.frame_id) {
-            tracing::warn!("frames {first}..{} not recorded: the recorder fell behind", first + count);
+            tracing::warn!(
+                "frames {first}..{} not recorded: the recorder fell behind",
+                first + count
+            );
             losses.frames_missed += count;
         }
         if message.payload().is_empty() {

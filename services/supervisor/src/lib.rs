@@ -681,7 +681,9 @@ impl<'m> Supervisor<'m> {
             return Ok(());
         }
         if self.hub.is_some() {
-            tracing::warn!("[record] mcap = true is ignored with --single-process: the recorder subscribes over shared memory");
+            tracing::warn!(
+                "[record] mcap = true is ignored with --single-process: the recorder subscribes over shared memory"
+            );
             self.monitor.event(
                 "recorder-off",
                 "recorder",
@@ -741,7 +743,9 @@ impl<'m> Supervisor<'m> {
         }
         if recorder.started.elapsed() > timeout {
             let pid = recorder.pid;
-            tracing::warn!("the recorder (pid {pid}) was not ready after {timeout:?}: the run starts without it");
+            tracing::warn!(
+                "the recorder (pid {pid}) was not ready after {timeout:?}: the run starts without it"
+            );
             recorder.ready = true;
             self.monitor.event(
                 "recorder-late",
@@ -769,7 +773,9 @@ impl<'m> Supervisor<'m> {
         };
         let pid = recorder.pid;
         self.recorder = None;
-        tracing::warn!("the recorder (pid {pid}) exited during the run ({status}): the run goes on without a recording");
+        tracing::warn!(
+            "the recorder (pid {pid}) exited during the run ({status}): the run goes on without a recording"
+        );
         self.monitor.event(
             "recorder-exited",
             "recorder",
@@ -790,8 +796,7 @@ impl<'m> Supervisor<'m> {
         {
             tracing::warn!("shutdown command to the recorder not sent: {e}");
         }
-        let deadline =
-            Instant::now() + Duration::from_millis(self.config.record.close_timeout_ms);
+        let deadline = Instant::now() + Duration::from_millis(self.config.record.close_timeout_ms);
         loop {
             match recorder.child.try_wait() {
                 Ok(Some(status)) if status.success() => return,

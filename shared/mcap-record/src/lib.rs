@@ -207,7 +207,10 @@ fn encode<M: Encode>(message: &M, schema: &'static str) -> Result<Vec<u8>, McapE
 }
 
 /// Segment end points as a Foxglove line list, one colour per segment.
-fn line_list(segments: impl Iterator<Item = ([f32; 4], Color)>, thickness: f64) -> PointsAnnotation {
+fn line_list(
+    segments: impl Iterator<Item = ([f32; 4], Color)>,
+    thickness: f64,
+) -> PointsAnnotation {
     let mut points = Vec::new();
     let mut colors = Vec::new();
     for (e, color) in segments {
@@ -347,6 +350,27 @@ impl Recording {
             })
     }
 
+    /// Encodes and writes `message` about the frame of `header` on `topic`: its sequence
+    /// number the frame id, its log time the sequence's timestamp, its publish time the
+    /// capture time.
+    fn write_of_frame<M: Encode>(
+        &mut self,
+        topic: &'static str,
+        header: &FrameHeader,
+        message: &M,
+        schema: &'static str,
+    ) -> Result<(), McapError> {
+        let data = encode(message, schema)?;
+        let sequence = u32::try_from(header.frame_id).ok();
+        self.write(
+            topic,
+            sequence,
+            header.sequence_ns,
+            header.capture_ns,
+            &data,
+        )
+    }
+
     /// Writes the rig as the two cameras' calibrations (rectified: no distortion, the
     /// right camera's projection `Tx = −f·B`), unless it is the rig already written.
     pub fn rig(&mut self, rig: &RigRecord, log_ns: u64) -> Result<(), McapError> {
@@ -396,7 +420,6 @@ impl Recording {
                 ),
             });
         }
-        let sequence = u32::try_from(header.frame_id).ok();
         for (topic, frame, image) in [
             (LEFT_IMAGE, LEFT_FRAME, &pixels[..size]),
             (RIGHT_IMAGE, RIGHT_FRAME, &pixels[size..]),
@@ -410,8 +433,7 @@ impl Recording {
                 step: header.width,
                 data: foxglove::bytes::Bytes::copy_from_slice(image),
             };
-            let data = encode(&message, "foxglove.RawImage")?;
-            self.write(topic, sequence, header.sequence_ns, header.capture_ns, &data)?;
+            self.write_of_frame(topic, header, &message, "foxglove.RawImage")?;
         }
         self.counts.images += 1;
         Ok(())
@@ -430,7 +452,6 @@ impl Recording {
         segments: &[SegmentRecord],
     ) -> Result<(), McapError> {
         let split = (header.left_count as usize).min(segments.len());
-        let sequence = u32::try_from(header.frame_id).ok();
         for (topic, side) in [
             (LEFT_SEGMENTS, &segments[..split]),
             (RIGHT_SEGMENTS, &segments[split..]),
@@ -440,8 +461,7 @@ impl Recording {
                 points: vec![line_list(side.iter().map(|s| (s.endpoints, DETECTED)), 2.0)],
                 ..Default::default()
             };
-            let data = encode(&message, "foxglove.ImageAnnotations")?;
-            self.write(topic, sequence, header.sequence_ns, header.capture_ns, &data)?;
+            self.write_of_frame(topic, header, &message, "foxglove.ImageAnnotations")?;
         }
         self.counts.segments += 1;
         Ok(())
@@ -450,8 +470,11 @@ impl Recording {
     /// Writes a frame's matches: on the left image every segment, green when stereo-matched
     /// and tracked from the previous frame, yellow when stereo-matched only, red when not
     /// stereo-matched; on the right image the stereo partners.
-    pub fn matches(&mut self, header: &FrameHeader, lines: &[TrackedLine]) -> Result<(), McapError> {
-        let sequence = u32::try_from(header.frame_id).ok();
+    pub fn matches(
+        &mut self,
+        header: &FrameHeader,
+        lines: &[TrackedLine],
+    ) -> Result<(), McapError> {
         let left = lines.iter().map(|l| {
             let color = match (l.has_stereo == 1, l.previous >= 0) {
                 (true, true) => TRACKED,
@@ -460,10 +483,16 @@ impl Recording {
             };
             (l.left, color)
         });
-        let right = lines
-            .iter()
-            .filter(|l| l.has_stereo == 1)
-            .map(|l| (l.right, if l.previous >= 0 { TRACKED } else { STEREO_ONLY }));
+        let right = lines.iter().filter(|l| l.has_stereo == 1).map(|l| {
+            (
+                l.right,
+                if l.previous >= 0 {
+                    TRACKED
+                } else {
+                    STEREO_ONLY
+                },
+            )
+        });
         for (topic, annotation) in [
             (LEFT_MATCHES, line_list(left, 2.0)),
             (RIGHT_MATCHES, line_list(right, 2.0)),
@@ -473,15 +502,18 @@ impl Recording {
                 points: vec![annotation],
                 ..Default::default()
             };
-            let data = encode(&message, "foxglove.ImageAnnotations")?;
-            self.write(topic, sequence, header.sequence_ns, header.capture_ns, &data)?;
+            self.write_of_frame(topic, header, &message, "foxglove.ImageAnnotations")?;
         }
         self.counts.matches += 1;
         Ok(())
     }
 
     /// Writes a frame's outcome: its latencies, and its pose when it got one.
-    pub fn outcome(&mut self, header: &FrameHeader, pose: Option<&PoseRecord>) -> Result<(), McapError> {
+    pub fn outcome(
+        &mut self,
+        header: &FrameHeader,
+        pose: Option<&PoseRecord>,
+    ) -> Result<(), McapError> {
         let sequence = u32::try_from(header.frame_id).ok();
         if let Some(p) = pose.filter(|_| header.frame_status() == FrameStatus::Ok) {
             let message = PoseInFrame {
@@ -501,15 +533,21 @@ impl Recording {
                     }),
                 }),
             };
-            let data = encode(&message, "foxglove.PoseInFrame")?;
-            self.write(POSE, sequence, header.sequence_ns, header.capture_ns, &data)?;
+            self.write_of_frame(POSE, header, &message, "foxglove.PoseInFrame")?;
             self.counts.poses += 1;
         }
-        let latency = serde_json::to_vec(&FrameLatency::of(header)).map_err(|e| McapError::Encode {
-            schema: LATENCY_SCHEMA,
-            message: e.to_string(),
-        })?;
-        self.write(LATENCY, sequence, header.sequence_ns, header.capture_ns, &latency)?;
+        let latency =
+            serde_json::to_vec(&FrameLatency::of(header)).map_err(|e| McapError::Encode {
+                schema: LATENCY_SCHEMA,
+                message: e.to_string(),
+            })?;
+        self.write(
+            LATENCY,
+            sequence,
+            header.sequence_ns,
+            header.capture_ns,
+            &latency,
+        )?;
         self.counts.latencies += 1;
         Ok(())
     }
@@ -517,9 +555,10 @@ impl Recording {
     /// Writes a stage's event (heartbeats are not events: the caller leaves them out).
     pub fn event(&mut self, report: &StatusReport, now_ns: u64) -> Result<(), McapError> {
         let event = StageEvent {
-            stage: report
-                .stage()
-                .map_or_else(|| format!("stage {}", report.stage), |s| s.name().to_string()),
+            stage: report.stage().map_or_else(
+                || format!("stage {}", report.stage),
+                |s| s.name().to_string(),
+            ),
             pid: report.pid,
             kind: report.kind,
             detail: report.detail,
@@ -536,7 +575,11 @@ impl Recording {
     }
 
     /// Writes `name` → `values` as an MCAP metadata record (the recorder's counts).
-    pub fn metadata(&mut self, name: &str, values: BTreeMap<String, String>) -> Result<(), McapError> {
+    pub fn metadata(
+        &mut self,
+        name: &str,
+        values: BTreeMap<String, String>,
+    ) -> Result<(), McapError> {
         self.writer
             .write_metadata(&mcap::records::Metadata {
                 name: name.to_string(),
@@ -617,7 +660,9 @@ impl Replay {
             message,
         };
         if !bytes.starts_with(mcap::MAGIC) {
-            return Err(content("not an MCAP file (no MCAP magic at its start)".to_string()));
+            return Err(content(
+                "not an MCAP file (no MCAP magic at its start)".to_string(),
+            ));
         }
         let summary = match mcap::Summary::read(&bytes) {
             Ok(Some(summary)) => summary,
@@ -638,9 +683,9 @@ impl Replay {
             (LEFT_CALIBRATION, "foxglove.CameraCalibration"),
             (RIGHT_CALIBRATION, "foxglove.CameraCalibration"),
         ] {
-            let channel = by_topic.get(topic).ok_or_else(|| {
-                content(format!("no {topic} channel: not a linetrack recording"))
-            })?;
+            let channel = by_topic
+                .get(topic)
+                .ok_or_else(|| content(format!("no {topic} channel: not a linetrack recording")))?;
             expect_schema(path, channel, schema)?;
         }
         let count = |topic: &str| {
@@ -663,9 +708,8 @@ impl Replay {
             let message = message.map_err(format)?;
             let topic = message.channel.topic.as_str();
             if topic == LEFT_CALIBRATION || topic == RIGHT_CALIBRATION {
-                let c = CameraCalibration::decode(message.data.as_ref()).map_err(|e| {
-                    content(format!("{topic}: undecodable CameraCalibration: {e}"))
-                })?;
+                let c = CameraCalibration::decode(message.data.as_ref())
+                    .map_err(|e| content(format!("{topic}: undecodable CameraCalibration: {e}")))?;
                 if topic == LEFT_CALIBRATION {
                     left = Some(c);
                 } else {
@@ -677,7 +721,9 @@ impl Replay {
             }
         }
         let (Some(left), Some(right)) = (left, right) else {
-            return Err(content("no calibration message: the rig is missing".to_string()));
+            return Err(content(
+                "no calibration message: the rig is missing".to_string(),
+            ));
         };
         let rig = rig_of(&left, &right).map_err(content)?;
         Ok(Self {
@@ -704,8 +750,7 @@ impl Replay {
             message,
         };
         // Images of frames whose other image has not been read yet.
-        let mut pending: BTreeMap<u32, (Option<RawImage>, Option<RawImage>, u64)> =
-            BTreeMap::new();
+        let mut pending: BTreeMap<u32, (Option<RawImage>, Option<RawImage>, u64)> = BTreeMap::new();
         let mut handed = 0;
         for message in mcap::MessageStream::new(&self.bytes).map_err(format)? {
             let message = message.map_err(format)?;
@@ -896,7 +941,9 @@ mod tests {
         {
             let file = File::create(&path).expect("create");
             let mut w = mcap::Writer::new(BufWriter::new(file)).expect("writer");
-            let schema = w.add_schema("my.Image", "jsonschema", b"{}").expect("schema");
+            let schema = w
+                .add_schema("my.Image", "jsonschema", b"{}")
+                .expect("schema");
             for topic in [LEFT_IMAGE, RIGHT_IMAGE] {
                 let id = w
                     .add_channel(schema, topic, "json", &BTreeMap::new())
@@ -916,7 +963,10 @@ mod tests {
         }
         let error = Replay::open(&path).err().expect("refused");
         let text = error.to_string();
-        assert!(text.contains("/cam0/image") && text.contains("my.Image"), "{text}");
+        assert!(
+            text.contains("/cam0/image") && text.contains("my.Image"),
+            "{text}"
+        );
     }
 
     #[test]

@@ -590,9 +590,21 @@ impl PipelineConfig {
         }
         in_range("source.max_frames", src.max_frames, 0..=MAX_FRAMES)?;
         let rec = &self.record;
-        in_range("record.every_nth_image", rec.every_nth_image, 0..=MAX_FRAMES as u64)?;
-        in_range("record.startup_timeout_ms", rec.startup_timeout_ms, 1..=MAX_WAIT_MS)?;
-        in_range("record.close_timeout_ms", rec.close_timeout_ms, 1..=MAX_WAIT_MS)?;
+        in_range(
+            "record.every_nth_image",
+            rec.every_nth_image,
+            0..=MAX_FRAMES as u64,
+        )?;
+        in_range(
+            "record.startup_timeout_ms",
+            rec.startup_timeout_ms,
+            1..=MAX_WAIT_MS,
+        )?;
+        in_range(
+            "record.close_timeout_ms",
+            rec.close_timeout_ms,
+            1..=MAX_WAIT_MS,
+        )?;
         if src.replay().is_some() && self.camera.enabled() {
             return Err(
                 "source.replay and camera.capture are both set: frames come from one of them"
