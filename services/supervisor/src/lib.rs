@@ -13,6 +13,10 @@
 //! shows what the IPC costs. A thread stage has an id in place of a pid (from
 //! [`THREAD_IDS`]); a hung thread cannot be killed, only asked to stop and left behind.
 //!
+//! With `[record] mcap = true` it first starts `linetrack-recorder` (found like the stages),
+//! starts the frame source once the recorder is subscribed, records its death as an event
+//! without stopping the run, and stops it last so that it closes its file.
+//!
 //! Records go to the run folder as the run goes ([`monitor::Monitor`]); however the run
 //! ends (completed, interrupted, a stage that would not start or died past the restart
 //! limit) `summary.json` says how, and `status.json` stops saying "running". When the
