@@ -5,6 +5,8 @@
 //! With `[camera]` set, it reads a live stereo camera instead ([`camera`]).
 
 pub mod camera;
+#[cfg(feature = "mcap")]
+mod replay;
 
 use anyhow::Context;
 use linetrack_datasets::StereoSequence;
@@ -39,6 +41,19 @@ impl Ports {
     }
 }
 
+/// What a build without the `mcap` feature says when asked to replay.
+pub const NO_MCAP: &str =
+    "this build cannot replay MCAP recordings: build with --features linetrack-frame-source/mcap";
+
+/// Opens the recording `file` as the source will and checks it (before any stage starts):
+/// its number of stereo frames, or an error naming the file and what is wrong with it.
+pub fn check_replay(file: &std::path::Path) -> anyhow::Result<usize> {
+    #[cfg(feature = "mcap")]
+    return Ok(linetrack_mcap::Replay::open(file)?.frames);
+    #[cfg(not(feature = "mcap"))]
+    anyhow::bail!("{}: {NO_MCAP}", file.display())
+}
+
 /// When frame `k` (0-based from the first one published) is due, from the start.
 pub(crate) fn due_offset(
     pacing: Pacing,
@@ -71,6 +86,12 @@ pub fn run(ctx: &StageContext, bus: &Bus, shutdown: &Shutdown) -> anyhow::Result
 fn publish(ctx: &StageContext, mut ports: Ports, shutdown: &Shutdown) -> anyhow::Result<()> {
     if ctx.config.camera.enabled() {
         return camera::publish(ctx, ports, shutdown);
+    }
+    if let Some(file) = ctx.config.source.replay() {
+        #[cfg(feature = "mcap")]
+        return replay::publish(ctx, ports, shutdown, file);
+        #[cfg(not(feature = "mcap"))]
+        anyhow::bail!("{}: {NO_MCAP}", file.display());
     }
     let source = &ctx.config.source;
     let sequence = StereoSequence::open(&source.sequence)
@@ -107,21 +128,9 @@ fn publish(ctx: &StageContext, mut ports: Ports, shutdown: &Shutdown) -> anyhow:
             Ok(frame) => (frame.index, frame.timestamp_ns),
             Err(e) => (e.index, e.timestamp_ns),
         };
-        // Wait for the frame's time, waking for commands.
         let due = began + due_offset(source.pacing, rate, first_ns, timestamp_ns, k);
-        loop {
-            if shutdown.requested() || shutdown_ordered(&mut ports.control, ctx.pid)? {
-                tracing::info!("shutdown after {published} frames");
-                return Ok(());
-            }
-            let now = Instant::now();
-            if now >= due {
-                break;
-            }
-            ports
-                .wake
-                .wait((due - now).min(ports.reporter.until_due().max(Duration::from_millis(1))))?;
-            ports.reporter.beat(published);
+        if !wait_until(ctx, &mut ports, shutdown, due, published)? {
+            return Ok(());
         }
         let span = info_span!("publish_frame", frame_id = index as u64);
         let _entered = span.enter();
@@ -158,9 +167,34 @@ fn publish(ctx: &StageContext, mut ports: Ports, shutdown: &Shutdown) -> anyhow:
     stay_until_the_run_ends(ctx, &mut ports, shutdown, start as u64, published)
 }
 
+/// Waits for a frame's time `due`, waking for commands and beating; `false` when the run
+/// is shutting down instead.
+pub(crate) fn wait_until(
+    ctx: &StageContext,
+    ports: &mut Ports,
+    shutdown: &Shutdown,
+    due: Instant,
+    published: u64,
+) -> anyhow::Result<bool> {
+    loop {
+        if shutdown.requested() || shutdown_ordered(&mut ports.control, ctx.pid)? {
+            tracing::info!("shutdown after {published} frames");
+            return Ok(false);
+        }
+        let now = Instant::now();
+        if now >= due {
+            return Ok(true);
+        }
+        ports
+            .wake
+            .wait((due - now).min(ports.reporter.until_due().max(Duration::from_millis(1))))?;
+        ports.reporter.beat(published);
+    }
+}
+
 /// Reports the source finished after `published` frames from `start`, then stays until the
 /// run ends: it holds the rig, which a stage restarted after the last frame still needs.
-fn stay_until_the_run_ends(
+pub(crate) fn stay_until_the_run_ends(
     ctx: &StageContext,
     ports: &mut Ports,
     shutdown: &Shutdown,

@@ -13,6 +13,10 @@
 //! shows what the IPC costs. A thread stage has an id in place of a pid (from
 //! [`THREAD_IDS`]); a hung thread cannot be killed, only asked to stop and left behind.
 //!
+//! With `[record] mcap = true` it first starts `linetrack-recorder` (found like the stages),
+//! starts the frame source once the recorder is subscribed, records its death as an event
+//! without stopping the run, and stops it last so that it closes its file.
+//!
 //! Records go to the run folder as the run goes ([`monitor::Monitor`]); however the run
 //! ends (completed, interrupted, a stage that would not start or died past the restart
 //! limit) `summary.json` says how, and `status.json` stops saying "running". When the
@@ -222,6 +226,11 @@ pub fn run(
     let ground_truth = if config.camera.enabled() {
         camera_check::preflight(&config.camera)?;
         Vec::new()
+    } else if let Some(file) = config.source.replay() {
+        let frames = linetrack_frame_source::check_replay(file)
+            .with_context(|| format!("source.replay {}", file.display()))?;
+        tracing::info!("replaying {frames} stereo frames of {}", file.display());
+        Vec::new()
     } else {
         sequence_ground_truth(&config.source.sequence)?
     };
@@ -417,7 +426,7 @@ fn stage_code(stage: StageKind) -> Option<StageRun> {
         StageKind::LineDetector => Some(linetrack_line_detector::run),
         StageKind::Matcher => Some(linetrack_matcher::run),
         StageKind::PoseEstimator => Some(linetrack_pose_estimator::run),
-        StageKind::Supervisor => None,
+        StageKind::Supervisor | StageKind::Recorder => None,
     }
 }
 
@@ -433,6 +442,16 @@ struct StageProcess {
     detector: Option<DetectorKind>,
     /// Expected to exit (handed over, finished, killed for hanging).
     retiring: bool,
+}
+
+/// The recorder process: not a stage (nothing waits for it); its death is recorded and the
+/// run goes on without a recording.
+struct RecorderProcess {
+    child: Child,
+    pid: u32,
+    started: Instant,
+    /// It reported ready: subscribed, its file open.
+    ready: bool,
 }
 
 /// Restart bookkeeping of one stage.
@@ -460,6 +479,8 @@ struct Supervisor<'m> {
     monitor: &'m mut Monitor,
     processes: Vec<StageProcess>,
     restarts: [Restarts; 4],
+    /// The MCAP recorder (`[record] mcap = true`), while it runs.
+    recorder: Option<RecorderProcess>,
     detector: DetectorKind,
     swap_to: Option<DetectorKind>,
     /// The ROS 2 output's binary, when `[ros2] enabled`.
@@ -549,6 +570,7 @@ impl<'m> Supervisor<'m> {
             monitor,
             processes: Vec::new(),
             restarts: [Restarts::default(); 4],
+            recorder: None,
             detector: config.detector,
             swap_to: None,
             ros2_binary,
@@ -686,6 +708,167 @@ impl<'m> Supervisor<'m> {
         Ok((Launch::Process(child), pid))
     }
 
+    /// Starts `linetrack-recorder` when the config asks for a recording (processes only:
+    /// the recorder subscribes over shared memory, which threads mode does not use).
+    fn start_recorder(&mut self) -> anyhow::Result<()> {
+        if !self.config.record.mcap {
+            return Ok(());
+        }
+        if self.hub.is_some() {
+            tracing::warn!(
+                "[record] mcap = true is ignored with --single-process: the recorder subscribes over shared memory"
+            );
+            self.monitor.event(
+                "recorder-off",
+                "recorder",
+                None,
+                "no recording in single-process mode".to_string(),
+            );
+            return Ok(());
+        }
+        let bin = self.bin_dir.join("linetrack-recorder");
+        if !bin.is_file() {
+            bail!(
+                "[record] mcap = true but {} is not there: build it with `cargo build --release --workspace --features linetrack-recorder/mcap`",
+                bin.display()
+            );
+        }
+        let mut command = self.stage_runner.command(&bin);
+        command
+            .arg("--config")
+            .arg(&self.config_path)
+            .arg("--run-id")
+            .arg(&self.run_id)
+            .arg("--run-dir")
+            .arg(&self.run_dir)
+            .arg("--supervisor-pid")
+            .arg(std::process::id().to_string())
+            .env(Scope::PREFIX_VAR, &self.scope.prefix)
+            .env(Scope::ROOT_VAR, &self.scope.root)
+            .stdin(Stdio::null())
+            .stdout(Stdio::null());
+        let child = command
+            .spawn()
+            .with_context(|| format!("starting {}", bin.display()))?;
+        let pid = child.id();
+        tracing::info!(
+            "started recorder (pid {pid}) into {}",
+            self.config.record.file(&self.run_dir).display()
+        );
+        self.recorder = Some(RecorderProcess {
+            child,
+            pid,
+            started: Instant::now(),
+            ready: false,
+        });
+        Ok(())
+    }
+
+    /// Whether the frame source may start as far as the recorder goes: none asked for, it
+    /// is subscribed, it died, or it did not get ready within `record.startup_timeout_ms`
+    /// (then the run goes on without it).
+    fn recorder_settled(&mut self) -> bool {
+        let timeout = Duration::from_millis(self.config.record.startup_timeout_ms);
+        let Some(recorder) = &mut self.recorder else {
+            return true;
+        };
+        if recorder.ready {
+            return true;
+        }
+        if recorder.started.elapsed() > timeout {
+            let pid = recorder.pid;
+            tracing::warn!(
+                "the recorder (pid {pid}) was not ready after {timeout:?}: the run starts without it"
+            );
+            recorder.ready = true;
+            self.monitor.event(
+                "recorder-late",
+                "recorder",
+                None,
+                format!("pid {pid} not ready after {timeout:?}; the frames before it is are not recorded"),
+            );
+        }
+        recorder.ready
+    }
+
+    /// Records a recorder that exited during the run; the run goes on without it (it is not
+    /// restarted: its file is left unfinished, which a replay refuses as truncated).
+    fn check_recorder(&mut self) {
+        let Some(recorder) = &mut self.recorder else {
+            return;
+        };
+        let status = match recorder.child.try_wait() {
+            Ok(Some(status)) => status,
+            Ok(None) => return,
+            Err(e) => {
+                tracing::warn!("cannot poll the recorder (pid {}): {e}", recorder.pid);
+                return;
+            }
+        };
+        let pid = recorder.pid;
+        self.recorder = None;
+        tracing::warn!(
+            "the recorder (pid {pid}) exited during the run ({status}): the run goes on without a recording"
+        );
+        self.monitor.event(
+            "recorder-exited",
+            "recorder",
+            None,
+            format!("pid {pid} {status}; the run goes on without a recording"),
+        );
+    }
+
+    /// Asks the recorder to write what it holds and close its file; kills it after
+    /// `record.close_timeout_ms`.
+    fn stop_recorder(&mut self) {
+        let Some(mut recorder) = self.recorder.take() else {
+            return;
+        };
+        if let Err(e) = self
+            .ports
+            .send(StageKind::Recorder, recorder.pid, Command::Shutdown, 0, 0)
+        {
+            tracing::warn!("shutdown command to the recorder not sent: {e}");
+        }
+        let deadline = Instant::now() + Duration::from_millis(self.config.record.close_timeout_ms);
+        loop {
+            match recorder.child.try_wait() {
+                Ok(Some(status)) if status.success() => return,
+                Ok(Some(status)) => {
+                    tracing::warn!("the recorder (pid {}) ended with {status}", recorder.pid);
+                    self.monitor.event(
+                        "recorder-exited",
+                        "recorder",
+                        None,
+                        format!("pid {} {status} while closing its file", recorder.pid),
+                    );
+                    return;
+                }
+                Ok(None) if Instant::now() < deadline => {
+                    let _ = self.ports.wake.wait(Duration::from_millis(20));
+                }
+                _ => {
+                    tracing::warn!(
+                        "the recorder (pid {}) did not close its file in time: killing it",
+                        recorder.pid
+                    );
+                    let _ = recorder.child.kill();
+                    let _ = recorder.child.wait();
+                    self.monitor.event(
+                        "recorder-killed",
+                        "recorder",
+                        None,
+                        format!(
+                            "pid {} did not close its file within record.close_timeout_ms",
+                            recorder.pid
+                        ),
+                    );
+                    return;
+                }
+            }
+        }
+    }
+
     fn write_status(&self) {
         LiveStatus {
             run_id: self.run_id.clone(),
@@ -741,6 +924,7 @@ impl<'m> Supervisor<'m> {
             let command = self.child_command(bin);
             self.ros2 = outputs::Output::start(command, bin, self.monitor);
         }
+        self.start_recorder()?;
         for stage in [
             StageKind::LineDetector,
             StageKind::Matcher,
@@ -777,6 +961,7 @@ impl<'m> Supervisor<'m> {
                         StageKind::Matcher,
                         StageKind::PoseEstimator,
                     ])
+                    && self.recorder_settled()
                 {
                     self.spawn(StageKind::FrameSource, None, false)?;
                     source_started = true;
@@ -835,6 +1020,14 @@ impl<'m> Supervisor<'m> {
             if let Some(output) = self.ros2.as_mut().filter(|o| o.pid() == report.pid) {
                 if report.kind() == Some(StatusKind::Ready) {
                     output.set_ready();
+                }
+                continue;
+            }
+            if report.stage() == Some(StageKind::Recorder) {
+                if let Some(recorder) = self.recorder.as_mut().filter(|r| r.pid == report.pid)
+                    && report.kind() == Some(StatusKind::Ready)
+                {
+                    recorder.ready = true;
                 }
                 continue;
             }
@@ -1051,6 +1244,7 @@ impl<'m> Supervisor<'m> {
         {
             self.ros2 = None;
         }
+        self.check_recorder();
         let hang = Duration::from_millis(self.config.supervisor.hang_timeout_ms);
         let startup = Duration::from_millis(self.config.supervisor.startup_timeout_ms);
         let mut exited = Vec::new();
@@ -1193,6 +1387,7 @@ impl<'m> Supervisor<'m> {
                 self.config.supervisor.shutdown_grace_ms,
             ));
         }
+        self.stop_recorder();
         let cleaned = self.bus.remove_stale_resources();
         if cleaned > 0 {
             tracing::info!("removed the shared memory of {cleaned} killed stage processes");

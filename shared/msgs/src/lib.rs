@@ -24,6 +24,8 @@ pub enum StageKind {
     PoseEstimator,
     /// Starts, watches and steers the others.
     Supervisor,
+    /// Records the run into an MCAP file (`[record] mcap = true`); no processing stage.
+    Recorder,
 }
 
 impl StageKind {
@@ -43,6 +45,7 @@ impl StageKind {
             StageKind::Matcher => "matcher",
             StageKind::PoseEstimator => "pose-estimator",
             StageKind::Supervisor => "supervisor",
+            StageKind::Recorder => "recorder",
         }
     }
 
@@ -614,6 +617,7 @@ mod tests {
             StageKind::Matcher,
             StageKind::PoseEstimator,
             StageKind::Supervisor,
+            StageKind::Recorder,
         ] {
             assert_eq!(StageKind::from_code(stage.code()), Some(stage));
         }

@@ -66,6 +66,65 @@ pub struct SourceConfig {
     pub rate_hz: f64,
     /// Publish at most this many frames (0 = all).
     pub max_frames: usize,
+    /// An MCAP recording (`[record]`, `linetrack replay FILE`) whose stereo frames and rig
+    /// are published instead of `sequence`'s; empty: the sequence.
+    #[serde(skip_serializing_if = "is_empty_path")]
+    pub replay: PathBuf,
+}
+
+fn is_empty_path(path: &Path) -> bool {
+    path.as_os_str().is_empty()
+}
+
+impl SourceConfig {
+    /// The recording to replay, when one is set.
+    pub fn replay(&self) -> Option<&Path> {
+        (!self.replay.as_os_str().is_empty()).then_some(self.replay.as_path())
+    }
+}
+
+/// The run's MCAP recording (`[record]`), written by the `linetrack-recorder` process the
+/// supervisor starts next to the stages.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct RecordConfig {
+    /// Record the run into an MCAP file.
+    pub mcap: bool,
+    /// The file; empty: `recording.mcap` in the run folder.
+    #[serde(skip_serializing_if = "is_empty_path")]
+    pub path: PathBuf,
+    /// Record the images of every n-th frame (frame id divisible by n); 0 = no images.
+    /// Only a recording of every frame's images (1) replays the run.
+    pub every_nth_image: u64,
+    /// How long the supervisor waits for the recorder to open its file before starting
+    /// the frame source (it starts it anyway then, without a recording).
+    pub startup_timeout_ms: u64,
+    /// How long the recorder may take to write what it still holds and close the file
+    /// when the run ends, before it is killed.
+    pub close_timeout_ms: u64,
+}
+
+impl Default for RecordConfig {
+    fn default() -> Self {
+        Self {
+            mcap: false,
+            path: PathBuf::new(),
+            every_nth_image: 1,
+            startup_timeout_ms: 10_000,
+            close_timeout_ms: 10_000,
+        }
+    }
+}
+
+impl RecordConfig {
+    /// The file a run into `run_dir` records into.
+    pub fn file(&self, run_dir: &Path) -> PathBuf {
+        if self.path.as_os_str().is_empty() {
+            run_dir.join("recording.mcap")
+        } else {
+            self.path.clone()
+        }
+    }
 }
 
 impl Default for SourceConfig {
@@ -75,6 +134,7 @@ impl Default for SourceConfig {
             pacing: Pacing::Realtime,
             rate_hz: 0.0,
             max_frames: 0,
+            replay: PathBuf::new(),
         }
     }
 }
@@ -459,6 +519,8 @@ pub struct PipelineConfig {
     pub supervisor: SupervisorConfig,
     /// Records.
     pub output: OutputConfig,
+    /// The MCAP recording.
+    pub record: RecordConfig,
     /// Each stage's CPUs and scheduling policy.
     pub stages: StagesConfig,
     /// Shared memory.
@@ -481,6 +543,7 @@ impl Default for PipelineConfig {
             budget: BudgetConfig::default(),
             supervisor: SupervisorConfig::default(),
             output: OutputConfig::default(),
+            record: RecordConfig::default(),
             stages: StagesConfig::default(),
             ipc: IpcConfig::default(),
             odometry: OdometryConfig::default(),
@@ -533,6 +596,28 @@ impl PipelineConfig {
                 .map_err(|e| format!("{e} (or 0 = the sequence's rate)"))?;
         }
         in_range("source.max_frames", src.max_frames, 0..=MAX_FRAMES)?;
+        let rec = &self.record;
+        in_range(
+            "record.every_nth_image",
+            rec.every_nth_image,
+            0..=MAX_FRAMES as u64,
+        )?;
+        in_range(
+            "record.startup_timeout_ms",
+            rec.startup_timeout_ms,
+            1..=MAX_WAIT_MS,
+        )?;
+        in_range(
+            "record.close_timeout_ms",
+            rec.close_timeout_ms,
+            1..=MAX_WAIT_MS,
+        )?;
+        if src.replay().is_some() && self.camera.enabled() {
+            return Err(
+                "source.replay and camera.capture are both set: frames come from one of them"
+                    .to_string(),
+            );
+        }
         let cam = &self.camera;
         if cam.fps != 0.0 {
             in_range("camera.fps", cam.fps, RATE_HZ)
@@ -662,6 +747,29 @@ mod tests {
         let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../configs/pipeline.toml");
         let shipped = PipelineConfig::from_file(&path).unwrap_or_else(|e| panic!("{e}"));
         assert_eq!(shipped, PipelineConfig::default());
+    }
+
+    #[test]
+    fn a_recording_goes_into_the_run_folder_unless_named_and_replay_excludes_a_camera() {
+        let config = PipelineConfig::from_toml_str("[record]\nmcap = true\n", "x.toml")
+            .unwrap_or_else(|e| panic!("{e}"));
+        assert!(config.record.mcap);
+        assert_eq!(
+            config.record.file(Path::new("out/runs/r1")),
+            Path::new("out/runs/r1/recording.mcap")
+        );
+        let named = PipelineConfig::from_toml_str("[record]\npath = \"/data/a.mcap\"\n", "x.toml")
+            .unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(named.record.file(Path::new("x")), Path::new("/data/a.mcap"));
+        assert_eq!(PipelineConfig::default().source.replay(), None);
+        let err = refusal(
+            "[source]\nreplay = \"r.mcap\"\n[camera]\ncapture = \"0\"\ncalibration = \"c.yaml\"\n",
+        );
+        assert!(err.contains("source.replay"), "{err}");
+        let err = refusal("[record]\nclose_timeout_ms = 0\n");
+        assert!(err.contains("record.close_timeout_ms"), "{err}");
+        let err = refusal("[record]\nmcap = true\nevery_nth = 2\n");
+        assert!(err.contains("every_nth"), "{err}");
     }
 
     #[test]

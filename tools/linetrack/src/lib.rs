@@ -2,6 +2,7 @@
 //!
 //! - `linetrack run`: the pipeline end to end (one process per stage over shared memory, or
 //!   `--single-process`), with a live status line and the final latency report.
+//! - `linetrack replay FILE.mcap`: the same, its frames read from a recording (`[record]`).
 //! - `linetrack ctl swap-detector fld`: hot-swaps the detector of a running pipeline.
 //! - `linetrack report [RUN_DIR]`: the latency report of a run, with its latency pictures
 //!   ([`latency_plots`]) and a picture of a few frames of its trace ([`trace_picture`]).
@@ -36,6 +37,7 @@ const DEFAULT_FRAMES: usize = 100;
     linetrack run --single-process                  # same stages on threads (baseline)
     linetrack run --camera 'v4l2src ! videoconvert ! video/x-raw,format=GRAY8 ! appsink' \\
         --calibration camchain.yaml --duration 60   # a live side-by-side stereo camera
+    linetrack replay out/runs/latest/recording.mcap # a recorded run's frames through the pipeline again
     linetrack ctl swap-detector fld                 # while a run is going, from another shell
     linetrack report out/runs/latest                # latency report + latency and trace pictures
 
@@ -55,6 +57,9 @@ pub struct Cli {
 pub enum Cmd {
     /// Run the pipeline on a sequence and report.
     Run(RunArgs),
+    /// Run the pipeline on the stereo frames of an MCAP recording (`[record] mcap = true`)
+    /// and report; needs a build with the `mcap` feature.
+    Replay(ReplayArgs),
     /// Steer a running pipeline.
     Ctl(CtlArgs),
     /// Latency report of a finished run.
@@ -114,6 +119,20 @@ pub struct RunArgs {
     /// No live status line, and no progress while the default sequence is generated.
     #[arg(long)]
     pub quiet: bool,
+    /// An MCAP recording to read the frames from (`linetrack replay`).
+    #[arg(skip)]
+    pub replay: Option<PathBuf>,
+}
+
+/// `linetrack replay`.
+#[derive(Debug, clap::Args)]
+pub struct ReplayArgs {
+    /// The recording (`recording.mcap` of a run recorded with `[record] mcap = true` and
+    /// `every_nth_image = 1`).
+    pub file: PathBuf,
+    /// The run's options (--dataset and --camera do not apply).
+    #[command(flatten)]
+    pub run: RunArgs,
 }
 
 /// `linetrack ctl`.
@@ -154,6 +173,18 @@ pub struct ReportArgs {
 pub fn main(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
         Cmd::Run(args) => run(&args).map(|_| ()),
+        Cmd::Replay(args) => {
+            anyhow::ensure!(
+                args.run.dataset.is_none() && args.run.camera.is_none(),
+                "linetrack replay reads its frames from {}: --dataset and --camera do not apply",
+                args.file.display()
+            );
+            let run_args = RunArgs {
+                replay: Some(args.file),
+                ..args.run
+            };
+            run(&run_args).map(|_| ())
+        }
         Cmd::Ctl(args) => ctl(&args),
         Cmd::Report(args) => {
             print!("{}", report(&args.run_dir)?);
@@ -167,6 +198,10 @@ pub fn effective_config(args: &RunArgs) -> anyhow::Result<PipelineConfig> {
     let mut config = PipelineConfig::from_file(&args.config)?;
     if let Some(dataset) = &args.dataset {
         config.source.sequence = dataset.clone();
+    }
+    if let Some(file) = &args.replay {
+        config.source.replay = file.clone();
+        config.camera.capture.clear();
     }
     if let Some(camera) = &args.camera {
         anyhow::ensure!(
@@ -215,6 +250,7 @@ pub fn run(args: &RunArgs) -> anyhow::Result<PathBuf> {
     let config = effective_config(args)?;
     let sequence = &config.source.sequence;
     if !config.camera.enabled()
+        && config.source.replay().is_none()
         && args.dataset.is_none()
         && !sequence.join("mav0/cam0/data.csv").is_file()
         && sequence.ends_with("out/sequences/pipeline")
@@ -254,6 +290,8 @@ pub fn run(args: &RunArgs) -> anyhow::Result<PathBuf> {
                 },
                 config.camera.calibration.display()
             )
+        } else if let Some(file) = config.source.replay() {
+            format!("recording {}", file.display())
         } else {
             sequence.display().to_string()
         },

@@ -10,7 +10,8 @@
 //! - `cargo xtask test-ros2 [ARGS…]` — the ROS 2 output (cargo feature `ros2`): install the
 //!   DDS peer if missing ([`dds_peer`]), build `linetrack-ros2`, run its crate's tests and
 //!   the end-to-end test in which Cyclone DDS receives the poses, and clippy with the feature.
-//! - `cargo xtask setup` — only install the system packages and the DDS peer.
+//! - `cargo xtask setup` — only install the system packages, the MCAP checker and the DDS
+//!   peer.
 //! - `cargo xtask cross [--no-run]` — aarch64 release binaries of every service and tool,
 //!   run under qemu on the EuRoC excerpt and compared with the native build ([`cross`]).
 //! - `cargo xtask deb [--target TRIPLE] [--check]` — the Debian package ([`deb`]).
@@ -28,7 +29,8 @@ use std::process::{Command, ExitCode};
 /// Debian packages the workspace builds against: OpenCV with its contrib modules
 /// (LSD, FLD, LBD, ORB) and libclang for the `opencv` crate's binding generator; and
 /// GStreamer's base and good plugins, which the live camera source's GStreamer pipelines
-/// (`videotestsrc`, `compositor`, `appsink`, `videocrop`, `v4l2src`) and its tests need.
+/// (`videotestsrc`, `compositor`, `appsink`, `videocrop`, `v4l2src`) and its tests need;
+/// and Python's `venv`, for the MCAP checker ([`install_mcap_checker`]).
 const SYSTEM_PACKAGES: &[&str] = &[
     "libopencv-dev",
     "libopencv-contrib-dev",
@@ -36,7 +38,18 @@ const SYSTEM_PACKAGES: &[&str] = &[
     "libclang-dev",
     "gstreamer1.0-plugins-base",
     "gstreamer1.0-plugins-good",
+    "python3-venv",
 ];
+
+/// The independent MCAP checker the recording tests run (`tests/scripts/check_mcap.py`):
+/// the PyPI `mcap` reader and its protobuf decoder, pinned, in a virtual environment under
+/// the target folder (`target/mcap-check`; the tests look there, or at
+/// `$LINETRACK_MCAP_PYTHON`).
+const MCAP_CHECKER: &[&str] = &["mcap==1.6.0", "mcap-protobuf-support==0.6.0"];
+
+/// The features every `cargo xtask` build turns on: MCAP recording and replay (tested by
+/// `tests/tests/recording.rs`).
+const FEATURES: &str = "linetrack/mcap";
 
 const USAGE: &str = "usage: cargo xtask <demo|match-demo|test|setup> [ARGS…]
   demo        run the pipeline: `linetrack run ARGS…` (try `cargo xtask demo --help`)
@@ -64,6 +77,7 @@ fn run() -> anyhow::Result<ExitCode> {
     match command.as_str() {
         "setup" => {
             install_system_packages()?;
+            install_mcap_checker()?;
             install_packages(dds_peer::SYSTEM_PACKAGES)?;
             dds_peer::install()?;
             Ok(ExitCode::SUCCESS)
@@ -84,10 +98,7 @@ fn run() -> anyhow::Result<ExitCode> {
             if built != ExitCode::SUCCESS {
                 return Ok(built);
             }
-            let target = std::env::var_os("CARGO_TARGET_DIR").map_or_else(
-                || std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../target"),
-                std::path::PathBuf::from,
-            );
+            let target = target_dir();
             let mut linetrack_args = vec!["run".to_string()];
             linetrack_args.extend(rest);
             let status = Command::new(target.join("release/linetrack"))
@@ -116,6 +127,7 @@ fn run() -> anyhow::Result<ExitCode> {
         }
         "test" => {
             install_system_packages()?;
+            install_mcap_checker()?;
             // The end-to-end tests start the real stage processes.
             let built = cargo(
                 &[
@@ -124,6 +136,8 @@ fn run() -> anyhow::Result<ExitCode> {
                     "--bins",
                     "--profile",
                     "test-release",
+                    "--features",
+                    FEATURES,
                 ],
                 &[],
             )?;
@@ -138,6 +152,8 @@ fn run() -> anyhow::Result<ExitCode> {
                     "--workspace",
                     "--cargo-profile",
                     "test-release",
+                    "--features",
+                    FEATURES,
                 ];
                 if !with_real_data {
                     fixed.extend(["-E", "not test(/real_data/)"]);
@@ -154,7 +170,14 @@ fn run() -> anyhow::Result<ExitCode> {
                     ]);
                 }
                 cargo(
-                    &["test", "--workspace", "--profile", "test-release"],
+                    &[
+                        "test",
+                        "--workspace",
+                        "--profile",
+                        "test-release",
+                        "--features",
+                        FEATURES,
+                    ],
                     &extra,
                 )
             }
@@ -301,6 +324,56 @@ fn has_nextest() -> bool {
         .args(["nextest", "--version"])
         .output()
         .is_ok_and(|o| o.status.success())
+}
+
+/// The target folder (`$CARGO_TARGET_DIR`, else the workspace's `target`).
+fn target_dir() -> std::path::PathBuf {
+    std::env::var_os("CARGO_TARGET_DIR").map_or_else(
+        || std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../target"),
+        std::path::PathBuf::from,
+    )
+}
+
+/// Makes the MCAP checker's virtual environment (`target/mcap-check`) with
+/// [`MCAP_CHECKER`] installed; does nothing when it already imports them.
+fn install_mcap_checker() -> anyhow::Result<()> {
+    let venv = target_dir().join("mcap-check");
+    let python = venv.join("bin/python");
+    let imports = |python: &std::path::Path| {
+        Command::new(python)
+            .args(["-c", "import mcap, mcap_protobuf"])
+            .output()
+            .is_ok_and(|o| o.status.success())
+    };
+    if imports(&python) {
+        return Ok(());
+    }
+    eprintln!(
+        "xtask: installing the MCAP checker ({}) into {}",
+        MCAP_CHECKER.join(" "),
+        venv.display()
+    );
+    let status = Command::new("python3")
+        .args(["-m", "venv"])
+        .arg(&venv)
+        .status()
+        .context("cannot run python3 -m venv")?;
+    if !status.success() {
+        bail!("python3 -m venv {} failed ({status})", venv.display());
+    }
+    let status = Command::new(&python)
+        .args(["-m", "pip", "install", "--quiet"])
+        .args(MCAP_CHECKER)
+        .status()
+        .with_context(|| format!("cannot run {} -m pip", python.display()))?;
+    if !status.success() || !imports(&python) {
+        bail!(
+            "installing {} into {} failed",
+            MCAP_CHECKER.join(" "),
+            venv.display()
+        );
+    }
+    Ok(())
 }
 
 /// Installs the missing ones of [`SYSTEM_PACKAGES`] with apt-get (through sudo when not
