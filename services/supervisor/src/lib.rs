@@ -733,20 +733,8 @@ impl<'m> Supervisor<'m> {
                 bin.display()
             );
         }
-        let mut command = self.stage_runner.command(&bin);
-        command
-            .arg("--config")
-            .arg(&self.config_path)
-            .arg("--run-id")
-            .arg(&self.run_id)
-            .arg("--run-dir")
-            .arg(&self.run_dir)
-            .arg("--supervisor-pid")
-            .arg(std::process::id().to_string())
-            .env(Scope::PREFIX_VAR, &self.scope.prefix)
-            .env(Scope::ROOT_VAR, &self.scope.root)
-            .stdin(Stdio::null())
-            .stdout(Stdio::null());
+        let mut command = self.child_command(&bin);
+        command.arg("--run-dir").arg(&self.run_dir);
         let child = command
             .spawn()
             .with_context(|| format!("starting {}", bin.display()))?;

@@ -71,10 +71,13 @@ pub struct OdometryConfig {
     /// searched for within this of where the last motion (constant velocity) projects
     /// them, pixels.
     pub predicted_window_px: f64,
-    /// Frame to frame once a motion is known: match the last frame's segments at the
-    /// positions the last motion predicts for them (each one with a 3-D position), not
-    /// where they were. The matcher's own gates (LBD: displacement; ℓ1: overlap, angle,
-    /// flow) then compare like with like.
+    /// Frame to frame once a motion is known, with a matcher that gains from it (LBD):
+    /// match the last frame's segments at the positions the last motion predicts for them
+    /// (each one with a 3-D position), not where they were, so LBD's displacement gate is
+    /// centred on the prediction. The ℓ1 matcher compares segment geometry assuming a small
+    /// motion and filters on a coherent flow; given predicted positions it lost frames
+    /// (generated `lights-switching` seed 1, lines only: 2 lost, ATE 3.2 cm against none
+    /// and 1.6 cm), so it gets the segments as they were.
     pub predicted_matching: bool,
     /// Frame to frame, ORB points: the second-best Hamming distance must be at least this
     /// times the best (the stereo ratio is the front end's `orb.min_distance_ratio`).
@@ -1016,6 +1019,7 @@ impl Odometry {
             // Matched where the last motion puts them, when it is known.
             let mut predicted = Vec::new();
             let moved = self.tracker.config.predicted_matching
+                && self.matcher.matches_predicted_positions()
                 && self
                     .tracker
                     .predict_segments(&previous.segments, &mut predicted);

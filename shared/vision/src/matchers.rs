@@ -35,6 +35,12 @@ pub trait SegmentMatcher: Send {
         features: &mut LineFeatures,
     ) -> Result<(), VisionError>;
 
+    /// Whether frame-to-frame matching gains from being given the last frame's segments
+    /// where the camera's motion predicts them rather than where they were.
+    fn matches_predicted_positions(&self) -> bool {
+        false
+    }
+
     /// Replaces `out` with the matches between the two images' segments.
     fn match_lines(
         &mut self,
@@ -118,6 +124,12 @@ impl LbdSegmentMatcher {
 impl SegmentMatcher for LbdSegmentMatcher {
     fn name(&self) -> &'static str {
         "lbd"
+    }
+
+    /// Its displacement gate is then centred on the prediction, which keeps far look-alikes
+    /// out of the ratio test.
+    fn matches_predicted_positions(&self) -> bool {
+        true
     }
 
     fn describe(
