@@ -8,7 +8,7 @@
 //!   end-to-end tests start, then run the whole test suite with cargo-nextest (or `cargo
 //!   test` where nextest is not installed).
 //! - `cargo xtask test-ros2 [ARGS…]` — the ROS 2 output (cargo feature `ros2`): install the
-//!   DDS peer if missing ([`dds_peer`]), build `linetrack-ros2`, run its crate's tests and
+//!   DDS peer if missing ([`python_env`]), build `linetrack-ros2`, run its crate's tests and
 //!   the end-to-end test in which Cyclone DDS receives the poses, and clippy with the feature.
 //! - `cargo xtask setup` — only install the system packages, the MCAP checker and the DDS
 //!   peer.
@@ -19,9 +19,9 @@
 //! Every command can be run again: packages already installed are not touched.
 
 mod cross;
-mod dds_peer;
 mod deb;
 mod pose_diff;
+mod python_env;
 
 use anyhow::{Context, bail};
 use std::process::{Command, ExitCode};
@@ -30,7 +30,7 @@ use std::process::{Command, ExitCode};
 /// (LSD, FLD, LBD, ORB) and libclang for the `opencv` crate's binding generator; and
 /// GStreamer's base and good plugins, which the live camera source's GStreamer pipelines
 /// (`videotestsrc`, `compositor`, `appsink`, `videocrop`, `v4l2src`) and its tests need;
-/// and Python's `venv`, for the MCAP checker ([`install_mcap_checker`]).
+/// and Python's `venv`, for the tests' Python peers ([`python_env`]).
 const SYSTEM_PACKAGES: &[&str] = &[
     "libopencv-dev",
     "libopencv-contrib-dev",
@@ -40,12 +40,6 @@ const SYSTEM_PACKAGES: &[&str] = &[
     "gstreamer1.0-plugins-good",
     "python3-venv",
 ];
-
-/// The independent MCAP checker the recording tests run (`tests/scripts/check_mcap.py`):
-/// the PyPI `mcap` reader and its protobuf decoder, pinned, in a virtual environment under
-/// the target folder (`target/mcap-check`; the tests look there, or at
-/// `$LINETRACK_MCAP_PYTHON`).
-const MCAP_CHECKER: &[&str] = &["mcap==1.6.0", "mcap-protobuf-support==0.6.0"];
 
 /// The features every `cargo xtask` build turns on: MCAP recording and replay (tested by
 /// `tests/tests/recording.rs`).
@@ -77,15 +71,13 @@ fn run() -> anyhow::Result<ExitCode> {
     match command.as_str() {
         "setup" => {
             install_system_packages()?;
-            install_mcap_checker()?;
-            install_packages(dds_peer::SYSTEM_PACKAGES)?;
-            dds_peer::install()?;
+            python_env::MCAP_CHECKER.install()?;
+            python_env::DDS_PEER.install()?;
             Ok(ExitCode::SUCCESS)
         }
         "test-ros2" => {
             install_system_packages()?;
-            install_packages(dds_peer::SYSTEM_PACKAGES)?;
-            dds_peer::install()?;
+            python_env::DDS_PEER.install()?;
             test_ros2(&rest)
         }
         "demo" => {
@@ -98,7 +90,7 @@ fn run() -> anyhow::Result<ExitCode> {
             if built != ExitCode::SUCCESS {
                 return Ok(built);
             }
-            let target = target_dir();
+            let target = python_env::target_dir();
             let mut linetrack_args = vec!["run".to_string()];
             linetrack_args.extend(rest);
             let status = Command::new(target.join("release/linetrack"))
@@ -127,7 +119,7 @@ fn run() -> anyhow::Result<ExitCode> {
         }
         "test" => {
             install_system_packages()?;
-            install_mcap_checker()?;
+            python_env::MCAP_CHECKER.install()?;
             // The end-to-end tests start the real stage processes.
             let built = cargo(
                 &[
@@ -324,56 +316,6 @@ fn has_nextest() -> bool {
         .args(["nextest", "--version"])
         .output()
         .is_ok_and(|o| o.status.success())
-}
-
-/// The target folder (`$CARGO_TARGET_DIR`, else the workspace's `target`).
-fn target_dir() -> std::path::PathBuf {
-    std::env::var_os("CARGO_TARGET_DIR").map_or_else(
-        || std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../target"),
-        std::path::PathBuf::from,
-    )
-}
-
-/// Makes the MCAP checker's virtual environment (`target/mcap-check`) with
-/// [`MCAP_CHECKER`] installed; does nothing when it already imports them.
-fn install_mcap_checker() -> anyhow::Result<()> {
-    let venv = target_dir().join("mcap-check");
-    let python = venv.join("bin/python");
-    let imports = |python: &std::path::Path| {
-        Command::new(python)
-            .args(["-c", "import mcap, mcap_protobuf"])
-            .output()
-            .is_ok_and(|o| o.status.success())
-    };
-    if imports(&python) {
-        return Ok(());
-    }
-    eprintln!(
-        "xtask: installing the MCAP checker ({}) into {}",
-        MCAP_CHECKER.join(" "),
-        venv.display()
-    );
-    let status = Command::new("python3")
-        .args(["-m", "venv"])
-        .arg(&venv)
-        .status()
-        .context("cannot run python3 -m venv")?;
-    if !status.success() {
-        bail!("python3 -m venv {} failed ({status})", venv.display());
-    }
-    let status = Command::new(&python)
-        .args(["-m", "pip", "install", "--quiet"])
-        .args(MCAP_CHECKER)
-        .status()
-        .with_context(|| format!("cannot run {} -m pip", python.display()))?;
-    if !status.success() || !imports(&python) {
-        bail!(
-            "installing {} into {} failed",
-            MCAP_CHECKER.join(" "),
-            venv.display()
-        );
-    }
-    Ok(())
 }
 
 /// Installs the missing ones of [`SYSTEM_PACKAGES`] with apt-get (through sudo when not
