@@ -21,6 +21,7 @@
 
 mod camera_check;
 pub mod fallback;
+pub mod link;
 pub mod monitor;
 pub mod run_dir;
 pub mod stage_runner;
@@ -454,6 +455,8 @@ struct Supervisor<'m> {
     restarts: [Restarts; 4],
     detector: DetectorKind,
     swap_to: Option<DetectorKind>,
+    /// The ground-station link's process (`[link] enabled`, multi-process mode).
+    link: Option<link::LinkProcess>,
 }
 
 fn stage_slot(stage: StageKind) -> usize {
@@ -521,7 +524,7 @@ impl<'m> Supervisor<'m> {
             scope,
             run_dir: run_dir.to_path_buf(),
             config_path,
-            bin_dir,
+            bin_dir: bin_dir.clone(),
             stage_runner,
             bus,
             ports,
@@ -530,6 +533,8 @@ impl<'m> Supervisor<'m> {
             restarts: [Restarts::default(); 4],
             detector: config.detector,
             swap_to: None,
+            link: (config.link.enabled && options.mode == Mode::Processes)
+                .then(|| link::LinkProcess::new(&bin_dir)),
         })
     }
 
@@ -609,17 +614,10 @@ impl<'m> Supervisor<'m> {
         Ok(())
     }
 
-    /// Starts `stage`'s binary as a child process.
-    fn spawn_process(
-        &self,
-        stage: StageKind,
-        detector: Option<DetectorKind>,
-        standby: bool,
-        resume_pose: Option<String>,
-        start_frame: u64,
-    ) -> anyhow::Result<(Launch, u32)> {
-        let bin = self.bin_dir.join(format!("linetrack-{}", stage.name()));
-        let mut command = self.stage_runner.command(&bin);
+    /// The command that starts `bin` with the arguments every process of the run gets
+    /// (through the stage runner).
+    fn process_command(&self, bin: &Path) -> std::process::Command {
+        let mut command = self.stage_runner.command(bin);
         command
             .arg("--config")
             .arg(&self.config_path)
@@ -633,6 +631,20 @@ impl<'m> Supervisor<'m> {
             .env(Scope::ROOT_VAR, &self.scope.root)
             .stdin(Stdio::null())
             .stdout(Stdio::null());
+        command
+    }
+
+    /// Starts `stage`'s binary as a child process.
+    fn spawn_process(
+        &self,
+        stage: StageKind,
+        detector: Option<DetectorKind>,
+        standby: bool,
+        resume_pose: Option<String>,
+        start_frame: u64,
+    ) -> anyhow::Result<(Launch, u32)> {
+        let bin = self.bin_dir.join(format!("linetrack-{}", stage.name()));
+        let mut command = self.process_command(&bin);
         if let Some(kind) = detector {
             command.arg("--detector").arg(kind.name());
         }
@@ -732,6 +744,7 @@ impl<'m> Supervisor<'m> {
             self.handle_poses()?;
             self.handle_requests()?;
             self.check_processes(shutdown)?;
+            self.supervise_link();
             if !source_started {
                 if self.all_ready(&[
                     StageKind::LineDetector,
@@ -776,6 +789,17 @@ impl<'m> Supervisor<'m> {
                 println!("{}", self.monitor.status_line());
                 next_status = Instant::now() + status_every;
             }
+        }
+    }
+
+    /// Starts, or restarts, the link's process when due.
+    fn supervise_link(&mut self) {
+        if let Some(mut link) = self.link.take() {
+            let command = link
+                .wants_start()
+                .then(|| self.process_command(link.binary()));
+            link.supervise(command, &self.config.supervisor, self.monitor);
+            self.link = Some(link);
         }
     }
 
@@ -866,59 +890,9 @@ impl<'m> Supervisor<'m> {
                 }
                 Some(StatusKind::SourceFinished) => {
                     process.retiring = true;
-                    if report.value == 0 && report.frame_id == 0 && !self.monitor.any_published() {
-                        // A camera that never delivered: no frame to wait for.
-                        self.monitor.source_finished_empty();
-                    } else {
-                        self.monitor.published(report.frame_id);
-                        self.monitor.source_finished(report.frame_id);
-                    }
+                    self.monitor.on_report(&report, stage, &self.config.camera);
                 }
-                Some(StatusKind::CameraLost) => {
-                    let failure = linetrack_msgs::CameraFailure::from_code(report.detail);
-                    self.monitor.event(
-                        "camera-lost",
-                        stage.name(),
-                        Some(report.frame_id),
-                        format!(
-                            "{} {}; reopening (attempt {}, backoff from {} ms)",
-                            camera_check::describe(&self.config.camera),
-                            failure.describe(),
-                            report.value,
-                            self.config.camera.retry_ms
-                        ),
-                    );
-                }
-                Some(StatusKind::CameraBack) => self.monitor.event(
-                    "camera-back",
-                    stage.name(),
-                    Some(report.frame_id),
-                    format!(
-                        "{} delivers again after {} failed attempts",
-                        camera_check::describe(&self.config.camera),
-                        report.value
-                    ),
-                ),
-                Some(StatusKind::Overflow) => self.monitor.event(
-                    "overflow",
-                    stage.name(),
-                    Some(report.frame_id),
-                    format!(
-                        "{} held frames released before their other input arrived (hold of {})",
-                        report.value,
-                        linetrack_stage_runtime::HELD_FRAMES
-                    ),
-                ),
-                Some(StatusKind::QueueGap) => {
-                    self.monitor
-                        .presume_lost(report.frame_id, report.value, stage.name());
-                }
-                Some(StatusKind::Heartbeat)
-                    if stage == StageKind::FrameSource && report.value > 0 =>
-                {
-                    self.monitor.published(report.frame_id)
-                }
-                _ => {}
+                _ => self.monitor.on_report(&report, stage, &self.config.camera),
             }
         }
         Ok(())
@@ -1123,6 +1097,12 @@ impl<'m> Supervisor<'m> {
                 break;
             }
             let _ = self.ports.wake.wait(Duration::from_millis(20));
+        }
+        // The link goes last: it forwards what the stages published to the end.
+        if let Some(link) = &mut self.link {
+            link.stop(Duration::from_millis(
+                self.config.supervisor.shutdown_grace_ms,
+            ));
         }
         let cleaned = self.bus.remove_stale_resources();
         if cleaned > 0 {

@@ -587,7 +587,7 @@ fn start(
 /// Asks for shutdown when the process that started this one (the supervisor) dies: a stage
 /// never outlives its supervisor. The kernel sends SIGTERM (which sets `shutdown`) when
 /// the parent ends; a parent that ended before that was armed is seen by its pid.
-fn end_with_parent(shutdown: &Shutdown, supervisor: Option<u32>) -> anyhow::Result<()> {
+pub fn end_with_parent(shutdown: &Shutdown, supervisor: Option<u32>) -> anyhow::Result<()> {
     rustix::process::set_parent_process_death_signal(Some(rustix::process::Signal::TERM))
         .context("arming the parent-death signal")?;
     let parent = std::os::unix::process::parent_id();

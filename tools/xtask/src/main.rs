@@ -21,6 +21,10 @@ mod pose_diff;
 use anyhow::{Context, bail};
 use std::process::{Command, ExitCode};
 
+/// The features the test suite builds and tests on top of the default build: the
+/// ground-station link (zenoh) and its end-to-end test.
+const TEST_FEATURES: &str = "linetrack/link,linetrack-e2e/link";
+
 /// Debian packages the workspace builds against: OpenCV with its contrib modules
 /// (LSD, FLD, LBD, ORB) and libclang for the `opencv` crate's binding generator; and
 /// GStreamer's base and good plugins, which the live camera source's GStreamer pipelines
@@ -111,6 +115,8 @@ fn run() -> anyhow::Result<ExitCode> {
                     "--bins",
                     "--profile",
                     "test-release",
+                    "--features",
+                    TEST_FEATURES,
                 ],
                 &[],
             )?;
@@ -125,6 +131,8 @@ fn run() -> anyhow::Result<ExitCode> {
                     "--workspace",
                     "--cargo-profile",
                     "test-release",
+                    "--features",
+                    TEST_FEATURES,
                 ];
                 if !with_real_data {
                     fixed.extend(["-E", "not test(/real_data/)"]);
@@ -141,7 +149,14 @@ fn run() -> anyhow::Result<ExitCode> {
                     ]);
                 }
                 cargo(
-                    &["test", "--workspace", "--profile", "test-release"],
+                    &[
+                        "test",
+                        "--workspace",
+                        "--profile",
+                        "test-release",
+                        "--features",
+                        TEST_FEATURES,
+                    ],
                     &extra,
                 )
             }
