@@ -65,27 +65,75 @@ fn wait_until(what: &str, watch: &mut Child, ready: impl Fn() -> bool) {
     }
 }
 
-#[test]
-fn poses_and_status_cross_the_link_and_a_2_s_cut_costs_the_onboard_run_no_frame() {
-    let dir = scratch("link");
-    let endpoint = format!("tcp/127.0.0.1:{}", free_port());
-    let far = dir.join("far");
-    // The far side: another iceoryx2 domain (it joins none; the only way in is zenoh).
-    let mut far_side = Far(Command::new(bin_dir().join("linetrack"))
-        .args(["watch", "--connect", &endpoint, "--status-every-ms", "0"])
+/// `linetrack watch` on `endpoint`, recording into `out`, in its own iceoryx2 domain (it
+/// joins none: the only way in is zenoh).
+fn watch_on(dir: &Path, endpoint: &str, out: &Path) -> Far {
+    Far(Command::new(bin_dir().join("linetrack"))
+        .args(["watch", "--connect", endpoint, "--status-every-ms", "0"])
         .args(["--idle-exit", "3", "--out"])
-        .arg(&far)
+        .arg(out)
         .env(Scope::PREFIX_VAR, format!("ltfar{}_", std::process::id()))
         .env(Scope::ROOT_VAR, dir.join("far-iceoryx2"))
         .stdin(Stdio::null())
         .stdout(Stdio::piped())
         .stderr(Stdio::inherit())
         .spawn()
-        .unwrap_or_else(|e| panic!("starting linetrack watch: {e}")));
-    let watch = &mut far_side.0;
-    let extra = format!(
+        .unwrap_or_else(|e| panic!("starting linetrack watch: {e}")))
+}
+
+/// The onboard config: the link on `endpoint` with every topic, an image every 5th frame.
+fn link_config(endpoint: &str) -> String {
+    format!(
         "[supervisor]\nrestart_backoff_ms = 100\nstatus_every_ms = 0\n[budget]\ndrop_late = false\n[link]\nenabled = true\nlisten = \"{endpoint}\"\ntopics = [\"poses\", \"status\", \"segments\", \"tracks\", \"images\"]\nimage_every = 5\n"
+    )
+}
+
+/// Waits for the far side to end on its own (after the onboard source's end); its stdout.
+fn far_ends(watch: &mut Child) -> String {
+    let deadline = Instant::now() + TIMEOUT;
+    let status = loop {
+        if let Ok(Some(status)) = watch.try_wait() {
+            break status;
+        }
+        assert!(
+            Instant::now() < deadline,
+            "linetrack watch did not end after the run"
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    };
+    let mut out = String::new();
+    if let Some(mut stdout) = watch.stdout.take() {
+        use std::io::Read;
+        let _ = stdout.read_to_string(&mut out);
+    }
+    assert!(status.success(), "{status}\n{out}");
+    out
+}
+
+/// Every frame once onboard, each with a pose: the link cost the run nothing.
+fn assert_onboard_lost_nothing(records: &Records) {
+    assert_ids_accounted(records, FRAMES as u64, &[]);
+    let outcomes: BTreeSet<&str> = records.frames.iter().map(|f| f.outcome.as_str()).collect();
+    assert!(
+        outcomes.iter().all(|o| *o == "pose" || *o == "lost"),
+        "onboard outcomes {outcomes:?}"
     );
+    assert!(
+        records.events_of("link-exit").is_empty(),
+        "{:?}",
+        records.events
+    );
+}
+
+#[test]
+fn poses_and_status_cross_the_link_and_a_2_s_cut_costs_the_onboard_run_no_frame() {
+    let dir = scratch("link");
+    let endpoint = format!("tcp/127.0.0.1:{}", free_port());
+    let far = dir.join("far");
+    // The far side: another iceoryx2 domain (it joins none; the only way in is zenoh).
+    let mut far_side = watch_on(&dir, &endpoint, &far);
+    let watch = &mut far_side.0;
+    let extra = link_config(&endpoint);
     let run = start(&dir, &base_sequence(FRAMES), &extra);
     let run_dir = run.run_dir.clone();
     let far_poses = far.join("poses.tum");
@@ -107,21 +155,10 @@ fn poses_and_status_cross_the_link_and_a_2_s_cut_costs_the_onboard_run_no_frame(
 
     let (exit, out, records) = run.finish(TIMEOUT);
     assert!(exit.success(), "{exit}\n{out}");
-    // Onboard: every frame once, every one tracked (no drop for the link's sake).
-    assert_ids_accounted(&records, FRAMES as u64, &[]);
-    let outcomes: BTreeSet<&str> = records.frames.iter().map(|f| f.outcome.as_str()).collect();
-    assert!(
-        outcomes.iter().all(|o| *o == "pose" || *o == "lost"),
-        "onboard outcomes {outcomes:?}"
-    );
+    assert_onboard_lost_nothing(&records);
     assert!(
         onboard_at_resume < FRAMES as u64,
         "the run was over before the far side came back ({onboard_at_resume} frames)"
-    );
-    assert!(
-        records.events_of("link-exit").is_empty(),
-        "{:?}",
-        records.events
     );
     let onboard_counts = run_dir.join("link.json");
     assert_eq!(
@@ -141,23 +178,7 @@ fn poses_and_status_cross_the_link_and_a_2_s_cut_costs_the_onboard_run_no_frame(
 
     // The far side ends on its own once the source's end has arrived (a status report
     // sent after the cut) and nothing more comes.
-    let deadline = Instant::now() + TIMEOUT;
-    let status = loop {
-        if let Ok(Some(status)) = watch.try_wait() {
-            break status;
-        }
-        if Instant::now() > deadline {
-            let _ = watch.kill();
-            panic!("linetrack watch did not end after the run");
-        }
-        std::thread::sleep(Duration::from_millis(50));
-    };
-    let mut far_out = String::new();
-    if let Some(mut stdout) = watch.stdout.take() {
-        use std::io::Read;
-        let _ = stdout.read_to_string(&mut far_out);
-    }
-    assert!(status.success(), "{status}\n{far_out}");
+    far_ends(watch);
 
     // Poses on the far side equal the onboard ones, before and after the cut.
     let onboard_lines: BTreeSet<String> =
@@ -208,4 +229,59 @@ fn poses_and_status_cross_the_link_and_a_2_s_cut_costs_the_onboard_run_no_frame(
     }
     let far_events = std::fs::read_to_string(far.join("events.csv")).unwrap_or_default();
     assert!(far_events.contains("link-up"), "{far_events}");
+}
+
+#[test]
+fn a_far_side_restarted_after_2_s_gets_the_rest_and_the_gap_is_counted_unheard() {
+    let dir = scratch("link-restart");
+    let endpoint = format!("tcp/127.0.0.1:{}", free_port());
+    let (first, second) = (dir.join("far-1"), dir.join("far-2"));
+    let mut far_side = watch_on(&dir, &endpoint, &first);
+    let run = start(&dir, &base_sequence(FRAMES), &link_config(&endpoint));
+    let run_dir = run.run_dir.clone();
+    wait_until("5 poses on the far side", &mut far_side.0, || {
+        pose_lines(&first.join("poses.tum")).len() >= 5
+    });
+    // The far side goes away (its records closed), and another comes 2 s later.
+    signal(far_side.0.id(), "TERM");
+    far_ends(&mut far_side.0);
+    std::thread::sleep(Duration::from_secs(2));
+    let mut far_side = watch_on(&dir, &endpoint, &second);
+
+    let (exit, out, records) = run.finish(TIMEOUT);
+    assert!(exit.success(), "{exit}\n{out}");
+    assert_onboard_lost_nothing(&records);
+    let counts = run_dir.join("link.json");
+    let unheard = link_count(&counts, "poses", "unheard");
+    assert_eq!(
+        link_count(&counts, "poses", "sent") + link_count(&counts, "poses", "dropped") + unheard,
+        FRAMES as u64,
+        "every pose message counted"
+    );
+    assert!(unheard > 0, "no pose counted unheard while nobody listened");
+
+    far_ends(&mut far_side.0);
+    let onboard: BTreeSet<String> = pose_lines(&run_dir.join("poses.tum")).into_iter().collect();
+    let (before, after) = (
+        pose_lines(&first.join("poses.tum")),
+        pose_lines(&second.join("poses.tum")),
+    );
+    assert!(!after.is_empty(), "the second far side got no pose");
+    for line in before.iter().chain(&after) {
+        assert!(onboard.contains(line), "far pose {line:?} is not onboard");
+    }
+    let first_frames = read_frames(&first.join("frames.csv")).unwrap_or_else(|e| panic!("{e}"));
+    let second_frames = read_frames(&second.join("frames.csv")).unwrap_or_else(|e| panic!("{e}"));
+    let last_before = first_frames.iter().map(|f| f.frame_id).max().unwrap_or(0);
+    let first_after = second_frames
+        .iter()
+        .map(|f| f.frame_id)
+        .min()
+        .unwrap_or(u64::MAX);
+    assert!(
+        first_after > last_before,
+        "the second far side starts at frame {first_after}, the first ended at {last_before}"
+    );
+    let events = std::fs::read_to_string(second.join("events.csv")).unwrap_or_default();
+    assert!(events.contains("link-up"), "{events}");
 }
