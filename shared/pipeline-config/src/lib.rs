@@ -739,6 +739,28 @@ mod tests {
     }
 
     #[test]
+    fn a_link_topic_scale_endpoint_or_key_out_of_bounds_is_refused_naming_its_key() {
+        let err = refusal("[link]\ntopics = [\"poses\", \"video\"]\n");
+        assert!(err.contains("link.topics") && err.contains("video"), "{err}");
+        let err = refusal("[link]\nimage_scale = 0\n");
+        assert!(err.contains("link.image_scale"), "{err}");
+        let err = refusal("[link]\nimage_every = 0\n");
+        assert!(err.contains("link.image_every"), "{err}");
+        let err = refusal("[link]\nlisten = \"7447\"\n");
+        assert!(err.contains("link.listen"), "{err}");
+        let err = refusal("[link]\nkey_prefix = \"robot/**\"\n");
+        assert!(err.contains("link.key_prefix"), "{err}");
+        let err = refusal("[link]\nenable = true\n");
+        assert!(err.contains("enable"), "{err}");
+        let ok = PipelineConfig::from_toml_str(
+            "[link]\nenabled = true\ntopics = [\"images\"]\nkey_prefix = \"robot/one\"\n",
+            "x.toml",
+        )
+        .unwrap_or_else(|e| panic!("{e}"));
+        assert!(ok.link.allows("images") && !ok.link.allows("poses"));
+    }
+
+    #[test]
     fn a_camera_needs_a_calibration_and_a_right_camera_a_left_one() {
         let err = refusal("[camera]\ncapture = \"0\"\n");
         assert!(err.contains("camera.calibration"), "{err}");
