@@ -3,7 +3,6 @@
 //! allowed topics to zenoh until the run ends, and writes its counters to `link.json` in
 //! the run folder.
 
-use anyhow::Context;
 use clap::Parser;
 use linetrack_ipc::{Bus, Scope, Shutdown};
 use linetrack_pipeline_config::PipelineConfig;
@@ -42,6 +41,7 @@ fn forward(
     shutdown: &Shutdown,
     args: &StageArgs,
 ) -> anyhow::Result<()> {
+    use anyhow::Context;
     let path = args.run_dir.join("link.json");
     let counts = linetrack_link::onboard::run(&config.link, bus, shutdown, &path)
         .with_context(|| format!("link.listen = {:?}", config.link.listen))?;

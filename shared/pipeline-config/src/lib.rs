@@ -741,7 +741,10 @@ mod tests {
     #[test]
     fn a_link_topic_scale_endpoint_or_key_out_of_bounds_is_refused_naming_its_key() {
         let err = refusal("[link]\ntopics = [\"poses\", \"video\"]\n");
-        assert!(err.contains("link.topics") && err.contains("video"), "{err}");
+        assert!(
+            err.contains("link.topics") && err.contains("video"),
+            "{err}"
+        );
         let err = refusal("[link]\nimage_scale = 0\n");
         assert!(err.contains("link.image_scale"), "{err}");
         let err = refusal("[link]\nimage_every = 0\n");
