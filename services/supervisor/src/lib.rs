@@ -25,6 +25,7 @@
 
 mod camera_check;
 pub mod fallback;
+pub mod link;
 pub mod monitor;
 pub mod outputs;
 pub mod run_dir;
@@ -487,6 +488,8 @@ struct Supervisor<'m> {
     ros2_binary: Option<PathBuf>,
     /// The ROS 2 output process, while it runs.
     ros2: Option<outputs::Output>,
+    /// The ground-station link's process (`[link] enabled`, multi-process mode).
+    link: Option<link::LinkProcess>,
 }
 
 fn stage_slot(stage: StageKind) -> usize {
@@ -563,7 +566,7 @@ impl<'m> Supervisor<'m> {
             scope,
             run_dir: run_dir.to_path_buf(),
             config_path,
-            bin_dir,
+            bin_dir: bin_dir.clone(),
             stage_runner,
             bus,
             ports,
@@ -575,6 +578,8 @@ impl<'m> Supervisor<'m> {
             swap_to: None,
             ros2_binary,
             ros2: None,
+            link: (config.link.enabled && options.mode == Mode::Processes)
+                .then(|| link::LinkProcess::new(&bin_dir)),
         })
     }
 
@@ -938,6 +943,7 @@ impl<'m> Supervisor<'m> {
             self.handle_poses()?;
             self.handle_requests()?;
             self.check_processes(shutdown)?;
+            self.supervise_link();
             if !source_started {
                 let outputs_settled = self
                     .ros2
@@ -989,6 +995,21 @@ impl<'m> Supervisor<'m> {
                 println!("{}", self.monitor.status_line());
                 next_status = Instant::now() + status_every;
             }
+        }
+    }
+
+    /// Starts, or restarts, the link's process when due.
+    fn supervise_link(&mut self) {
+        if let Some(mut link) = self.link.take() {
+            let command = link
+                .wants_start()
+                .then(|| {
+                    let mut command = self.child_command(link.binary());
+                    command.arg("--run-dir").arg(&self.run_dir);
+                    command
+                });
+            link.supervise(command, &self.config.supervisor, self.monitor);
+            self.link = Some(link);
         }
     }
 
@@ -1097,59 +1118,9 @@ impl<'m> Supervisor<'m> {
                 }
                 Some(StatusKind::SourceFinished) => {
                     process.retiring = true;
-                    if report.value == 0 && report.frame_id == 0 && !self.monitor.any_published() {
-                        // A camera that never delivered: no frame to wait for.
-                        self.monitor.source_finished_empty();
-                    } else {
-                        self.monitor.published(report.frame_id);
-                        self.monitor.source_finished(report.frame_id);
-                    }
+                    self.monitor.on_report(&report, stage, &self.config.camera);
                 }
-                Some(StatusKind::CameraLost) => {
-                    let failure = linetrack_msgs::CameraFailure::from_code(report.detail);
-                    self.monitor.event(
-                        "camera-lost",
-                        stage.name(),
-                        Some(report.frame_id),
-                        format!(
-                            "{} {}; reopening (attempt {}, backoff from {} ms)",
-                            camera_check::describe(&self.config.camera),
-                            failure.describe(),
-                            report.value,
-                            self.config.camera.retry_ms
-                        ),
-                    );
-                }
-                Some(StatusKind::CameraBack) => self.monitor.event(
-                    "camera-back",
-                    stage.name(),
-                    Some(report.frame_id),
-                    format!(
-                        "{} delivers again after {} failed attempts",
-                        camera_check::describe(&self.config.camera),
-                        report.value
-                    ),
-                ),
-                Some(StatusKind::Overflow) => self.monitor.event(
-                    "overflow",
-                    stage.name(),
-                    Some(report.frame_id),
-                    format!(
-                        "{} held frames released before their other input arrived (hold of {})",
-                        report.value,
-                        linetrack_stage_runtime::HELD_FRAMES
-                    ),
-                ),
-                Some(StatusKind::QueueGap) => {
-                    self.monitor
-                        .presume_lost(report.frame_id, report.value, stage.name());
-                }
-                Some(StatusKind::Heartbeat)
-                    if stage == StageKind::FrameSource && report.value > 0 =>
-                {
-                    self.monitor.published(report.frame_id)
-                }
-                _ => {}
+                _ => self.monitor.on_report(&report, stage, &self.config.camera),
             }
         }
         Ok(())
@@ -1369,7 +1340,12 @@ impl<'m> Supervisor<'m> {
             }
             let _ = self.ports.wake.wait(Duration::from_millis(20));
         }
-        // The outputs last: the stages' last poses are queued for them by now.
+        // The outputs last: they forward what the stages published to the end.
+        if let Some(link) = &mut self.link {
+            link.stop(Duration::from_millis(
+                self.config.supervisor.shutdown_grace_ms,
+            ));
+        }
         if let Some(output) = self.ros2.take() {
             output.stop(Duration::from_millis(
                 self.config.supervisor.shutdown_grace_ms,

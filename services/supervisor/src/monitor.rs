@@ -7,8 +7,10 @@
 //! length of the run, and a run that ends any way at all leaves its records.
 
 use crate::fallback::{FallbackController, Switch};
-use linetrack_msgs::{FrameHeader, FrameStatus, MatcherMode, PoseRecord, StageKind};
-use linetrack_pipeline_config::{MatcherPolicy, PipelineConfig};
+use linetrack_msgs::{
+    FrameHeader, FrameStatus, MatcherMode, PoseRecord, StageKind, StatusKind, StatusReport,
+};
+use linetrack_pipeline_config::{CameraConfig, MatcherPolicy, PipelineConfig};
 use linetrack_run_record::{
     EventRecord, FrameRecord, Percentiles, RecordError, RecordWriter, Report, RunEnd, STAGES,
     Summary, Tally,
@@ -300,6 +302,66 @@ impl Monitor {
             );
         }
         switch
+    }
+
+    /// Takes what a stage's status report says about the run (the frames the source
+    /// published, its end, skipped frames, camera and hold events); reports about the stage
+    /// processes themselves (ready, hand-over) are the supervisor's. `camera` names the
+    /// camera in the events.
+    pub fn on_report(&mut self, report: &StatusReport, stage: StageKind, camera: &CameraConfig) {
+        match report.kind() {
+            Some(StatusKind::SourceFinished) => {
+                if report.value == 0 && report.frame_id == 0 && !self.any_published() {
+                    // A camera that never delivered: no frame to wait for.
+                    self.source_finished_empty();
+                } else {
+                    self.published(report.frame_id);
+                    self.source_finished(report.frame_id);
+                }
+            }
+            Some(StatusKind::CameraLost) => {
+                let failure = linetrack_msgs::CameraFailure::from_code(report.detail);
+                self.event(
+                    "camera-lost",
+                    stage.name(),
+                    Some(report.frame_id),
+                    format!(
+                        "{} {}; reopening (attempt {}, backoff from {} ms)",
+                        crate::camera_check::describe(camera),
+                        failure.describe(),
+                        report.value,
+                        camera.retry_ms
+                    ),
+                );
+            }
+            Some(StatusKind::CameraBack) => self.event(
+                "camera-back",
+                stage.name(),
+                Some(report.frame_id),
+                format!(
+                    "{} delivers again after {} failed attempts",
+                    crate::camera_check::describe(camera),
+                    report.value
+                ),
+            ),
+            Some(StatusKind::Overflow) => self.event(
+                "overflow",
+                stage.name(),
+                Some(report.frame_id),
+                format!(
+                    "{} held frames released before their other input arrived (hold of {})",
+                    report.value,
+                    linetrack_stage_runtime::HELD_FRAMES
+                ),
+            ),
+            Some(StatusKind::QueueGap) => {
+                self.presume_lost(report.frame_id, report.value, stage.name());
+            }
+            Some(StatusKind::Heartbeat) if stage == StageKind::FrameSource && report.value > 0 => {
+                self.published(report.frame_id)
+            }
+            _ => {}
+        }
     }
 
     /// `stage` saw `count` frames from `first` skipped on its input (overwritten in its full

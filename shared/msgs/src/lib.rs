@@ -5,6 +5,9 @@
 //! user header, [`FrameHeader`], so a subscriber in another process reads it in place from
 //! shared memory. The topology is static: [`Topic::consumers`] says which stages read a
 //! topic, and so which stages a publisher wakes.
+//!
+//! The records the ground-station link forwards (headers, segments, tracks, poses, status
+//! reports) are also serde types.
 
 use iceoryx2::prelude::ZeroCopySend;
 use num_enum::{IntoPrimitive, TryFromPrimitive};
@@ -255,6 +258,7 @@ impl MatcherMode {
 /// processes on one machine share the clock.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, ZeroCopySend)]
 #[repr(C)]
+#[derive(serde::Serialize, serde::Deserialize)]
 pub struct StageStamp {
     /// Taken from the input queue (for the source: started reading).
     pub start_ns: u64,
@@ -265,6 +269,7 @@ pub struct StageStamp {
 /// The per-frame metadata every message carries.
 #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
 #[repr(C)]
+#[derive(serde::Serialize, serde::Deserialize)]
 pub struct FrameHeader {
     /// Frame number in the sequence, from 0.
     pub frame_id: u64,
@@ -340,6 +345,7 @@ impl FrameHeader {
 /// One segment, pixels.
 #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
 #[repr(C)]
+#[derive(serde::Serialize, serde::Deserialize)]
 pub struct SegmentRecord {
     /// x1, y1, x2, y2.
     pub endpoints: [f32; 4],
@@ -348,6 +354,7 @@ pub struct SegmentRecord {
 /// A left segment with its stereo match and its frame-to-frame match.
 #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
 #[repr(C)]
+#[derive(serde::Serialize, serde::Deserialize)]
 pub struct TrackedLine {
     /// The segment in the left image.
     pub left: [f32; 4],
@@ -362,6 +369,7 @@ pub struct TrackedLine {
 /// The pose of a frame.
 #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
 #[repr(C)]
+#[derive(serde::Serialize, serde::Deserialize)]
 pub struct PoseRecord {
     /// Position of the left camera in the first frame's world, metres.
     pub translation: [f64; 3],
@@ -464,6 +472,7 @@ pub struct RigRecord {
 /// A stage's heartbeat or event.
 #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
 #[repr(C)]
+#[derive(serde::Serialize, serde::Deserialize)]
 pub struct StatusReport {
     /// [`StageKind::code`] of the sender.
     pub stage: u32,

@@ -457,6 +457,82 @@ pub struct IpcConfig {
     pub root: Option<PathBuf>,
 }
 
+/// The ground-station link (`linetrack-link`, built with the `link` feature): an optional
+/// process the supervisor starts that forwards the allowed topics to zenoh. It never slows
+/// the pipeline: when the link is down or slow, messages are dropped and counted.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct LinkConfig {
+    /// Start the link process with the run.
+    pub enabled: bool,
+    /// The zenoh endpoint the onboard side listens on (`tcp/HOST:PORT`); `linetrack watch
+    /// --connect` names the same.
+    pub listen: String,
+    /// The topics forwarded: any of `poses`, `status`, `segments`, `tracks`, `images`.
+    pub topics: Vec<String>,
+    /// The zenoh key prefix the topics are published under (`<key_prefix>/poses`, ...).
+    pub key_prefix: String,
+    /// `images`: the left image shrunk by this factor in each direction (box average).
+    pub image_scale: u32,
+    /// `images`: one image every this many frames.
+    pub image_every: u32,
+}
+
+impl Default for LinkConfig {
+    fn default() -> Self {
+        Self {
+            enabled: false,
+            listen: "tcp/127.0.0.1:7447".to_string(),
+            topics: ["poses", "status"].map(String::from).to_vec(),
+            key_prefix: "linetrack".to_string(),
+            image_scale: 4,
+            image_every: 10,
+        }
+    }
+}
+
+impl LinkConfig {
+    /// The topics `topics` may name.
+    pub const TOPICS: [&'static str; 5] = ["poses", "status", "segments", "tracks", "images"];
+
+    /// Whether `topic` is on the allow-list.
+    pub fn allows(&self, topic: &str) -> bool {
+        self.topics.iter().any(|t| t == topic)
+    }
+
+    fn validate(&self) -> Result<(), String> {
+        if let Some(unknown) = self
+            .topics
+            .iter()
+            .find(|t| !Self::TOPICS.contains(&t.as_str()))
+        {
+            return Err(format!(
+                "link.topics: unknown topic {unknown:?}: allowed {:?}",
+                Self::TOPICS
+            ));
+        }
+        in_range("link.image_scale", self.image_scale, 1..=64)?;
+        in_range("link.image_every", self.image_every, 1..=MAX_STREAK_FRAMES)?;
+        if self.listen.is_empty() || !self.listen.contains('/') {
+            return Err(format!(
+                "link.listen = {:?}: expected a zenoh endpoint such as tcp/0.0.0.0:7447",
+                self.listen
+            ));
+        }
+        if self.key_prefix.is_empty()
+            || self.key_prefix.starts_with('/')
+            || self.key_prefix.ends_with('/')
+            || self.key_prefix.contains(['*', '$', '?', '#'])
+        {
+            return Err(format!(
+                "link.key_prefix = {:?}: expected words separated by '/', no wildcards",
+                self.key_prefix
+            ));
+        }
+        Ok(())
+    }
+}
+
 /// Allowed latency budgets, milliseconds: above zero, at most a minute.
 const BUDGET_MS: std::ops::RangeInclusive<f64> = 0.001..=60_000.0;
 /// Allowed realtime rates, frames per second (0 = the sequence's own rate).
@@ -475,6 +551,8 @@ const HEARTBEAT_MS: std::ops::RangeInclusive<u64> = 10..=10_000;
 const MIN_STARTUP_MS: u64 = 100;
 /// The longest timeout, backoff, drain or grace period, milliseconds (10 minutes).
 const MAX_WAIT_MS: u64 = 600_000;
+/// The longest image period of the link, frames.
+const MAX_STREAK_FRAMES: u32 = 10_000;
 /// The most restarts per stage.
 const MAX_RESTARTS: u32 = 1000;
 /// The longest camera run, seconds (a year).
@@ -525,6 +603,8 @@ pub struct PipelineConfig {
     pub stages: StagesConfig,
     /// Shared memory.
     pub ipc: IpcConfig,
+    /// The ground-station link.
+    pub link: LinkConfig,
     /// Front end and motion estimation (its `detector` and `matcher` keys are ignored:
     /// the ones above rule).
     pub odometry: OdometryConfig,
@@ -546,6 +626,7 @@ impl Default for PipelineConfig {
             record: RecordConfig::default(),
             stages: StagesConfig::default(),
             ipc: IpcConfig::default(),
+            link: LinkConfig::default(),
             odometry: OdometryConfig::default(),
             ros2: Ros2Config::default(),
         }
@@ -722,6 +803,7 @@ impl PipelineConfig {
                 root.display().to_string()
             ));
         }
+        self.link.validate()?;
         self.odometry
             .validate()
             .map_err(|e| format!("odometry.{e}"))?;
@@ -770,6 +852,28 @@ mod tests {
         assert!(err.contains("record.close_timeout_ms"), "{err}");
         let err = refusal("[record]\nmcap = true\nevery_nth = 2\n");
         assert!(err.contains("every_nth"), "{err}");
+    fn a_link_topic_scale_endpoint_or_key_out_of_bounds_is_refused_naming_its_key() {
+        let err = refusal("[link]\ntopics = [\"poses\", \"video\"]\n");
+        assert!(
+            err.contains("link.topics") && err.contains("video"),
+            "{err}"
+        );
+        let err = refusal("[link]\nimage_scale = 0\n");
+        assert!(err.contains("link.image_scale"), "{err}");
+        let err = refusal("[link]\nimage_every = 0\n");
+        assert!(err.contains("link.image_every"), "{err}");
+        let err = refusal("[link]\nlisten = \"7447\"\n");
+        assert!(err.contains("link.listen"), "{err}");
+        let err = refusal("[link]\nkey_prefix = \"robot/**\"\n");
+        assert!(err.contains("link.key_prefix"), "{err}");
+        let err = refusal("[link]\nenable = true\n");
+        assert!(err.contains("enable"), "{err}");
+        let ok = PipelineConfig::from_toml_str(
+            "[link]\nenabled = true\ntopics = [\"images\"]\nkey_prefix = \"robot/one\"\n",
+            "x.toml",
+        )
+        .unwrap_or_else(|e| panic!("{e}"));
+        assert!(ok.link.allows("images") && !ok.link.allows("poses"));
     }
 
     #[test]

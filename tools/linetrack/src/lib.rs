@@ -6,9 +6,13 @@
 //! - `linetrack ctl swap-detector fld`: hot-swaps the detector of a running pipeline.
 //! - `linetrack report [RUN_DIR]`: the latency report of a run, with its latency pictures
 //!   ([`latency_plots`]) and a picture of a few frames of its trace ([`trace_picture`]).
+//! - `linetrack watch --connect tcp/HOST:PORT` (feature `link`): the far side of the
+//!   ground-station link (`watch`).
 
 pub mod latency_plots;
 pub mod trace_picture;
+#[cfg(feature = "link")]
+pub mod watch;
 
 use anyhow::{Context, bail};
 use clap::{Parser, Subcommand};
@@ -64,6 +68,9 @@ pub enum Cmd {
     Ctl(CtlArgs),
     /// Latency report of a finished run.
     Report(ReportArgs),
+    /// The far side of the ground-station link: live status and records of a remote run.
+    #[cfg(feature = "link")]
+    Watch(watch::WatchArgs),
 }
 
 /// `linetrack run`.
@@ -190,6 +197,8 @@ pub fn main(cli: Cli) -> anyhow::Result<()> {
             print!("{}", report(&args.run_dir)?);
             Ok(())
         }
+        #[cfg(feature = "link")]
+        Cmd::Watch(args) => watch::watch(&args),
     }
 }
 

@@ -26,6 +26,11 @@ mod python_env;
 use anyhow::{Context, bail};
 use std::process::{Command, ExitCode};
 
+/// The features the test suite builds and tests on top of the default build: MCAP
+/// recording and replay (`tests/tests/recording.rs`), the ground-station link (zenoh) and
+/// its end-to-end test (`tests/tests/link.rs`).
+const TEST_FEATURES: &str = "linetrack/mcap,linetrack/link,linetrack-e2e/link";
+
 /// Debian packages the workspace builds against: OpenCV with its contrib modules
 /// (LSD, FLD, LBD, ORB) and libclang for the `opencv` crate's binding generator; and
 /// GStreamer's base and good plugins, which the live camera source's GStreamer pipelines
@@ -40,10 +45,6 @@ const SYSTEM_PACKAGES: &[&str] = &[
     "gstreamer1.0-plugins-good",
     "python3-venv",
 ];
-
-/// The features every `cargo xtask` build turns on: MCAP recording and replay (tested by
-/// `tests/tests/recording.rs`).
-const FEATURES: &str = "linetrack/mcap";
 
 const USAGE: &str = "usage: cargo xtask <demo|match-demo|test|setup> [ARGS…]
   demo        run the pipeline: `linetrack run ARGS…` (try `cargo xtask demo --help`)
@@ -129,7 +130,7 @@ fn run() -> anyhow::Result<ExitCode> {
                     "--profile",
                     "test-release",
                     "--features",
-                    FEATURES,
+                    TEST_FEATURES,
                 ],
                 &[],
             )?;
@@ -145,7 +146,7 @@ fn run() -> anyhow::Result<ExitCode> {
                     "--cargo-profile",
                     "test-release",
                     "--features",
-                    FEATURES,
+                    TEST_FEATURES,
                 ];
                 if !with_real_data {
                     fixed.extend(["-E", "not test(/real_data/)"]);
@@ -168,7 +169,7 @@ fn run() -> anyhow::Result<ExitCode> {
                         "--profile",
                         "test-release",
                         "--features",
-                        FEATURES,
+                        TEST_FEATURES,
                     ],
                     &extra,
                 )
