@@ -1001,13 +1001,11 @@ impl<'m> Supervisor<'m> {
     /// Starts, or restarts, the link's process when due.
     fn supervise_link(&mut self) {
         if let Some(mut link) = self.link.take() {
-            let command = link
-                .wants_start()
-                .then(|| {
-                    let mut command = self.child_command(link.binary());
-                    command.arg("--run-dir").arg(&self.run_dir);
-                    command
-                });
+            let command = link.wants_start().then(|| {
+                let mut command = self.child_command(link.binary());
+                command.arg("--run-dir").arg(&self.run_dir);
+                command
+            });
             link.supervise(command, &self.config.supervisor, self.monitor);
             self.link = Some(link);
         }

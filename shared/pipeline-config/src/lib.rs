@@ -852,6 +852,9 @@ mod tests {
         assert!(err.contains("record.close_timeout_ms"), "{err}");
         let err = refusal("[record]\nmcap = true\nevery_nth = 2\n");
         assert!(err.contains("every_nth"), "{err}");
+    }
+
+    #[test]
     fn a_link_topic_scale_endpoint_or_key_out_of_bounds_is_refused_naming_its_key() {
         let err = refusal("[link]\ntopics = [\"poses\", \"video\"]\n");
         assert!(
