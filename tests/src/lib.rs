@@ -340,3 +340,23 @@ pub fn assert_ids_accounted(records: &Records, n: u64, also: &[&str]) {
         );
     }
 }
+
+/// The Python of a test peer installed by `cargo xtask setup`: `$variable` when set, else
+/// `target/<venv>/bin/python3`; a missing one fails the test saying how to install it.
+pub fn peer_python(variable: &str, venv: &str, what: &str) -> PathBuf {
+    let python = std::env::var_os(variable).map_or_else(
+        || {
+            bin_dir()
+                .parent()
+                .map(|target| target.join(venv).join("bin/python3"))
+                .unwrap_or_default()
+        },
+        PathBuf::from,
+    );
+    assert!(
+        python.is_file(),
+        "{} is missing: `cargo xtask setup` installs {what} (or set {variable} to a Python with it)",
+        python.display()
+    );
+    python
+}

@@ -33,21 +33,7 @@ fn recorder_built() {
 
 /// The checker's Python (`$LINETRACK_MCAP_PYTHON`, else `target/mcap-check`).
 fn checker_python() -> PathBuf {
-    let python = std::env::var_os("LINETRACK_MCAP_PYTHON").map_or_else(
-        || {
-            bin_dir()
-                .parent()
-                .map(|t| t.join("mcap-check/bin/python"))
-                .unwrap_or_default()
-        },
-        PathBuf::from,
-    );
-    assert!(
-        python.is_file(),
-        "{} is missing: `cargo xtask setup` installs the MCAP checker (or set LINETRACK_MCAP_PYTHON)",
-        python.display()
-    );
-    python
+    linetrack_e2e::peer_python("LINETRACK_MCAP_PYTHON", "mcap-check", "the MCAP checker")
 }
 
 /// What the independent checker read.

@@ -22,21 +22,11 @@ const STAMP_TOLERANCE_NS: i128 = 1_000;
 
 /// The Python with Cyclone DDS: `LINETRACK_DDS_PYTHON`, else `target/dds-peer/bin/python3`.
 fn peer_python() -> PathBuf {
-    let python = std::env::var_os("LINETRACK_DDS_PYTHON").map_or_else(
-        || {
-            bin_dir()
-                .parent()
-                .map(|target| target.join("dds-peer/bin/python3"))
-                .unwrap_or_default()
-        },
-        PathBuf::from,
-    );
-    assert!(
-        python.is_file(),
-        "{} is missing: the DDS peer is installed by `cargo xtask setup` (or set LINETRACK_DDS_PYTHON to a python with the cyclonedds package)",
-        python.display()
-    );
-    python
+    linetrack_e2e::peer_python(
+        "LINETRACK_DDS_PYTHON",
+        "dds-peer",
+        "the DDS peer (cyclonedds)",
+    )
 }
 
 /// The subscriber process; killed when dropped.
