@@ -24,6 +24,8 @@ pub(crate) struct Fitting {
     points: Vec<[f32; 2]>,
     /// The validated segments of the frame, at least `min_length_px` long.
     pub(crate) candidates: Vec<LineSegment>,
+    /// The candidates' lengths and places, sorted longest first.
+    ranked: Vec<(f32, u32)>,
 }
 
 /// Running sums of a least-squares (total least squares) line fit.
@@ -37,12 +39,11 @@ struct LineFit {
     sxy: f64,
 }
 
-/// A fitted line: a point on it, its unit direction and its spread across, pixels².
+/// A fitted line: a point on it and its unit direction.
 #[derive(Debug, Clone, Copy)]
 struct Line {
     centre: [f64; 2],
     direction: [f64; 2],
-    across_variance: f64,
 }
 
 impl LineFit {
@@ -56,8 +57,9 @@ impl LineFit {
         self.sxy += sign * x * y;
     }
 
-    /// The principal axis of the points (their largest-variance direction).
-    fn line(&self) -> Line {
+    /// The centre, the covariance `(a, b, c)` (xx, xy, yy) and the root of the eigenvalue
+    /// equation: what both [`LineFit::line`] and [`LineFit::across_variance`] start from.
+    fn moments(&self) -> ([f64; 2], [f64; 3], f64) {
         let n = self.n.max(1.0);
         let (cx, cy) = (self.sx / n, self.sy / n);
         let a = (self.sxx / n - cx * cx).max(0.0);
@@ -65,8 +67,20 @@ impl LineFit {
         let b = self.sxy / n - cx * cy;
         let half_gap = 0.5 * (a - c);
         let root = half_gap.hypot(b);
+        ([cx, cy], [a, b, c], root)
+    }
+
+    /// The points' spread across their principal axis (the smaller eigenvalue), pixels²;
+    /// no direction computed (one `hypot` less in the start window's sliding loop).
+    fn across_variance(&self) -> f64 {
+        let (_, [a, _, c], root) = self.moments();
+        (0.5 * (a + c) - root).max(0.0)
+    }
+
+    /// The principal axis of the points (their largest-variance direction).
+    fn line(&self) -> Line {
+        let ([cx, cy], [a, b, c], root) = self.moments();
         let largest = 0.5 * (a + c) + root;
-        let smallest = (0.5 * (a + c) - root).max(0.0);
         // Eigenvector of the largest eigenvalue, from whichever row is better conditioned.
         let (u, v) = if a >= c {
             (largest - c, b)
@@ -82,7 +96,6 @@ impl LineFit {
         Line {
             centre: [cx, cy],
             direction,
-            across_variance: smallest,
         }
     }
 }
@@ -125,7 +138,7 @@ impl Fitting {
             for &p in &points[start..start + window] {
                 fit.add(p, 1.0);
             }
-            while fit.line().across_variance > window_variance {
+            while fit.across_variance() > window_variance {
                 if start + window >= n {
                     return;
                 }
@@ -178,19 +191,30 @@ impl Fitting {
         }));
     }
 
-    /// The `max_segments` longest candidates into `out`, longest first.
+    /// The `max_segments` longest candidates into `out`, longest first (equally long ones
+    /// in the order they were found).
     pub(crate) fn keep_longest(&mut self, params: &Params, out: &mut Vec<LineSegment>) {
-        let longest_first = |a: &LineSegment, b: &LineSegment| b.length().total_cmp(&a.length());
-        let candidates = &mut self.candidates;
         if params.max_segments == 0 {
             return;
         }
-        if candidates.len() > params.max_segments {
-            candidates.select_nth_unstable_by(params.max_segments - 1, longest_first);
-            candidates.truncate(params.max_segments);
+        // Each length computed once (not at every comparison), with the candidate's place
+        // as the tie-break: the order is the one a stable sort by length gives.
+        let ranked = &mut self.ranked;
+        ranked.clear();
+        ranked.extend(
+            self.candidates
+                .iter()
+                .enumerate()
+                .map(|(k, s)| (s.length(), k as u32)),
+        );
+        let longest_first =
+            |a: &(f32, u32), b: &(f32, u32)| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1));
+        if ranked.len() > params.max_segments {
+            ranked.select_nth_unstable_by(params.max_segments - 1, longest_first);
+            ranked.truncate(params.max_segments);
         }
-        candidates.sort_unstable_by(longest_first);
-        out.extend_from_slice(candidates);
+        ranked.sort_unstable_by(longest_first);
+        out.extend(ranked.iter().map(|&(_, k)| self.candidates[k as usize]));
     }
 }
 

@@ -15,6 +15,7 @@
 //! - `l1/stereo-whole`: the whole ℓ1 stereo call with its photometric check, image access
 //!   included: profiles of both images + matching;
 //! - `orb/extract`: 600 ORB points of one image, `orb/match/stereo`.
+//! - `stretch`: the contrast stretch of one image (the odometry's default gain limit, 4).
 //!
 //! Monocular tracking of a frame = detect + describe + frame-to-frame match; stereo =
 //! 2 × (detect + describe) + stereo match + frame-to-frame match. The data is located as in
@@ -150,6 +151,10 @@ fn bench_frontend(c: &mut Criterion) {
     });
     orb.extract(&left, &mut p_left).expect("orb");
     orb.extract(&right, &mut p_right).expect("orb");
+    // The odometry's default gain limit (`max_contrast_gain`), as both stages stretch.
+    group.bench_function("stretch", |b| {
+        b.iter(|| linetrack_vision::stretch_contrast(black_box(&left), 4.0))
+    });
     // Every pair compared (the matcher before the grid) against the grid's candidates:
     // the same matches.
     let mut hamming = HammingMatcher::new();

@@ -41,6 +41,30 @@ impl BinaryDescriptors {
         Ok(())
     }
 
+    /// Copies the first rows of an OpenCV CV_8U descriptor matrix (one per feature, as
+    /// many as both have) in one pass when its rows are contiguous, else row by row.
+    pub(crate) fn set_rows_from_mat(&mut self, mat: &Mat) -> Result<(), VisionError> {
+        let rows = self
+            .present
+            .len()
+            .min(usize::try_from(mat.rows()).unwrap_or(0));
+        let row_bytes = self.row_bytes;
+        let whole = if mat.is_continuous() && mat.elem_size1() == 1 && mat.channels() == 1 {
+            mat.data_bytes().context("reading descriptor bytes")?
+        } else {
+            &[]
+        };
+        if usize::try_from(mat.cols()).ok() != Some(row_bytes) || whole.len() < rows * row_bytes {
+            for k in 0..rows {
+                self.set_from_mat(k, mat, k as i32)?;
+            }
+            return Ok(());
+        }
+        self.bytes[..rows * row_bytes].copy_from_slice(&whole[..rows * row_bytes]);
+        self.present[..rows].fill(true);
+        Ok(())
+    }
+
     /// Number of features (with or without a descriptor).
     pub fn len(&self) -> usize {
         self.present.len()

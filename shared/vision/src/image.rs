@@ -344,14 +344,26 @@ pub fn stretch_contrast(
     if !(max_gain > 1.0) {
         return Ok(None);
     }
-    let mut histogram = [0usize; 256];
+    // Four histograms filled in turn, summed after: runs of equal pixels (flat image
+    // regions) then do not wait on one counter's previous increment.
+    let mut partial = [[0usize; 256]; 4];
     let mut total = 0usize;
     for row in 0..image.mat.rows() {
         let pixels = image.mat.at_row::<u8>(row).context("reading a row")?;
-        for &v in pixels {
-            histogram[usize::from(v)] += 1;
+        let mut quads = pixels.chunks_exact(4);
+        for q in &mut quads {
+            for (h, &v) in partial.iter_mut().zip(q) {
+                h[usize::from(v)] += 1;
+            }
+        }
+        for &v in quads.remainder() {
+            partial[0][usize::from(v)] += 1;
         }
         total += pixels.len();
+    }
+    let mut histogram = [0usize; 256];
+    for (level, count) in histogram.iter_mut().enumerate() {
+        *count = partial.iter().map(|h| h[level]).sum();
     }
     let tail = (TAIL * total as f64) as usize;
     let percentile = |from_top: bool| {

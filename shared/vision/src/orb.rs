@@ -80,13 +80,7 @@ impl OrbExtractor {
         );
         let row_bytes = usize::try_from(self.raw.cols()).unwrap_or(0);
         out.descriptors.reset(out.points.len(), row_bytes);
-        for k in 0..out
-            .points
-            .len()
-            .min(usize::try_from(self.raw.rows()).unwrap_or(0))
-        {
-            out.descriptors.set_from_mat(k, &self.raw, k as i32)?;
-        }
+        out.descriptors.set_rows_from_mat(&self.raw)?;
         Ok(())
     }
 }
@@ -119,7 +113,13 @@ impl PointMatcher {
         min_ratio: f64,
         out: &mut Vec<FeatureMatch>,
     ) {
-        self.grid.rebuild(&second.points, GRID_CELL_PX);
+        // Stereo windows are a few rows high and wide along them: flat cells list fewer
+        // points outside the window than square ones.
+        let cell = match case {
+            MatchCase::Stereo => STEREO_CELL_PX,
+            MatchCase::FrameToFrame => GRID_CELL_PX,
+        };
+        self.grid.rebuild(&second.points, cell);
         let grid = &self.grid;
         let window = |a: Point| match case {
             MatchCase::Stereo => (
@@ -140,17 +140,25 @@ impl PointMatcher {
                 ],
             ),
         };
-        let admit =
-            |i: usize, j: usize| points_may_match(case, gates, first.points[i], second.points[j]);
+        // Stereo: the gate is applied while the cells are listed, over the grid's own copy
+        // of the positions (contiguous, cell by cell), and the matcher gets only admitted
+        // pairs. Frame to frame, where most listed points are inside the window's circle,
+        // that did not pay (criterion): the matcher applies the gate.
+        let gate_in_grid = case == MatchCase::Stereo;
         self.hamming.match_mutual_among(
             &first.descriptors,
             &second.descriptors,
             min_ratio,
             |i, candidates| {
-                let (x, y) = window(first.points[i]);
-                grid.extend_within(x, y, candidates);
+                let a = first.points[i];
+                let (x, y) = window(a);
+                if gate_in_grid {
+                    grid.extend_within(x, y, |b| points_may_match(case, gates, a, b), candidates);
+                } else {
+                    grid.extend_within(x, y, |_| true, candidates);
+                }
             },
-            admit,
+            |i, j| gate_in_grid || points_may_match(case, gates, first.points[i], second.points[j]),
             out,
         );
     }
@@ -167,34 +175,58 @@ pub fn points_may_match(case: MatchCase, gates: &AppearanceGates, a: Point, b: P
                 && disparity >= gates.min_disparity_px
                 && disparity <= gates.max_disparity_px
         }
-        MatchCase::FrameToFrame => (a - b).norm() <= gates.max_displacement_px,
+        MatchCase::FrameToFrame => {
+            // The squared distance settles all but the pairs within a rounding error of the
+            // limit, which get the exact test.
+            let (dx, dy) = (a.x - b.x, a.y - b.y);
+            let squared = dx * dx + dy * dy;
+            let limit = gates.max_displacement_px * gates.max_displacement_px;
+            // (Limits whose square is not a normal number, or not a distance, get only
+            // the exact test.)
+            if !(1e-100..=1e100).contains(&gates.max_displacement_px) {
+                (a - b).norm() <= gates.max_displacement_px
+            } else if squared < limit * (1.0 - 1e-9) {
+                true
+            } else if squared > limit * (1.0 + 1e-9) || squared.is_nan() {
+                false
+            } else {
+                (a - b).norm() <= gates.max_displacement_px
+            }
+        }
     }
 }
 
-/// Side of a [`PointGrid`] cell, pixels.
-const GRID_CELL_PX: f64 = 16.0;
+/// Side of a square [`PointGrid`] cell for frame-to-frame windows, pixels.
+const GRID_CELL_PX: [f64; 2] = [16.0, 16.0];
+
+/// Width and height of a [`PointGrid`] cell for stereo windows (±3 rows by default), pixels.
+const STEREO_CELL_PX: [f64; 2] = [32.0, 4.0];
 
 /// Most cells along one side of a [`PointGrid`]: points spread wider share cells.
 const GRID_MAX_CELLS: usize = 1024;
 
-/// Points bucketed into square cells (a counting sort by cell), to list the points in a
-/// window without visiting every point.
+/// Points bucketed into cells (a counting sort by cell), to list the points in a window
+/// without visiting every point.
 #[derive(Debug, Clone, Default)]
 struct PointGrid {
     origin: Point,
-    cell: f64,
+    /// Cell width and height, pixels.
+    cell: [f64; 2],
     cols: usize,
     rows: usize,
     /// Where each cell's points start in `order` (one more entry than cells).
     starts: Vec<usize>,
     /// Point indices, cell by cell, increasing within a cell.
     order: Vec<usize>,
+    /// The positions of `order`'s points, in its order.
+    ordered: Vec<Point>,
     cell_of: Vec<usize>,
 }
 
 impl PointGrid {
-    /// Buckets `points` (non-finite positions are left out: no window holds them).
-    fn rebuild(&mut self, points: &[Point], cell: f64) {
+    /// Buckets `points` into cells of `cell` (width, height) pixels at least (non-finite
+    /// positions are left out: no window holds them).
+    fn rebuild(&mut self, points: &[Point], cell: [f64; 2]) {
         let finite = || points.iter().filter(|p| p.x.is_finite() && p.y.is_finite());
         let (mut lo, mut hi) = (
             Point::new(f64::MAX, f64::MAX),
@@ -207,19 +239,22 @@ impl PointGrid {
         if lo.x > hi.x {
             (lo, hi) = (Point::origin(), Point::origin());
         }
-        let spread = (hi.x - lo.x).max(hi.y - lo.y);
-        self.cell = cell
-            .max(spread / (GRID_MAX_CELLS - 1) as f64)
-            .max(f64::MIN_POSITIVE);
+        let spread = [hi.x - lo.x, hi.y - lo.y];
+        for axis in 0..2 {
+            self.cell[axis] = cell[axis]
+                .max(spread[axis] / (GRID_MAX_CELLS - 1) as f64)
+                .max(f64::MIN_POSITIVE);
+        }
         self.origin = lo;
-        self.cols = self.index(hi.x - lo.x, GRID_MAX_CELLS) + 1;
-        self.rows = self.index(hi.y - lo.y, GRID_MAX_CELLS) + 1;
+        self.cols = self.index(spread[0], 0, GRID_MAX_CELLS) + 1;
+        self.rows = self.index(spread[1], 1, GRID_MAX_CELLS) + 1;
         self.starts.clear();
         self.starts.resize(self.cols * self.rows + 1, 0);
         self.cell_of.clear();
         for p in points {
             let k = if p.x.is_finite() && p.y.is_finite() {
-                self.index(p.y - lo.y, self.rows) * self.cols + self.index(p.x - lo.x, self.cols)
+                self.index(p.y - lo.y, 1, self.rows) * self.cols
+                    + self.index(p.x - lo.x, 0, self.cols)
             } else {
                 usize::MAX
             };
@@ -244,11 +279,14 @@ impl PointGrid {
         let cells = self.starts.len() - 1;
         self.starts.copy_within(..cells, 1);
         self.starts[0] = 0;
+        self.ordered.clear();
+        self.ordered.extend(self.order.iter().map(|&j| points[j]));
     }
 
-    /// The cell along one axis of an offset from the origin, clamped to `count` cells.
-    fn index(&self, offset: f64, count: usize) -> usize {
-        let k = (offset / self.cell).floor();
+    /// The cell along `axis` (0: x, 1: y) of an offset from the origin, clamped to
+    /// `count` cells.
+    fn index(&self, offset: f64, axis: usize, count: usize) -> usize {
+        let k = (offset / self.cell[axis]).floor();
         if k.is_nan() || k <= 0.0 {
             0
         } else {
@@ -256,23 +294,36 @@ impl PointGrid {
         }
     }
 
-    /// Appends the points of every cell meeting the window `x` × `y` (a superset of the
-    /// points inside it).
-    fn extend_within(&self, x: [f64; 2], y: [f64; 2], out: &mut Vec<usize>) {
-        let outside = |range: [f64; 2], low: f64, cells: usize| {
-            !(range[1] >= low && range[0] <= low + self.cell * cells as f64)
+    /// Appends the points `keep` accepts among those of every cell meeting the window
+    /// `x` × `y` (so every point inside the window that `keep` accepts).
+    fn extend_within(
+        &self,
+        x: [f64; 2],
+        y: [f64; 2],
+        keep: impl Fn(Point) -> bool,
+        out: &mut Vec<usize>,
+    ) {
+        let outside = |range: [f64; 2], low: f64, cell: f64, cells: usize| {
+            !(range[1] >= low && range[0] <= low + cell * cells as f64)
         };
         if self.order.is_empty()
-            || outside(x, self.origin.x, self.cols)
-            || outside(y, self.origin.y, self.rows)
+            || outside(x, self.origin.x, self.cell[0], self.cols)
+            || outside(y, self.origin.y, self.cell[1], self.rows)
         {
             return;
         }
-        let [c0, c1] = x.map(|v| self.index(v - self.origin.x, self.cols));
-        let [r0, r1] = y.map(|v| self.index(v - self.origin.y, self.rows));
+        let [c0, c1] = x.map(|v| self.index(v - self.origin.x, 0, self.cols));
+        let [r0, r1] = y.map(|v| self.index(v - self.origin.y, 1, self.rows));
         for r in r0..=r1 {
             let row = r * self.cols;
-            out.extend_from_slice(&self.order[self.starts[row + c0]..self.starts[row + c1 + 1]]);
+            let span = self.starts[row + c0]..self.starts[row + c1 + 1];
+            out.extend(
+                self.order[span.clone()]
+                    .iter()
+                    .zip(&self.ordered[span])
+                    .filter(|&(_, &p)| keep(p))
+                    .map(|(&j, _)| j),
+            );
         }
     }
 }
@@ -350,4 +401,62 @@ pub fn refine_stereo_column(
         0.0
     };
     Some((ur + best as i64 - SEARCH) as f64 + fraction)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The frame-to-frame gate settles most pairs on the squared distance; at the limit and
+    /// for limits that are not a distance it answers as `|a − b| ≤ limit` does.
+    #[test]
+    fn the_frame_to_frame_gate_is_the_distance_test() {
+        let exact = |a: Point, b: Point, limit: f64| (a - b).norm() <= limit;
+        let (a, b) = (Point::new(10.0, 20.0), Point::new(13.0, 24.0)); // 5 px apart
+        for limit in [
+            5.0,
+            5.0 - 1e-12,
+            5.0 + 1e-12,
+            4.999_999_999,
+            5.000_000_001,
+            0.0,
+            -5.0,
+            f64::NAN,
+            f64::INFINITY,
+            1e-300,
+            1e300,
+        ] {
+            let gates = AppearanceGates {
+                max_displacement_px: limit,
+                ..AppearanceGates::default()
+            };
+            for (p, q) in [
+                (a, b),
+                (a, a),
+                (a, Point::new(f64::NAN, 0.0)),
+                (a, Point::new(f64::INFINITY, 0.0)),
+            ] {
+                assert_eq!(
+                    points_may_match(MatchCase::FrameToFrame, &gates, p, q),
+                    exact(p, q, limit),
+                    "{p:?} {q:?} within {limit}"
+                );
+            }
+        }
+        // Many distances near one limit.
+        let gates = AppearanceGates {
+            max_displacement_px: 40.0,
+            ..AppearanceGates::default()
+        };
+        for k in 0..20_000 {
+            let angle = f64::from(k) * 0.001;
+            let r = 40.0 + (f64::from(k % 200) - 100.0) * 1e-14;
+            let q = Point::new(a.x + r * angle.cos(), a.y + r * angle.sin());
+            assert_eq!(
+                points_may_match(MatchCase::FrameToFrame, &gates, a, q),
+                exact(a, q, 40.0),
+                "{q:?}"
+            );
+        }
+    }
 }
