@@ -10,11 +10,13 @@ use linetrack_msgs::{FrameHeader, SegmentRecord, StageKind, Topic};
 use linetrack_stage_runtime::{
     Stage, StageContext, detector_code, run_stage, stereo_views, to_records,
 };
-use linetrack_vision::{GrayImage, LineDetector, create_detector, stretch_contrast};
+use linetrack_vision::{ContrastStretch, GrayImage, LineDetector, create_detector};
 
-/// One side's detector and its output buffer.
+/// One side's detector, its stretched image and its output buffer (all kept from frame to
+/// frame).
 struct Side {
     detector: Box<dyn LineDetector>,
+    stretch: ContrastStretch,
     segments: Vec<linetrack_geometry::Segment>,
 }
 
@@ -22,9 +24,8 @@ impl Side {
     /// Detects in `image`, stretched first when it is dark (as the odometry does:
     /// `odometry.max_contrast_gain`).
     fn detect(&mut self, image: &GrayImage, max_gain: f64) -> anyhow::Result<()> {
-        let stretched = stretch_contrast(image, max_gain)?;
-        self.detector
-            .detect(stretched.as_ref().unwrap_or(image), &mut self.segments)?;
+        let seen = self.stretch.apply(image, max_gain)?;
+        self.detector.detect(seen, &mut self.segments)?;
         Ok(())
     }
 }
@@ -47,6 +48,7 @@ impl Detector {
         let side = || -> anyhow::Result<Side> {
             Ok(Side {
                 detector: create_detector(kind, &ctx.config.odometry.frontend)?,
+                stretch: ContrastStretch::new(),
                 segments: Vec::new(),
             })
         };

@@ -339,6 +339,59 @@ pub fn stretch_contrast(
     image: &GrayImage,
     max_gain: f64,
 ) -> Result<Option<GrayImage>, VisionError> {
+    let Some((gain, low)) = stretch_gain(image, max_gain)? else {
+        return Ok(None);
+    };
+    let mut out = Mat::default();
+    image
+        .mat
+        .convert_to(&mut out, -1, gain, -gain * low)
+        .context("stretching the contrast")?;
+    Ok(Some(GrayImage {
+        mat: out,
+        origin: image.origin.clone(),
+    }))
+}
+
+/// [`stretch_contrast`] into a buffer kept from one call to the next: a stage stretching
+/// every frame allocates no image for it once warm.
+#[derive(Debug, Default)]
+pub struct ContrastStretch {
+    stretched: Option<GrayImage>,
+}
+
+impl ContrastStretch {
+    /// A stretch with no buffer yet.
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// `image` stretched as [`stretch_contrast`] does, in the kept buffer, or `image`
+    /// itself where that returns `None`.
+    pub fn apply<'a>(
+        &'a mut self,
+        image: &'a GrayImage,
+        max_gain: f64,
+    ) -> Result<&'a GrayImage, VisionError> {
+        let Some((gain, low)) = stretch_gain(image, max_gain)? else {
+            return Ok(image);
+        };
+        let out = self.stretched.get_or_insert_with(|| GrayImage {
+            mat: Mat::default(),
+            origin: String::new(),
+        });
+        image
+            .mat
+            .convert_to(&mut out.mat, -1, gain, -gain * low)
+            .context("stretching the contrast")?;
+        out.origin.clear();
+        out.origin.push_str(&image.origin);
+        Ok(out)
+    }
+}
+
+/// The gain and the low level of [`stretch_contrast`], `None` where it keeps the image.
+fn stretch_gain(image: &GrayImage, max_gain: f64) -> Result<Option<(f64, f64)>, VisionError> {
     const TAIL: f64 = 0.005;
     const MIN_GAIN: f64 = 1.1;
     if !(max_gain > 1.0) {
@@ -382,13 +435,5 @@ pub fn stretch_contrast(
     if gain < MIN_GAIN {
         return Ok(None);
     }
-    let mut out = Mat::default();
-    image
-        .mat
-        .convert_to(&mut out, -1, gain, -gain * low)
-        .context("stretching the contrast")?;
-    Ok(Some(GrayImage {
-        mat: out,
-        origin: image.origin.clone(),
-    }))
+    Ok(Some((gain, low)))
 }

@@ -34,7 +34,9 @@ pub use detect::{
     create_detector, keep_longest,
 };
 pub use hamming::{BinaryDescriptors, FeatureMatch, HammingMatcher};
-pub use image::{BorrowedGray, GrayImage, MAX_FILE_BYTES, MAX_PIXELS, perturb, stretch_contrast};
+pub use image::{
+    BorrowedGray, ContrastStretch, GrayImage, MAX_FILE_BYTES, MAX_PIXELS, perturb, stretch_contrast,
+};
 pub use lbd::LbdExtractor;
 pub use matchers::{
     L1SegmentMatcher, LbdSegmentMatcher, LineFeatures, MatcherKind, SegmentMatcher,

@@ -374,6 +374,41 @@ fn a_dark_image_is_stretched_to_the_full_range_and_a_bright_one_is_left_alone() 
     assert!(stretch_contrast(&bright, 16.0).unwrap().is_none());
 }
 
+#[test]
+fn the_kept_stretch_gives_the_same_pixels_in_one_buffer() {
+    // Odd widths: rows that do not split into fours (the histogram's remainder).
+    let mut stretch = ContrastStretch::new();
+    for (width, height) in [(101, 10), (7, 143), (1, 1), (3, 5)] {
+        let n = width * height;
+        let dark: Vec<u8> = (0..n).map(|k| 10 + (k * 31 / n) as u8).collect();
+        let image = GrayImage::from_pixels(width, height, &dark, "dark").unwrap();
+        let once = stretch_contrast(&image, 16.0).unwrap();
+        let first = stretch
+            .apply(&image, 16.0)
+            .unwrap()
+            .pixels()
+            .map(<[u8]>::as_ptr);
+        let kept = stretch.apply(&image, 16.0).unwrap();
+        match once {
+            Some(once) => {
+                assert_eq!(
+                    kept.pixels().unwrap(),
+                    once.pixels().unwrap(),
+                    "{width}×{height}"
+                );
+                assert!(!std::ptr::eq(kept, &image));
+                // The next frame of the same size goes where the last one went.
+                assert_eq!(kept.pixels().map(<[u8]>::as_ptr), first);
+            }
+            None => assert!(std::ptr::eq(kept, &image), "{width}×{height}"),
+        }
+    }
+    // Not stretched: the image itself.
+    let full: Vec<u8> = (0..1000).map(|k| (k * 256 / 1000) as u8).collect();
+    let bright = GrayImage::from_pixels(100, 10, &full, "full").unwrap();
+    assert!(std::ptr::eq(stretch.apply(&bright, 16.0).unwrap(), &bright));
+}
+
 // ---------------------------------------------------------------- bad input
 
 fn error_text(result: Result<GrayImage, VisionError>) -> String {
