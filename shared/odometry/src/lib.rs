@@ -36,6 +36,7 @@ use linetrack_vision::{
     SegmentMatcher, VisionError, create_detector, create_segment_matcher, refine_stereo_column,
     stretch_contrast,
 };
+use linetrack_l1_matcher::{GrayView, SegmentProfiles};
 use nalgebra::{Isometry3, Point3};
 use serde::{Deserialize, Serialize};
 use std::time::Instant;
@@ -48,6 +49,37 @@ pub enum Features {
     PointsAndLines,
     /// Line segments only.
     LinesOnly,
+}
+
+/// The photometric check of stereo segment matches: on the image rows both segments cover,
+/// the intensities across the two lines are compared by zero-normalised cross-correlation
+/// (blind to any gain and bias between the cameras), also one pixel to either side. A match
+/// is not triangulated when the correlation is low or its peak lies off the line: a
+/// descriptor matched the right texture at the wrong edge, and the landmark would sit at a
+/// wrong depth.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct StereoPhotometric {
+    /// Switch.
+    pub enabled: bool,
+    /// Matches whose mean row correlation is below this are dropped.
+    pub min_correlation: f64,
+    /// Rows both segments must have a usable profile on for the correlation to count.
+    pub min_rows: usize,
+    /// Matches whose content sits farther than this from the right segment's line are
+    /// dropped, pixels.
+    pub max_offset_px: f64,
+}
+
+impl Default for StereoPhotometric {
+    fn default() -> Self {
+        Self {
+            enabled: true,
+            min_correlation: 0.7,
+            min_rows: 3,
+            max_offset_px: 1.0,
+        }
+    }
 }
 
 /// Configuration of the odometry.
@@ -103,6 +135,8 @@ pub struct OdometryConfig {
     /// 4.4 cm, up to 8 or 16 let noise corners carry the point matches and gave 58 cm, none
     /// lost 21 frames and gave 20 cm.
     pub max_contrast_gain: f64,
+    /// Photometric check of stereo segment matches before they are triangulated.
+    pub stereo_photometric: StereoPhotometric,
     /// When an estimate is not believed.
     pub lost: LostLimits,
     /// Segments closer than this to horizontal are not triangulated, degrees: an
@@ -137,6 +171,7 @@ impl Default for OdometryConfig {
             landmarks: true,
             landmark_disparity_px: 1.0,
             max_contrast_gain: 4.0,
+            stereo_photometric: StereoPhotometric::default(),
             lost: LostLimits::default(),
             min_line_angle_deg: 10.0,
         }
@@ -192,6 +227,24 @@ impl OdometryConfig {
                 "field `min_line_angle_deg` = {}: expected a number in [0, 90)",
                 self.min_line_angle_deg
             ));
+        }
+        let photometric = &self.stereo_photometric;
+        if !(-1.0..=1.0).contains(&photometric.min_correlation) {
+            return Err(format!(
+                "field `stereo_photometric.min_correlation` = {}: expected a number in [-1, 1]",
+                photometric.min_correlation
+            ));
+        }
+        if !(photometric.max_offset_px > 0.0) {
+            return Err(format!(
+                "field `stereo_photometric.max_offset_px` = {}: expected a number > 0 (inf: off)",
+                photometric.max_offset_px
+            ));
+        }
+        if photometric.min_rows == 0 {
+            return Err(
+                "field `stereo_photometric.min_rows` = 0: expected at least 1".to_string(),
+            );
         }
         let m = &self.motion;
         if !(m.min_relative_eigenvalue >= 0.0 && m.min_relative_eigenvalue < 1.0) {
@@ -338,6 +391,8 @@ pub struct MotionTracker {
     last_motion: Isometry3<f64>,
     /// Whether `last_motion` was measured (not the identity of a fresh start).
     motion_known: bool,
+    /// Row profiles across this frame's left and right segments (photometric check).
+    profiles: [SegmentProfiles; 2],
 }
 
 impl MotionTracker {
@@ -350,6 +405,7 @@ impl MotionTracker {
             pose: Isometry3::identity(),
             last_motion: Isometry3::identity(),
             motion_known: false,
+            profiles: Default::default(),
             config,
             rig,
         })
@@ -539,6 +595,7 @@ impl MotionTracker {
             min_sin_from_horizontal: self.config.min_line_angle_deg.to_radians().sin(),
             ..TriangulationLimits::default()
         };
+        let stereo_images = images.as_ref().map(|(images, _)| *images);
         let (images, [points_l, points_r]) = match images {
             Some((images, points)) if self.config.features == Features::PointsAndLines => {
                 (Some(images), points)
@@ -577,6 +634,7 @@ impl MotionTracker {
                 }
             }
         }
+        let verified = self.photometric_profiles(stereo_images, &lines);
         let mut line_positions = vec![None; lines.left.len()];
         let right_features: Vec<Option<SegmentFeatures>> = lines
             .right
@@ -587,6 +645,9 @@ impl MotionTracker {
             let (Some(l), Some(r)) = (lines.left.get(m.query), lines.right.get(m.train)) else {
                 continue;
             };
+            if verified && !self.photometric_agreement(m.query, m.train) {
+                continue;
+            }
             if self.config.reject_look_alikes
                 && has_look_alike(
                     l,
@@ -706,6 +767,47 @@ impl MotionTracker {
                 })
             }
         }
+    }
+
+    /// Takes the row profiles across the segments of both images, when the check is on and
+    /// the images are given; whether it did.
+    fn photometric_profiles(
+        &mut self,
+        images: Option<(&GrayImage, &GrayImage)>,
+        lines: &MatchedLines<'_>,
+    ) -> bool {
+        let Some((left, right)) = images.filter(|_| self.config.stereo_photometric.enabled) else {
+            return false;
+        };
+        let min_angle = self.config.min_line_angle_deg;
+        for ((image, segments), profiles) in [(left, lines.left), (right, lines.right)]
+            .into_iter()
+            .zip(self.profiles.iter_mut())
+        {
+            let (width, height) = (image.width() as usize, image.height() as usize);
+            let Some(view) = image
+                .pixels()
+                .and_then(|p| GrayView::new(p, width, height, width).ok())
+            else {
+                return false;
+            };
+            profiles.extract(view, segments, min_angle);
+        }
+        true
+    }
+
+    /// Whether left segment `i` and right segment `j` look alike across their lines (or
+    /// cannot be compared).
+    fn photometric_agreement(&self, i: usize, j: usize) -> bool {
+        let check = &self.config.stereo_photometric;
+        let [left, right] = &self.profiles;
+        if let Some(s) = left.similarity(i, right, j, check.min_rows)
+            && s.correlation < check.min_correlation
+        {
+            return false;
+        }
+        left.offset_px(i, right, j)
+            .is_none_or(|offset| offset.abs() <= check.max_offset_px)
     }
 
     /// A reference whose landmarks are this frame's fresh triangulations placed at `pose`.
@@ -1114,6 +1216,60 @@ mod tests {
                 .iter()
                 .all(|v| v.is_finite())
         );
+    }
+
+    #[test]
+    fn stereo_segments_on_the_wrong_edge_fail_the_photometric_check() {
+        // Left: a textured bar with a slanted edge at x = 100 + 0.3 y. Right: the same
+        // scene 20 px further left, under another gain and bias; a second edge of the bar
+        // lies 3 px to the right of the true partner.
+        let (width, height) = (240usize, 120usize);
+        let scene = |x: f64, y: f64| -> f64 {
+            let u = x - 0.3 * y;
+            let texture = 30.0 * ((0.7 * y).sin() + 0.5 * (1.3 * y).cos());
+            if u < 100.0 {
+                40.0
+            } else if u < 103.0 {
+                200.0 + texture
+            } else {
+                90.0 + 0.5 * texture
+            }
+        };
+        let render = |shift: f64, gain: f64, bias: f64| {
+            let pixels: Vec<u8> = (0..height)
+                .flat_map(|y| (0..width).map(move |x| (x, y)))
+                .map(|(x, y)| {
+                    // 4 × 4 supersampling: anti-aliased edges.
+                    let mut sum = 0.0;
+                    for k in 0..16 {
+                        let (dx, dy) = ((k % 4) as f64 / 4.0, (k / 4) as f64 / 4.0);
+                        sum += scene(x as f64 + dx + shift, y as f64 + dy);
+                    }
+                    (gain * sum / 16.0 + bias).clamp(0.0, 255.0) as u8
+                })
+                .collect();
+            GrayImage::from_pixels(width, height, &pixels, "test").unwrap()
+        };
+        let left = render(0.0, 1.0, 0.0);
+        let right = render(20.0, 0.6, 25.0);
+        let edge = |x0: f64| Segment::new(Point::new(x0 + 6.0, 20.0), Point::new(x0 + 27.0, 90.0));
+        let left_segments = [edge(100.0)];
+        let right_segments = [edge(80.0), edge(83.0), edge(81.5)];
+        let mut tracker =
+            MotionTracker::new(OdometryConfig::default(), StereoRig::default()).unwrap();
+        let lines = MatchedLines {
+            left: &left_segments,
+            right: &right_segments,
+            stereo: &[],
+            tracked: None,
+        };
+        assert!(tracker.photometric_profiles(Some((&left, &right)), &lines));
+        assert!(tracker.photometric_agreement(0, 0), "the true partner");
+        assert!(!tracker.photometric_agreement(0, 1), "the bar's other edge");
+        assert!(!tracker.photometric_agreement(0, 2), "1.5 px off the edge");
+        // Switched off, nothing is checked.
+        tracker.config.stereo_photometric.enabled = false;
+        assert!(!tracker.photometric_profiles(Some((&left, &right)), &lines));
     }
 
     #[test]
