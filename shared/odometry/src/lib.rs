@@ -135,6 +135,12 @@ pub struct OdometryConfig {
     /// 4.4 cm, up to 8 or 16 let noise corners carry the point matches and gave 58 cm, none
     /// lost 21 frames and gave 20 cm.
     pub max_contrast_gain: f64,
+    /// Point observations of a stretched image weighted by 1 / gain²: the stretch
+    /// multiplies the sensor's noise with the contrast, so a corner found in a dimmed scene
+    /// is that much less certain than one in a well-exposed image (in image units its
+    /// noise is `gain` times larger relative to the edges it sits on). Segments are fitted
+    /// over tens of pixels, which averages the noise, and keep their weight.
+    pub points_weighted_by_gain: bool,
     /// Photometric check of stereo segment matches before they are triangulated.
     pub stereo_photometric: StereoPhotometric,
     /// When an estimate is not believed.
@@ -171,6 +177,7 @@ impl Default for OdometryConfig {
             landmarks: true,
             landmark_disparity_px: 1.0,
             max_contrast_gain: 4.0,
+            points_weighted_by_gain: true,
             stereo_photometric: StereoPhotometric::default(),
             lost: LostLimits::default(),
             min_line_angle_deg: 10.0,
@@ -346,6 +353,8 @@ pub struct MatchedLines<'a> {
 pub struct PreparedImages {
     /// The left and right images stretched (`None`: the original is used as it is).
     stretched: [Option<GrayImage>; 2],
+    /// The left image's stretch gain (1: not stretched).
+    left_gain: f64,
     /// ORB points of the left and right image (empty when the odometry uses lines only).
     points: [PointFeatures; 2],
     /// Milliseconds it took.
@@ -528,9 +537,8 @@ impl MotionTracker {
         right: &GrayImage,
     ) -> Result<PreparedImages, OdometryError> {
         let started = Instant::now();
-        let (left_stretched, right_stretched) =
-            stretch_pair(left, right, self.config.max_contrast_gain)?;
-        let mut prepared = self.prepare_stretched(left_stretched, right_stretched, left, right)?;
+        let (stretched, left_gain) = stretch_pair(left, right, self.config.max_contrast_gain)?;
+        let mut prepared = self.prepare_stretched(stretched, left_gain, left, right)?;
         prepared.ms = since(started);
         Ok(prepared)
     }
@@ -539,8 +547,8 @@ impl MotionTracker {
     /// images (or the originals, `None` where not stretched).
     fn prepare_stretched(
         &mut self,
-        left_stretched: Option<GrayImage>,
-        right_stretched: Option<GrayImage>,
+        [left_stretched, right_stretched]: [Option<GrayImage>; 2],
+        left_gain: f64,
         left: &GrayImage,
         right: &GrayImage,
     ) -> Result<PreparedImages, OdometryError> {
@@ -554,6 +562,7 @@ impl MotionTracker {
         }
         Ok(PreparedImages {
             stretched: [left_stretched, right_stretched],
+            left_gain,
             points,
             ms: since(started),
         })
@@ -573,6 +582,7 @@ impl MotionTracker {
         };
         let PreparedImages {
             stretched: [left_stretched, right_stretched],
+            left_gain,
             points,
             ms,
         } = prepared;
@@ -581,13 +591,13 @@ impl MotionTracker {
             left_stretched.as_ref().unwrap_or(left),
             right_stretched.as_ref().unwrap_or(right),
         );
-        self.update_stretched(Some((seen, points)), lines, stats)
+        self.update_stretched(Some((seen, points, left_gain)), lines, stats)
     }
 
     /// [`MotionTracker::update`] on images already stretched, with their points.
     fn update_stretched(
         &mut self,
-        images: Option<((&GrayImage, &GrayImage), [PointFeatures; 2])>,
+        images: Option<((&GrayImage, &GrayImage), [PointFeatures; 2], f64)>,
         lines: MatchedLines<'_>,
         mut stats: FrameStats,
     ) -> Result<FrameResult, OdometryError> {
@@ -595,12 +605,12 @@ impl MotionTracker {
             min_sin_from_horizontal: self.config.min_line_angle_deg.to_radians().sin(),
             ..TriangulationLimits::default()
         };
-        let stereo_images = images.as_ref().map(|(images, _)| *images);
-        let (images, [points_l, points_r]) = match images {
-            Some((images, points)) if self.config.features == Features::PointsAndLines => {
-                (Some(images), points)
+        let stereo_images = images.as_ref().map(|(images, ..)| *images);
+        let (images, [points_l, points_r], left_gain) = match images {
+            Some((images, points, gain)) if self.config.features == Features::PointsAndLines => {
+                (Some(images), points, gain)
             }
-            _ => (None, Default::default()),
+            _ => (None, Default::default(), 1.0),
         };
         let use_points = images.is_some();
         stats.points = [points_l.points.len(), points_r.points.len()];
@@ -694,7 +704,18 @@ impl MotionTracker {
             line_pairs: Vec::new(),
         };
         if use_points {
-            self.observe_points(&mut previous, &points_l, &mut matches, &mut observations);
+            let noise_weight = if self.config.points_weighted_by_gain {
+                left_gain.powi(-2)
+            } else {
+                1.0
+            };
+            self.observe_points(
+                &mut previous,
+                &points_l,
+                noise_weight,
+                &mut matches,
+                &mut observations,
+            );
         }
         self.observe_lines(
             &previous,
@@ -943,11 +964,13 @@ impl MotionTracker {
     }
 
     /// Observations of `previous`'s point landmarks among `current` (this frame's left
-    /// points), searched for around where the last motion moves them.
+    /// points, their weights scaled by `noise_weight`), searched for around where the last
+    /// motion moves them.
     fn observe_points(
         &mut self,
         previous: &mut Reference,
         current: &PointFeatures,
+        noise_weight: f64,
         scratch: &mut Vec<FeatureMatch>,
         observations: &mut Observations,
     ) {
@@ -984,7 +1007,9 @@ impl MotionTracker {
                 observations.points.push(PointObservation {
                     position: to_previous * landmark.world,
                     pixel: current.points[m.train],
-                    weight: landmark.observation_weight() * self.level_weight(current, m.train),
+                    weight: landmark.observation_weight()
+                        * self.level_weight(current, m.train)
+                        * noise_weight,
                 });
                 observations.point_pairs.push((m.query, m.train));
             }
@@ -1053,16 +1078,19 @@ pub enum OdometryError {
     Vision(#[from] VisionError),
 }
 
-/// Both images of a stereo pair through [`stretch_contrast`] (`None`: keep the original).
+/// Both images of a stereo pair through [`stretch_contrast`] (`None`: keep the original),
+/// and the gain the left one was stretched by (1: not stretched).
 fn stretch_pair(
     left: &GrayImage,
     right: &GrayImage,
     max_gain: f64,
-) -> Result<(Option<GrayImage>, Option<GrayImage>), VisionError> {
-    Ok((
-        stretch_contrast(left, max_gain)?,
-        stretch_contrast(right, max_gain)?,
-    ))
+) -> Result<([Option<GrayImage>; 2], f64), VisionError> {
+    let (left, left_gain) = match stretch_contrast(left, max_gain)? {
+        Some((image, gain)) => (Some(image), gain),
+        None => (None, 1.0),
+    };
+    let right = stretch_contrast(right, max_gain)?.map(|(image, _)| image);
+    Ok(([left, right], left_gain))
 }
 
 fn since(start: Instant) -> f64 {
@@ -1088,7 +1116,7 @@ impl Odometry {
     ) -> Result<FrameResult, OdometryError> {
         let mut stats = FrameStats::default();
         let started = Instant::now();
-        let (left_stretched, right_stretched) =
+        let (stretched, left_gain) =
             stretch_pair(left, right, self.tracker.config.max_contrast_gain)?;
         let PreparedImages {
             stretched: [left_stretched, right_stretched],
@@ -1096,7 +1124,7 @@ impl Odometry {
             ..
         } = self
             .tracker
-            .prepare_stretched(left_stretched, right_stretched, left, right)?;
+            .prepare_stretched(stretched, left_gain, left, right)?;
         // Stretched once, for the detectors and the back end's corners alike.
         let seen_left = left_stretched.as_ref().unwrap_or(left);
         let seen_right = right_stretched.as_ref().unwrap_or(right);
@@ -1143,7 +1171,7 @@ impl Odometry {
         };
         let result =
             self.tracker
-                .update_stretched(Some(((seen_left, seen_right), points)), lines, stats);
+                .update_stretched(Some(((seen_left, seen_right), points, left_gain)), lines, stats);
         self.previous_lines = Some(lines_l);
         result
     }
