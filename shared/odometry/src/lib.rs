@@ -25,6 +25,7 @@ use landmarks::{Geometry, Landmark, sighted};
 use linetrack_geometry::{
     MatchCase, Point, Segment, SegmentFeatures, StereoRig, direction_angle, length_ratio, overlap,
 };
+use linetrack_l1_matcher::{GrayView, SegmentProfiles};
 use linetrack_stereo_vo::motion::{line_residual, point_residual};
 use linetrack_stereo_vo::{
     LineObservation, MotionConfig, PointObservation, TriangulationLimits, disparity_weight,
@@ -36,7 +37,6 @@ use linetrack_vision::{
     SegmentMatcher, VisionError, create_detector, create_segment_matcher, refine_stereo_column,
     stretch_contrast,
 };
-use linetrack_l1_matcher::{GrayView, SegmentProfiles};
 use nalgebra::{Isometry3, Point3};
 use serde::{Deserialize, Serialize};
 use std::time::Instant;
@@ -249,9 +249,7 @@ impl OdometryConfig {
             ));
         }
         if photometric.min_rows == 0 {
-            return Err(
-                "field `stereo_photometric.min_rows` = 0: expected at least 1".to_string(),
-            );
+            return Err("field `stereo_photometric.min_rows` = 0: expected at least 1".to_string());
         }
         let m = &self.motion;
         if !(m.min_relative_eigenvalue >= 0.0 && m.min_relative_eigenvalue < 1.0) {
@@ -1067,6 +1065,8 @@ pub struct Odometry {
     detector: Box<dyn LineDetector>,
     matcher: Box<dyn SegmentMatcher>,
     previous_lines: Option<LineFeatures>,
+    /// Where the last motion moves the previous frame's segments (kept between frames).
+    predicted: Vec<Segment>,
     tracker: MotionTracker,
 }
 
@@ -1104,6 +1104,7 @@ impl Odometry {
             detector: create_detector(config.detector, &config.frontend)?,
             matcher: create_segment_matcher(config.matcher, &config.frontend)?,
             previous_lines: None,
+            predicted: Vec::new(),
             tracker: MotionTracker::new(config, rig)?,
         })
     }
@@ -1147,19 +1148,17 @@ impl Odometry {
         let mut tracked = Vec::new();
         if let Some(previous) = &mut self.previous_lines {
             // Matched where the last motion puts them, when it is known.
-            let mut predicted = Vec::new();
+            let predicted = &mut self.predicted;
             let moved = self.tracker.config.predicted_matching
                 && self.matcher.matches_predicted_positions()
-                && self
-                    .tracker
-                    .predict_segments(&previous.segments, &mut predicted);
+                && self.tracker.predict_segments(&previous.segments, predicted);
             if moved {
-                std::mem::swap(&mut previous.segments, &mut predicted);
+                std::mem::swap(&mut previous.segments, predicted);
             }
             self.matcher
                 .match_lines(MatchCase::FrameToFrame, previous, &lines_l, &mut tracked);
             if moved {
-                std::mem::swap(&mut previous.segments, &mut predicted);
+                std::mem::swap(&mut previous.segments, predicted);
             }
         }
         stats.ms[3] = since(started);
@@ -1169,9 +1168,11 @@ impl Odometry {
             stereo: &stereo,
             tracked: self.previous_lines.as_ref().map(|_| tracked.as_slice()),
         };
-        let result =
-            self.tracker
-                .update_stretched(Some(((seen_left, seen_right), points, left_gain)), lines, stats);
+        let result = self.tracker.update_stretched(
+            Some(((seen_left, seen_right), points, left_gain)),
+            lines,
+            stats,
+        );
         self.previous_lines = Some(lines_l);
         result
     }
