@@ -25,6 +25,7 @@ use landmarks::{Geometry, Landmark, sighted};
 use linetrack_geometry::{
     MatchCase, Point, Segment, SegmentFeatures, StereoRig, direction_angle, length_ratio, overlap,
 };
+use linetrack_l1_matcher::{GrayView, SegmentProfiles};
 use linetrack_stereo_vo::motion::{line_residual, point_residual};
 use linetrack_stereo_vo::{
     LineObservation, MotionConfig, PointObservation, TriangulationLimits, disparity_weight,
@@ -48,6 +49,37 @@ pub enum Features {
     PointsAndLines,
     /// Line segments only.
     LinesOnly,
+}
+
+/// The photometric check of stereo segment matches: on the image rows both segments cover,
+/// the intensities across the two lines are compared by zero-normalised cross-correlation
+/// (blind to any gain and bias between the cameras), also one pixel to either side. A match
+/// is not triangulated when the correlation is low or its peak lies off the line: a
+/// descriptor matched the right texture at the wrong edge, and the landmark would sit at a
+/// wrong depth.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct StereoPhotometric {
+    /// Switch.
+    pub enabled: bool,
+    /// Matches whose mean row correlation is below this are dropped.
+    pub min_correlation: f64,
+    /// Rows both segments must have a usable profile on for the correlation to count.
+    pub min_rows: usize,
+    /// Matches whose content sits farther than this from the right segment's line are
+    /// dropped, pixels.
+    pub max_offset_px: f64,
+}
+
+impl Default for StereoPhotometric {
+    fn default() -> Self {
+        Self {
+            enabled: true,
+            min_correlation: 0.7,
+            min_rows: 3,
+            max_offset_px: 1.0,
+        }
+    }
 }
 
 /// Configuration of the odometry.
@@ -103,6 +135,14 @@ pub struct OdometryConfig {
     /// 4.4 cm, up to 8 or 16 let noise corners carry the point matches and gave 58 cm, none
     /// lost 21 frames and gave 20 cm.
     pub max_contrast_gain: f64,
+    /// Point observations of a stretched image weighted by 1 / gain²: the stretch
+    /// multiplies the sensor's noise with the contrast, so a corner found in a dimmed scene
+    /// is that much less certain than one in a well-exposed image (in image units its
+    /// noise is `gain` times larger relative to the edges it sits on). Segments are fitted
+    /// over tens of pixels, which averages the noise, and keep their weight.
+    pub points_weighted_by_gain: bool,
+    /// Photometric check of stereo segment matches before they are triangulated.
+    pub stereo_photometric: StereoPhotometric,
     /// When an estimate is not believed.
     pub lost: LostLimits,
     /// Segments closer than this to horizontal are not triangulated, degrees: an
@@ -137,6 +177,8 @@ impl Default for OdometryConfig {
             landmarks: true,
             landmark_disparity_px: 1.0,
             max_contrast_gain: 4.0,
+            points_weighted_by_gain: true,
+            stereo_photometric: StereoPhotometric::default(),
             lost: LostLimits::default(),
             min_line_angle_deg: 10.0,
         }
@@ -192,6 +234,22 @@ impl OdometryConfig {
                 "field `min_line_angle_deg` = {}: expected a number in [0, 90)",
                 self.min_line_angle_deg
             ));
+        }
+        let photometric = &self.stereo_photometric;
+        if !(-1.0..=1.0).contains(&photometric.min_correlation) {
+            return Err(format!(
+                "field `stereo_photometric.min_correlation` = {}: expected a number in [-1, 1]",
+                photometric.min_correlation
+            ));
+        }
+        if !(photometric.max_offset_px > 0.0) {
+            return Err(format!(
+                "field `stereo_photometric.max_offset_px` = {}: expected a number > 0 (inf: off)",
+                photometric.max_offset_px
+            ));
+        }
+        if photometric.min_rows == 0 {
+            return Err("field `stereo_photometric.min_rows` = 0: expected at least 1".to_string());
         }
         let m = &self.motion;
         if !(m.min_relative_eigenvalue >= 0.0 && m.min_relative_eigenvalue < 1.0) {
@@ -293,6 +351,8 @@ pub struct MatchedLines<'a> {
 pub struct PreparedImages {
     /// The left and right images stretched (`None`: the original is used as it is).
     stretched: [Option<GrayImage>; 2],
+    /// The left image's stretch gain (1: not stretched).
+    left_gain: f64,
     /// ORB points of the left and right image (empty when the odometry uses lines only).
     points: [PointFeatures; 2],
     /// Milliseconds it took.
@@ -338,6 +398,8 @@ pub struct MotionTracker {
     last_motion: Isometry3<f64>,
     /// Whether `last_motion` was measured (not the identity of a fresh start).
     motion_known: bool,
+    /// Row profiles across this frame's left and right segments (photometric check).
+    profiles: [SegmentProfiles; 2],
 }
 
 impl MotionTracker {
@@ -350,6 +412,7 @@ impl MotionTracker {
             pose: Isometry3::identity(),
             last_motion: Isometry3::identity(),
             motion_known: false,
+            profiles: Default::default(),
             config,
             rig,
         })
@@ -472,9 +535,8 @@ impl MotionTracker {
         right: &GrayImage,
     ) -> Result<PreparedImages, OdometryError> {
         let started = Instant::now();
-        let (left_stretched, right_stretched) =
-            stretch_pair(left, right, self.config.max_contrast_gain)?;
-        let mut prepared = self.prepare_stretched(left_stretched, right_stretched, left, right)?;
+        let (stretched, left_gain) = stretch_pair(left, right, self.config.max_contrast_gain)?;
+        let mut prepared = self.prepare_stretched(stretched, left_gain, left, right)?;
         prepared.ms = since(started);
         Ok(prepared)
     }
@@ -483,8 +545,8 @@ impl MotionTracker {
     /// images (or the originals, `None` where not stretched).
     fn prepare_stretched(
         &mut self,
-        left_stretched: Option<GrayImage>,
-        right_stretched: Option<GrayImage>,
+        [left_stretched, right_stretched]: [Option<GrayImage>; 2],
+        left_gain: f64,
         left: &GrayImage,
         right: &GrayImage,
     ) -> Result<PreparedImages, OdometryError> {
@@ -498,6 +560,7 @@ impl MotionTracker {
         }
         Ok(PreparedImages {
             stretched: [left_stretched, right_stretched],
+            left_gain,
             points,
             ms: since(started),
         })
@@ -517,6 +580,7 @@ impl MotionTracker {
         };
         let PreparedImages {
             stretched: [left_stretched, right_stretched],
+            left_gain,
             points,
             ms,
         } = prepared;
@@ -525,13 +589,13 @@ impl MotionTracker {
             left_stretched.as_ref().unwrap_or(left),
             right_stretched.as_ref().unwrap_or(right),
         );
-        self.update_stretched(Some((seen, points)), lines, stats)
+        self.update_stretched(Some((seen, points, left_gain)), lines, stats)
     }
 
     /// [`MotionTracker::update`] on images already stretched, with their points.
     fn update_stretched(
         &mut self,
-        images: Option<((&GrayImage, &GrayImage), [PointFeatures; 2])>,
+        images: Option<((&GrayImage, &GrayImage), [PointFeatures; 2], f64)>,
         lines: MatchedLines<'_>,
         mut stats: FrameStats,
     ) -> Result<FrameResult, OdometryError> {
@@ -539,11 +603,12 @@ impl MotionTracker {
             min_sin_from_horizontal: self.config.min_line_angle_deg.to_radians().sin(),
             ..TriangulationLimits::default()
         };
-        let (images, [points_l, points_r]) = match images {
-            Some((images, points)) if self.config.features == Features::PointsAndLines => {
-                (Some(images), points)
+        let stereo_images = images.as_ref().map(|(images, ..)| *images);
+        let (images, [points_l, points_r], left_gain) = match images {
+            Some((images, points, gain)) if self.config.features == Features::PointsAndLines => {
+                (Some(images), points, gain)
             }
-            _ => (None, Default::default()),
+            _ => (None, Default::default(), 1.0),
         };
         let use_points = images.is_some();
         stats.points = [points_l.points.len(), points_r.points.len()];
@@ -577,6 +642,7 @@ impl MotionTracker {
                 }
             }
         }
+        let verified = self.photometric_profiles(stereo_images, &lines);
         let mut line_positions = vec![None; lines.left.len()];
         let right_features: Vec<Option<SegmentFeatures>> = lines
             .right
@@ -587,6 +653,9 @@ impl MotionTracker {
             let (Some(l), Some(r)) = (lines.left.get(m.query), lines.right.get(m.train)) else {
                 continue;
             };
+            if verified && !self.photometric_agreement(m.query, m.train) {
+                continue;
+            }
             if self.config.reject_look_alikes
                 && has_look_alike(
                     l,
@@ -633,7 +702,18 @@ impl MotionTracker {
             line_pairs: Vec::new(),
         };
         if use_points {
-            self.observe_points(&mut previous, &points_l, &mut matches, &mut observations);
+            let noise_weight = if self.config.points_weighted_by_gain {
+                left_gain.powi(-2)
+            } else {
+                1.0
+            };
+            self.observe_points(
+                &mut previous,
+                &points_l,
+                noise_weight,
+                &mut matches,
+                &mut observations,
+            );
         }
         self.observe_lines(
             &previous,
@@ -706,6 +786,47 @@ impl MotionTracker {
                 })
             }
         }
+    }
+
+    /// Takes the row profiles across the segments of both images, when the check is on and
+    /// the images are given; whether it did.
+    fn photometric_profiles(
+        &mut self,
+        images: Option<(&GrayImage, &GrayImage)>,
+        lines: &MatchedLines<'_>,
+    ) -> bool {
+        let Some((left, right)) = images.filter(|_| self.config.stereo_photometric.enabled) else {
+            return false;
+        };
+        let min_angle = self.config.min_line_angle_deg;
+        for ((image, segments), profiles) in [(left, lines.left), (right, lines.right)]
+            .into_iter()
+            .zip(self.profiles.iter_mut())
+        {
+            let (width, height) = (image.width() as usize, image.height() as usize);
+            let Some(view) = image
+                .pixels()
+                .and_then(|p| GrayView::new(p, width, height, width).ok())
+            else {
+                return false;
+            };
+            profiles.extract(view, segments, min_angle);
+        }
+        true
+    }
+
+    /// Whether left segment `i` and right segment `j` look alike across their lines (or
+    /// cannot be compared).
+    fn photometric_agreement(&self, i: usize, j: usize) -> bool {
+        let check = &self.config.stereo_photometric;
+        let [left, right] = &self.profiles;
+        if let Some(s) = left.similarity(i, right, j, check.min_rows)
+            && s.correlation < check.min_correlation
+        {
+            return false;
+        }
+        left.offset_px(i, right, j)
+            .is_none_or(|offset| offset.abs() <= check.max_offset_px)
     }
 
     /// A reference whose landmarks are this frame's fresh triangulations placed at `pose`.
@@ -841,11 +962,13 @@ impl MotionTracker {
     }
 
     /// Observations of `previous`'s point landmarks among `current` (this frame's left
-    /// points), searched for around where the last motion moves them.
+    /// points, their weights scaled by `noise_weight`), searched for around where the last
+    /// motion moves them.
     fn observe_points(
         &mut self,
         previous: &mut Reference,
         current: &PointFeatures,
+        noise_weight: f64,
         scratch: &mut Vec<FeatureMatch>,
         observations: &mut Observations,
     ) {
@@ -882,7 +1005,9 @@ impl MotionTracker {
                 observations.points.push(PointObservation {
                     position: to_previous * landmark.world,
                     pixel: current.points[m.train],
-                    weight: landmark.observation_weight() * self.level_weight(current, m.train),
+                    weight: landmark.observation_weight()
+                        * self.level_weight(current, m.train)
+                        * noise_weight,
                 });
                 observations.point_pairs.push((m.query, m.train));
             }
@@ -940,6 +1065,8 @@ pub struct Odometry {
     detector: Box<dyn LineDetector>,
     matcher: Box<dyn SegmentMatcher>,
     previous_lines: Option<LineFeatures>,
+    /// Where the last motion moves the previous frame's segments (kept between frames).
+    predicted: Vec<Segment>,
     tracker: MotionTracker,
 }
 
@@ -951,16 +1078,19 @@ pub enum OdometryError {
     Vision(#[from] VisionError),
 }
 
-/// Both images of a stereo pair through [`stretch_contrast`] (`None`: keep the original).
+/// Both images of a stereo pair through [`stretch_contrast`] (`None`: keep the original),
+/// and the gain the left one was stretched by (1: not stretched).
 fn stretch_pair(
     left: &GrayImage,
     right: &GrayImage,
     max_gain: f64,
-) -> Result<(Option<GrayImage>, Option<GrayImage>), VisionError> {
-    Ok((
-        stretch_contrast(left, max_gain)?,
-        stretch_contrast(right, max_gain)?,
-    ))
+) -> Result<([Option<GrayImage>; 2], f64), VisionError> {
+    let (left, left_gain) = match stretch_contrast(left, max_gain)? {
+        Some((image, gain)) => (Some(image), gain),
+        None => (None, 1.0),
+    };
+    let right = stretch_contrast(right, max_gain)?.map(|(image, _)| image);
+    Ok(([left, right], left_gain))
 }
 
 fn since(start: Instant) -> f64 {
@@ -974,6 +1104,7 @@ impl Odometry {
             detector: create_detector(config.detector, &config.frontend)?,
             matcher: create_segment_matcher(config.matcher, &config.frontend)?,
             previous_lines: None,
+            predicted: Vec::new(),
             tracker: MotionTracker::new(config, rig)?,
         })
     }
@@ -986,7 +1117,7 @@ impl Odometry {
     ) -> Result<FrameResult, OdometryError> {
         let mut stats = FrameStats::default();
         let started = Instant::now();
-        let (left_stretched, right_stretched) =
+        let (stretched, left_gain) =
             stretch_pair(left, right, self.tracker.config.max_contrast_gain)?;
         let PreparedImages {
             stretched: [left_stretched, right_stretched],
@@ -994,7 +1125,7 @@ impl Odometry {
             ..
         } = self
             .tracker
-            .prepare_stretched(left_stretched, right_stretched, left, right)?;
+            .prepare_stretched(stretched, left_gain, left, right)?;
         // Stretched once, for the detectors and the back end's corners alike.
         let seen_left = left_stretched.as_ref().unwrap_or(left);
         let seen_right = right_stretched.as_ref().unwrap_or(right);
@@ -1017,19 +1148,17 @@ impl Odometry {
         let mut tracked = Vec::new();
         if let Some(previous) = &mut self.previous_lines {
             // Matched where the last motion puts them, when it is known.
-            let mut predicted = Vec::new();
+            let predicted = &mut self.predicted;
             let moved = self.tracker.config.predicted_matching
                 && self.matcher.matches_predicted_positions()
-                && self
-                    .tracker
-                    .predict_segments(&previous.segments, &mut predicted);
+                && self.tracker.predict_segments(&previous.segments, predicted);
             if moved {
-                std::mem::swap(&mut previous.segments, &mut predicted);
+                std::mem::swap(&mut previous.segments, predicted);
             }
             self.matcher
                 .match_lines(MatchCase::FrameToFrame, previous, &lines_l, &mut tracked);
             if moved {
-                std::mem::swap(&mut previous.segments, &mut predicted);
+                std::mem::swap(&mut previous.segments, predicted);
             }
         }
         stats.ms[3] = since(started);
@@ -1039,9 +1168,11 @@ impl Odometry {
             stereo: &stereo,
             tracked: self.previous_lines.as_ref().map(|_| tracked.as_slice()),
         };
-        let result =
-            self.tracker
-                .update_stretched(Some(((seen_left, seen_right), points)), lines, stats);
+        let result = self.tracker.update_stretched(
+            Some(((seen_left, seen_right), points, left_gain)),
+            lines,
+            stats,
+        );
         self.previous_lines = Some(lines_l);
         result
     }
@@ -1114,6 +1245,60 @@ mod tests {
                 .iter()
                 .all(|v| v.is_finite())
         );
+    }
+
+    #[test]
+    fn stereo_segments_on_the_wrong_edge_fail_the_photometric_check() {
+        // Left: a textured bar with a slanted edge at x = 100 + 0.3 y. Right: the same
+        // scene 20 px further left, under another gain and bias; a second edge of the bar
+        // lies 3 px to the right of the true partner.
+        let (width, height) = (240usize, 120usize);
+        let scene = |x: f64, y: f64| -> f64 {
+            let u = x - 0.3 * y;
+            let texture = 30.0 * ((0.7 * y).sin() + 0.5 * (1.3 * y).cos());
+            if u < 100.0 {
+                40.0
+            } else if u < 103.0 {
+                200.0 + texture
+            } else {
+                90.0 + 0.5 * texture
+            }
+        };
+        let render = |shift: f64, gain: f64, bias: f64| {
+            let pixels: Vec<u8> = (0..height)
+                .flat_map(|y| (0..width).map(move |x| (x, y)))
+                .map(|(x, y)| {
+                    // 4 × 4 supersampling: anti-aliased edges.
+                    let mut sum = 0.0;
+                    for k in 0..16 {
+                        let (dx, dy) = ((k % 4) as f64 / 4.0, (k / 4) as f64 / 4.0);
+                        sum += scene(x as f64 + dx + shift, y as f64 + dy);
+                    }
+                    (gain * sum / 16.0 + bias).clamp(0.0, 255.0) as u8
+                })
+                .collect();
+            GrayImage::from_pixels(width, height, &pixels, "test").unwrap()
+        };
+        let left = render(0.0, 1.0, 0.0);
+        let right = render(20.0, 0.6, 25.0);
+        let edge = |x0: f64| Segment::new(Point::new(x0 + 6.0, 20.0), Point::new(x0 + 27.0, 90.0));
+        let left_segments = [edge(100.0)];
+        let right_segments = [edge(80.0), edge(83.0), edge(81.5)];
+        let mut tracker =
+            MotionTracker::new(OdometryConfig::default(), StereoRig::default()).unwrap();
+        let lines = MatchedLines {
+            left: &left_segments,
+            right: &right_segments,
+            stereo: &[],
+            tracked: None,
+        };
+        assert!(tracker.photometric_profiles(Some((&left, &right)), &lines));
+        assert!(tracker.photometric_agreement(0, 0), "the true partner");
+        assert!(!tracker.photometric_agreement(0, 1), "the bar's other edge");
+        assert!(!tracker.photometric_agreement(0, 2), "1.5 px off the edge");
+        // Switched off, nothing is checked.
+        tracker.config.stereo_photometric.enabled = false;
+        assert!(!tracker.photometric_profiles(Some((&left, &right)), &lines));
     }
 
     #[test]

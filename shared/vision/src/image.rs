@@ -328,8 +328,9 @@ pub fn perturb(image: &GrayImage, gain: f64, bias: f64) -> Result<GrayImage, Vis
 
 /// A dark or flat image stretched to the full grey range, as an automatic gain would:
 /// `I' = clamp(gain·(I − low))` with `low` the 0.5th percentile and `gain` mapping the 99.5th
-/// to 255, at most `max_gain`. `None` when the image already spans the range (gain below
-/// 1.1) or `max_gain` is at most 1: the caller then keeps the original.
+/// to 255, at most `max_gain`; with the gain it applied. `None` when the image already
+/// spans the range (gain below 1.1) or `max_gain` is at most 1: the caller then keeps the
+/// original.
 ///
 /// Detectors threshold absolute gradients (LSD's gradient magnitude, FAST's intensity
 /// difference), so a scene with its lights dimmed loses most of its segments and corners
@@ -338,7 +339,7 @@ pub fn perturb(image: &GrayImage, gain: f64, bias: f64) -> Result<GrayImage, Vis
 pub fn stretch_contrast(
     image: &GrayImage,
     max_gain: f64,
-) -> Result<Option<GrayImage>, VisionError> {
+) -> Result<Option<(GrayImage, f64)>, VisionError> {
     let Some((gain, low)) = stretch_gain(image, max_gain)? else {
         return Ok(None);
     };
@@ -347,10 +348,13 @@ pub fn stretch_contrast(
         .mat
         .convert_to(&mut out, -1, gain, -gain * low)
         .context("stretching the contrast")?;
-    Ok(Some(GrayImage {
-        mat: out,
-        origin: image.origin.clone(),
-    }))
+    Ok(Some((
+        GrayImage {
+            mat: out,
+            origin: image.origin.clone(),
+        },
+        gain,
+    )))
 }
 
 /// [`stretch_contrast`] into a buffer kept from one call to the next: a stage stretching

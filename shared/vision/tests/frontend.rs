@@ -361,12 +361,15 @@ fn a_dark_image_is_stretched_to_the_full_range_and_a_bright_one_is_left_alone() 
     // 1000 pixels from 10 to 40: the 0.5 % tails are 5 pixels at each end.
     let dark: Vec<u8> = (0..1000).map(|k| 10 + (k * 31 / 1000) as u8).collect();
     let image = GrayImage::from_pixels(100, 10, &dark, "dark").unwrap();
-    let stretched = stretch_contrast(&image, 16.0).unwrap().expect("stretched");
+    let (stretched, gain) = stretch_contrast(&image, 16.0).unwrap().expect("stretched");
+    // The tails end at 10 and 40 (0.5th and 99.5th percentiles): 255 / 30.
+    assert!((gain - 8.5).abs() < 1e-9, "{gain}");
     let pixels = stretched.pixels().unwrap();
     assert_eq!(pixels[0], 0);
     assert!(pixels[999] >= 250, "{}", pixels[999]);
     // The gain is capped.
-    let capped = stretch_contrast(&image, 2.0).unwrap().expect("stretched");
+    let (capped, gain) = stretch_contrast(&image, 2.0).unwrap().expect("stretched");
+    assert_eq!(gain, 2.0);
     assert_eq!(capped.pixels().unwrap()[999], 60);
     assert!(stretch_contrast(&image, 1.0).unwrap().is_none());
     let full: Vec<u8> = (0..1000).map(|k| (k * 256 / 1000) as u8).collect();
@@ -390,7 +393,7 @@ fn the_kept_stretch_gives_the_same_pixels_in_one_buffer() {
             .map(<[u8]>::as_ptr);
         let kept = stretch.apply(&image, 16.0).unwrap();
         match once {
-            Some(once) => {
+            Some((once, _)) => {
                 assert_eq!(
                     kept.pixels().unwrap(),
                     once.pixels().unwrap(),
