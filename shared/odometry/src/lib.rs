@@ -391,7 +391,8 @@ struct Observations {
 pub struct MotionTracker {
     config: OdometryConfig,
     rig: StereoRig,
-    orb: OrbExtractor,
+    /// One ORB extractor per image: the two run at the same time.
+    orb: [OrbExtractor; 2],
     point_matcher: PointMatcher,
     reference: Option<Reference>,
     pose: Isometry3<f64>,
@@ -406,7 +407,10 @@ impl MotionTracker {
     /// A tracker starting at the identity pose.
     pub fn new(config: OdometryConfig, rig: StereoRig) -> Result<Self, OdometryError> {
         Ok(Self {
-            orb: OrbExtractor::new(&config.frontend.orb)?,
+            orb: [
+                OrbExtractor::new(&config.frontend.orb)?,
+                OrbExtractor::new(&config.frontend.orb)?,
+            ],
             point_matcher: PointMatcher::new(),
             reference: None,
             pose: Isometry3::identity(),
@@ -553,10 +557,22 @@ impl MotionTracker {
         let started = Instant::now();
         let mut points = [PointFeatures::default(), PointFeatures::default()];
         if self.config.features == Features::PointsAndLines {
-            self.orb
-                .extract(left_stretched.as_ref().unwrap_or(left), &mut points[0])?;
-            self.orb
-                .extract(right_stretched.as_ref().unwrap_or(right), &mut points[1])?;
+            // Left and right at the same time: a frame's corners are its pose's longest step.
+            let [orb_l, orb_r] = &mut self.orb;
+            let [points_l, points_r] = &mut points;
+            let (image_l, image_r) = (
+                left_stretched.as_ref().unwrap_or(left),
+                right_stretched.as_ref().unwrap_or(right),
+            );
+            std::thread::scope(|scope| {
+                let right_side = scope.spawn(|| orb_r.extract(image_r, points_r));
+                let left_side = orb_l.extract(image_l, points_l);
+                // The right side's panic, if any, is ORB's own: pass it on.
+                let right_side = right_side
+                    .join()
+                    .unwrap_or_else(|panic| std::panic::resume_unwind(panic));
+                left_side.and(right_side)
+            })?;
         }
         Ok(PreparedImages {
             stretched: [left_stretched, right_stretched],
