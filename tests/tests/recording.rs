@@ -316,7 +316,7 @@ fn a_killed_recorder_is_recorded_and_the_run_goes_on() {
     let (status, out, records) = run.finish(RUN_TIMEOUT);
     assert!(status.success(), "{status}\n{out}");
     linetrack_e2e::assert_ids_accounted(&records, 40, &[]);
-    let exited = records.events_of("recorder-exited");
+    let exited = records.events_of("recorder-exit");
     assert_eq!(exited.len(), 1, "{:?}", records.events);
     assert!(
         exited[0].detail.contains(&recorder.to_string()),
