@@ -11,7 +11,7 @@
 
 use crate::fallback::Hysteresis;
 use crate::monitor::stage_ms;
-use linetrack_msgs::{FrameHeader, StageKind};
+use linetrack_msgs::{FrameHeader, FrameStatus, StageKind};
 use linetrack_pipeline_config::DetectorFallbackConfig;
 use linetrack_stage_runtime::detector_from_code;
 use linetrack_vision::DetectorKind;
@@ -68,7 +68,10 @@ impl DetectorPolicy {
             self.streaks.reset();
         }
         let index = StageKind::LineDetector.stamp_index()?;
-        if header.stamps[index].end_ns == 0 || detector_from_code(header.detector)? != running {
+        if header.stamps[index].end_ns == 0
+            || !detected(header, index)
+            || detector_from_code(header.detector)? != running
+        {
             return None;
         }
         let ms = stage_ms(header, index);
@@ -108,6 +111,15 @@ impl DetectorPolicy {
                 ),
             })
     }
+}
+
+/// Whether the detector (stamp index `detector`) detected the frame: not a frame dropped
+/// before it or by it (its stamps then time the drop, not a detection).
+fn detected(header: &FrameHeader, detector: usize) -> bool {
+    header.frame_status() == FrameStatus::Ok
+        || StageKind::from_code(header.dropped_by)
+            .and_then(|s| s.stamp_index())
+            .is_some_and(|by| by > detector)
 }
 
 #[cfg(test)]
@@ -225,6 +237,30 @@ mod tests {
         assert!(!spaced.is_empty());
         assert!(spaced.windows(2).all(|w| w[1] - w[0] >= 100), "{spaced:?}");
         assert!(spaced.len() <= 4, "{spaced:?}");
+    }
+
+    #[test]
+    fn frames_the_detector_dropped_say_nothing_and_those_dropped_after_it_count() {
+        // Overloaded LSD: it detects every third frame (slowly) and drops the ones that
+        // queued behind meanwhile (in no time); the matcher drops the detected ones late.
+        let mut p = policy(0);
+        let mut switches = Vec::new();
+        for id in 0..9u64 {
+            let mut h = frame(id, LSD, if id % 3 == 0 { 150.0 } else { 0.001 });
+            h.status = if id % 3 == 0 {
+                FrameStatus::DroppedLate
+            } else {
+                FrameStatus::DroppedBehind
+            } as u32;
+            h.dropped_by = if id % 3 == 0 {
+                StageKind::Matcher
+            } else {
+                StageKind::LineDetector
+            }
+            .code();
+            switches.extend(p.observe(&h, LSD).map(|s| (id, s.to)));
+        }
+        assert_eq!(switches, [(6, FLD)], "the third detected frame");
     }
 
     #[test]
