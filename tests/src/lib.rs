@@ -194,9 +194,16 @@ fn launch_with(
     let run_dir = dir.join("run");
     let config = dir.join("pipeline.toml");
     // The tests check LSD's hot swap to FLD and LBD's fallback to l1: they pin the detector
-    // and the matcher policy (the shipped defaults are edgelines and l1).
+    // and the matcher policy (the shipped defaults are edgelines and l1). The automatic
+    // detector policy would swap LSD away on a loaded machine: only a test that names it
+    // has it.
+    let policy = if extra.contains("[detector_fallback]") {
+        ""
+    } else {
+        "[detector_fallback]\nenabled = false\n"
+    };
     let text = format!(
-        "detector = \"lsd\"\n[matcher]\nmode = \"auto\"\n{extra}\n[source]\nsequence = {:?}\nrate_hz = 10.0\n[output]\nrun_dir = {:?}\n",
+        "detector = \"lsd\"\n{policy}[matcher]\nmode = \"auto\"\n{extra}\n[source]\nsequence = {:?}\nrate_hz = 10.0\n[output]\nrun_dir = {:?}\n",
         sequence.display().to_string(),
         run_dir.display().to_string()
     );

@@ -495,6 +495,53 @@ fn hot_swap(mut run: Run) {
 }
 
 #[test]
+fn lsd_missing_a_budget_no_detector_meets_gives_way_to_fld_after_its_streak() {
+    let dir = scratch("detector-policy");
+    // A 1 µs detector budget: every LSD frame misses it, so the policy swaps after exactly
+    // `bad_frames` frames, whatever the machine's load; FLD never gets within a quarter of
+    // it either, so it never swaps back.
+    let config = format!(
+        "{SUPERVISION}[budget]\ndrop_late = false\nline_detector_ms = 0.001\n\
+         [detector_fallback]\nenabled = true\nbad_frames = 3\nmin_interval_frames = 0\n"
+    );
+    let (status, out, records) = start(&dir, &base_sequence(FRAMES), &config).finish(RUN_TIMEOUT);
+    assert!(status.success(), "{status}\n{out}");
+    assert_every_frame_accounted(&records);
+    let fallbacks = records.events_of("detector-fallback");
+    assert_eq!(fallbacks.len(), 1, "{:?}", records.events);
+    assert!(
+        fallbacks[0].detail.starts_with("lsd -> fld: lsd over its")
+            && fallbacks[0].detail.contains("on 3 frames in a row"),
+        "{}",
+        fallbacks[0].detail
+    );
+    // It came on the third frame LSD detected.
+    let lsd: Vec<u64> = records
+        .frames
+        .iter()
+        .filter(|f| f.detector == "lsd")
+        .map(|f| f.frame_id)
+        .collect();
+    assert_eq!(
+        fallbacks[0].frame_id,
+        lsd.get(2).copied(),
+        "LSD frames {lsd:?}"
+    );
+    assert!(records.events_of("detector-recover").is_empty());
+    // The hot swap carried it out: LSD before the hand-over frame, FLD from it to the end.
+    let swaps = records.events_of("swap");
+    assert_eq!(swaps.len(), 1, "{:?}", records.events);
+    let at = swaps[0]
+        .frame_id
+        .unwrap_or_else(|| panic!("swap without a frame"));
+    assert!(at < FRAMES as u64, "swap at {at}");
+    for f in &records.frames {
+        let expected = if f.frame_id < at { "lsd" } else { "fld" };
+        assert_eq!(f.detector, expected, "frame {} (swap at {at})", f.frame_id);
+    }
+}
+
+#[test]
 fn matching_falls_back_to_l1_when_the_right_image_turns_unmatchable() {
     let dir = scratch("fallback");
     let sequence = sequence_copy(FRAMES, &dir);

@@ -2,10 +2,11 @@
 //! segments, tracks, poses, status and rig topics and writes them into one MCAP file
 //! (`linetrack-mcap`), started by the supervisor when the config says `[record] mcap = true`.
 //!
-//! It never holds the pipeline up: it is no consumer the publishers wait for or wake (it
-//! looks at its queues every [`POLL`]), and iceoryx2 overwrites the oldest message of a
-//! subscriber whose queue is full, so a recorder that falls behind loses frames from its
-//! recording, which it counts ([`linetrack_stage_runtime::GapWatch`]), and the stages go
+//! It never holds the pipeline up: it sleeps on its own iceoryx2 event service, which the
+//! publishers of the topics it records notify (a notification costs them no wait), and
+//! empties its queues when woken; iceoryx2 overwrites the oldest message of a subscriber
+//! whose queue is full, so a recorder that falls behind loses frames from its recording,
+//! which it counts ([`linetrack_stage_runtime::GapWatch`]), and the stages go
 //! on. On a shutdown (command or signal) it writes what its queues still hold, then closes
 //! the file with its index and summary.
 
@@ -13,10 +14,6 @@
 mod recorder;
 #[cfg(feature = "mcap")]
 pub use recorder::run;
-
-/// How often the recorder empties its queues: well within the frames topic's 12-message
-/// queue at any camera rate the pipeline sustains (12 frames at 20 Hz last 600 ms).
-pub const POLL: std::time::Duration = std::time::Duration::from_millis(5);
 
 /// Without the `mcap` feature there is no recorder: says so.
 #[cfg(not(feature = "mcap"))]

@@ -1,6 +1,5 @@
 //! The recorder's loop.
 
-use crate::POLL;
 use anyhow::Context;
 use linetrack_ipc::{Bus, Inlet, Shutdown};
 use linetrack_mcap::Recording;
@@ -10,6 +9,7 @@ use linetrack_msgs::{
 };
 use linetrack_stage_runtime::{GapWatch, Reporter, StageContext};
 use std::collections::BTreeMap;
+use std::time::Duration;
 
 /// The recorder's subscriptions.
 struct Inlets {
@@ -32,6 +32,9 @@ struct Losses {
 
 /// Runs the recorder until a shutdown command or signal; the file is closed either way.
 pub fn run(ctx: &StageContext, bus: &Bus, shutdown: &Shutdown) -> anyhow::Result<()> {
+    // Listening before subscribing: no message comes without its wake-up.
+    let wake = bus.wake(StageKind::Recorder)?;
+    let heartbeat = Duration::from_millis(ctx.config.supervisor.heartbeat_ms);
     let mut inlets = Inlets {
         frames: bus.inlet(Topic::Frames)?,
         segments: bus.inlet(Topic::Segments)?,
@@ -62,7 +65,12 @@ pub fn run(ctx: &StageContext, bus: &Bus, shutdown: &Shutdown) -> anyhow::Result
         if stop {
             break;
         }
-        std::thread::sleep(POLL);
+        // Until a publisher of a recorded topic (or a signal) wakes it; at the latest when
+        // its heartbeat is due.
+        if let Err(e) = wake.wait(heartbeat) {
+            result = Err(e.into());
+            break;
+        }
     }
     let counts = recording.counts();
     let mut values = BTreeMap::new();

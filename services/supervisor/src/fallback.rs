@@ -1,7 +1,80 @@
-//! When the matcher falls back from LBD to ℓ1 and when it returns.
+//! When the matcher falls back from LBD to ℓ1 and when it returns; the streaks with
+//! hysteresis ([`Hysteresis`]) that this and the detector policy
+//! ([`crate::detector_policy`]) switch on.
 
+use crate::monitor::stage_ms;
 use linetrack_msgs::{FrameHeader, MatcherMode, PoseRecord, StageKind};
 use linetrack_pipeline_config::FallbackConfig;
+
+/// Two states, normal and fallen back, and the streaks that move between them: `trip`
+/// failing frames in a row in the normal state switch to the fallback, `recover` passing
+/// frames in a row in the fallback switch back (the bars for failing and passing are the
+/// caller's, apart: the hysteresis), and no switch comes within `min_gap` frames of the
+/// last one. A frame that says nothing is not observed.
+#[derive(Debug, Clone)]
+pub struct Hysteresis {
+    trip: u32,
+    recover: u32,
+    min_gap: u64,
+    fallen_back: bool,
+    streak: u32,
+    last_switch: Option<u64>,
+}
+
+impl Hysteresis {
+    /// In the normal state.
+    pub fn new(trip: u32, recover: u32, min_gap: u64) -> Self {
+        Self {
+            trip,
+            recover,
+            min_gap,
+            fallen_back: false,
+            streak: 0,
+            last_switch: None,
+        }
+    }
+
+    /// Whether it is in the fallback state.
+    pub fn fallen_back(&self) -> bool {
+        self.fallen_back
+    }
+
+    /// The streak needed to switch from the present state.
+    pub fn needed(&self) -> u32 {
+        if self.fallen_back {
+            self.recover
+        } else {
+            self.trip
+        }
+    }
+
+    /// Takes frame `frame_id`: in the normal state `counts` says it failed, in the fallback
+    /// state that it passed the bar for the way back. Returns whether the state switched
+    /// (then the streak starts again).
+    pub fn observe(&mut self, frame_id: u64, counts: bool) -> bool {
+        self.streak = if counts {
+            self.streak.saturating_add(1)
+        } else {
+            0
+        };
+        let allowed = self
+            .last_switch
+            .is_none_or(|last| frame_id >= last.saturating_add(self.min_gap));
+        if self.streak < self.needed() || !allowed {
+            return false;
+        }
+        self.fallen_back = !self.fallen_back;
+        self.streak = 0;
+        self.last_switch = Some(frame_id);
+        true
+    }
+
+    /// Back to the normal state without a switch of its own (something else switched).
+    pub fn reset(&mut self) {
+        self.fallen_back = false;
+        self.streak = 0;
+    }
+}
 
 /// A decision to switch the matcher's mode.
 #[derive(Debug, Clone, PartialEq)]
@@ -29,32 +102,34 @@ pub struct Switch {
 pub struct FallbackController {
     config: FallbackConfig,
     matcher_budget_ms: f64,
-    mode: MatcherMode,
-    bad_streak: u32,
-    good_probes: u32,
+    /// Fallen back: ℓ1.
+    streaks: Hysteresis,
 }
 
 impl FallbackController {
     /// A controller starting in LBD mode.
     pub fn new(config: FallbackConfig, matcher_budget_ms: f64) -> Self {
+        let streaks = Hysteresis::new(config.bad_frames, config.recover_probes, 0);
         Self {
             config,
             matcher_budget_ms,
-            mode: MatcherMode::Lbd,
-            bad_streak: 0,
-            good_probes: 0,
+            streaks,
         }
     }
 
     /// The mode the controller wants.
     pub fn mode(&self) -> MatcherMode {
-        self.mode
+        if self.streaks.fallen_back() {
+            MatcherMode::L1
+        } else {
+            MatcherMode::Lbd
+        }
     }
 
-    /// Milliseconds the matcher stage took on `header`.
+    /// Milliseconds the matcher stage took on `header` (NaN without its stamps: then it
+    /// is neither over a bar nor within one).
     fn matcher_ms(header: &FrameHeader) -> f64 {
-        let stamp = header.stamps[StageKind::Matcher.stamp_index().unwrap_or(2)];
-        stamp.end_ns.saturating_sub(stamp.start_ns) as f64 * 1e-6
+        stage_ms(header, StageKind::Matcher.stamp_index().unwrap_or(2))
     }
 
     /// Why an LBD probe does not pass, if it does not.
@@ -68,7 +143,7 @@ impl FallbackController {
         }
         let ms = Self::matcher_ms(header);
         let bar = c.recover_budget_fraction * self.matcher_budget_ms;
-        (c.over_budget && ms > bar).then(|| format!("matcher {ms:.1} ms > {bar:.1} ms"))
+        (c.over_budget && !(ms <= bar)).then(|| format!("matcher {ms:.1} ms > {bar:.1} ms"))
     }
 
     /// Why an LBD frame failed, if it did.
@@ -101,63 +176,53 @@ impl FallbackController {
 
     /// Takes one processed frame's results; returns a switch when one is due.
     pub fn observe(&mut self, header: &FrameHeader, pose: &PoseRecord) -> Option<Switch> {
-        match self.mode {
+        match self.mode() {
             MatcherMode::Lbd => {
                 // Frames matched by ℓ1 for lack of images say nothing about LBD.
                 if MatcherMode::from_code(header.matcher_mode) != Some(MatcherMode::Lbd) {
                     return None;
                 }
-                match self.failure(header, pose) {
-                    Some(reason) => {
-                        self.bad_streak += 1;
-                        if self.bad_streak >= self.config.bad_frames {
-                            self.mode = MatcherMode::L1;
-                            self.bad_streak = 0;
-                            self.good_probes = 0;
-                            let reason =
-                                format!("{reason}, {} frames in a row", self.config.bad_frames);
-                            return Some(Switch {
-                                to: MatcherMode::L1,
-                                reason,
-                            });
-                        }
-                    }
-                    None => self.bad_streak = 0,
+                let failure = self.failure(header, pose);
+                if !self.streaks.observe(header.frame_id, failure.is_some()) {
+                    return None;
                 }
-                None
+                let reason = format!(
+                    "{}, {} frames in a row",
+                    failure.unwrap_or_default(),
+                    self.config.bad_frames
+                );
+                Some(Switch {
+                    to: MatcherMode::L1,
+                    reason,
+                })
             }
             MatcherMode::L1 => {
                 let Ok(found) = u32::try_from(header.lbd_probe_matches) else {
                     return None;
                 };
-                match self.probe_shortfall(header, found) {
-                    None => self.good_probes += 1,
-                    Some(_) => self.good_probes = 0,
+                let passed = self.probe_shortfall(header, found).is_none();
+                if !self.streaks.observe(header.frame_id, passed) {
+                    return None;
                 }
-                if self.good_probes >= self.config.recover_probes {
-                    self.mode = MatcherMode::Lbd;
-                    self.good_probes = 0;
-                    let c = &self.config;
-                    let latency = if c.over_budget {
-                        format!(
-                            " with the matcher within {:.1} ms",
-                            c.recover_budget_fraction * self.matcher_budget_ms
-                        )
-                    } else {
-                        String::new()
-                    };
-                    let reason = format!(
-                        "LBD probes found >= {} stereo matches{latency} on {} probes in a row (last {found}, {:.1} ms)",
-                        c.recover_stereo_matches,
-                        c.recover_probes,
-                        Self::matcher_ms(header)
-                    );
-                    return Some(Switch {
-                        to: MatcherMode::Lbd,
-                        reason,
-                    });
-                }
-                None
+                let c = &self.config;
+                let latency = if c.over_budget {
+                    format!(
+                        " with the matcher within {:.1} ms",
+                        c.recover_budget_fraction * self.matcher_budget_ms
+                    )
+                } else {
+                    String::new()
+                };
+                let reason = format!(
+                    "LBD probes found >= {} stereo matches{latency} on {} probes in a row (last {found}, {:.1} ms)",
+                    c.recover_stereo_matches,
+                    c.recover_probes,
+                    Self::matcher_ms(header)
+                );
+                Some(Switch {
+                    to: MatcherMode::Lbd,
+                    reason,
+                })
             }
         }
     }
@@ -196,6 +261,29 @@ mod tests {
             },
             50.0,
         )
+    }
+
+    #[test]
+    fn hysteresis_needs_whole_streaks_and_keeps_its_minimum_gap() {
+        let mut h = Hysteresis::new(3, 2, 10);
+        let mut frame = 0..;
+        let mut feed = |h: &mut Hysteresis, counts: &[bool]| -> Vec<bool> {
+            counts
+                .iter()
+                .map(|&c| h.observe(frame.next().unwrap_or_default(), c))
+                .collect()
+        };
+        assert_eq!(feed(&mut h, &[true, true, false]), [false; 3]);
+        assert_eq!(feed(&mut h, &[true, true, true]), [false, false, true]);
+        assert!(h.fallen_back());
+        // Frame 5 switched: the way back waits for frame 15 even with a streak of passes.
+        assert_eq!(feed(&mut h, &[true; 9]), [false; 9]);
+        assert!(h.fallen_back());
+        assert_eq!(feed(&mut h, &[true]), [true], "frame 15, streak 10 >= 2");
+        assert!(!h.fallen_back());
+        h.reset();
+        assert!(!h.fallen_back());
+        assert_eq!(h.needed(), 3);
     }
 
     #[test]

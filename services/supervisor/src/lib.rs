@@ -24,14 +24,16 @@
 //! (`metrics`: the names and definitions of `linetrack-vo`'s `metrics.json`).
 
 mod camera_check;
+pub mod clock;
+pub mod detector_policy;
 pub mod fallback;
-pub mod link;
 pub mod monitor;
-pub mod outputs;
+pub mod optional;
 pub mod run_dir;
 pub mod stage_runner;
 
 use anyhow::{Context, bail};
+use clock::{Backoff, Clock, Every, SystemClock, Timeout, Watchdog};
 use linetrack_ipc::{Bus, Inlet, LocalHub, Outlet, Scope, Shutdown, Wake};
 use linetrack_msgs::{
     Command, Control, FrameHeader, MatcherMode, PoseRecord, StageKind, StatusKind, StatusReport,
@@ -42,11 +44,12 @@ use linetrack_run_record::{Report, RunEnd};
 use linetrack_stage_runtime::{StageContext, detector_code, detector_from_code};
 use linetrack_vision::DetectorKind;
 use monitor::Monitor;
+use optional::{OptionalProcess, StopBy};
 use serde::Serialize;
 use stage_runner::StageRunner;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Stdio};
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 /// How the stages run.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -436,30 +439,13 @@ struct StageProcess {
     stage: StageKind,
     child: Launch,
     pid: u32,
-    started: Instant,
-    last_seen: Instant,
+    started: Duration,
+    last_seen: Duration,
     ready: bool,
     standby: bool,
     detector: Option<DetectorKind>,
     /// Expected to exit (handed over, finished, killed for hanging).
     retiring: bool,
-}
-
-/// The recorder process: not a stage (nothing waits for it); its death is recorded and the
-/// run goes on without a recording.
-struct RecorderProcess {
-    child: Child,
-    pid: u32,
-    started: Instant,
-    /// It reported ready: subscribed, its file open.
-    ready: bool,
-}
-
-/// Restart bookkeeping of one stage.
-#[derive(Debug, Default, Clone, Copy)]
-struct Restarts {
-    count: u32,
-    due: Option<Instant>,
 }
 
 struct Supervisor<'m> {
@@ -479,17 +465,19 @@ struct Supervisor<'m> {
     ports: Ports,
     monitor: &'m mut Monitor,
     processes: Vec<StageProcess>,
-    restarts: [Restarts; 4],
-    /// The MCAP recorder (`[record] mcap = true`), while it runs.
-    recorder: Option<RecorderProcess>,
+    /// Each stage's restarts.
+    restarts: [Backoff; 4],
+    /// How long a stage may be silent.
+    watchdog: Watchdog,
+    /// The optional processes the config turns on: the MCAP recorder, the ROS 2 output,
+    /// the ground-station link (in that order; stopped in the reverse one).
+    optional: Vec<OptionalProcess>,
     detector: DetectorKind,
     swap_to: Option<DetectorKind>,
-    /// The ROS 2 output's binary, when `[ros2] enabled`.
-    ros2_binary: Option<PathBuf>,
-    /// The ROS 2 output process, while it runs.
-    ros2: Option<outputs::Output>,
-    /// The ground-station link's process (`[link] enabled`, multi-process mode).
-    link: Option<link::LinkProcess>,
+    /// What every timer reads.
+    clock: Box<dyn Clock>,
+    /// The automatic LSD → faster detector swap (`[detector_fallback] enabled`).
+    detector_policy: Option<detector_policy::DetectorPolicy>,
 }
 
 fn stage_slot(stage: StageKind) -> usize {
@@ -525,11 +513,7 @@ impl<'m> Supervisor<'m> {
                 );
             }
         }
-        let ros2_binary = config
-            .ros2
-            .enabled
-            .then(|| outputs::ros2_binary(&bin_dir))
-            .transpose()?;
+        let optional = optional_processes(config, options.mode, &bin_dir, run_dir, monitor)?;
         let stage_runner = StageRunner::from_env()?;
         if !stage_runner.is_direct() {
             tracing::info!("stages start through {stage_runner}");
@@ -545,7 +529,7 @@ impl<'m> Supervisor<'m> {
             Some(hub) => Ports::open(&hub.bus(), &bus)?,
             None => Ports::open(&bus, &bus)?,
         };
-        if hub.is_some() && ros2_binary.is_some() {
+        if hub.is_some() && config.ros2.enabled {
             ports.forward_poses = Some(bus.outlet(Topic::Poses, 1)?);
             ports.output_status = Some(bus.inlet(Topic::Status)?);
         }
@@ -572,14 +556,16 @@ impl<'m> Supervisor<'m> {
             ports,
             monitor,
             processes: Vec::new(),
-            restarts: [Restarts::default(); 4],
-            recorder: None,
+            restarts: [Backoff::new(&config.supervisor); 4],
+            watchdog: Watchdog::new(&config.supervisor),
+            optional,
             detector: config.detector,
             swap_to: None,
-            ros2_binary,
-            ros2: None,
-            link: (config.link.enabled && options.mode == Mode::Processes)
-                .then(|| link::LinkProcess::new(&bin_dir)),
+            clock: Box::new(SystemClock::default()),
+            detector_policy: detector_policy::DetectorPolicy::new(
+                &config.detector_fallback,
+                config.budget.line_detector_ms,
+            ),
         })
     }
 
@@ -589,7 +575,7 @@ impl<'m> Supervisor<'m> {
         detector: Option<DetectorKind>,
         standby: bool,
     ) -> anyhow::Result<()> {
-        let restarted = self.restarts[stage_slot(stage)].count > 0;
+        let restarted = self.restarts[stage_slot(stage)].count() > 0;
         let resume_pose = (restarted && stage == StageKind::PoseEstimator)
             .then(|| self.monitor.resume_pose())
             .flatten();
@@ -643,7 +629,7 @@ impl<'m> Supervisor<'m> {
             "started {stage} (pid {pid}{})",
             if standby { ", standby" } else { "" }
         );
-        let now = Instant::now();
+        let now = self.clock.now();
         self.processes.push(StageProcess {
             stage,
             child,
@@ -713,152 +699,18 @@ impl<'m> Supervisor<'m> {
         Ok((Launch::Process(child), pid))
     }
 
-    /// Starts `linetrack-recorder` when the config asks for a recording (processes only:
-    /// the recorder subscribes over shared memory, which threads mode does not use).
-    fn start_recorder(&mut self) -> anyhow::Result<()> {
-        if !self.config.record.mcap {
-            return Ok(());
-        }
-        if self.hub.is_some() {
-            tracing::warn!(
-                "[record] mcap = true is ignored with --single-process: the recorder subscribes over shared memory"
-            );
-            self.monitor.event(
-                "recorder-off",
-                "recorder",
-                None,
-                "no recording in single-process mode".to_string(),
-            );
-            return Ok(());
-        }
-        let bin = self.bin_dir.join("linetrack-recorder");
-        if !bin.is_file() {
-            bail!(
-                "[record] mcap = true but {} is not there: build it with `cargo build --release --workspace --features linetrack-recorder/mcap`",
-                bin.display()
-            );
-        }
-        let mut command = self.child_command(&bin);
-        command.arg("--run-dir").arg(&self.run_dir);
-        let child = command
-            .spawn()
-            .with_context(|| format!("starting {}", bin.display()))?;
-        let pid = child.id();
-        tracing::info!(
-            "started recorder (pid {pid}) into {}",
-            self.config.record.file(&self.run_dir).display()
-        );
-        self.recorder = Some(RecorderProcess {
-            child,
-            pid,
-            started: Instant::now(),
-            ready: false,
-        });
-        Ok(())
-    }
-
-    /// Whether the frame source may start as far as the recorder goes: none asked for, it
-    /// is subscribed, it died, or it did not get ready within `record.startup_timeout_ms`
-    /// (then the run goes on without it).
-    fn recorder_settled(&mut self) -> bool {
-        let timeout = Duration::from_millis(self.config.record.startup_timeout_ms);
-        let Some(recorder) = &mut self.recorder else {
-            return true;
-        };
-        if recorder.ready {
-            return true;
-        }
-        if recorder.started.elapsed() > timeout {
-            let pid = recorder.pid;
-            tracing::warn!(
-                "the recorder (pid {pid}) was not ready after {timeout:?}: the run starts without it"
-            );
-            recorder.ready = true;
-            self.monitor.event(
-                "recorder-late",
-                "recorder",
-                None,
-                format!("pid {pid} not ready after {timeout:?}; the frames before it is are not recorded"),
-            );
-        }
-        recorder.ready
-    }
-
-    /// Records a recorder that exited during the run; the run goes on without it (it is not
-    /// restarted: its file is left unfinished, which a replay refuses as truncated).
-    fn check_recorder(&mut self) {
-        let Some(recorder) = &mut self.recorder else {
-            return;
-        };
-        let status = match recorder.child.try_wait() {
-            Ok(Some(status)) => status,
-            Ok(None) => return,
-            Err(e) => {
-                tracing::warn!("cannot poll the recorder (pid {}): {e}", recorder.pid);
-                return;
-            }
-        };
-        let pid = recorder.pid;
-        self.recorder = None;
-        tracing::warn!(
-            "the recorder (pid {pid}) exited during the run ({status}): the run goes on without a recording"
-        );
-        self.monitor.event(
-            "recorder-exited",
-            "recorder",
-            None,
-            format!("pid {pid} {status}; the run goes on without a recording"),
-        );
-    }
-
-    /// Asks the recorder to write what it holds and close its file; kills it after
-    /// `record.close_timeout_ms`.
-    fn stop_recorder(&mut self) {
-        let Some(mut recorder) = self.recorder.take() else {
-            return;
-        };
-        if let Err(e) = self
-            .ports
-            .send(StageKind::Recorder, recorder.pid, Command::Shutdown, 0, 0)
-        {
-            tracing::warn!("shutdown command to the recorder not sent: {e}");
-        }
-        let deadline = Instant::now() + Duration::from_millis(self.config.record.close_timeout_ms);
-        loop {
-            match recorder.child.try_wait() {
-                Ok(Some(status)) if status.success() => return,
-                Ok(Some(status)) => {
-                    tracing::warn!("the recorder (pid {}) ended with {status}", recorder.pid);
-                    self.monitor.event(
-                        "recorder-exited",
-                        "recorder",
-                        None,
-                        format!("pid {} {status} while closing its file", recorder.pid),
-                    );
-                    return;
-                }
-                Ok(None) if Instant::now() < deadline => {
-                    let _ = self.ports.wake.wait(Duration::from_millis(20));
-                }
-                _ => {
-                    tracing::warn!(
-                        "the recorder (pid {}) did not close its file in time: killing it",
-                        recorder.pid
-                    );
-                    let _ = recorder.child.kill();
-                    let _ = recorder.child.wait();
-                    self.monitor.event(
-                        "recorder-killed",
-                        "recorder",
-                        None,
-                        format!(
-                            "pid {} did not close its file within record.close_timeout_ms",
-                            recorder.pid
-                        ),
-                    );
-                    return;
-                }
-            }
+    /// Starts the optional processes that are due (at the start, or a restart), notes
+    /// their exits. Called on every turn of the loop.
+    fn supervise_optional(&mut self) {
+        let now = self.clock.now();
+        for i in 0..self.optional.len() {
+            let command = self.optional[i].wants_start(now).then(|| {
+                let process = &self.optional[i];
+                let mut command = self.child_command(&process.binary());
+                command.args(process.args());
+                command
+            });
+            self.optional[i].supervise(command, now, self.monitor);
         }
     }
 
@@ -913,11 +765,7 @@ impl<'m> Supervisor<'m> {
 
     /// The main loop; returns whether it was interrupted.
     fn supervise(&mut self, shutdown: &Shutdown) -> anyhow::Result<bool> {
-        if let Some(bin) = &self.ros2_binary {
-            let command = self.child_command(bin);
-            self.ros2 = outputs::Output::start(command, bin, self.monitor);
-        }
-        self.start_recorder()?;
+        self.supervise_optional();
         for stage in [
             StageKind::LineDetector,
             StageKind::Matcher,
@@ -927,12 +775,15 @@ impl<'m> Supervisor<'m> {
             self.spawn(stage, detector, false)?;
         }
         let startup = Duration::from_millis(self.config.supervisor.startup_timeout_ms);
-        let waiting_since = Instant::now();
+        let mut waiting = Timeout::new(startup);
+        waiting.expired(self.clock.now());
         let mut source_started = false;
-        let mut drain_since: Option<Instant> = None;
-        let mut next_status = Instant::now();
-        let mut next_file = Instant::now();
+        let mut drain = Timeout::new(Duration::from_millis(
+            self.config.supervisor.drain_timeout_ms,
+        ));
         let status_every = Duration::from_millis(self.config.supervisor.status_every_ms);
+        let mut status_line = Every::new(status_every);
+        let mut status_file = Every::new(STATUS_FILE_EVERY);
         loop {
             if shutdown.requested() {
                 tracing::info!("shutdown requested");
@@ -943,23 +794,23 @@ impl<'m> Supervisor<'m> {
             self.handle_poses()?;
             self.handle_requests()?;
             self.check_processes(shutdown)?;
-            self.supervise_link();
+            self.supervise_optional();
             if !source_started {
-                let outputs_settled = self
-                    .ros2
-                    .as_mut()
-                    .is_none_or(|o| o.settled(startup, self.monitor));
-                if outputs_settled
+                let now = self.clock.now();
+                let mut optional_settled = true;
+                for process in &mut self.optional {
+                    optional_settled &= process.settled(now, self.monitor);
+                }
+                if optional_settled
                     && self.all_ready(&[
                         StageKind::LineDetector,
                         StageKind::Matcher,
                         StageKind::PoseEstimator,
                     ])
-                    && self.recorder_settled()
                 {
                     self.spawn(StageKind::FrameSource, None, false)?;
                     source_started = true;
-                } else if waiting_since.elapsed() > startup {
+                } else if waiting.expired(now) {
                     bail!(
                         "stages not ready after {:?}: {}",
                         startup,
@@ -976,38 +827,17 @@ impl<'m> Supervisor<'m> {
                 tracing::info!("every frame accounted for");
                 return Ok(false);
             }
-            if self.monitor.source_done() {
-                let since = *drain_since.get_or_insert_with(Instant::now);
-                if since.elapsed() > Duration::from_millis(self.config.supervisor.drain_timeout_ms)
-                {
-                    tracing::warn!("drain timeout: frames still missing are recorded as missing");
-                    return Ok(false);
-                }
+            let now = self.clock.now();
+            if self.monitor.source_done() && drain.expired(now) {
+                tracing::warn!("drain timeout: frames still missing are recorded as missing");
+                return Ok(false);
             }
-            if Instant::now() >= next_file {
+            if status_file.due(now) {
                 self.write_status();
-                next_file = Instant::now() + Duration::from_millis(200);
             }
-            if self.options.live_status
-                && status_every > Duration::ZERO
-                && Instant::now() >= next_status
-            {
+            if self.options.live_status && status_every > Duration::ZERO && status_line.due(now) {
                 println!("{}", self.monitor.status_line());
-                next_status = Instant::now() + status_every;
             }
-        }
-    }
-
-    /// Starts, or restarts, the link's process when due.
-    fn supervise_link(&mut self) {
-        if let Some(mut link) = self.link.take() {
-            let command = link.wants_start().then(|| {
-                let mut command = self.child_command(link.binary());
-                command.arg("--run-dir").arg(&self.run_dir);
-                command
-            });
-            link.supervise(command, &self.config.supervisor, self.monitor);
-            self.link = Some(link);
         }
     }
 
@@ -1024,24 +854,21 @@ impl<'m> Supervisor<'m> {
             let Some(&report) = message.payload().first() else {
                 continue;
             };
-            if let Some(output) = self.ros2.as_mut().filter(|o| o.pid() == report.pid) {
+            if let Some(process) = self
+                .optional
+                .iter_mut()
+                .find(|o| o.pid() == Some(report.pid))
+            {
                 if report.kind() == Some(StatusKind::Ready) {
-                    output.set_ready();
+                    process.set_ready();
                 }
                 continue;
             }
-            if report.stage() == Some(StageKind::Recorder) {
-                if let Some(recorder) = self.recorder.as_mut().filter(|r| r.pid == report.pid)
-                    && report.kind() == Some(StatusKind::Ready)
-                {
-                    recorder.ready = true;
-                }
-                continue;
-            }
+            let now = self.clock.now();
             let Some(process) = self.process_mut(report.pid) else {
                 continue;
             };
-            process.last_seen = Instant::now();
+            process.last_seen = now;
             let (stage, standby) = (process.stage, process.standby);
             match report.kind() {
                 Some(StatusKind::Ready) => {
@@ -1159,6 +986,27 @@ impl<'m> Supervisor<'m> {
                     0,
                 )?;
             }
+            // The detector policy waits while a swap is under way (its own or one asked for).
+            if self.swap_to.is_none()
+                && let Some(switch) = self
+                    .detector_policy
+                    .as_mut()
+                    .and_then(|p| p.observe(message.header(), self.detector))
+                && switch.to != self.detector
+            {
+                self.monitor.event(
+                    switch.event,
+                    "line-detector",
+                    Some(message.header().frame_id),
+                    format!(
+                        "{} -> {}: {}",
+                        self.detector.name(),
+                        switch.to.name(),
+                        switch.reason
+                    ),
+                );
+                self.start_swap(switch.to)?;
+            }
         }
         Ok(())
     }
@@ -1188,30 +1036,28 @@ impl<'m> Supervisor<'m> {
                     None,
                     format!("{} -> {}", self.detector.name(), kind.name()),
                 );
-                self.swap_to = Some(kind);
-                self.spawn(StageKind::LineDetector, Some(kind), true)?;
+                self.start_swap(kind)?;
             }
         }
         Ok(())
     }
 
+    /// Starts a standby detector of `kind`; the running one hands over to it.
+    fn start_swap(&mut self, kind: DetectorKind) -> anyhow::Result<()> {
+        self.swap_to = Some(kind);
+        self.spawn(StageKind::LineDetector, Some(kind), true)
+    }
+
     fn check_processes(&mut self, shutdown: &Shutdown) -> anyhow::Result<()> {
-        if let Some(output) = &mut self.ros2
-            && !output.alive(self.monitor)
-        {
-            self.ros2 = None;
-        }
-        self.check_recorder();
-        let hang = Duration::from_millis(self.config.supervisor.hang_timeout_ms);
-        let startup = Duration::from_millis(self.config.supervisor.startup_timeout_ms);
+        let now = self.clock.now();
         let mut exited = Vec::new();
         for (i, p) in self.processes.iter_mut().enumerate() {
             match p.child.try_wait() {
                 Ok(Some((status, success))) => exited.push((i, status, success)),
                 Ok(None) => {
-                    let silent = p.last_seen.elapsed();
-                    let limit = if p.ready { hang } else { startup };
-                    if !p.retiring && silent > limit {
+                    if !p.retiring
+                        && let Some(silent) = self.watchdog.overdue(p.last_seen, now, p.ready)
+                    {
                         tracing::warn!(
                             "{} (pid {}) silent for {silent:?}: killing it",
                             p.stage,
@@ -1245,7 +1091,7 @@ impl<'m> Supervisor<'m> {
                     p.pid
                 );
             }
-            let silent = p.last_seen.elapsed() > if p.ready { hang } else { startup };
+            let silent = self.watchdog.overdue(p.last_seen, now, p.ready).is_some();
             let kind = if silent { "hang" } else { "crash" };
             self.monitor.event(
                 kind,
@@ -1254,7 +1100,7 @@ impl<'m> Supervisor<'m> {
                 format!(
                     "pid {} {status} after {:.1} s",
                     p.pid,
-                    p.started.elapsed().as_secs_f64()
+                    now.saturating_sub(p.started).as_secs_f64()
                 ),
             );
             if p.standby {
@@ -1267,43 +1113,26 @@ impl<'m> Supervisor<'m> {
                 self.swap_to = None;
                 continue;
             }
-            let slot = &mut self.restarts[stage_slot(p.stage)];
-            if slot.count >= self.config.supervisor.max_restarts {
+            if let Err(given_up) = self.restarts[stage_slot(p.stage)].schedule(now) {
                 bail!(
                     "{} died {} times (restart limit {}): giving up",
                     p.stage,
-                    slot.count + 1,
-                    self.config.supervisor.max_restarts
+                    given_up.deaths,
+                    given_up.limit
                 );
             }
-            let backoff = self
-                .config
-                .supervisor
-                .restart_backoff_ms
-                .saturating_mul(1 << slot.count.min(16))
-                .min(self.config.supervisor.restart_backoff_max_ms);
-            slot.due = Some(Instant::now() + Duration::from_millis(backoff));
             self.write_status();
         }
         for stage in StageKind::PROCESSING {
-            let slot = self.restarts[stage_slot(stage)];
-            if let Some(due) = slot.due
-                && Instant::now() >= due
-            {
-                self.restarts[stage_slot(stage)] = Restarts {
-                    count: slot.count + 1,
-                    due: None,
-                };
+            let slot = &mut self.restarts[stage_slot(stage)];
+            if let Some(count) = slot.take_due(now) {
+                let limit = slot.limit();
                 let detector = (stage == StageKind::LineDetector).then_some(self.detector);
                 self.monitor.event(
                     "restart",
                     stage.name(),
                     None,
-                    format!(
-                        "restart {} of {}",
-                        slot.count + 1,
-                        self.config.supervisor.max_restarts
-                    ),
+                    format!("restart {count} of {limit}"),
                 );
                 self.spawn(stage, detector, false)?;
             }
@@ -1318,12 +1147,13 @@ impl<'m> Supervisor<'m> {
                 tracing::warn!("shutdown command to {stage} not sent: {e}");
             }
         }
-        let grace =
-            Instant::now() + Duration::from_millis(self.config.supervisor.shutdown_grace_ms);
+        let grace = self.clock.now().saturating_add(Duration::from_millis(
+            self.config.supervisor.shutdown_grace_ms,
+        ));
         while !self.processes.is_empty() {
             self.processes
                 .retain_mut(|p| !matches!(p.child.try_wait(), Ok(Some(_))));
-            if Instant::now() >= grace {
+            if self.clock.now() >= grace {
                 for p in &mut self.processes {
                     tracing::warn!(
                         "{} (pid {}) did not exit in time: killing it",
@@ -1338,24 +1168,85 @@ impl<'m> Supervisor<'m> {
             }
             let _ = self.ports.wake.wait(Duration::from_millis(20));
         }
-        // The outputs last: they forward what the stages published to the end.
-        if let Some(link) = &mut self.link {
-            link.stop(Duration::from_millis(
-                self.config.supervisor.shutdown_grace_ms,
-            ));
+        // The optional processes last: they forward and record what the stages published
+        // to the end; the recorder, started first, stops last.
+        for process in self.optional.iter_mut().rev() {
+            if let (StopBy::Command(stage), Some(pid)) = (process.rule().stop, process.pid())
+                && let Err(e) = self.ports.send(stage, pid, Command::Shutdown, 0, 0)
+            {
+                tracing::warn!("shutdown command to {} not sent: {e}", process.rule().name);
+            }
+            process.stop(self.clock.as_ref(), self.monitor);
         }
-        if let Some(output) = self.ros2.take() {
-            output.stop(Duration::from_millis(
-                self.config.supervisor.shutdown_grace_ms,
-            ));
-        }
-        self.stop_recorder();
         let cleaned = self.bus.remove_stale_resources();
         if cleaned > 0 {
             tracing::info!("removed the shared memory of {cleaned} killed stage processes");
         }
         self.write_status();
     }
+}
+
+/// How often `status.json` is rewritten while the run goes.
+const STATUS_FILE_EVERY: Duration = Duration::from_millis(200);
+
+/// The optional processes `config` turns on, in the order they start (the recorder, the
+/// ROS 2 output, the link); a binary the config needs and that is not there is refused.
+fn optional_processes(
+    config: &PipelineConfig,
+    mode: Mode,
+    bin_dir: &Path,
+    run_dir: &Path,
+    monitor: &mut Monitor,
+) -> anyhow::Result<Vec<OptionalProcess>> {
+    let supervisor = &config.supervisor;
+    let grace = Duration::from_millis(supervisor.shutdown_grace_ms);
+    let in_run_dir = vec!["--run-dir".into(), run_dir.as_os_str().to_owned()];
+    let mut processes = Vec::new();
+    if config.record.mcap && mode == Mode::Threads {
+        tracing::warn!(
+            "[record] mcap = true is ignored with --single-process: the recorder subscribes over shared memory"
+        );
+        monitor.event(
+            "recorder-off",
+            "recorder",
+            None,
+            "no recording in single-process mode".to_string(),
+        );
+    } else if config.record.mcap {
+        optional::require_binary(&optional::RECORDER, bin_dir, "[record] mcap = true")?;
+        tracing::info!("recording into {}", config.record.file(run_dir).display());
+        let settings = optional::Settings {
+            bin_dir: bin_dir.to_path_buf(),
+            args: in_run_dir.clone(),
+            ready_timeout: Duration::from_millis(config.record.startup_timeout_ms),
+            grace: Duration::from_millis(config.record.close_timeout_ms),
+        };
+        processes.push(OptionalProcess::new(
+            optional::RECORDER,
+            settings,
+            supervisor,
+        ));
+    }
+    if config.ros2.enabled {
+        optional::require_binary(&optional::ROS2, bin_dir, "ros2.enabled = true")?;
+        let settings = optional::Settings {
+            bin_dir: bin_dir.to_path_buf(),
+            args: Vec::new(),
+            ready_timeout: Duration::from_millis(supervisor.startup_timeout_ms),
+            grace,
+        };
+        processes.push(OptionalProcess::new(optional::ROS2, settings, supervisor));
+    }
+    if config.link.enabled && mode == Mode::Processes {
+        let settings = optional::Settings {
+            bin_dir: bin_dir.to_path_buf(),
+            args: in_run_dir,
+            ready_timeout: Duration::ZERO,
+            grace,
+        };
+        processes.push(OptionalProcess::new(optional::LINK, settings, supervisor));
+    }
+    Ok(processes)
 }
 
 /// The detector wire code (re-exported for `linetrack ctl`).

@@ -102,7 +102,8 @@ pub struct Monitor {
     ground_truth: Vec<StampedPose>,
 }
 
-fn stage_ms(header: &FrameHeader, i: usize) -> f64 {
+/// Milliseconds stage `i` (its stamp index) took on the frame; NaN when a stamp is missing.
+pub(crate) fn stage_ms(header: &FrameHeader, i: usize) -> f64 {
     let s = header.stamps[i];
     if s.start_ns == 0 || s.end_ns < s.start_ns {
         f64::NAN

@@ -605,6 +605,11 @@ fn pubsub_service<P: Record>(
         .map_err(|e| setup("publish-subscribe service", service_name)(format!("{e:?}")))
 }
 
+/// Notifiers one stage's wake service takes: one per outlet of a topic the stage consumes,
+/// in every process of the run. The recorder's and the supervisor's are the busiest (the
+/// status outlet of every process, a standby detector's and `linetrack ctl`'s too).
+const MAX_NOTIFIERS: usize = 32;
+
 fn event_service(
     node: &Node<ipc::Service>,
     service_name: &str,
@@ -614,7 +619,7 @@ fn event_service(
     node.service_builder(&name)
         .event()
         .max_listeners(4)
-        .max_notifiers(16)
+        .max_notifiers(MAX_NOTIFIERS)
         .open_or_create()
         .map_err(|e| setup("event service", service_name)(format!("{e:?}")))
 }

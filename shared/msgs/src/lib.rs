@@ -123,19 +123,22 @@ impl Topic {
     /// The stages that subscribe, and so are woken when a message is published.
     pub fn consumers(self) -> &'static [StageKind] {
         use StageKind::*;
+        // The recorder reads every topic but control's commands to others; it is woken like
+        // a stage (a notification costs the publisher no wait) and sleeps otherwise.
         match self {
-            Topic::Frames => &[LineDetector, Matcher, PoseEstimator],
-            Topic::Segments => &[Matcher],
-            Topic::Tracks => &[PoseEstimator],
-            Topic::Poses => &[Supervisor],
-            Topic::Rig => &[PoseEstimator],
-            Topic::Status => &[Supervisor],
+            Topic::Frames => &[LineDetector, Matcher, PoseEstimator, Recorder],
+            Topic::Segments => &[Matcher, Recorder],
+            Topic::Tracks => &[PoseEstimator, Recorder],
+            Topic::Poses => &[Supervisor, Recorder],
+            Topic::Rig => &[PoseEstimator, Recorder],
+            Topic::Status => &[Supervisor, Recorder],
             Topic::Control => &[
                 FrameSource,
                 LineDetector,
                 Matcher,
                 PoseEstimator,
                 Supervisor,
+                Recorder,
             ],
         }
     }

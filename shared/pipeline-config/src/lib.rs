@@ -249,6 +249,40 @@ impl Default for FallbackConfig {
     }
 }
 
+/// When the supervisor hot-swaps the line detector from LSD to a faster one under budget
+/// pressure, and back (`[detector_fallback]`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct DetectorFallbackConfig {
+    /// The off switch: false leaves the detector to the config and `linetrack ctl`.
+    pub enabled: bool,
+    /// The faster detector LSD gives way to (not LSD).
+    pub to: DetectorKind,
+    /// Consecutive LSD frames over `budget.line_detector_ms` before the swap.
+    pub bad_frames: u32,
+    /// Consecutive frames of the faster detector within `recover_budget_fraction` of the
+    /// budget before the swap back to LSD.
+    pub recover_frames: u32,
+    /// The fraction (< 1: the hysteresis band) of `budget.line_detector_ms` the faster
+    /// detector must stay within for the swap back.
+    pub recover_budget_fraction: f64,
+    /// Frames between two swaps of this policy, at least.
+    pub min_interval_frames: u64,
+}
+
+impl Default for DetectorFallbackConfig {
+    fn default() -> Self {
+        Self {
+            enabled: true,
+            to: DetectorKind::Fld,
+            bad_frames: 5,
+            recover_frames: 40,
+            recover_budget_fraction: 0.25,
+            min_interval_frames: 200,
+        }
+    }
+}
+
 /// Matcher stage.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -577,6 +611,23 @@ fn in_range<T: PartialOrd + std::fmt::Debug>(
     }
 }
 
+/// The keys of a policy that switches with hysteresis (the matcher's fallback, the
+/// detector's): its streaks of frames and its recovery fraction of a budget.
+fn check_hysteresis(
+    table: &str,
+    streaks: &[(&str, u32)],
+    recover_budget_fraction: f64,
+) -> Result<(), String> {
+    for &(key, frames) in streaks {
+        in_range(&format!("{table}.{key}"), frames, STREAK)?;
+    }
+    in_range(
+        &format!("{table}.recover_budget_fraction"),
+        recover_budget_fraction,
+        RECOVER_BUDGET_FRACTION,
+    )
+}
+
 /// The whole pipeline.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -589,6 +640,8 @@ pub struct PipelineConfig {
     pub detector: DetectorKind,
     /// Detect the left and the right image at the same time, on two threads.
     pub detect_sides_in_parallel: bool,
+    /// The automatic LSD → faster detector swap under budget pressure.
+    pub detector_fallback: DetectorFallbackConfig,
     /// Matcher policy.
     pub matcher: MatcherConfig,
     /// Budgets and drop policy.
@@ -619,6 +672,7 @@ impl Default for PipelineConfig {
             camera: CameraConfig::default(),
             detector: DetectorKind::EdgeLines,
             detect_sides_in_parallel: false,
+            detector_fallback: DetectorFallbackConfig::default(),
             matcher: MatcherConfig::default(),
             budget: BudgetConfig::default(),
             supervisor: SupervisorConfig::default(),
@@ -738,13 +792,14 @@ impl PipelineConfig {
             f.min_observations,
             0..=MAX_MATCHES,
         )?;
-        in_range("matcher.fallback.bad_frames", f.bad_frames, STREAK)?;
-        in_range("matcher.fallback.probe_every", f.probe_every, STREAK)?;
-        in_range("matcher.fallback.recover_probes", f.recover_probes, STREAK)?;
-        in_range(
-            "matcher.fallback.recover_budget_fraction",
+        check_hysteresis(
+            "matcher.fallback",
+            &[
+                ("bad_frames", f.bad_frames),
+                ("probe_every", f.probe_every),
+                ("recover_probes", f.recover_probes),
+            ],
             f.recover_budget_fraction,
-            RECOVER_BUDGET_FRACTION,
         )?;
         in_range(
             "matcher.fallback.recover_stereo_matches",
@@ -752,6 +807,26 @@ impl PipelineConfig {
             f.min_stereo_matches.saturating_add(1)..=MAX_MATCHES,
         )
         .map_err(|e| format!("{e}: above min_stereo_matches, that gap is the hysteresis"))?;
+        let d = &self.detector_fallback;
+        if d.to == DetectorKind::Lsd {
+            return Err(
+                "detector_fallback.to = \"lsd\": the detector LSD gives way to must be a faster one (fld or edgelines)"
+                    .to_string(),
+            );
+        }
+        check_hysteresis(
+            "detector_fallback",
+            &[
+                ("bad_frames", d.bad_frames),
+                ("recover_frames", d.recover_frames),
+            ],
+            d.recover_budget_fraction,
+        )?;
+        in_range(
+            "detector_fallback.min_interval_frames",
+            d.min_interval_frames,
+            0..=MAX_FRAMES as u64,
+        )?;
         let s = &self.supervisor;
         in_range("supervisor.heartbeat_ms", s.heartbeat_ms, HEARTBEAT_MS)?;
         in_range(
@@ -829,6 +904,51 @@ mod tests {
         let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../configs/pipeline.toml");
         let shipped = PipelineConfig::from_file(&path).unwrap_or_else(|e| panic!("{e}"));
         assert_eq!(shipped, PipelineConfig::default());
+    }
+
+    #[test]
+    fn the_detector_fallback_is_range_checked_and_never_falls_back_to_lsd() {
+        let refused = |text: &str| {
+            PipelineConfig::from_toml_str(text, "x.toml")
+                .err()
+                .map(|e| e.to_string())
+                .unwrap_or_default()
+        };
+        for (text, key) in [
+            ("[detector_fallback]\nbad_frames = 0\n", "bad_frames = 0"),
+            (
+                "[detector_fallback]\nrecover_frames = 1001\n",
+                "recover_frames = 1001",
+            ),
+            (
+                "[detector_fallback]\nrecover_budget_fraction = 1.0\n",
+                "recover_budget_fraction = 1.0",
+            ),
+            (
+                "[detector_fallback]\nrecover_budget_fraction = nan\n",
+                "recover_budget_fraction = NaN",
+            ),
+            (
+                "[detector_fallback]\nmin_interval_frames = 1000000001\n",
+                "min_interval_frames = 1000000001",
+            ),
+        ] {
+            let err = refused(text);
+            assert!(
+                err.contains(&format!("detector_fallback.{key}")) && err.contains("out of range"),
+                "{text}: {err}"
+            );
+        }
+        let err = refused("[detector_fallback]\nto = \"lsd\"\n");
+        assert!(err.contains("detector_fallback.to"), "{err}");
+        assert!(refused("[detector_fallback]\nfrom = \"lsd\"\n").contains("unknown field"));
+        let config = PipelineConfig::from_toml_str(
+            "[detector_fallback]\nenabled = false\nto = \"edgelines\"\n",
+            "x.toml",
+        )
+        .unwrap_or_else(|e| panic!("{e}"));
+        assert!(!config.detector_fallback.enabled);
+        assert_eq!(config.detector_fallback.to, DetectorKind::EdgeLines);
     }
 
     #[test]

@@ -1,0 +1,293 @@
+//! The automatic detector policy (`[detector_fallback]`): LSD gives way to a faster
+//! detector when it misses its budget, and comes back with hysteresis.
+//!
+//! While the line detector runs LSD, `bad_frames` frames in a row over
+//! `budget.line_detector_ms` ask for a hot swap to `to` (FLD by default); while that one
+//! runs after such a swap, `recover_frames` frames in a row within `recover_budget_fraction`
+//! of the budget ask for LSD back; no swap of the policy comes within `min_interval_frames`
+//! frames of its last. The streaks are the matcher fallback's ([`Hysteresis`]). The
+//! detector's time is read from each frame's stamps, never from a clock, so tests inject
+//! it; a frame the detector did not process says nothing.
+
+use crate::fallback::Hysteresis;
+use crate::monitor::stage_ms;
+use linetrack_msgs::{FrameHeader, FrameStatus, StageKind};
+use linetrack_pipeline_config::DetectorFallbackConfig;
+use linetrack_stage_runtime::detector_from_code;
+use linetrack_vision::DetectorKind;
+
+/// The detector the policy watches for its budget.
+const SLOW: DetectorKind = DetectorKind::Lsd;
+
+/// A swap the policy asks for.
+#[derive(Debug, Clone, PartialEq)]
+pub struct DetectorSwitch {
+    /// The detector to swap to.
+    pub to: DetectorKind,
+    /// `detector-fallback` or `detector-recover` (its kind in `events.csv`).
+    pub event: &'static str,
+    /// Why, in words.
+    pub reason: String,
+}
+
+/// Watches the detector's time on each frame and decides when to swap.
+#[derive(Debug, Clone)]
+pub struct DetectorPolicy {
+    config: DetectorFallbackConfig,
+    budget_ms: f64,
+    /// Fallen back: the faster detector.
+    streaks: Hysteresis,
+}
+
+impl DetectorPolicy {
+    /// The policy of `config` against a detector budget of `budget_ms`; `None` when it is
+    /// switched off.
+    pub fn new(config: &DetectorFallbackConfig, budget_ms: f64) -> Option<Self> {
+        config.enabled.then(|| Self {
+            config: config.clone(),
+            budget_ms,
+            streaks: Hysteresis::new(
+                config.bad_frames,
+                config.recover_frames,
+                config.min_interval_frames,
+            ),
+        })
+    }
+
+    /// Takes one frame that reached the end while `running` is the running detector;
+    /// returns a swap when one is due. Only frames of the running detector count (not
+    /// those still on their way from the one before a swap).
+    pub fn observe(
+        &mut self,
+        header: &FrameHeader,
+        running: DetectorKind,
+    ) -> Option<DetectorSwitch> {
+        if running == SLOW && self.streaks.fallen_back() {
+            // LSD runs again without this policy (`linetrack ctl`, an abandoned swap):
+            // watch it afresh.
+            self.streaks.reset();
+        }
+        let index = StageKind::LineDetector.stamp_index()?;
+        if header.stamps[index].end_ns == 0
+            || !detected(header, index)
+            || detector_from_code(header.detector)? != running
+        {
+            return None;
+        }
+        let ms = stage_ms(header, index);
+        let kind = running;
+        let budget = self.budget_ms;
+        let c = &self.config;
+        if kind == SLOW {
+            let over = ms > budget;
+            return self
+                .streaks
+                .observe(header.frame_id, over)
+                .then(|| DetectorSwitch {
+                    to: c.to,
+                    event: "detector-fallback",
+                    reason: format!(
+                        "{} over its {budget:.1} ms budget on {} frames in a row (last {ms:.1} ms)",
+                        SLOW.name(),
+                        c.bad_frames
+                    ),
+                });
+        }
+        if kind != c.to || !self.streaks.fallen_back() {
+            return None;
+        }
+        let bar = c.recover_budget_fraction * budget;
+        let within = ms <= bar;
+        self.streaks
+            .observe(header.frame_id, within)
+            .then(|| DetectorSwitch {
+                to: SLOW,
+                event: "detector-recover",
+                reason: format!(
+                    "{} within {bar:.1} ms ({} of the {budget:.1} ms budget) on {} frames in a row (last {ms:.1} ms)",
+                    c.to.name(),
+                    c.recover_budget_fraction,
+                    c.recover_frames
+                ),
+            })
+    }
+}
+
+/// Whether the detector (stamp index `detector`) detected the frame: not a frame dropped
+/// before it or by it (its stamps then time the drop, not a detection).
+fn detected(header: &FrameHeader, detector: usize) -> bool {
+    header.frame_status() == FrameStatus::Ok
+        || StageKind::from_code(header.dropped_by)
+            .and_then(|s| s.stamp_index())
+            .is_some_and(|by| by > detector)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use linetrack_stage_runtime::detector_code;
+
+    /// Frame `id` detected by `kind` in `ms` milliseconds (from its stamps).
+    fn frame(id: u64, kind: DetectorKind, ms: f64) -> FrameHeader {
+        let mut h = FrameHeader::new(id, 0, 0);
+        h.detector = detector_code(kind);
+        h.stamps[1].start_ns = 5_000_000_000 + id * 50_000_000;
+        h.stamps[1].end_ns = h.stamps[1].start_ns + (ms * 1e6) as u64;
+        h
+    }
+
+    fn policy(min_interval_frames: u64) -> DetectorPolicy {
+        DetectorPolicy::new(
+            &DetectorFallbackConfig {
+                bad_frames: 3,
+                recover_frames: 4,
+                recover_budget_fraction: 0.5,
+                min_interval_frames,
+                ..DetectorFallbackConfig::default()
+            },
+            50.0,
+        )
+        .unwrap_or_else(|| panic!("enabled by default"))
+    }
+
+    /// Feeds `(detector, ms)` frames from `first` on, each while its detector runs; the
+    /// ids of the frames that switched.
+    fn run(
+        p: &mut DetectorPolicy,
+        first: u64,
+        frames: &[(DetectorKind, f64)],
+    ) -> Vec<(u64, DetectorSwitch)> {
+        frames
+            .iter()
+            .zip(first..)
+            .filter_map(|(&(kind, ms), id)| p.observe(&frame(id, kind, ms), kind).map(|s| (id, s)))
+            .collect()
+    }
+
+    const LSD: DetectorKind = DetectorKind::Lsd;
+    const FLD: DetectorKind = DetectorKind::Fld;
+
+    #[test]
+    fn lsd_over_budget_on_n_frames_in_a_row_swaps_to_fld_and_not_before() {
+        let mut p = policy(0);
+        // Two over, one within (exactly the budget is within): no swap.
+        assert!(run(&mut p, 0, &[(LSD, 60.0), (LSD, 51.0), (LSD, 50.0)]).is_empty());
+        let switches = run(&mut p, 3, &[(LSD, 55.0), (LSD, 80.0), (LSD, 50.1)]);
+        assert_eq!(switches.len(), 1);
+        let (id, s) = &switches[0];
+        assert_eq!((*id, s.to, s.event), (5, FLD, "detector-fallback"));
+        assert!(
+            s.reason
+                .contains("lsd over its 50.0 ms budget on 3 frames in a row (last 50.1 ms)"),
+            "{}",
+            s.reason
+        );
+        // LSD frames still on their way once FLD runs change nothing.
+        for id in 6..16 {
+            assert_eq!(p.observe(&frame(id, LSD, 90.0), FLD), None);
+        }
+        assert!(run(&mut p, 16, &[(FLD, 12.0); 3]).is_empty(), "3 of 4");
+    }
+
+    #[test]
+    fn fld_comes_back_only_after_m_frames_within_the_fraction() {
+        let mut p = policy(0);
+        run(&mut p, 0, &[(LSD, 60.0); 3]);
+        // Within the budget but above half of it: never back (the hysteresis band).
+        assert!(run(&mut p, 3, &[(FLD, 30.0); 50]).is_empty());
+        // Three within, one above: the count starts again.
+        let mixed = [(FLD, 20.0), (FLD, 25.0), (FLD, 10.0), (FLD, 25.1)];
+        assert!(run(&mut p, 53, &mixed).is_empty());
+        let switches = run(&mut p, 57, &[(FLD, 12.0); 4]);
+        assert_eq!(switches.len(), 1);
+        let (id, s) = &switches[0];
+        assert_eq!((*id, s.to, s.event), (60, LSD, "detector-recover"));
+        assert!(
+            s.reason.contains(
+                "fld within 25.0 ms (0.5 of the 50.0 ms budget) on 4 frames in a row (last 12.0 ms)"
+            ),
+            "{}",
+            s.reason
+        );
+    }
+
+    #[test]
+    fn a_load_around_the_budget_swaps_at_most_once_per_interval() {
+        // LSD alternating around its budget in runs of 3 over, FLD always fast: without an
+        // interval it would swap back and forth every few frames.
+        let load = |p: &mut DetectorPolicy| {
+            let mut detector = LSD;
+            let mut switches = Vec::new();
+            for id in 0..400u64 {
+                let ms = match detector {
+                    LSD if id % 4 == 3 => 40.0,
+                    LSD => 60.0,
+                    _ => 5.0,
+                };
+                if let Some(s) = p.observe(&frame(id, detector, ms), detector) {
+                    detector = s.to;
+                    switches.push(id);
+                }
+            }
+            switches
+        };
+        let free = load(&mut policy(0));
+        assert!(free.len() > 50, "{free:?}");
+        let spaced = load(&mut policy(100));
+        assert!(!spaced.is_empty());
+        assert!(spaced.windows(2).all(|w| w[1] - w[0] >= 100), "{spaced:?}");
+        assert!(spaced.len() <= 4, "{spaced:?}");
+    }
+
+    #[test]
+    fn frames_the_detector_dropped_say_nothing_and_those_dropped_after_it_count() {
+        // Overloaded LSD: it detects every third frame (slowly) and drops the ones that
+        // queued behind meanwhile (in no time); the matcher drops the detected ones late.
+        let mut p = policy(0);
+        let mut switches = Vec::new();
+        for id in 0..9u64 {
+            let mut h = frame(id, LSD, if id % 3 == 0 { 150.0 } else { 0.001 });
+            h.status = if id % 3 == 0 {
+                FrameStatus::DroppedLate
+            } else {
+                FrameStatus::DroppedBehind
+            } as u32;
+            h.dropped_by = if id % 3 == 0 {
+                StageKind::Matcher
+            } else {
+                StageKind::LineDetector
+            }
+            .code();
+            switches.extend(p.observe(&h, LSD).map(|s| (id, s.to)));
+        }
+        assert_eq!(switches, [(6, FLD)], "the third detected frame");
+    }
+
+    #[test]
+    fn other_detectors_and_unprocessed_frames_say_nothing_and_off_means_off() {
+        let mut p = policy(0);
+        assert!(run(&mut p, 0, &[(DetectorKind::EdgeLines, 500.0); 20]).is_empty());
+        assert!(
+            run(&mut p, 20, &[(FLD, 500.0); 20]).is_empty(),
+            "not fallen back"
+        );
+        let mut unprocessed = frame(40, LSD, 90.0);
+        unprocessed.stamps[1].end_ns = 0;
+        for _ in 0..10 {
+            assert_eq!(p.observe(&unprocessed, LSD), None);
+        }
+        // A fallback, then LSD back by `linetrack ctl`: watched afresh.
+        assert_eq!(run(&mut p, 41, &[(LSD, 60.0); 3]).len(), 1);
+        assert_eq!(run(&mut p, 44, &[(LSD, 60.0); 3]).len(), 1);
+        assert!(
+            DetectorPolicy::new(
+                &DetectorFallbackConfig {
+                    enabled: false,
+                    ..DetectorFallbackConfig::default()
+                },
+                50.0
+            )
+            .is_none()
+        );
+    }
+}
