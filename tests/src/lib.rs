@@ -191,23 +191,7 @@ fn launch_with(
     env: &[(&str, &str)],
 ) -> Run {
     let prefix = prefix.to_string();
-    let run_dir = dir.join("run");
-    let config = dir.join("pipeline.toml");
-    // The tests check LSD's hot swap to FLD and LBD's fallback to l1: they pin the detector
-    // and the matcher policy (the shipped defaults are edgelines and l1). The automatic
-    // detector policy would swap LSD away on a loaded machine: only a test that names it
-    // has it.
-    let policy = if extra.contains("[detector_fallback]") {
-        ""
-    } else {
-        "[detector_fallback]\nenabled = false\n"
-    };
-    let text = format!(
-        "detector = \"lsd\"\n{policy}[matcher]\nmode = \"auto\"\n{extra}\n[source]\nsequence = {:?}\nrate_hz = 10.0\n[output]\nrun_dir = {:?}\n",
-        sequence.display().to_string(),
-        run_dir.display().to_string()
-    );
-    std::fs::write(&config, text).unwrap_or_else(|e| panic!("{e}"));
+    let (config, run_dir) = write_config(dir, sequence, extra);
     let child = Command::new(bin_dir().join("linetrack"))
         .args(["run", "--quiet"])
         .args(args)
@@ -225,6 +209,29 @@ fn launch_with(
         run_dir,
         prefix,
     }
+}
+
+/// Writes `dir/pipeline.toml` for `sequence`: `extra` TOML appended to the test defaults
+/// (LSD, the LBD→ℓ1 policy, 10 Hz), the run folder `dir/run`. Returns both paths.
+pub fn write_config(dir: &Path, sequence: &Path, extra: &str) -> (PathBuf, PathBuf) {
+    let run_dir = dir.join("run");
+    let config = dir.join("pipeline.toml");
+    // The tests check LSD's hot swap to FLD and LBD's fallback to l1: they pin the detector
+    // and the matcher policy (the shipped defaults are edgelines and l1). The automatic
+    // detector policy would swap LSD away on a loaded machine: only a test that names it
+    // has it.
+    let policy = if extra.contains("[detector_fallback]") {
+        ""
+    } else {
+        "[detector_fallback]\nenabled = false\n"
+    };
+    let text = format!(
+        "detector = \"lsd\"\n{policy}[matcher]\nmode = \"auto\"\n{extra}\n[source]\nsequence = {:?}\nrate_hz = 10.0\n[output]\nrun_dir = {:?}\n",
+        sequence.display().to_string(),
+        run_dir.display().to_string()
+    );
+    std::fs::write(&config, text).unwrap_or_else(|e| panic!("{e}"));
+    (config, run_dir)
 }
 
 impl Run {

@@ -1,0 +1,177 @@
+//! Two users' runs on one machine. iceoryx2's defaults put every user's bookkeeping in one
+//! `/tmp/iceoryx2` and leave its management segment in /dev/shm world-writable: the first
+//! user locked the others out, and any local user could write into another's run. Here a
+//! second user's pipeline (user `nobody`) starts while ours runs; it completes with its own
+//! shared memory and its own root folder, and it can write into neither of ours.
+//!
+//! Starting a process as another user needs root (CI runs the suite as root).
+
+use linetrack_e2e::*;
+use std::os::unix::fs::{MetadataExt, PermissionsExt};
+use std::os::unix::process::CommandExt;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Stdio};
+use std::time::Duration;
+
+const FRAMES: usize = 40;
+const RUN_TIMEOUT: Duration = Duration::from_secs(120);
+/// The other user.
+const NOBODY: u32 = 65534;
+/// Every frame processed however late (the drop policy has its own tests).
+const CONFIG: &str = "[supervisor]\nrestart_backoff_ms = 100\nhang_timeout_ms = 2000\ndrain_timeout_ms = 4000\nstatus_every_ms = 0\n[budget]\ndrop_late = false\n";
+/// What `linetrack run` needs of the workspace's binaries for a plain run.
+const BINARIES: [&str; 5] = [
+    "linetrack",
+    "linetrack-frame-source",
+    "linetrack-line-detector",
+    "linetrack-matcher",
+    "linetrack-pose-estimator",
+];
+
+/// `program` as user `nobody`, with the environment of a fresh login (no `XDG_RUNTIME_DIR`,
+/// no `LINETRACK_IPC_*`), in `cwd`.
+fn as_nobody(program: &Path, cwd: &Path) -> Command {
+    let me = std::fs::metadata("/proc/self").map_or(u32::MAX, |m| m.uid());
+    assert_eq!(
+        me, 0,
+        "this test starts a second user's processes (user nobody, uid {NOBODY}): run it as root"
+    );
+    let mut command = Command::new(program);
+    command
+        .uid(NOBODY)
+        .gid(NOBODY)
+        .env_clear()
+        .env("PATH", "/usr/bin:/bin")
+        .env("HOME", cwd)
+        .current_dir(cwd)
+        .stdin(Stdio::null());
+    command
+}
+
+/// Whether user `nobody` can append 16 bytes to `file` (`sh`'s `>>`).
+fn nobody_can_write(file: &Path, cwd: &Path) -> bool {
+    as_nobody(Path::new("/bin/sh"), cwd)
+        .args(["-c", "printf 0123456789abcdef >> \"$1\"", "sh"])
+        .arg(file)
+        .stderr(Stdio::null())
+        .status()
+        .unwrap_or_else(|e| panic!("sh as nobody: {e}"))
+        .success()
+}
+
+/// The files in /dev/shm whose names start with `prefix`.
+fn shared_memory_files(prefix: &str) -> Vec<PathBuf> {
+    std::fs::read_dir("/dev/shm")
+        .unwrap_or_else(|e| panic!("/dev/shm: {e}"))
+        .flatten()
+        .filter(|e| e.file_name().to_string_lossy().starts_with(prefix))
+        .map(|e| e.path())
+        .collect()
+}
+
+/// A folder everyone may read and enter (the other user's binaries and sequence).
+fn open_dir(dir: &Path) {
+    std::fs::create_dir_all(dir).unwrap_or_else(|e| panic!("{}: {e}", dir.display()));
+    std::fs::set_permissions(dir, std::fs::Permissions::from_mode(0o755))
+        .unwrap_or_else(|e| panic!("{}: {e}", dir.display()));
+}
+
+/// Asserts every file is `owner`'s and readable and writable by its owner only.
+fn assert_private(files: &[PathBuf], owner: u32) {
+    for file in files {
+        let meta =
+            std::fs::symlink_metadata(file).unwrap_or_else(|e| panic!("{}: {e}", file.display()));
+        assert_eq!(meta.uid(), owner, "{}", file.display());
+        assert_eq!(
+            meta.mode() & 0o077,
+            0,
+            "{} is mode {:o}",
+            file.display(),
+            meta.mode() & 0o777
+        );
+    }
+}
+
+#[test]
+fn another_users_run_beside_ours_completes_and_cannot_write_into_ours() {
+    let dir = scratch("users");
+    let mut ours = start(&dir, &base_sequence(FRAMES), CONFIG);
+    ours.wait_for("3 frames", RUN_TIMEOUT, |s| s.frames >= 3);
+
+    // The other user's world, outside the build folder (which may sit in a private home).
+    let theirs_dir =
+        std::env::temp_dir().join(format!("linetrack-e2e-users-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&theirs_dir);
+    open_dir(&theirs_dir);
+    let bin = theirs_dir.join("bin");
+    open_dir(&bin);
+    for name in BINARIES {
+        std::fs::copy(bin_dir().join(name), bin.join(name))
+            .unwrap_or_else(|e| panic!("copying {name}: {e}"));
+    }
+    let sequence = sequence_copy(FRAMES, &theirs_dir);
+    let home = theirs_dir.join("home");
+    open_dir(&home);
+    let (config, their_run_dir) = write_config(&home, &sequence, CONFIG);
+    std::os::unix::fs::chown(&home, Some(NOBODY), Some(NOBODY))
+        .unwrap_or_else(|e| panic!("{}: {e}", home.display()));
+    let their_prefix = format!("linetrack_u{NOBODY}_");
+    let mut theirs = Run {
+        child: as_nobody(&bin.join("linetrack"), &home)
+            .args(["run", "--quiet", "--config"])
+            .arg(&config)
+            .stdout(Stdio::piped())
+            .stderr(Stdio::inherit())
+            .spawn()
+            .unwrap_or_else(|e| panic!("starting linetrack as nobody: {e}")),
+        run_dir: their_run_dir,
+        prefix: their_prefix.clone(),
+    };
+    theirs.wait_for("their 3 frames", RUN_TIMEOUT, |s| s.frames >= 3);
+
+    // Both running: each user's shared memory is its own and closed to the other.
+    let our_files = shared_memory_files(&ours.prefix);
+    let their_files = shared_memory_files(&their_prefix);
+    assert!(!our_files.is_empty() && !their_files.is_empty());
+    assert_private(&our_files, 0);
+    assert_private(&their_files, NOBODY);
+    for file in &our_files {
+        assert!(
+            !nobody_can_write(file, &home),
+            "user nobody wrote into {}",
+            file.display()
+        );
+    }
+    // Our iceoryx2 bookkeeping: a folder of ours the other user cannot even enter.
+    let our_root = linetrack_ipc::Scope::default_root();
+    let root_meta =
+        std::fs::metadata(&our_root).unwrap_or_else(|e| panic!("{}: {e}", our_root.display()));
+    assert_eq!(
+        (root_meta.uid(), root_meta.mode() & 0o077),
+        (0, 0),
+        "{}",
+        our_root.display()
+    );
+    assert!(!nobody_can_write(&our_root.join("intruder"), &home));
+    let their_root = PathBuf::from(format!("/tmp/linetrack-{NOBODY}/iceoryx2"));
+    let their_root_meta = std::fs::metadata(&their_root)
+        .unwrap_or_else(|e| panic!("their root folder {}: {e}", their_root.display()));
+    assert_eq!(
+        (their_root_meta.uid(), their_root_meta.mode() & 0o777),
+        (NOBODY, 0o700)
+    );
+
+    // Neither run noticed the other.
+    let (status, out, records) = ours.finish(RUN_TIMEOUT);
+    assert!(status.success(), "our run: {status}\n{out}");
+    assert_ids_accounted(&records, FRAMES as u64, &[]);
+    assert!(records.frames.iter().any(|f| f.outcome == "pose"), "{out}");
+    let (status, out, records) = theirs.finish(RUN_TIMEOUT);
+    assert!(status.success(), "their run: {status}\n{out}");
+    assert_ids_accounted(&records, FRAMES as u64, &[]);
+    assert!(records.frames.iter().any(|f| f.outcome == "pose"), "{out}");
+    // What stays (iceoryx2's management segment, kept for the user's next run) stays theirs
+    // alone: iceoryx2 creates it world-writable.
+    assert_private(&shared_memory_files(&their_prefix), NOBODY);
+    let _ = std::fs::remove_dir_all(&theirs_dir);
+}
