@@ -136,25 +136,53 @@ impl<'de, E: WireEnum> serde::Deserialize<'de> for Code<E> {
     }
 }
 
-/// A stage of the pipeline.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, TryFromPrimitive, IntoPrimitive)]
-#[repr(u32)]
-pub enum StageKind {
-    /// Reads (or renders) stereo frames and publishes them.
-    #[default]
-    FrameSource,
-    /// Detects segments in both images.
-    LineDetector,
-    /// Stereo and frame-to-frame segment matching.
-    Matcher,
-    /// Visual odometry.
-    PoseEstimator,
-    /// Starts, watches and steers the others.
-    Supervisor,
-    /// Records the run into an MCAP file (`[record] mcap = true`); no processing stage.
-    Recorder,
-    /// Publishes the poses to ROS 2 (`[ros2]`); no processing stage.
-    Ros2Bridge,
+/// Declares an enum that travels as a [`Code`]: `#[repr(u32)]` with an explicit code per
+/// variant, its [`WireEnum::WHAT`], and `ALL`, every variant in the order declared (so a
+/// test over `ALL` covers a variant added later).
+macro_rules! wire_enum {
+    (
+        $(#[$meta:meta])*
+        $vis:vis enum $name:ident: $what:literal {
+            $( $(#[$variant_meta:meta])* $variant:ident = $code:literal, )+
+        }
+    ) => {
+        $(#[$meta])*
+        #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, TryFromPrimitive, IntoPrimitive)]
+        #[repr(u32)]
+        $vis enum $name {
+            $( $(#[$variant_meta])* $variant = $code, )+
+        }
+
+        impl WireEnum for $name {
+            const WHAT: &'static str = $what;
+        }
+
+        impl $name {
+            /// Every variant, in the order declared.
+            pub const ALL: &'static [$name] = &[$($name::$variant),+];
+        }
+    };
+}
+
+wire_enum! {
+    /// A stage of the pipeline.
+    pub enum StageKind: "stage" {
+        /// Reads (or renders) stereo frames and publishes them.
+        #[default]
+        FrameSource = 0,
+        /// Detects segments in both images.
+        LineDetector = 1,
+        /// Stereo and frame-to-frame segment matching.
+        Matcher = 2,
+        /// Visual odometry.
+        PoseEstimator = 3,
+        /// Starts, watches and steers the others.
+        Supervisor = 4,
+        /// Records the run into an MCAP file (`[record] mcap = true`); no processing stage.
+        Recorder = 5,
+        /// Publishes the poses to ROS 2 (`[ros2]`); no processing stage.
+        Ros2Bridge = 6,
+    }
 }
 
 impl StageKind {
@@ -179,17 +207,6 @@ impl StageKind {
         }
     }
 
-    /// Every stage.
-    pub const ALL: [StageKind; 7] = [
-        StageKind::FrameSource,
-        StageKind::LineDetector,
-        StageKind::Matcher,
-        StageKind::PoseEstimator,
-        StageKind::Supervisor,
-        StageKind::Recorder,
-        StageKind::Ros2Bridge,
-    ];
-
     /// Index into [`FrameHeader::stamps`]; the supervisor has none.
     pub fn stamp_index(self) -> Option<usize> {
         Self::PROCESSING.iter().position(|&k| k == self)
@@ -197,12 +214,8 @@ impl StageKind {
 
     /// The stage named `name` (see [`StageKind::name`]).
     pub fn from_name(name: &str) -> Option<Self> {
-        Self::ALL.into_iter().find(|k| k.name() == name)
+        Self::ALL.iter().copied().find(|k| k.name() == name)
     }
-}
-
-impl WireEnum for StageKind {
-    const WHAT: &'static str = "stage";
 }
 
 impl fmt::Display for StageKind {
@@ -327,45 +340,30 @@ pub fn wake_service_name(run_id: &str, stage: StageKind) -> String {
 /// No frame: the value of [`Matching::previous_frame_id`] when there is none.
 pub const NO_FRAME: u64 = u64::MAX;
 
-/// What happened to a frame.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, TryFromPrimitive, IntoPrimitive)]
-#[repr(u32)]
-pub enum FrameStatus {
-    /// Processed.
-    #[default]
-    Ok = 0,
-    /// The source could not read or decode it.
-    Corrupt = 1,
-    /// A stage dropped it because it was already over the latency budget.
-    DroppedLate = 2,
-    /// A stage failed on it (the header says which, in [`FrameHeader::status_by`]).
-    StageError = 3,
-    /// A stage dropped it because its queue was behind (a newer frame was waiting).
-    DroppedBehind = 4,
-    /// The camera delivered it but the source could not take it (a gap in the driver's
-    /// timestamps, or the source's hand-over queue was full): no pixels.
-    CaptureDropped = 5,
-    /// The camera's frame waited in a buffer longer than `camera.late_ms`: dropped by the
-    /// source (with `budget.drop_late`).
-    CaptureLate = 6,
-}
-
-impl WireEnum for FrameStatus {
-    const WHAT: &'static str = "frame status";
+wire_enum! {
+    /// What happened to a frame.
+    pub enum FrameStatus: "frame status" {
+        /// Processed.
+        #[default]
+        Ok = 0,
+        /// The source could not read or decode it.
+        Corrupt = 1,
+        /// A stage dropped it because it was already over the latency budget.
+        DroppedLate = 2,
+        /// A stage failed on it (the header says which, in [`FrameHeader::status_by`]).
+        StageError = 3,
+        /// A stage dropped it because its queue was behind (a newer frame was waiting).
+        DroppedBehind = 4,
+        /// The camera delivered it but the source could not take it (a gap in the driver's
+        /// timestamps, or the source's hand-over queue was full): no pixels.
+        CaptureDropped = 5,
+        /// The camera's frame waited in a buffer longer than `camera.late_ms`: dropped by the
+        /// source (with `budget.drop_late`).
+        CaptureLate = 6,
+    }
 }
 
 impl FrameStatus {
-    /// Every status.
-    pub const ALL: [FrameStatus; 7] = [
-        FrameStatus::Ok,
-        FrameStatus::Corrupt,
-        FrameStatus::DroppedLate,
-        FrameStatus::StageError,
-        FrameStatus::DroppedBehind,
-        FrameStatus::CaptureDropped,
-        FrameStatus::CaptureLate,
-    ];
-
     /// Short name used in run records.
     pub fn name(self) -> &'static str {
         match self {
@@ -380,25 +378,18 @@ impl FrameStatus {
     }
 }
 
-/// How the matcher matched a frame ([`Matching::mode`]).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, TryFromPrimitive, IntoPrimitive)]
-#[repr(u32)]
-pub enum MatcherMode {
-    /// LBD descriptors.
-    #[default]
-    Lbd = 0,
-    /// The geometric ℓ1 matcher.
-    L1 = 1,
-}
-
-impl WireEnum for MatcherMode {
-    const WHAT: &'static str = "matcher mode";
+wire_enum! {
+    /// How the matcher matched a frame ([`Matching::mode`]).
+    pub enum MatcherMode: "matcher mode" {
+        /// LBD descriptors.
+        #[default]
+        Lbd = 0,
+        /// The geometric ℓ1 matcher.
+        L1 = 1,
+    }
 }
 
 impl MatcherMode {
-    /// Every mode.
-    pub const ALL: [MatcherMode; 2] = [MatcherMode::Lbd, MatcherMode::L1];
-
     /// `lbd` or `l1`.
     pub fn name(self) -> &'static str {
         match self {
@@ -420,28 +411,19 @@ pub struct StageStamp {
     pub end_ns: u64,
 }
 
-/// The line detector that found a frame's segments, as the wire names it (the mirror of
-/// `linetrack_vision::DetectorKind`, which this crate cannot see: the algorithm crates do
-/// not depend on the transport; `linetrack_stage_runtime` converts, exhaustively).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, TryFromPrimitive, IntoPrimitive)]
-#[repr(u32)]
-pub enum Detector {
-    /// Line Segment Detector.
-    #[default]
-    Lsd = 0,
-    /// Fast Line Detector.
-    Fld = 1,
-    /// The edge-drawing detector.
-    EdgeLines = 2,
-}
-
-impl WireEnum for Detector {
-    const WHAT: &'static str = "detector";
-}
-
-impl Detector {
-    /// Every detector.
-    pub const ALL: [Detector; 3] = [Detector::Lsd, Detector::Fld, Detector::EdgeLines];
+wire_enum! {
+    /// The line detector that found a frame's segments, as the wire names it (the mirror of
+    /// `linetrack_vision::DetectorKind`, which this crate cannot see: the algorithm crates do
+    /// not depend on the transport; `linetrack_stage_runtime` converts, exhaustively).
+    pub enum Detector: "detector" {
+        /// Line Segment Detector.
+        #[default]
+        Lsd = 0,
+        /// Fast Line Detector.
+        Fld = 1,
+        /// The edge-drawing detector.
+        EdgeLines = 2,
+    }
 }
 
 /// What every frame has, on every topic that carries frames: the user header of the images
@@ -687,62 +669,51 @@ pub struct PoseRecord {
     pub rms_px: f64,
 }
 
-/// What a [`StatusReport`] says.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, TryFromPrimitive, IntoPrimitive)]
-#[repr(u32)]
-pub enum StatusKind {
-    /// Alive; `value` = frames processed.
-    #[default]
-    Heartbeat = 0,
-    /// Started and warmed up; for a standby detector, `frame_id` = the first frame it holds.
-    Ready = 1,
-    /// A detector handing over: it published every frame below `frame_id` and stops.
-    HandedOver = 2,
-    /// The frame source reached the end: `value` = frames published.
-    SourceFinished = 3,
-    /// A stage exits on its own (`value`: 0 done, 1 error).
-    Exiting = 4,
-    /// A stage's hold overflowed: `value` frames from `frame_id` on were released before
-    /// their other input arrived (they go on without it).
-    Overflow = 5,
-    /// Frames never arrived on a stage's input: `value` frames from `frame_id` on were
-    /// skipped (overwritten in its full queue while it was stopped or slow).
-    QueueGap = 6,
-    /// The frame source's camera failed and is being reopened: `frame_id` = the next
-    /// frame's id, `value` = the attempt (1, 2, …), `detail` = a [`CameraFailure`] code.
-    CameraLost = 7,
-    /// The frame source's camera delivers again: `frame_id` = the next frame's id,
-    /// `value` = the attempts it took.
-    CameraBack = 8,
+wire_enum! {
+    /// What a [`StatusReport`] says.
+    pub enum StatusKind: "status kind" {
+        /// Alive; `value` = frames processed.
+        #[default]
+        Heartbeat = 0,
+        /// Started and warmed up; for a standby detector, `frame_id` = the first frame it holds.
+        Ready = 1,
+        /// A detector handing over: it published every frame below `frame_id` and stops.
+        HandedOver = 2,
+        /// The frame source reached the end: `value` = frames published.
+        SourceFinished = 3,
+        /// A stage exits on its own (`value`: 0 done, 1 error).
+        Exiting = 4,
+        /// A stage's hold overflowed: `value` frames from `frame_id` on were released before
+        /// their other input arrived (they go on without it).
+        Overflow = 5,
+        /// Frames never arrived on a stage's input: `value` frames from `frame_id` on were
+        /// skipped (overwritten in its full queue while it was stopped or slow).
+        QueueGap = 6,
+        /// The frame source's camera failed and is being reopened: `frame_id` = the next
+        /// frame's id, `value` = the attempt (1, 2, …), `detail` = a [`CameraFailure`] code.
+        CameraLost = 7,
+        /// The frame source's camera delivers again: `frame_id` = the next frame's id,
+        /// `value` = the attempts it took.
+        CameraBack = 8,
+    }
 }
 
-/// Why a camera failed ([`StatusKind::CameraLost`]'s `detail`).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, TryFromPrimitive, IntoPrimitive)]
-#[repr(u32)]
-pub enum CameraFailure {
-    /// It could not be opened (no such device, busy, a pipeline that does not start).
-    Open = 0,
-    /// A read failed: the device is gone or the stream ended.
-    Read = 1,
-    /// Its frames are not the size the calibration is for.
-    Size = 2,
-    /// Anything else (a frame that cannot be split, rectified or converted).
-    Other = 3,
-}
-
-impl WireEnum for CameraFailure {
-    const WHAT: &'static str = "camera failure";
+wire_enum! {
+    /// Why a camera failed ([`StatusKind::CameraLost`]'s `detail`).
+    pub enum CameraFailure: "camera failure" {
+        /// It could not be opened (no such device, busy, a pipeline that does not start).
+        Open = 0,
+        /// A read failed: the device is gone or the stream ended.
+        Read = 1,
+        /// Its frames are not the size the calibration is for.
+        Size = 2,
+        /// Anything else (a frame that cannot be split, rectified or converted).
+        #[default]
+        Other = 3,
+    }
 }
 
 impl CameraFailure {
-    /// Every failure.
-    pub const ALL: [CameraFailure; 4] = [
-        CameraFailure::Open,
-        CameraFailure::Read,
-        CameraFailure::Size,
-        CameraFailure::Other,
-    ];
-
     /// What happened, for the event's text.
     pub fn describe(self) -> &'static str {
         match self {
@@ -752,25 +723,6 @@ impl CameraFailure {
             CameraFailure::Other => "delivered a frame that could not be used",
         }
     }
-}
-
-impl WireEnum for StatusKind {
-    const WHAT: &'static str = "status kind";
-}
-
-impl StatusKind {
-    /// Every kind.
-    pub const ALL: [StatusKind; 9] = [
-        StatusKind::Heartbeat,
-        StatusKind::Ready,
-        StatusKind::HandedOver,
-        StatusKind::SourceFinished,
-        StatusKind::Exiting,
-        StatusKind::Overflow,
-        StatusKind::QueueGap,
-        StatusKind::CameraLost,
-        StatusKind::CameraBack,
-    ];
 }
 
 /// A `u32` argument read from the wire as an `E` (a report's `detail`, a command's
@@ -820,38 +772,23 @@ pub struct StatusReport {
     pub value: u64,
 }
 
-/// Commands.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, TryFromPrimitive, IntoPrimitive)]
-#[repr(u32)]
-pub enum Command {
-    /// To the matcher: use [`MatcherMode`] `value` from the next frame.
-    #[default]
-    SetMatcherMode = 0,
-    /// To the detector with pid `target_pid`: hand over to the standby detector, which holds
-    /// frames from `frame_id` on.
-    HandOver = 1,
-    /// To the standby detector `target_pid`: the old detector published every frame below
-    /// `frame_id`; take over from there.
-    TakeOver = 2,
-    /// To the supervisor: swap the detector for [`Detector`] `value`.
-    SwapDetector = 3,
-    /// To everyone: finish and exit.
-    Shutdown = 4,
-}
-
-impl WireEnum for Command {
-    const WHAT: &'static str = "command";
-}
-
-impl Command {
-    /// Every command.
-    pub const ALL: [Command; 5] = [
-        Command::SetMatcherMode,
-        Command::HandOver,
-        Command::TakeOver,
-        Command::SwapDetector,
-        Command::Shutdown,
-    ];
+wire_enum! {
+    /// Commands.
+    pub enum Command: "command" {
+        /// To the matcher: use [`MatcherMode`] `value` from the next frame.
+        #[default]
+        SetMatcherMode = 0,
+        /// To the detector with pid `target_pid`: hand over to the standby detector, which holds
+        /// frames from `frame_id` on.
+        HandOver = 1,
+        /// To the standby detector `target_pid`: the old detector published every frame below
+        /// `frame_id`; take over from there.
+        TakeOver = 2,
+        /// To the supervisor: swap the detector for [`Detector`] `value`.
+        SwapDetector = 3,
+        /// To everyone: finish and exit.
+        Shutdown = 4,
+    }
 }
 
 /// A command.
@@ -977,13 +914,13 @@ mod tests {
 
     #[test]
     fn every_code_round_trips_and_an_unknown_one_is_refused() {
-        round_trips(&StageKind::ALL);
-        round_trips(&FrameStatus::ALL);
-        round_trips(&MatcherMode::ALL);
-        round_trips(&Detector::ALL);
-        round_trips(&StatusKind::ALL);
-        round_trips(&CameraFailure::ALL);
-        round_trips(&Command::ALL);
+        round_trips(StageKind::ALL);
+        round_trips(FrameStatus::ALL);
+        round_trips(MatcherMode::ALL);
+        round_trips(Detector::ALL);
+        round_trips(StatusKind::ALL);
+        round_trips(CameraFailure::ALL);
+        round_trips(Command::ALL);
     }
 
     /// What another process left in shared memory: a header whose codes name nothing.
@@ -1044,7 +981,7 @@ mod tests {
 
     #[test]
     fn stage_names_come_back_to_their_stage() {
-        for stage in StageKind::ALL {
+        for &stage in StageKind::ALL {
             assert_eq!(StageKind::from_name(stage.name()), Some(stage));
         }
         assert_eq!(StageKind::from_name("camera"), None);
