@@ -252,9 +252,7 @@ pub fn publish(ctx: &StageContext, mut ports: Ports, shutdown: &Shutdown) -> any
             .right()
             .map_or_else(|| " (side by side)".to_string(), |r| format!(" and {r:?}"))
     );
-    ports
-        .rig
-        .publish(&FrameHeader::default(), &[&[rig_record(&rig)]])?;
+    ports.rig.publish(&(), &[&[rig_record(&rig)]])?;
     let (tx, rx) = crossbeam_channel::bounded(HANDOVER_FRAMES);
     let not_taken = Arc::new(AtomicU64::new(0));
     let stop = Arc::new(AtomicBool::new(false));

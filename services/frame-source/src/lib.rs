@@ -21,9 +21,9 @@ use tracing::info_span;
 
 /// The source's connections.
 pub struct Ports {
-    frames: Outlet<u8>,
-    rig: Outlet<RigRecord>,
-    control: Inlet<Control>,
+    frames: Outlet<u8, FrameHeader>,
+    rig: Outlet<RigRecord, ()>,
+    control: Inlet<Control, ()>,
     wake: Wake,
     reporter: Reporter,
 }
@@ -70,10 +70,10 @@ pub(crate) fn due_offset(
 }
 
 /// Whether a shutdown command arrived.
-pub(crate) fn shutdown_ordered(control: &mut Inlet<Control>, pid: u32) -> anyhow::Result<bool> {
+pub(crate) fn shutdown_ordered(control: &mut Inlet<Control, ()>, pid: u32) -> anyhow::Result<bool> {
     Ok(control.receive_all()?.iter().any(|c| {
         let c = c.payload().first().copied().unwrap_or_default();
-        c.command() == Some(Command::Shutdown) && c.is_for(StageKind::FrameSource, pid)
+        c.command.is(Command::Shutdown) && c.is_for(StageKind::FrameSource, pid)
     }))
 }
 
@@ -115,9 +115,7 @@ fn publish(ctx: &StageContext, mut ports: Ports, shutdown: &Shutdown) -> anyhow:
         source.pacing
     );
     // The rig goes first: the pose estimator needs it before the first frame's tracks.
-    ports
-        .rig
-        .publish(&FrameHeader::default(), &[&[rig_record(&sequence.rig)]])?;
+    ports.rig.publish(&(), &[&[rig_record(&sequence.rig)]])?;
     let stream = sequence.into_stream(start, 4);
     ports.reporter.report(StatusKind::Ready, start as u64, 0);
 

@@ -35,9 +35,7 @@ pub(crate) fn publish(
         replay.frames,
         source.pacing
     );
-    ports
-        .rig
-        .publish(&FrameHeader::default(), &[&[replay.rig]])?;
+    ports.rig.publish(&(), &[&[replay.rig]])?;
     ports.reporter.report(StatusKind::Ready, start as u64, 0);
     let began = Instant::now();
     let mut first_ns = None;

@@ -5,10 +5,11 @@
 //! detector of the other kind starts with `--standby`, warms up and holds the newest frames
 //! until the running one hands over; no frame is lost or published twice.
 
-use linetrack_ipc::{Bus, Received, Shutdown};
-use linetrack_msgs::{FrameHeader, SegmentRecord, StageKind, Topic};
+use linetrack_ipc::{Bus, Shutdown};
+use linetrack_msgs::{Detector as WireDetector, FrameHeader, SegmentRecord, SegmentsHeader};
+use linetrack_msgs::{StageKind, Topic};
 use linetrack_stage_runtime::{
-    Stage, StageContext, detector_code, run_stage, stereo_views, to_records,
+    Images, Stage, StageContext, detector_on_wire, run_stage, stereo_views, to_records,
 };
 use linetrack_vision::{ContrastStretch, GrayImage, LineDetector, create_detector};
 
@@ -36,7 +37,7 @@ pub struct Detector {
     left: Side,
     right: Side,
     in_parallel: bool,
-    kind_code: u32,
+    kind: WireDetector,
     pid: u32,
     max_contrast_gain: f64,
 }
@@ -57,7 +58,7 @@ impl Detector {
             left: side()?,
             right: side()?,
             in_parallel: ctx.config.detect_sides_in_parallel,
-            kind_code: detector_code(kind),
+            kind: detector_on_wire(kind),
             pid: ctx.pid,
             max_contrast_gain: ctx.config.odometry.max_contrast_gain,
         };
@@ -81,7 +82,9 @@ impl Detector {
 
 impl Stage for Detector {
     type Input = u8;
+    type InputHeader = FrameHeader;
     type Output = SegmentRecord;
+    type OutputHeader = SegmentsHeader;
     const KIND: StageKind = StageKind::LineDetector;
     const INPUT: Topic = Topic::Frames;
     const OUTPUT: Topic = Topic::Segments;
@@ -93,17 +96,18 @@ impl Stage for Detector {
     }
 
     fn detail(&self) -> u32 {
-        self.kind_code
+        self.kind.into()
     }
 
     fn process(
         &mut self,
-        header: &mut FrameHeader,
-        frame: &Received<u8>,
-        _images: Option<&Received<u8>>,
+        header: &mut SegmentsHeader,
+        frame: &Images,
+        _images: Option<&Images>,
     ) -> anyhow::Result<Vec<SegmentRecord>> {
-        header.detector = self.kind_code;
-        header.detector_pid = self.pid;
+        let detection = &mut header.detection;
+        detection.detector = self.kind.into();
+        detection.detector_pid = self.pid;
         let (left, right) = stereo_views(frame)?;
         let gain = self.max_contrast_gain;
         if self.in_parallel {
@@ -120,8 +124,8 @@ impl Stage for Detector {
             self.left.detect(&left, gain)?;
             self.right.detect(&right, gain)?;
         }
-        header.left_count = self.left.segments.len() as u32;
-        header.right_count = self.right.segments.len() as u32;
+        detection.left_count = self.left.segments.len() as u32;
+        detection.right_count = self.right.segments.len() as u32;
         let mut records = to_records(&self.left.segments);
         records.extend(to_records(&self.right.segments));
         Ok(records)
@@ -141,7 +145,7 @@ mod tests {
     use std::path::PathBuf;
 
     /// The segments of one EuRoC stereo frame, detected with the sides at once or in turn.
-    fn detect(in_parallel: bool) -> (FrameHeader, Vec<SegmentRecord>) {
+    fn detect(in_parallel: bool) -> (SegmentsHeader, Vec<SegmentRecord>) {
         let (left, right) =
             linetrack_test_data::euroc_stereo_pair(0).unwrap_or_else(|e| panic!("{e}"));
         let read = |p: &std::path::Path| GrayImage::load(p).unwrap_or_else(|e| panic!("{e}"));
@@ -151,10 +155,10 @@ mod tests {
         };
         let bus = Bus::local();
         let mut inlet = bus
-            .inlet::<u8>(Topic::Frames)
+            .inlet::<u8, FrameHeader>(Topic::Frames)
             .unwrap_or_else(|e| panic!("{e}"));
         let mut outlet = bus
-            .outlet::<u8>(Topic::Frames, l.len() + r.len())
+            .outlet::<u8, FrameHeader>(Topic::Frames, l.len() + r.len())
             .unwrap_or_else(|e| panic!("{e}"));
         let mut header = FrameHeader::new(0, 0, 1);
         header.width = left.width() as u32;
@@ -172,21 +176,20 @@ mod tests {
         };
         let ctx = StageContext::in_process(StageKind::LineDetector, config, PathBuf::new());
         let mut detector = Detector::new(&ctx).unwrap_or_else(|e| panic!("{e}"));
+        let mut segments = SegmentsHeader::from(header);
         let records = detector
-            .process(&mut header, &frame, None)
+            .process(&mut segments, &frame, None)
             .unwrap_or_else(|e| panic!("{e}"));
-        (header, records)
+        (segments, records)
     }
 
     #[test]
     fn both_sides_at_once_find_what_one_after_the_other_finds() {
         let (serial_header, serial) = detect(false);
         let (parallel_header, parallel) = detect(true);
-        assert!(serial_header.left_count > 20 && serial_header.right_count > 20);
-        assert_eq!(
-            (parallel_header.left_count, parallel_header.right_count),
-            (serial_header.left_count, serial_header.right_count)
-        );
+        let (serial_found, parallel_found) = (serial_header.detection, parallel_header.detection);
+        assert!(serial_found.left_count > 20 && serial_found.right_count > 20);
+        assert_eq!(parallel_found, serial_found);
         assert_eq!(parallel, serial);
     }
 }

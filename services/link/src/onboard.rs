@@ -13,7 +13,10 @@ use crate::wire::{Message, key, shrink};
 use crate::{LinkError, peer_config};
 use crossbeam_channel::{Receiver, TrySendError};
 use linetrack_ipc::{Bus, Inlet, Record, Shutdown};
-use linetrack_msgs::{PoseRecord, SegmentRecord, StageKind, StatusReport, Topic, TrackedLine};
+use linetrack_msgs::{
+    FrameHeader, PoseRecord, SegmentRecord, SegmentsHeader, StageKind, StatusReport, Topic,
+    TrackedLine, TracksHeader,
+};
 use linetrack_pipeline_config::LinkConfig;
 use serde::Serialize;
 use std::collections::BTreeMap;
@@ -75,19 +78,19 @@ impl LinkCounts {
 
 /// The allowed topics' subscribers.
 struct Inlets {
-    poses: Option<Inlet<PoseRecord>>,
-    status: Option<Inlet<StatusReport>>,
-    segments: Option<Inlet<SegmentRecord>>,
-    tracks: Option<Inlet<TrackedLine>>,
-    frames: Option<Inlet<u8>>,
+    poses: Option<Inlet<PoseRecord, TracksHeader>>,
+    status: Option<Inlet<StatusReport, ()>>,
+    segments: Option<Inlet<SegmentRecord, SegmentsHeader>>,
+    tracks: Option<Inlet<TrackedLine, TracksHeader>>,
+    frames: Option<Inlet<u8, FrameHeader>>,
 }
 
-fn inlet_if<P: Record>(
+fn inlet_if<P: Record, H: Record>(
     config: &LinkConfig,
     bus: &Bus,
     name: &str,
     topic: Topic,
-) -> Result<Option<Inlet<P>>, LinkError> {
+) -> Result<Option<Inlet<P, H>>, LinkError> {
     Ok(if config.allows(name) {
         Some(bus.inlet(topic)?)
     } else {
@@ -96,10 +99,10 @@ fn inlet_if<P: Record>(
 }
 
 /// Every message waiting on `inlet`, as link messages.
-fn drain<P: Record>(
-    inlet: &mut Option<Inlet<P>>,
+fn drain<P: Record, H: Record>(
+    inlet: &mut Option<Inlet<P, H>>,
     out: &mut Vec<Message>,
-    make: impl Fn(&linetrack_msgs::FrameHeader, &[P]) -> Option<Message>,
+    make: impl Fn(&H, &[P]) -> Option<Message>,
 ) -> Result<(), LinkError> {
     if let Some(inlet) = inlet {
         for m in inlet.receive_all()? {
@@ -149,7 +152,7 @@ pub fn run(
     // Every frame's pose message is seen even when poses are not forwarded: it counts frames.
     let mut frame_counter = match inlets.poses {
         Some(_) => None,
-        None => Some(bus.inlet::<PoseRecord>(Topic::Poses)?),
+        None => Some(bus.inlet::<PoseRecord, TracksHeader>(Topic::Poses)?),
     };
     let wake = bus.wake(StageKind::Supervisor)?;
     tracing::info!(
@@ -215,9 +218,8 @@ pub fn run(
         if let Some(inlet) = &mut frame_counter {
             frames += inlet.receive_all()?.len() as u64;
         }
-        drain(&mut inlets.status, &mut batch, |header, r| {
+        drain(&mut inlets.status, &mut batch, |_, r| {
             Some(Message::Status {
-                header: *header,
                 report: *r.first()?,
             })
         })?;

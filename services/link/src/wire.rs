@@ -1,8 +1,12 @@
 //! What goes on the link: one [`Message`] per zenoh sample, postcard-encoded (integers as
-//! varints), under the key `<key_prefix>/<topic>`.
+//! varints), under the key `<key_prefix>/<topic>`. Each message carries the header its topic
+//! has in shared memory; a code (a stage, a status, a mode) arrives as it was sent and is
+//! checked where it is read, as in shared memory.
 
 use crate::LinkError;
-use linetrack_msgs::{FrameHeader, PoseRecord, SegmentRecord, StatusReport, TrackedLine};
+use linetrack_msgs::{
+    FrameHeader, PoseRecord, SegmentRecord, SegmentsHeader, StatusReport, TrackedLine, TracksHeader,
+};
 use serde::{Deserialize, Serialize};
 
 /// One forwarded message.
@@ -10,29 +14,28 @@ use serde::{Deserialize, Serialize};
 pub enum Message {
     /// A frame's pose (or its drop: the header's status says).
     Pose {
-        /// The frame's header.
-        header: FrameHeader,
+        /// The frame's header, with the detector's and the matcher's results.
+        header: TracksHeader,
         /// The pose.
         pose: PoseRecord,
     },
     /// A stage's heartbeat or event.
     Status {
-        /// The message's header.
-        header: FrameHeader,
         /// The report.
         report: StatusReport,
     },
-    /// A frame's segments, left image's then right image's (`header.left_count` splits them).
+    /// A frame's segments, left image's then right image's (the detection's `left_count`
+    /// splits them).
     Segments {
-        /// The frame's header.
-        header: FrameHeader,
+        /// The frame's header, with the detector's results.
+        header: SegmentsHeader,
         /// The segments.
         segments: Vec<SegmentRecord>,
     },
     /// A frame's matched segments.
     Tracks {
-        /// The frame's header.
-        header: FrameHeader,
+        /// The frame's header, with the detector's and the matcher's results.
+        header: TracksHeader,
         /// The tracks.
         tracks: Vec<TrackedLine>,
     },
@@ -63,14 +66,13 @@ impl Message {
         }
     }
 
-    /// The header.
-    pub fn header(&self) -> &FrameHeader {
+    /// The frame the message is about (none for a status report).
+    pub fn frame(&self) -> Option<&FrameHeader> {
         match self {
-            Message::Pose { header, .. }
-            | Message::Status { header, .. }
-            | Message::Segments { header, .. }
-            | Message::Tracks { header, .. }
-            | Message::Image { header, .. } => header,
+            Message::Pose { header, .. } | Message::Tracks { header, .. } => Some(&header.frame),
+            Message::Segments { header, .. } => Some(&header.frame),
+            Message::Image { header, .. } => Some(header),
+            Message::Status { .. } => None,
         }
     }
 
@@ -126,22 +128,30 @@ pub fn shrink(pixels: &[u8], width: u32, height: u32, scale: u32) -> Option<(Vec
 #[cfg(test)]
 mod tests {
     use super::*;
+    use linetrack_msgs::{MatcherMode, StageKind, StatusKind};
 
     fn header(frame_id: u64) -> FrameHeader {
-        FrameHeader {
-            frame_id,
-            sequence_ns: 1_403_636_579_763_555_584,
-            capture_ns: 17,
-            left_count: 2,
-            ..Default::default()
-        }
+        FrameHeader::new(frame_id, 1_403_636_579_763_555_584, 17)
+    }
+
+    fn segments_header(frame_id: u64) -> SegmentsHeader {
+        let mut h = SegmentsHeader::from(header(frame_id));
+        h.detection.left_count = 2;
+        h
+    }
+
+    fn tracks_header(frame_id: u64) -> TracksHeader {
+        let mut h = TracksHeader::from(segments_header(frame_id));
+        h.matching.mode = MatcherMode::L1.into();
+        h.matching.stereo_matches = 40;
+        h
     }
 
     #[test]
     fn every_message_comes_back_as_it_went() {
         let messages = [
             Message::Pose {
-                header: header(3),
+                header: tracks_header(3),
                 pose: PoseRecord {
                     translation: [0.1, -2.0, 1e-9],
                     rotation_xyzw: [0.0, 0.0, 0.6, 0.8],
@@ -151,18 +161,17 @@ mod tests {
                 },
             },
             Message::Status {
-                header: header(0),
                 report: StatusReport {
-                    stage: 1,
+                    stage: StageKind::LineDetector.into(),
                     pid: 4242,
-                    kind: 3,
+                    kind: StatusKind::SourceFinished.into(),
                     frame_id: 99,
                     value: 100,
                     ..Default::default()
                 },
             },
             Message::Segments {
-                header: header(4),
+                header: segments_header(4),
                 segments: vec![
                     SegmentRecord {
                         endpoints: [1.0, 2.0, 3.5, 4.25],
@@ -171,7 +180,7 @@ mod tests {
                 ],
             },
             Message::Tracks {
-                header: header(5),
+                header: tracks_header(5),
                 tracks: vec![TrackedLine {
                     previous: -1,
                     has_stereo: 1,
@@ -190,7 +199,10 @@ mod tests {
             let bytes = m.encode().unwrap_or_else(|e| panic!("{e}"));
             let back = Message::decode("k", &bytes).unwrap_or_else(|e| panic!("{e}"));
             assert_eq!(back, m);
-            assert_eq!(back.header().frame_id, m.header().frame_id);
+            assert_eq!(
+                back.frame().map(|f| f.frame_id),
+                m.frame().map(|f| f.frame_id)
+            );
         }
     }
 
@@ -203,12 +215,29 @@ mod tests {
         assert!(err.contains("linetrack/poses"), "{err}");
         // A message cut short is refused too.
         let bytes = Message::Tracks {
-            header: header(1),
+            header: tracks_header(1),
             tracks: vec![TrackedLine::default(); 4],
         }
         .encode()
         .unwrap_or_else(|e| panic!("{e}"));
         assert!(Message::decode("k", &bytes[..bytes.len() - 3]).is_err());
+    }
+
+    #[test]
+    fn a_code_that_names_nothing_arrives_and_reads_as_an_error_naming_it() {
+        // A status message as a newer build might send it: variant 1 (status), then the
+        // report's stage, pid, kind, detail, frame id and value; kind 99 is no status kind
+        // of this build.
+        let fields: (u32, u32, u32, u32, u32, u64, u64) = (1, 1, 4242, 99, 0, 7, 0);
+        let bytes = postcard::to_stdvec(&fields).unwrap_or_else(|e| panic!("{e}"));
+        let back = Message::decode("k", &bytes).unwrap_or_else(|e| panic!("{e}"));
+        let Message::Status { report } = back else {
+            panic!("not a status message: {back:?}");
+        };
+        assert_eq!((report.pid, report.frame_id), (4242, 7));
+        assert_eq!(report.stage.get(), Ok(StageKind::LineDetector));
+        let err = report.kind.get().err().map(|e| e.to_string());
+        assert_eq!(err.as_deref(), Some("unknown status kind code 99"));
     }
 
     #[test]

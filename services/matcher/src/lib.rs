@@ -11,11 +11,11 @@
 use linetrack_geometry::MatchCase;
 use linetrack_ipc::{Bus, Received, Shutdown};
 use linetrack_msgs::{
-    Command, Control, FrameHeader, MatcherMode, NO_FRAME, SegmentRecord, StageKind, Topic,
-    TrackedLine,
+    Command, Control, MatcherMode, Matching, SegmentRecord, SegmentsHeader, StageKind, Topic,
+    TrackedLine, TracksHeader, decode,
 };
 use linetrack_pipeline_config::MatcherPolicy;
-use linetrack_stage_runtime::{Stage, StageContext, run_stage, stereo_views, to_segment};
+use linetrack_stage_runtime::{Images, Stage, StageContext, run_stage, stereo_views, to_segment};
 use linetrack_vision::{
     FeatureMatch, LineFeatures, MatcherKind, SegmentMatcher, create_segment_matcher,
 };
@@ -88,15 +88,16 @@ impl FrameMatcher {
     }
 
     /// Matches one frame's segments (with `images` for LBD and the ℓ1 matcher's photometric
-    /// check; without, by geometry alone); fills `header`'s counts and returns
+    /// check; without, by geometry alone); fills `header`'s [`Matching`] and returns
     /// one record per left segment.
     pub fn match_frame(
         &mut self,
-        header: &mut FrameHeader,
+        header: &mut TracksHeader,
         segments: &[SegmentRecord],
-        images: Option<&Received<u8>>,
+        images: Option<&Images>,
     ) -> anyhow::Result<Vec<TrackedLine>> {
-        let n_left = (header.left_count as usize).min(segments.len());
+        let frame_id = header.frame.frame_id;
+        let n_left = (header.detection.left_count as usize).min(segments.len());
         let (left_records, right_records) = segments.split_at(n_left);
         let mut left = LineFeatures {
             segments: left_records
@@ -115,7 +116,7 @@ impl FrameMatcher {
         let views = match images.map(stereo_views) {
             Some(Ok(views)) => Some(views),
             Some(Err(e)) => {
-                tracing::warn!("frame {}: {e}; matching by geometry", header.frame_id);
+                tracing::warn!("frame {frame_id}: {e}; matching by geometry");
                 None
             }
             None => None,
@@ -125,6 +126,7 @@ impl FrameMatcher {
             mode = MatcherMode::L1;
         }
         let probe = views.is_some() && self.probes_now(mode);
+        let mut matching = Matching::default();
         let mut described = false;
         if let Some((l, r)) = &views {
             let span = info_span!("describe");
@@ -150,14 +152,13 @@ impl FrameMatcher {
                 if probe {
                     self.lbd
                         .match_lines(MatchCase::Stereo, &left, &right, &mut self.stereo);
-                    header.lbd_probe_matches = self.stereo.len() as i32;
+                    matching.lbd_probe_matches = self.stereo.len() as i32;
                 }
                 self.l1
                     .match_lines(MatchCase::Stereo, &left, &right, &mut self.stereo);
             }
         }
         self.tracked.clear();
-        header.previous_frame_id = NO_FRAME;
         if let Some(previous) = &self.previous {
             let span = info_span!("track_match");
             let _entered = span.enter();
@@ -169,14 +170,15 @@ impl FrameMatcher {
                 &left,
                 &mut self.tracked,
             );
-            header.previous_frame_id = previous.frame_id;
+            matching.previous_frame_id = previous.frame_id;
         }
         if self.mode == MatcherMode::L1 {
             self.frames_in_l1 += 1;
         }
-        header.matcher_mode = mode as u32;
-        header.stereo_matches = self.stereo.len() as u32;
-        header.tracked_matches = self.tracked.len() as u32;
+        matching.mode = mode.into();
+        matching.stereo_matches = self.stereo.len() as u32;
+        matching.tracked_matches = self.tracked.len() as u32;
+        header.matching = matching;
 
         let mut out: Vec<TrackedLine> = left_records
             .iter()
@@ -198,7 +200,7 @@ impl FrameMatcher {
             }
         }
         self.previous = Some(Previous {
-            frame_id: header.frame_id,
+            frame_id,
             features: left,
             described,
         });
@@ -208,7 +210,9 @@ impl FrameMatcher {
 
 impl Stage for FrameMatcher {
     type Input = SegmentRecord;
+    type InputHeader = SegmentsHeader;
     type Output = TrackedLine;
+    type OutputHeader = TracksHeader;
     const KIND: StageKind = StageKind::Matcher;
     const INPUT: Topic = Topic::Segments;
     const OUTPUT: Topic = Topic::Tracks;
@@ -220,18 +224,18 @@ impl Stage for FrameMatcher {
 
     fn process(
         &mut self,
-        header: &mut FrameHeader,
-        segments: &Received<SegmentRecord>,
-        images: Option<&Received<u8>>,
+        header: &mut TracksHeader,
+        segments: &Received<SegmentRecord, SegmentsHeader>,
+        images: Option<&Images>,
     ) -> anyhow::Result<Vec<TrackedLine>> {
         self.match_frame(header, segments.payload(), images)
     }
 
     fn command(&mut self, command: Command, control: &Control) {
         if command == Command::SetMatcherMode {
-            match MatcherMode::from_code(control.value) {
-                Some(mode) => self.set_mode(mode),
-                None => tracing::warn!("unknown matcher mode code {}", control.value),
+            match decode::<MatcherMode>(control.value) {
+                Ok(mode) => self.set_mode(mode),
+                Err(unknown) => tracing::warn!("{unknown}: mode unchanged"),
             }
         }
     }

@@ -10,12 +10,15 @@
 use anyhow::Context;
 use linetrack_geometry::{Segment, StereoRig};
 use linetrack_ipc::{Bus, Inlet, Received, Shutdown};
-use linetrack_msgs::{FrameHeader, NO_FRAME, PoseRecord, RigRecord, StageKind, Topic, TrackedLine};
+use linetrack_msgs::{
+    FrameHeader, NO_FRAME, PoseRecord, RigRecord, StageKind, Topic, TrackedLine, TracksHeader,
+};
 use linetrack_odometry::{
     Features, FrameStats, MatchedLines, MotionTracker, OdometryConfig, PreparedImages,
 };
 use linetrack_stage_runtime::{
-    Stage, StageContext, held_capacity, rig_from_record, run_stage, stereo_views, to_segment,
+    Images, Stage, StageContext, held_capacity, rig_from_record, run_stage, stereo_views,
+    to_segment,
 };
 use linetrack_vision::FeatureMatch;
 use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion};
@@ -188,7 +191,7 @@ impl PoseTracker {
 
     /// Stretches frame `header`'s images and finds their corners ahead of its segments
     /// (nothing before a rig arrived); kept for [`PoseTracker::track`] of the same frame.
-    pub fn prepare(&mut self, header: &FrameHeader, frame: &Received<u8>) -> anyhow::Result<()> {
+    pub fn prepare(&mut self, header: &FrameHeader, frame: &Images) -> anyhow::Result<()> {
         let Some(tracker) = &mut self.tracker else {
             return Ok(());
         };
@@ -216,10 +219,12 @@ impl PoseTracker {
     /// Tracks one frame (with what was prepared from its images, if anything).
     pub fn track(
         &mut self,
-        header: &FrameHeader,
+        header: &TracksHeader,
         lines: &[TrackedLine],
-        frame: Option<&Received<u8>>,
+        frame: Option<&Images>,
     ) -> anyhow::Result<PoseRecord> {
+        let previous_frame_id = header.matching.previous_frame_id;
+        let header = &header.frame;
         let prepared = self.take_prepared(header.frame_id);
         // The frame's segments and matches, in buffers kept from frame to frame.
         let buffers = &mut self.buffers;
@@ -254,8 +259,7 @@ impl PoseTracker {
                 });
             }
         }
-        let continues =
-            header.previous_frame_id != NO_FRAME && header.previous_frame_id == self.last_frame;
+        let continues = previous_frame_id != NO_FRAME && previous_frame_id == self.last_frame;
         let matched = MatchedLines {
             left: &self.buffers.left,
             right: &self.buffers.right,
@@ -303,7 +307,7 @@ impl PoseTracker {
 /// The pose estimator stage: the tracker and the rig's topic.
 pub struct PoseStage {
     tracker: PoseTracker,
-    rig: Inlet<RigRecord>,
+    rig: Inlet<RigRecord, ()>,
     points: bool,
 }
 
@@ -320,7 +324,9 @@ impl PoseStage {
 
 impl Stage for PoseStage {
     type Input = TrackedLine;
+    type InputHeader = TracksHeader;
     type Output = PoseRecord;
+    type OutputHeader = TracksHeader;
     const KIND: StageKind = StageKind::PoseEstimator;
     const INPUT: Topic = Topic::Tracks;
     const OUTPUT: Topic = Topic::Poses;
@@ -350,15 +356,15 @@ impl Stage for PoseStage {
         self.points
     }
 
-    fn prepare(&mut self, header: &FrameHeader, images: &Received<u8>) -> anyhow::Result<()> {
+    fn prepare(&mut self, header: &FrameHeader, images: &Images) -> anyhow::Result<()> {
         self.tracker.prepare(header, images)
     }
 
     fn process(
         &mut self,
-        header: &mut FrameHeader,
-        tracks: &Received<TrackedLine>,
-        images: Option<&Received<u8>>,
+        header: &mut TracksHeader,
+        tracks: &Received<TrackedLine, TracksHeader>,
+        images: Option<&Images>,
     ) -> anyhow::Result<Vec<PoseRecord>> {
         Ok(vec![self.tracker.track(
             header,

@@ -4,8 +4,8 @@ use anyhow::Context;
 use linetrack_ipc::{Bus, Inlet, Shutdown};
 use linetrack_mcap::Recording;
 use linetrack_msgs::{
-    Command, Control, PoseRecord, RigRecord, SegmentRecord, StageKind, StatusKind, StatusReport,
-    Topic, TrackedLine, now_ns,
+    Command, Control, FrameHeader, PoseRecord, RigRecord, SegmentRecord, SegmentsHeader, StageKind,
+    StatusKind, StatusReport, Topic, TrackedLine, TracksHeader, now_ns,
 };
 use linetrack_stage_runtime::{GapWatch, Reporter, StageContext};
 use std::collections::BTreeMap;
@@ -13,13 +13,13 @@ use std::time::Duration;
 
 /// The recorder's subscriptions.
 struct Inlets {
-    frames: Inlet<u8>,
-    segments: Inlet<SegmentRecord>,
-    tracks: Inlet<TrackedLine>,
-    poses: Inlet<PoseRecord>,
-    status: Inlet<StatusReport>,
-    rig: Inlet<RigRecord>,
-    control: Inlet<Control>,
+    frames: Inlet<u8, FrameHeader>,
+    segments: Inlet<SegmentRecord, SegmentsHeader>,
+    tracks: Inlet<TrackedLine, TracksHeader>,
+    poses: Inlet<PoseRecord, TracksHeader>,
+    status: Inlet<StatusReport, ()>,
+    rig: Inlet<RigRecord, ()>,
+    control: Inlet<Control, ()>,
 }
 
 /// What the recorder saw and could not record.
@@ -109,10 +109,10 @@ pub fn run(ctx: &StageContext, bus: &Bus, shutdown: &Shutdown) -> anyhow::Result
 }
 
 /// Whether a shutdown command for the recorder arrived.
-fn shutdown_ordered(control: &mut Inlet<Control>, pid: u32) -> anyhow::Result<bool> {
+fn shutdown_ordered(control: &mut Inlet<Control, ()>, pid: u32) -> anyhow::Result<bool> {
     Ok(control.receive_all()?.iter().any(|c| {
         let c = c.payload().first().copied().unwrap_or_default();
-        c.command() == Some(Command::Shutdown) && c.is_for(StageKind::Recorder, pid)
+        c.command.is(Command::Shutdown) && c.is_for(StageKind::Recorder, pid)
     }))
 }
 
@@ -151,14 +151,14 @@ fn drain(
         recording.segments(message.header(), message.payload())?;
     }
     for message in inlets.tracks.receive_all()? {
-        recording.matches(message.header(), message.payload())?;
+        recording.matches(&message.header().frame, message.payload())?;
     }
     for message in inlets.poses.receive_all()? {
-        recording.outcome(message.header(), message.payload().first())?;
+        recording.outcome(&message.header().frame, message.payload().first())?;
     }
     for message in inlets.status.receive_all()? {
         if let Some(report) = message.payload().first()
-            && report.kind() != Some(StatusKind::Heartbeat)
+            && !report.kind.is(StatusKind::Heartbeat)
         {
             recording.event(report, now_ns())?;
         }

@@ -23,18 +23,13 @@ pub mod ros_msgs;
 
 use convert::PathWindow;
 use linetrack_ipc::{Bus, Shutdown};
-use linetrack_msgs::{
-    FrameHeader, FrameStatus, PoseRecord, StageKind, StatusKind, StatusReport, Topic,
-};
+use linetrack_msgs::{PoseRecord, StageKind, StatusKind, StatusReport, Topic, TracksHeader};
 use linetrack_pipeline_config::Ros2Config;
 use ros_msgs::{Header, Path, PoseStamped};
 use std::time::Duration;
 
 /// A failed write is logged the first time and then once per this many failures.
 pub const LOG_EVERY: u64 = 100;
-
-/// What the bridge puts in a [`StatusReport`]'s `stage`: it is no pipeline stage.
-pub const STATUS_STAGE_CODE: u32 = u32::MAX;
 
 /// How long the loop sleeps at most between checks of the shutdown flag.
 const WAKE_TIMEOUT: Duration = Duration::from_millis(100);
@@ -128,8 +123,14 @@ impl Bridge {
 
     /// Takes one message of the `poses` topic: publishes the pose and the path when the
     /// frame was tracked (or lost, with `publish_lost`); nothing otherwise.
-    pub fn on_pose(&mut self, header: &FrameHeader, record: &PoseRecord, sink: &mut dyn PoseSink) {
-        if header.frame_status() != FrameStatus::Ok {
+    pub fn on_pose(
+        &mut self,
+        message: &TracksHeader,
+        record: &PoseRecord,
+        sink: &mut dyn PoseSink,
+    ) {
+        let header = &message.frame;
+        if !header.is_ok() {
             self.tally.dropped += 1;
             return;
         }
@@ -188,17 +189,17 @@ pub fn run(
     make_sink: impl FnOnce() -> Result<Box<dyn PoseSink>, BridgeError>,
 ) -> Result<Tally, BridgeError> {
     // Subscribed before ready is said: no pose published after that is missed.
-    let mut poses = bus.inlet::<PoseRecord>(Topic::Poses)?;
+    let mut poses = bus.inlet::<PoseRecord, TracksHeader>(Topic::Poses)?;
     let wake = bus.wake(StageKind::Supervisor)?;
     let mut sink = make_sink()?;
-    let mut status = bus.outlet::<StatusReport>(Topic::Status, 1)?;
+    let mut status = bus.outlet::<StatusReport, ()>(Topic::Status, 1)?;
     let ready = StatusReport {
-        stage: STATUS_STAGE_CODE,
+        stage: StageKind::Ros2Bridge.into(),
         pid: std::process::id(),
         kind: StatusKind::Ready.into(),
         ..StatusReport::default()
     };
-    status.publish(&FrameHeader::default(), &[&[ready]])?;
+    status.publish(&(), &[&[ready]])?;
     let mut bridge = Bridge::new(config);
     loop {
         let stopping = shutdown.requested();
@@ -219,6 +220,7 @@ pub fn run(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use linetrack_msgs::{FrameHeader, FrameStatus};
     use linetrack_pipeline_config::Convention;
 
     #[derive(Default)]
@@ -266,13 +268,29 @@ mod tests {
         };
         let mut bridge = Bridge::new(&config);
         let mut sink = Recorded::default();
-        bridge.on_pose(&FrameHeader::new(0, 0, 0), &pose(1.0, 0), &mut sink);
+        bridge.on_pose(
+            &TracksHeader::from(FrameHeader::new(0, 0, 0)),
+            &pose(1.0, 0),
+            &mut sink,
+        );
         let mut dropped = FrameHeader::new(1, 1, 1);
         dropped.mark(FrameStatus::DroppedLate, StageKind::Matcher);
-        bridge.on_pose(&dropped, &pose(2.0, 0), &mut sink);
-        bridge.on_pose(&FrameHeader::new(2, 2, 2), &pose(3.0, 1), &mut sink);
-        bridge.on_pose(&FrameHeader::new(3, 3, 3), &pose(4.0, 0), &mut sink);
-        bridge.on_pose(&FrameHeader::new(4, 4, 4), &pose(5.0, 0), &mut sink);
+        bridge.on_pose(&TracksHeader::from(dropped), &pose(2.0, 0), &mut sink);
+        bridge.on_pose(
+            &TracksHeader::from(FrameHeader::new(2, 2, 2)),
+            &pose(3.0, 1),
+            &mut sink,
+        );
+        bridge.on_pose(
+            &TracksHeader::from(FrameHeader::new(3, 3, 3)),
+            &pose(4.0, 0),
+            &mut sink,
+        );
+        bridge.on_pose(
+            &TracksHeader::from(FrameHeader::new(4, 4, 4)),
+            &pose(5.0, 0),
+            &mut sink,
+        );
         let xs: Vec<f64> = sink.poses.iter().map(|p| p.pose.position.x).collect();
         assert_eq!(xs, [1.0, 4.0, 5.0]);
         let last: Vec<f64> = sink
@@ -286,7 +304,11 @@ mod tests {
             publish_lost: true,
             ..config
         });
-        publish_lost.on_pose(&FrameHeader::new(2, 2, 2), &pose(3.0, 1), &mut sink);
+        publish_lost.on_pose(
+            &TracksHeader::from(FrameHeader::new(2, 2, 2)),
+            &pose(3.0, 1),
+            &mut sink,
+        );
         assert_eq!(sink.poses.len(), 4);
     }
 
@@ -297,9 +319,17 @@ mod tests {
             fail: true,
             ..Default::default()
         };
-        bridge.on_pose(&FrameHeader::new(0, 0, 0), &pose(1.0, 0), &mut sink);
+        bridge.on_pose(
+            &TracksHeader::from(FrameHeader::new(0, 0, 0)),
+            &pose(1.0, 0),
+            &mut sink,
+        );
         sink.fail = false;
-        bridge.on_pose(&FrameHeader::new(1, 0, 0), &pose(2.0, 0), &mut sink);
+        bridge.on_pose(
+            &TracksHeader::from(FrameHeader::new(1, 0, 0)),
+            &pose(2.0, 0),
+            &mut sink,
+        );
         assert_eq!(bridge.tally().failed_writes, 1);
         assert_eq!(sink.poses.len(), 1);
         // The path still has both: a failed pose write does not lose it from the path.

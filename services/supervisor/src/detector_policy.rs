@@ -11,9 +11,9 @@
 
 use crate::fallback::Hysteresis;
 use crate::monitor::stage_ms;
-use linetrack_msgs::{FrameHeader, FrameStatus, StageKind};
+use linetrack_msgs::{FrameHeader, StageKind, TracksHeader};
 use linetrack_pipeline_config::DetectorFallbackConfig;
-use linetrack_stage_runtime::detector_from_code;
+use linetrack_stage_runtime::detector_kind;
 use linetrack_vision::DetectorKind;
 
 /// The detector the policy watches for its budget.
@@ -59,9 +59,10 @@ impl DetectorPolicy {
     /// those still on their way from the one before a swap).
     pub fn observe(
         &mut self,
-        header: &FrameHeader,
+        message: &TracksHeader,
         running: DetectorKind,
     ) -> Option<DetectorSwitch> {
+        let header = &message.frame;
         if running == SLOW && self.streaks.fallen_back() {
             // LSD runs again without this policy (`linetrack ctl`, an abandoned swap):
             // watch it afresh.
@@ -70,7 +71,7 @@ impl DetectorPolicy {
         let index = StageKind::LineDetector.stamp_index()?;
         if header.stamps[index].end_ns == 0
             || !detected(header, index)
-            || detector_from_code(header.detector)? != running
+            || detector_kind(message.detection.detector.get().ok()?) != running
         {
             return None;
         }
@@ -116,8 +117,11 @@ impl DetectorPolicy {
 /// Whether the detector (stamp index `detector`) detected the frame: not a frame dropped
 /// before it or by it (its stamps then time the drop, not a detection).
 fn detected(header: &FrameHeader, detector: usize) -> bool {
-    header.frame_status() == FrameStatus::Ok
-        || StageKind::from_code(header.dropped_by)
+    header.is_ok()
+        || header
+            .status_by
+            .get()
+            .ok()
             .and_then(|s| s.stamp_index())
             .is_some_and(|by| by > detector)
 }
@@ -125,14 +129,17 @@ fn detected(header: &FrameHeader, detector: usize) -> bool {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use linetrack_stage_runtime::detector_code;
+    use linetrack_msgs::FrameStatus;
+    use linetrack_stage_runtime::detector_on_wire;
 
     /// Frame `id` detected by `kind` in `ms` milliseconds (from its stamps).
-    fn frame(id: u64, kind: DetectorKind, ms: f64) -> FrameHeader {
-        let mut h = FrameHeader::new(id, 0, 0);
-        h.detector = detector_code(kind);
-        h.stamps[1].start_ns = 5_000_000_000 + id * 50_000_000;
-        h.stamps[1].end_ns = h.stamps[1].start_ns + (ms * 1e6) as u64;
+    fn frame(id: u64, kind: DetectorKind, ms: f64) -> TracksHeader {
+        let mut h = TracksHeader::default();
+        h.frame.frame_id = id;
+        h.detection.detector = detector_on_wire(kind).into();
+        let stamp = &mut h.frame.stamps[1];
+        stamp.start_ns = 5_000_000_000 + id * 50_000_000;
+        stamp.end_ns = stamp.start_ns + (ms * 1e6) as u64;
         h
     }
 
@@ -247,17 +254,12 @@ mod tests {
         let mut switches = Vec::new();
         for id in 0..9u64 {
             let mut h = frame(id, LSD, if id % 3 == 0 { 150.0 } else { 0.001 });
-            h.status = if id % 3 == 0 {
-                FrameStatus::DroppedLate
+            if id % 3 == 0 {
+                h.frame.mark(FrameStatus::DroppedLate, StageKind::Matcher);
             } else {
-                FrameStatus::DroppedBehind
-            } as u32;
-            h.dropped_by = if id % 3 == 0 {
-                StageKind::Matcher
-            } else {
-                StageKind::LineDetector
+                h.frame
+                    .mark(FrameStatus::DroppedBehind, StageKind::LineDetector);
             }
-            .code();
             switches.extend(p.observe(&h, LSD).map(|s| (id, s.to)));
         }
         assert_eq!(switches, [(6, FLD)], "the third detected frame");
@@ -272,7 +274,7 @@ mod tests {
             "not fallen back"
         );
         let mut unprocessed = frame(40, LSD, 90.0);
-        unprocessed.stamps[1].end_ns = 0;
+        unprocessed.frame.stamps[1].end_ns = 0;
         for _ in 0..10 {
             assert_eq!(p.observe(&unprocessed, LSD), None);
         }

@@ -3,7 +3,7 @@
 //! ([`crate::detector_policy`]) switch on.
 
 use crate::monitor::stage_ms;
-use linetrack_msgs::{FrameHeader, MatcherMode, PoseRecord, StageKind};
+use linetrack_msgs::{FrameHeader, MatcherMode, PoseRecord, StageKind, TracksHeader};
 use linetrack_pipeline_config::FallbackConfig;
 
 /// Two states, normal and fallen back, and the streaks that move between them: `trip`
@@ -147,12 +147,13 @@ impl FallbackController {
     }
 
     /// Why an LBD frame failed, if it did.
-    fn failure(&self, header: &FrameHeader, pose: &PoseRecord) -> Option<String> {
+    fn failure(&self, header: &TracksHeader, pose: &PoseRecord) -> Option<String> {
         let c = &self.config;
-        if header.stereo_matches < c.min_stereo_matches {
+        let stereo_matches = header.matching.stereo_matches;
+        if stereo_matches < c.min_stereo_matches {
             return Some(format!(
-                "too few LBD stereo matches ({} < {})",
-                header.stereo_matches, c.min_stereo_matches
+                "too few LBD stereo matches ({stereo_matches} < {})",
+                c.min_stereo_matches
             ));
         }
         let observed = pose.observations[1];
@@ -164,7 +165,7 @@ impl FallbackController {
                 pose.inliers[1], observed, c.min_inlier_ratio
             ));
         }
-        let ms = Self::matcher_ms(header);
+        let ms = Self::matcher_ms(&header.frame);
         if c.over_budget && ms > self.matcher_budget_ms {
             return Some(format!(
                 "matcher over budget ({ms:.1} ms > {:.1} ms)",
@@ -175,15 +176,16 @@ impl FallbackController {
     }
 
     /// Takes one processed frame's results; returns a switch when one is due.
-    pub fn observe(&mut self, header: &FrameHeader, pose: &PoseRecord) -> Option<Switch> {
+    pub fn observe(&mut self, header: &TracksHeader, pose: &PoseRecord) -> Option<Switch> {
+        let frame = &header.frame;
         match self.mode() {
             MatcherMode::Lbd => {
                 // Frames matched by ℓ1 for lack of images say nothing about LBD.
-                if MatcherMode::from_code(header.matcher_mode) != Some(MatcherMode::Lbd) {
+                if !header.matching.mode.is(MatcherMode::Lbd) {
                     return None;
                 }
                 let failure = self.failure(header, pose);
-                if !self.streaks.observe(header.frame_id, failure.is_some()) {
+                if !self.streaks.observe(frame.frame_id, failure.is_some()) {
                     return None;
                 }
                 let reason = format!(
@@ -197,11 +199,11 @@ impl FallbackController {
                 })
             }
             MatcherMode::L1 => {
-                let Ok(found) = u32::try_from(header.lbd_probe_matches) else {
+                let Ok(found) = u32::try_from(header.matching.lbd_probe_matches) else {
                     return None;
                 };
-                let passed = self.probe_shortfall(header, found).is_none();
-                if !self.streaks.observe(header.frame_id, passed) {
+                let passed = self.probe_shortfall(frame, found).is_none();
+                if !self.streaks.observe(frame.frame_id, passed) {
                     return None;
                 }
                 let c = &self.config;
@@ -217,7 +219,7 @@ impl FallbackController {
                     "LBD probes found >= {} stereo matches{latency} on {} probes in a row (last {found}, {:.1} ms)",
                     c.recover_stereo_matches,
                     c.recover_probes,
-                    Self::matcher_ms(header)
+                    Self::matcher_ms(frame)
                 );
                 Some(Switch {
                     to: MatcherMode::Lbd,
@@ -232,13 +234,13 @@ impl FallbackController {
 mod tests {
     use super::*;
 
-    fn frame(mode: MatcherMode, stereo: u32, probe: i32, matcher_ms: u64) -> FrameHeader {
-        let mut h = FrameHeader::new(0, 0, 0);
-        h.matcher_mode = mode as u32;
-        h.stereo_matches = stereo;
-        h.lbd_probe_matches = probe;
-        h.stamps[2].start_ns = 1_000_000;
-        h.stamps[2].end_ns = 1_000_000 + matcher_ms * 1_000_000;
+    fn frame(mode: MatcherMode, stereo: u32, probe: i32, matcher_ms: u64) -> TracksHeader {
+        let mut h = TracksHeader::default();
+        h.matching.mode = mode.into();
+        h.matching.stereo_matches = stereo;
+        h.matching.lbd_probe_matches = probe;
+        h.frame.stamps[2].start_ns = 1_000_000;
+        h.frame.stamps[2].end_ns = 1_000_000 + matcher_ms * 1_000_000;
         h
     }
 

@@ -36,12 +36,12 @@ use anyhow::{Context, bail};
 use clock::{Backoff, Clock, Every, SystemClock, Timeout, Watchdog};
 use linetrack_ipc::{Bus, Inlet, LocalHub, Outlet, Scope, Shutdown, Wake};
 use linetrack_msgs::{
-    Command, Control, FrameHeader, MatcherMode, PoseRecord, StageKind, StatusKind, StatusReport,
-    Topic, now_ns,
+    Command, Control, MatcherMode, PoseRecord, StageKind, StatusKind, StatusReport, Topic,
+    TracksHeader, now_ns,
 };
 use linetrack_pipeline_config::PipelineConfig;
 use linetrack_run_record::{Report, RunEnd};
-use linetrack_stage_runtime::{StageContext, detector_code, detector_from_code};
+use linetrack_stage_runtime::{StageContext, detector_kind, detector_on_wire};
 use linetrack_vision::DetectorKind;
 use monitor::Monitor;
 use optional::{OptionalProcess, StopBy};
@@ -86,16 +86,16 @@ pub struct RunOutcome {
 
 /// The supervisor's connections.
 struct Ports {
-    poses: Inlet<PoseRecord>,
-    status: Inlet<StatusReport>,
-    control_in: Inlet<Control>,
-    control: Outlet<Control>,
+    poses: Inlet<PoseRecord, TracksHeader>,
+    status: Inlet<StatusReport, ()>,
+    control_in: Inlet<Control, ()>,
+    control: Outlet<Control, ()>,
     wake: Wake,
     /// Single-process mode with an output process: the poses, passed on to shared memory
     /// (where the output reads them).
-    forward_poses: Option<Outlet<PoseRecord>>,
+    forward_poses: Option<Outlet<PoseRecord, TracksHeader>>,
     /// Single-process mode with an output process: its reports (on shared memory).
-    output_status: Option<Inlet<StatusReport>>,
+    output_status: Option<Inlet<StatusReport, ()>>,
 }
 
 impl Ports {
@@ -122,7 +122,7 @@ impl Ports {
         frame_id: u64,
     ) -> anyhow::Result<()> {
         let c = Control::new(command, stage, pid, value, frame_id);
-        self.control.publish(&FrameHeader::default(), &[&[c]])?;
+        self.control.publish(&(), &[&[c]])?;
         Ok(())
     }
 }
@@ -430,7 +430,7 @@ fn stage_code(stage: StageKind) -> Option<StageRun> {
         StageKind::LineDetector => Some(linetrack_line_detector::run),
         StageKind::Matcher => Some(linetrack_matcher::run),
         StageKind::PoseEstimator => Some(linetrack_pose_estimator::run),
-        StageKind::Supervisor | StageKind::Recorder => None,
+        StageKind::Supervisor | StageKind::Recorder | StageKind::Ros2Bridge => None,
     }
 }
 
@@ -859,7 +859,7 @@ impl<'m> Supervisor<'m> {
                 .iter_mut()
                 .find(|o| o.pid() == Some(report.pid))
             {
-                if report.kind() == Some(StatusKind::Ready) {
+                if report.kind.is(StatusKind::Ready) {
                     process.set_ready();
                 }
                 continue;
@@ -870,7 +870,7 @@ impl<'m> Supervisor<'m> {
             };
             process.last_seen = now;
             let (stage, standby) = (process.stage, process.standby);
-            match report.kind() {
+            match report.kind.get().ok() {
                 Some(StatusKind::Ready) => {
                     process.ready = true;
                     if standby {
@@ -974,7 +974,7 @@ impl<'m> Supervisor<'m> {
             {
                 tracing::warn!(
                     "pose of frame {} not passed to the outputs: {e}",
-                    message.header().frame_id
+                    message.header().frame.frame_id
                 );
             }
             if let Some(switch) = self.monitor.on_pose(message.header(), &pose) {
@@ -997,7 +997,7 @@ impl<'m> Supervisor<'m> {
                 self.monitor.event(
                     switch.event,
                     "line-detector",
-                    Some(message.header().frame_id),
+                    Some(message.header().frame.frame_id),
                     format!(
                         "{} -> {}: {}",
                         self.detector.name(),
@@ -1017,13 +1017,16 @@ impl<'m> Supervisor<'m> {
                 continue;
             };
             if !c.is_for(StageKind::Supervisor, std::process::id())
-                || c.command() != Some(Command::SwapDetector)
+                || !c.command.is(Command::SwapDetector)
             {
                 continue;
             }
-            let Some(kind) = detector_from_code(c.value) else {
-                tracing::warn!("swap request for unknown detector code {}", c.value);
-                continue;
+            let kind = match linetrack_msgs::decode(c.value) {
+                Ok(detector) => detector_kind(detector),
+                Err(unknown) => {
+                    tracing::warn!("swap request refused: {unknown}");
+                    continue;
+                }
             };
             if self.swap_to.is_some() {
                 tracing::warn!("swap to {} refused: a swap is in progress", kind.name());
@@ -1249,7 +1252,7 @@ fn optional_processes(
     Ok(processes)
 }
 
-/// The detector wire code (re-exported for `linetrack ctl`).
+/// The detector's code in a [`Command::SwapDetector`]'s value (for `linetrack ctl`).
 pub fn detector_wire_code(kind: DetectorKind) -> u32 {
-    detector_code(kind)
+    detector_on_wire(kind).into()
 }

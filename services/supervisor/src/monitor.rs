@@ -8,14 +8,15 @@
 
 use crate::fallback::{FallbackController, Switch};
 use linetrack_msgs::{
-    FrameHeader, FrameStatus, MatcherMode, PoseRecord, StageKind, StatusKind, StatusReport,
+    CameraFailure, FrameHeader, FrameStatus, MatcherMode, PoseRecord, StageKind, StatusKind,
+    StatusReport, TracksHeader,
 };
 use linetrack_pipeline_config::{CameraConfig, MatcherPolicy, PipelineConfig};
 use linetrack_run_record::{
     EventRecord, FrameRecord, Percentiles, RecordError, RecordWriter, Report, RunEnd, STAGES,
     Summary, Tally,
 };
-use linetrack_stage_runtime::detector_from_code;
+use linetrack_stage_runtime::detector_kind;
 use linetrack_trajectory::tum::StampedPose;
 use std::collections::{BTreeMap, BTreeSet, VecDeque};
 use std::fmt::Write as _;
@@ -209,8 +210,16 @@ impl Monitor {
     }
 
     /// Takes one pose message; returns a matcher mode switch when one is due.
-    pub fn on_pose(&mut self, header: &FrameHeader, pose: &PoseRecord) -> Option<Switch> {
-        let status = header.frame_status();
+    pub fn on_pose(&mut self, message: &TracksHeader, pose: &PoseRecord) -> Option<Switch> {
+        let TracksHeader {
+            frame: header,
+            detection,
+            matching,
+        } = message;
+        let status = header.status.get().unwrap_or_else(|unknown| {
+            tracing::warn!("frame {}: {unknown}: recorded as failed", header.frame_id);
+            FrameStatus::StageError
+        });
         let outcome = match status {
             FrameStatus::Ok if pose.lost == 1 => "lost",
             FrameStatus::Ok => "pose",
@@ -235,29 +244,34 @@ impl Monitor {
             dropped_by: if status == FrameStatus::Ok {
                 String::new()
             } else {
-                StageKind::from_code(header.dropped_by)
-                    .map(|s| s.name().to_string())
-                    .unwrap_or_default()
+                header
+                    .status_by
+                    .get()
+                    .map_or_else(|unknown| unknown.to_string(), |s| s.name().to_string())
             },
             stage_ms: stage,
             wait_ms: wait,
             end_to_end_ms,
             matcher: if status == FrameStatus::Ok {
-                MatcherMode::from_code(header.matcher_mode)
+                matching
+                    .mode
+                    .get()
                     .map(|m| m.name().to_string())
                     .unwrap_or_default()
             } else {
                 String::new()
             },
             detector: if header.stamps[1].end_ns > 0 {
-                detector_from_code(header.detector)
-                    .map(|d| d.name().to_string())
+                detection
+                    .detector
+                    .get()
+                    .map(|d| detector_kind(d).name().to_string())
                     .unwrap_or_default()
             } else {
                 String::new()
             },
-            stereo_matches: header.stereo_matches,
-            tracked_matches: header.tracked_matches,
+            stereo_matches: matching.stereo_matches,
+            tracked_matches: matching.tracked_matches,
             deadline_miss: over_stage
                 || end_to_end_ms > budget.end_to_end_ms
                 || status == FrameStatus::DroppedLate,
@@ -283,7 +297,10 @@ impl Monitor {
             .writer
             .pose(header.sequence_ns, pose.translation, pose.rotation_xyzw);
         self.note(written);
-        let switch = self.fallback.as_mut().and_then(|f| f.observe(header, pose));
+        let switch = self
+            .fallback
+            .as_mut()
+            .and_then(|f| f.observe(message, pose));
         if let Some(s) = &switch {
             let kind = if s.to == MatcherMode::L1 {
                 "fallback"
@@ -310,7 +327,7 @@ impl Monitor {
     /// processes themselves (ready, hand-over) are the supervisor's. `camera` names the
     /// camera in the events.
     pub fn on_report(&mut self, report: &StatusReport, stage: StageKind, camera: &CameraConfig) {
-        match report.kind() {
+        match report.kind.get().ok() {
             Some(StatusKind::SourceFinished) => {
                 if report.value == 0 && report.frame_id == 0 && !self.any_published() {
                     // A camera that never delivered: no frame to wait for.
@@ -321,7 +338,8 @@ impl Monitor {
                 }
             }
             Some(StatusKind::CameraLost) => {
-                let failure = linetrack_msgs::CameraFailure::from_code(report.detail);
+                // An unknown failure (another build's) is described as the catch-all.
+                let failure = linetrack_msgs::decode(report.detail).unwrap_or(CameraFailure::Other);
                 self.event(
                     "camera-lost",
                     stage.name(),
@@ -601,10 +619,10 @@ mod tests {
     }
 
     fn pose_of(monitor: &mut Monitor, frame_id: u64) {
-        let mut header = FrameHeader::new(frame_id, frame_id * 50_000_000, 1);
-        header.stamps[3].end_ns = 2_000_001;
-        header.stereo_matches = 40;
-        header.matcher_mode = MatcherMode::Lbd as u32;
+        let mut header = TracksHeader::from(FrameHeader::new(frame_id, frame_id * 50_000_000, 1));
+        header.frame.stamps[3].end_ns = 2_000_001;
+        header.matching.stereo_matches = 40;
+        header.matching.mode = MatcherMode::Lbd.into();
         monitor.on_pose(&header, &PoseRecord::default());
     }
 

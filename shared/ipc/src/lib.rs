@@ -8,7 +8,9 @@
 //! - **local** ([`Bus::local`]): crossbeam channels between threads of one process, with
 //!   the same fan-out and wake-up semantics; the baseline that measures what IPC costs.
 //!
-//! Every message is a slice of [`Record`]s under a [`FrameHeader`].
+//! Every message is a slice of [`Record`]s under a user header, itself a [`Record`]: a
+//! topic's publishers and subscribers agree on both types (iceoryx2 checks them when a
+//! port opens its service), e.g. [`linetrack_msgs::SegmentsHeader`] over `[SegmentRecord]`.
 
 use crossbeam_channel::{Receiver, Sender, TrySendError};
 use iceoryx2::config::Config;
@@ -23,7 +25,7 @@ use iceoryx2::prelude::{
     SignalHandlingMode, ZeroCopySend, ipc,
 };
 use iceoryx2::sample::Sample;
-use linetrack_msgs::{FrameHeader, StageKind, Topic, wake_service_name};
+use linetrack_msgs::{StageKind, Topic, wake_service_name};
 use std::any::Any;
 use std::collections::HashMap;
 use std::fmt::Debug;
@@ -353,8 +355,8 @@ type LocalMessage = Arc<dyn Any + Send + Sync>;
 
 /// A message in the local transport.
 #[derive(Debug)]
-pub struct LocalPayload<P> {
-    header: FrameHeader,
+pub struct LocalPayload<P, H> {
+    header: H,
     payload: Vec<P>,
 }
 
@@ -460,15 +462,15 @@ impl Bus {
 
     /// A publisher on `topic` whose messages hold up to `initial_len` records (more are
     /// allocated when needed), waking the topic's consumers.
-    pub fn outlet<P: Record>(
+    pub fn outlet<P: Record, H: Record>(
         &self,
         topic: Topic,
         initial_len: usize,
-    ) -> Result<Outlet<P>, IpcError> {
+    ) -> Result<Outlet<P, H>, IpcError> {
         match &self.kind {
             BusKind::Shm { node, scope } => {
                 let service_name = topic.service_name(&scope.run_id);
-                let service = pubsub_service::<P>(node, topic, &service_name)?;
+                let service = pubsub_service::<P, H>(node, topic, &service_name)?;
                 let publisher = service
                     .publisher_builder()
                     .initial_max_slice_len(initial_len.max(1))
@@ -508,7 +510,7 @@ impl Bus {
                         subscribers,
                         keep_last: topic.history() > 0,
                         wakes,
-                        _record: std::marker::PhantomData,
+                        _message: std::marker::PhantomData,
                     },
                 })
             }
@@ -516,11 +518,11 @@ impl Bus {
     }
 
     /// A subscriber on `topic`.
-    pub fn inlet<P: Record>(&self, topic: Topic) -> Result<Inlet<P>, IpcError> {
+    pub fn inlet<P: Record, H: Record>(&self, topic: Topic) -> Result<Inlet<P, H>, IpcError> {
         match &self.kind {
             BusKind::Shm { node, scope } => {
                 let service_name = topic.service_name(&scope.run_id);
-                let service = pubsub_service::<P>(node, topic, &service_name)?;
+                let service = pubsub_service::<P, H>(node, topic, &service_name)?;
                 let subscriber = service
                     .subscriber_builder()
                     .buffer_size(topic.queue_depth())
@@ -582,19 +584,19 @@ impl Bus {
     }
 }
 
-fn pubsub_service<P: Record>(
+fn pubsub_service<P: Record, H: Record>(
     node: &Node<ipc::Service>,
     topic: Topic,
     service_name: &str,
 ) -> Result<
-    iceoryx2::service::port_factory::publish_subscribe::PortFactory<ipc::Service, [P], FrameHeader>,
+    iceoryx2::service::port_factory::publish_subscribe::PortFactory<ipc::Service, [P], H>,
     IpcError,
 > {
     let name = ServiceName::new(service_name)
         .map_err(|e| setup("service name", service_name)(format!("{e:?}")))?;
     node.service_builder(&name)
         .publish_subscribe::<[P]>()
-        .user_header::<FrameHeader>()
+        .user_header::<H>()
         .max_publishers(topic.max_publishers())
         .max_subscribers(8)
         .subscriber_max_buffer_size(topic.queue_depth())
@@ -624,29 +626,29 @@ fn event_service(
         .map_err(|e| setup("event service", service_name)(format!("{e:?}")))
 }
 
-enum OutletInner<P: Record> {
+enum OutletInner<P: Record, H: Record> {
     Shm {
-        publisher: Publisher<ipc::Service, [P], FrameHeader>,
+        publisher: Publisher<ipc::Service, [P], H>,
         notifiers: Vec<Notifier<ipc::Service>>,
     },
     Local {
         subscribers: Arc<Mutex<LocalTopic>>,
         keep_last: bool,
         wakes: Vec<Sender<()>>,
-        _record: std::marker::PhantomData<P>,
+        _message: std::marker::PhantomData<(P, H)>,
     },
 }
 
 /// Publishes messages on one topic.
-pub struct Outlet<P: Record> {
+pub struct Outlet<P: Record, H: Record> {
     service_name: String,
-    inner: OutletInner<P>,
+    inner: OutletInner<P, H>,
 }
 
-impl<P: Record> Outlet<P> {
+impl<P: Record, H: Record> Outlet<P, H> {
     /// Publishes `header` with the concatenation of `parts` as payload, written once into
     /// shared memory, and wakes the consumers. Returns how many subscribers got it.
-    pub fn publish(&mut self, header: &FrameHeader, parts: &[&[P]]) -> Result<usize, IpcError> {
+    pub fn publish(&mut self, header: &H, parts: &[&[P]]) -> Result<usize, IpcError> {
         let len: usize = parts.iter().map(|p| p.len()).sum();
         match &mut self.inner {
             OutletInner::Shm {
@@ -731,31 +733,31 @@ impl<P: Record> Outlet<P> {
     }
 }
 
-enum InletInner<P: Record> {
-    Shm(Subscriber<ipc::Service, [P], FrameHeader>),
-    Local(Receiver<LocalMessage>, std::marker::PhantomData<P>),
+enum InletInner<P: Record, H: Record> {
+    Shm(Subscriber<ipc::Service, [P], H>),
+    Local(Receiver<LocalMessage>, std::marker::PhantomData<(P, H)>),
 }
 
 /// Receives messages on one topic.
-pub struct Inlet<P: Record> {
+pub struct Inlet<P: Record, H: Record> {
     service_name: String,
     /// Messages it may hold at once: the topic's queue depth, which is also the
     /// subscriber's borrow limit.
     limit: usize,
-    inner: InletInner<P>,
+    inner: InletInner<P, H>,
 }
 
 /// A received message: in shared memory, read in place, or a local message.
-pub enum Received<P: Record> {
+pub enum Received<P: Record, H: Record> {
     /// A shared-memory sample.
-    Shm(Sample<ipc::Service, [P], FrameHeader>),
+    Shm(Sample<ipc::Service, [P], H>),
     /// A local message.
-    Local(Arc<LocalPayload<P>>),
+    Local(Arc<LocalPayload<P, H>>),
 }
 
-impl<P: Record> Received<P> {
+impl<P: Record, H: Record> Received<P, H> {
     /// The header.
-    pub fn header(&self) -> &FrameHeader {
+    pub fn header(&self) -> &H {
         match self {
             Received::Shm(s) => s.user_header(),
             Received::Local(m) => &m.header,
@@ -771,16 +773,16 @@ impl<P: Record> Received<P> {
     }
 }
 
-impl<P: Record> Inlet<P> {
+impl<P: Record, H: Record> Inlet<P, H> {
     /// The oldest waiting message, if any.
-    pub fn receive(&mut self) -> Result<Option<Received<P>>, IpcError> {
+    pub fn receive(&mut self) -> Result<Option<Received<P, H>>, IpcError> {
         match &mut self.inner {
             InletInner::Shm(subscriber) => subscriber
                 .receive()
                 .map(|s| s.map(Received::Shm))
                 .map_err(|e| transfer("receive", &self.service_name)(format!("{e:?}"))),
             InletInner::Local(rx, _) => match rx.try_recv() {
-                Ok(message) => match message.downcast::<LocalPayload<P>>() {
+                Ok(message) => match message.downcast::<LocalPayload<P, H>>() {
                     Ok(m) => Ok(Some(Received::Local(m))),
                     Err(_) => Err(transfer("receive", &self.service_name)(
                         "a message of another type".to_string(),
@@ -794,7 +796,7 @@ impl<P: Record> Inlet<P> {
     /// The waiting messages, oldest first, at most [`Inlet::limit`] of them: a publisher
     /// that keeps sending while they are taken can never push the subscriber past its
     /// borrow limit. A full batch may leave more waiting.
-    pub fn receive_all(&mut self) -> Result<Vec<Received<P>>, IpcError> {
+    pub fn receive_all(&mut self) -> Result<Vec<Received<P, H>>, IpcError> {
         let mut all = Vec::new();
         while all.len() < self.limit
             && let Some(m) = self.receive()?
@@ -862,7 +864,7 @@ mod tests {
     }
 
     use super::*;
-    use linetrack_msgs::SegmentRecord;
+    use linetrack_msgs::{FrameHeader, SegmentRecord, SegmentsHeader};
 
     #[test]
     fn a_scope_leaves_nothing_that_other_users_can_write() {
@@ -873,10 +875,10 @@ mod tests {
         };
         let bus = Bus::shared_memory(&scope, "private").unwrap_or_else(|e| panic!("{e}"));
         let _outlet = bus
-            .outlet::<SegmentRecord>(Topic::Segments, 4)
+            .outlet::<SegmentRecord, SegmentsHeader>(Topic::Segments, 4)
             .unwrap_or_else(|e| panic!("{e}"));
         let _inlet = bus
-            .inlet::<SegmentRecord>(Topic::Segments)
+            .inlet::<SegmentRecord, SegmentsHeader>(Topic::Segments)
             .unwrap_or_else(|e| panic!("{e}"));
         let mode = |path: &Path| {
             std::fs::symlink_metadata(path)
@@ -976,13 +978,13 @@ mod tests {
 
     fn round_trip(publisher_bus: &Bus, subscriber_bus: &Bus) {
         let mut inlet = subscriber_bus
-            .inlet::<SegmentRecord>(Topic::Segments)
+            .inlet::<SegmentRecord, SegmentsHeader>(Topic::Segments)
             .unwrap_or_else(|e| panic!("{e}"));
         let wake = subscriber_bus
             .wake(StageKind::Matcher)
             .unwrap_or_else(|e| panic!("{e}"));
         let mut outlet = publisher_bus
-            .outlet::<SegmentRecord>(Topic::Segments, 4)
+            .outlet::<SegmentRecord, SegmentsHeader>(Topic::Segments, 4)
             .unwrap_or_else(|e| panic!("{e}"));
         let a = [SegmentRecord {
             endpoints: [1.0, 2.0, 3.0, 4.0],
@@ -990,8 +992,8 @@ mod tests {
         let b = [SegmentRecord {
             endpoints: [5.0, 6.0, 7.0, 8.0],
         }; 9];
-        let mut header = FrameHeader::new(7, 0, 0);
-        header.left_count = 1;
+        let mut header = SegmentsHeader::from(FrameHeader::new(7, 0, 0));
+        header.detection.left_count = 1;
         // More records than the initial length: the publisher grows its slices.
         let delivered = outlet
             .publish(&header, &[&a, &b])
@@ -1003,7 +1005,8 @@ mod tests {
             .receive()
             .unwrap_or_else(|e| panic!("{e}"))
             .unwrap_or_else(|| panic!("no message"));
-        assert_eq!(got.header().frame_id, 7);
+        assert_eq!(got.header().frame.frame_id, 7);
+        assert_eq!(got.header().detection.left_count, 1);
         assert_eq!(got.payload().len(), 10);
         assert_eq!(got.payload()[0], a[0]);
         assert_eq!(got.payload()[9], b[0]);
@@ -1036,7 +1039,7 @@ mod tests {
         {
             let bus = Bus::shared_memory(&scope, "test-lifetime").unwrap_or_else(|e| panic!("{e}"));
             let _outlet = bus
-                .outlet::<SegmentRecord>(Topic::Segments, 4)
+                .outlet::<SegmentRecord, SegmentsHeader>(Topic::Segments, 4)
                 .unwrap_or_else(|e| panic!("{e}"));
             let during = scope.resources().unwrap_or_else(|e| panic!("{e}"));
             assert!(during.nodes >= 1 && during.services >= 1, "{during:?}");

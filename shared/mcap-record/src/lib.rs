@@ -17,7 +17,7 @@ use foxglove::messages::{
 };
 use foxglove::{Decode, Encode};
 use linetrack_msgs::{
-    FrameHeader, FrameStatus, PoseRecord, RigRecord, SegmentRecord, StageKind, StatusReport,
+    FrameHeader, PoseRecord, RigRecord, SegmentRecord, SegmentsHeader, StageKind, StatusReport,
     TrackedLine,
 };
 use mcap::records::MessageHeader;
@@ -140,7 +140,10 @@ impl FrameLatency {
         let last = header.stamps.iter().map(|s| s.end_ns).max().unwrap_or(0);
         Self {
             frame_id: header.frame_id,
-            outcome: header.frame_status().name().to_string(),
+            outcome: header
+                .status
+                .get()
+                .map_or_else(|unknown| unknown.to_string(), |s| s.name().to_string()),
             stages_ms,
             end_to_end_ms: header.age_ms(last),
         }
@@ -445,13 +448,14 @@ impl Recording {
     }
 
     /// Writes a frame's detected segments (left then right, as the segments topic holds
-    /// them: `header.left_count` left ones).
+    /// them: the detection's `left_count` left ones).
     pub fn segments(
         &mut self,
-        header: &FrameHeader,
+        message: &SegmentsHeader,
         segments: &[SegmentRecord],
     ) -> Result<(), McapError> {
-        let split = (header.left_count as usize).min(segments.len());
+        let header = &message.frame;
+        let split = (message.detection.left_count as usize).min(segments.len());
         for (topic, side) in [
             (LEFT_SEGMENTS, &segments[..split]),
             (RIGHT_SEGMENTS, &segments[split..]),
@@ -515,7 +519,7 @@ impl Recording {
         pose: Option<&PoseRecord>,
     ) -> Result<(), McapError> {
         let sequence = u32::try_from(header.frame_id).ok();
-        if let Some(p) = pose.filter(|_| header.frame_status() == FrameStatus::Ok) {
+        if let Some(p) = pose.filter(|_| header.is_ok()) {
             let message = PoseInFrame {
                 timestamp: Some(timestamp(header.sequence_ns)),
                 frame_id: WORLD_FRAME.to_string(),
@@ -555,12 +559,12 @@ impl Recording {
     /// Writes a stage's event (heartbeats are not events: the caller leaves them out).
     pub fn event(&mut self, report: &StatusReport, now_ns: u64) -> Result<(), McapError> {
         let event = StageEvent {
-            stage: report.stage().map_or_else(
-                || format!("stage {}", report.stage),
+            stage: report.stage.get().map_or_else(
+                |_| format!("stage {}", report.stage.raw()),
                 |s| s.name().to_string(),
             ),
             pid: report.pid,
-            kind: report.kind,
+            kind: report.kind.raw(),
             detail: report.detail,
             frame_id: report.frame_id,
             value: report.value,
@@ -874,8 +878,9 @@ mod tests {
         for id in 0..frames {
             let pixels: Vec<u8> = (0..24).map(|i| (i as u64 * 3 + id) as u8).collect();
             r.images(&header(id), &pixels).expect("images");
-            let mut h = header(id);
-            h.left_count = 1;
+            let h = header(id);
+            let mut detected = SegmentsHeader::from(h);
+            detected.detection.left_count = 1;
             let segs = [
                 SegmentRecord {
                     endpoints: [0.0, 0.0, 3.0, 2.0],
@@ -884,7 +889,7 @@ mod tests {
                     endpoints: [1.0, 0.0, 3.0, 2.0],
                 },
             ];
-            r.segments(&h, &segs).expect("segments");
+            r.segments(&detected, &segs).expect("segments");
             r.matches(&h, &[TrackedLine::default()]).expect("matches");
             r.outcome(&h, Some(&PoseRecord::default())).expect("pose");
         }

@@ -1,10 +1,18 @@
 //! The messages the pipeline's stages exchange, and the names of the services that carry
 //! them.
 //!
-//! Every message is a slice of fixed-layout records (`#[repr(C)]`, no pointers) under one
-//! user header, [`FrameHeader`], so a subscriber in another process reads it in place from
-//! shared memory. The topology is static: [`Topic::consumers`] says which stages read a
-//! topic, and so which stages a publisher wakes.
+//! Every message is a slice of fixed-layout records (`#[repr(C)]`, no pointers) under a
+//! user header, so a subscriber in another process reads it in place from shared memory.
+//! A frame's messages are headed by its [`FrameHeader`] (what every frame has) and the
+//! results of the stages upstream, each in its own record: images by a [`FrameHeader`],
+//! segments by a [`SegmentsHeader`] (with the [`Detection`]), tracks and poses by a
+//! [`TracksHeader`] (with the [`Detection`] and the [`Matching`]); status reports and
+//! commands have no header. The topology is static: [`Topic::consumers`] says which stages
+//! read a topic, and so which stages a publisher wakes.
+//!
+//! Codes (a stage, a status, a mode) travel as [`Code`]s: a `u32` that another, possibly
+//! older or crashed, process wrote, read back only through a checked conversion, so no
+//! value in shared memory is ever taken for an enum it is not.
 //!
 //! The records the ground-station link forwards (headers, segments, tracks, poses, status
 //! reports) are also serde types.
@@ -12,23 +20,169 @@
 use iceoryx2::prelude::ZeroCopySend;
 use num_enum::{IntoPrimitive, TryFromPrimitive};
 use std::fmt;
+use std::marker::PhantomData;
 
-/// A stage of the pipeline.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, TryFromPrimitive, IntoPrimitive)]
-#[repr(u32)]
-pub enum StageKind {
-    /// Reads (or renders) stereo frames and publishes them.
-    FrameSource,
-    /// Detects segments in both images.
-    LineDetector,
-    /// Stereo and frame-to-frame segment matching.
-    Matcher,
-    /// Visual odometry.
-    PoseEstimator,
-    /// Starts, watches and steers the others.
-    Supervisor,
-    /// Records the run into an MCAP file (`[record] mcap = true`); no processing stage.
-    Recorder,
+/// An enum that travels as a `u32` code ([`Code`]).
+pub trait WireEnum: Copy + fmt::Debug + Into<u32> + TryFrom<u32> + 'static {
+    /// What the code names, for errors ("frame status").
+    const WHAT: &'static str;
+}
+
+/// A code read from the wire that names no variant: written by another build, or garbage.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+#[error("unknown {what} code {code}")]
+pub struct UnknownCode {
+    /// What the code should have named ([`WireEnum::WHAT`]).
+    pub what: &'static str,
+    /// The code.
+    pub code: u32,
+}
+
+/// An `E` on the wire: its `u32` code. Whatever another process wrote, reading a `Code` is
+/// sound (any `u32` is a valid `Code`, where a `#[repr(u32)]` enum read from shared memory
+/// with an unknown discriminant would be undefined behaviour); the only way to the enum is
+/// the checked [`Code::get`], and the only way in is an `E`.
+#[repr(transparent)]
+pub struct Code<E> {
+    raw: u32,
+    kind: PhantomData<E>,
+}
+
+impl<E: WireEnum> Code<E> {
+    /// The code of `value`.
+    pub fn new(value: E) -> Self {
+        Self {
+            raw: value.into(),
+            kind: PhantomData,
+        }
+    }
+
+    /// The value, or an error naming the code when it names no `E`.
+    pub fn get(self) -> Result<E, UnknownCode> {
+        E::try_from(self.raw).map_err(|_| UnknownCode {
+            what: E::WHAT,
+            code: self.raw,
+        })
+    }
+
+    /// Whether this is the code of `value`.
+    pub fn is(self, value: E) -> bool {
+        self.raw == value.into()
+    }
+
+    /// The bare code, for records and messages that show it as it was read.
+    pub fn raw(self) -> u32 {
+        self.raw
+    }
+}
+
+impl<E: WireEnum> From<E> for Code<E> {
+    fn from(value: E) -> Self {
+        Self::new(value)
+    }
+}
+
+impl<E> Clone for Code<E> {
+    fn clone(&self) -> Self {
+        *self
+    }
+}
+
+impl<E> Copy for Code<E> {}
+
+impl<E> PartialEq for Code<E> {
+    fn eq(&self, other: &Self) -> bool {
+        self.raw == other.raw
+    }
+}
+
+impl<E> Eq for Code<E> {}
+
+impl<E: WireEnum + Default> Default for Code<E> {
+    fn default() -> Self {
+        Self::new(E::default())
+    }
+}
+
+impl<E: WireEnum> fmt::Debug for Code<E> {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self.get() {
+            Ok(value) => write!(f, "{value:?}"),
+            Err(unknown) => write!(f, "<{unknown}>"),
+        }
+    }
+}
+
+// SAFETY: a `Code` is one `u32` (`repr(transparent)`; the `PhantomData` takes no room): no
+// pointer, no handle, the same layout in every process, and every bit pattern is valid.
+#[allow(unsafe_code)]
+unsafe impl<E: WireEnum> ZeroCopySend for Code<E> {}
+
+impl<E: WireEnum> serde::Serialize for Code<E> {
+    fn serialize<S: serde::Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
+        serializer.serialize_u32(self.raw)
+    }
+}
+
+/// Decoded as it was sent, like a code read from shared memory: one that names no `E` (a
+/// newer build's) is an error only when [`Code::get`] reads it, so the rest of its message
+/// still arrives.
+impl<'de, E: WireEnum> serde::Deserialize<'de> for Code<E> {
+    fn deserialize<D: serde::Deserializer<'de>>(deserializer: D) -> Result<Self, D::Error> {
+        Ok(Self {
+            raw: u32::deserialize(deserializer)?,
+            kind: PhantomData,
+        })
+    }
+}
+
+/// Declares an enum that travels as a [`Code`]: `#[repr(u32)]` with an explicit code per
+/// variant, its [`WireEnum::WHAT`], and `ALL`, every variant in the order declared (so a
+/// test over `ALL` covers a variant added later).
+macro_rules! wire_enum {
+    (
+        $(#[$meta:meta])*
+        $vis:vis enum $name:ident: $what:literal {
+            $( $(#[$variant_meta:meta])* $variant:ident = $code:literal, )+
+        }
+    ) => {
+        $(#[$meta])*
+        #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, TryFromPrimitive, IntoPrimitive)]
+        #[repr(u32)]
+        $vis enum $name {
+            $( $(#[$variant_meta])* $variant = $code, )+
+        }
+
+        impl WireEnum for $name {
+            const WHAT: &'static str = $what;
+        }
+
+        impl $name {
+            /// Every variant, in the order declared.
+            pub const ALL: &'static [$name] = &[$($name::$variant),+];
+        }
+    };
+}
+
+wire_enum! {
+    /// A stage of the pipeline.
+    pub enum StageKind: "stage" {
+        /// Reads (or renders) stereo frames and publishes them.
+        #[default]
+        FrameSource = 0,
+        /// Detects segments in both images.
+        LineDetector = 1,
+        /// Stereo and frame-to-frame segment matching.
+        Matcher = 2,
+        /// Visual odometry.
+        PoseEstimator = 3,
+        /// Starts, watches and steers the others.
+        Supervisor = 4,
+        /// Records the run into an MCAP file (`[record] mcap = true`); no processing stage.
+        Recorder = 5,
+        /// Publishes the poses to ROS 2 (`[ros2]`); no processing stage.
+        Ros2Bridge = 6,
+    }
 }
 
 impl StageKind {
@@ -49,6 +203,7 @@ impl StageKind {
             StageKind::PoseEstimator => "pose-estimator",
             StageKind::Supervisor => "supervisor",
             StageKind::Recorder => "recorder",
+            StageKind::Ros2Bridge => "ros2-bridge",
         }
     }
 
@@ -57,14 +212,9 @@ impl StageKind {
         Self::PROCESSING.iter().position(|&k| k == self)
     }
 
-    /// The stage with this wire code.
-    pub fn from_code(code: u32) -> Option<Self> {
-        Self::try_from(code).ok()
-    }
-
-    /// The wire code.
-    pub fn code(self) -> u32 {
-        u32::from(self)
+    /// The stage named `name` (see [`StageKind::name`]).
+    pub fn from_name(name: &str) -> Option<Self> {
+        Self::ALL.iter().copied().find(|k| k.name() == name)
     }
 }
 
@@ -187,37 +337,33 @@ pub fn wake_service_name(run_id: &str, stage: StageKind) -> String {
     format!("linetrack/{run_id}/wake/{}", stage.name())
 }
 
-/// No frame: the value of [`FrameHeader::previous_frame_id`] when there is none.
+/// No frame: the value of [`Matching::previous_frame_id`] when there is none.
 pub const NO_FRAME: u64 = u64::MAX;
 
-/// What happened to a frame.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, TryFromPrimitive, IntoPrimitive)]
-#[repr(u32)]
-pub enum FrameStatus {
-    /// Processed.
-    Ok = 0,
-    /// The source could not read or decode it.
-    Corrupt = 1,
-    /// A stage dropped it because it was already over the latency budget.
-    DroppedLate = 2,
-    /// A stage failed on it (the message says which stage in `dropped_by`).
-    StageError = 3,
-    /// A stage dropped it because its queue was behind (a newer frame was waiting).
-    DroppedBehind = 4,
-    /// The camera delivered it but the source could not take it (a gap in the driver's
-    /// timestamps, or the source's hand-over queue was full): no pixels.
-    CaptureDropped = 5,
-    /// The camera's frame waited in a buffer longer than `camera.late_ms`: dropped by the
-    /// source (with `budget.drop_late`).
-    CaptureLate = 6,
+wire_enum! {
+    /// What happened to a frame.
+    pub enum FrameStatus: "frame status" {
+        /// Processed.
+        #[default]
+        Ok = 0,
+        /// The source could not read or decode it.
+        Corrupt = 1,
+        /// A stage dropped it because it was already over the latency budget.
+        DroppedLate = 2,
+        /// A stage failed on it (the header says which, in [`FrameHeader::status_by`]).
+        StageError = 3,
+        /// A stage dropped it because its queue was behind (a newer frame was waiting).
+        DroppedBehind = 4,
+        /// The camera delivered it but the source could not take it (a gap in the driver's
+        /// timestamps, or the source's hand-over queue was full): no pixels.
+        CaptureDropped = 5,
+        /// The camera's frame waited in a buffer longer than `camera.late_ms`: dropped by the
+        /// source (with `budget.drop_late`).
+        CaptureLate = 6,
+    }
 }
 
 impl FrameStatus {
-    /// The status with this wire code.
-    pub fn from_code(code: u32) -> Option<Self> {
-        Self::try_from(code).ok()
-    }
-
     /// Short name used in run records.
     pub fn name(self) -> &'static str {
         match self {
@@ -232,22 +378,18 @@ impl FrameStatus {
     }
 }
 
-/// Matcher mode codes in [`FrameHeader::matcher_mode`].
-#[derive(Debug, Clone, Copy, PartialEq, Eq, TryFromPrimitive, IntoPrimitive)]
-#[repr(u32)]
-pub enum MatcherMode {
-    /// LBD descriptors.
-    Lbd = 0,
-    /// The geometric ℓ1 matcher.
-    L1 = 1,
+wire_enum! {
+    /// How the matcher matched a frame ([`Matching::mode`]).
+    pub enum MatcherMode: "matcher mode" {
+        /// LBD descriptors.
+        #[default]
+        Lbd = 0,
+        /// The geometric ℓ1 matcher.
+        L1 = 1,
+    }
 }
 
 impl MatcherMode {
-    /// The mode with this wire code.
-    pub fn from_code(code: u32) -> Option<Self> {
-        Self::try_from(code).ok()
-    }
-
     /// `lbd` or `l1`.
     pub fn name(self) -> &'static str {
         match self {
@@ -269,9 +411,26 @@ pub struct StageStamp {
     pub end_ns: u64,
 }
 
-/// The per-frame metadata every message carries.
+wire_enum! {
+    /// The line detector that found a frame's segments, as the wire names it (the mirror of
+    /// `linetrack_vision::DetectorKind`, which this crate cannot see: the algorithm crates do
+    /// not depend on the transport; `linetrack_stage_runtime` converts, exhaustively).
+    pub enum Detector: "detector" {
+        /// Line Segment Detector.
+        #[default]
+        Lsd = 0,
+        /// Fast Line Detector.
+        Fld = 1,
+        /// The edge-drawing detector.
+        EdgeLines = 2,
+    }
+}
+
+/// What every frame has, on every topic that carries frames: the user header of the images
+/// and the first part of every later stage's header.
 #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
 #[repr(C)]
+#[type_name("linetrack::FrameHeader")]
 #[derive(serde::Serialize, serde::Deserialize)]
 pub struct FrameHeader {
     /// Frame number in the sequence, from 0.
@@ -282,32 +441,15 @@ pub struct FrameHeader {
     pub capture_ns: u64,
     /// Per stage, in [`StageKind::PROCESSING`] order.
     pub stamps: [StageStamp; 4],
-    /// [`FrameStatus`] code.
-    pub status: u32,
-    /// The stage that dropped or failed the frame ([`StageKind::code`]), when not Ok.
-    pub dropped_by: u32,
-    /// Image width and height, pixels.
+    /// What happened to the frame.
+    pub status: Code<FrameStatus>,
+    /// The stage that set [`FrameHeader::status`]: the one that dropped or failed the frame
+    /// (the frame source while it is Ok).
+    pub status_by: Code<StageKind>,
+    /// Image width, pixels.
     pub width: u32,
     /// Image height, pixels.
     pub height: u32,
-    /// Segments: left count (the right image's follow).
-    pub left_count: u32,
-    /// Segments in the right image.
-    pub right_count: u32,
-    /// Detector that found the segments: 0 LSD, 1 FLD.
-    pub detector: u32,
-    /// [`MatcherMode`] the matcher used.
-    pub matcher_mode: u32,
-    /// Stereo segment matches.
-    pub stereo_matches: u32,
-    /// Frame-to-frame segment matches.
-    pub tracked_matches: u32,
-    /// While in ℓ1 mode: stereo matches an LBD probe found on this frame, or -1 (no probe).
-    pub lbd_probe_matches: i32,
-    /// Process id of the detector that produced the segments.
-    pub detector_pid: u32,
-    /// The frame the tracks are matched against, or [`NO_FRAME`].
-    pub previous_frame_id: u64,
 }
 
 impl FrameHeader {
@@ -317,21 +459,19 @@ impl FrameHeader {
             frame_id,
             sequence_ns,
             capture_ns,
-            previous_frame_id: NO_FRAME,
-            lbd_probe_matches: -1,
             ..Self::default()
         }
     }
 
-    /// The decoded status (unknown codes read as a stage error).
-    pub fn frame_status(&self) -> FrameStatus {
-        FrameStatus::from_code(self.status).unwrap_or(FrameStatus::StageError)
+    /// Whether the frame is still to be processed (an unknown status is not Ok).
+    pub fn is_ok(&self) -> bool {
+        self.status.is(FrameStatus::Ok)
     }
 
     /// Marks the frame dropped or failed by `stage`.
     pub fn mark(&mut self, status: FrameStatus, stage: StageKind) {
-        self.status = status as u32;
-        self.dropped_by = stage.code();
+        self.status = status.into();
+        self.status_by = stage.into();
     }
 
     /// The stamp of `stage`.
@@ -342,6 +482,147 @@ impl FrameHeader {
     /// Milliseconds from capture to `end_ns`.
     pub fn age_ms(&self, end_ns: u64) -> f64 {
         end_ns.saturating_sub(self.capture_ns) as f64 * 1e-6
+    }
+}
+
+/// The line detector's result for a frame.
+#[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
+#[repr(C)]
+#[type_name("linetrack::Detection")]
+#[derive(serde::Serialize, serde::Deserialize)]
+pub struct Detection {
+    /// The detector that found the segments.
+    pub detector: Code<Detector>,
+    /// Process id of the detector (two run at once during a hot swap).
+    pub detector_pid: u32,
+    /// Segments in the left image: the message's first ones (the right image's follow).
+    pub left_count: u32,
+    /// Segments in the right image.
+    pub right_count: u32,
+}
+
+/// The matcher's result for a frame.
+#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
+#[repr(C)]
+#[type_name("linetrack::Matching")]
+#[derive(serde::Serialize, serde::Deserialize)]
+pub struct Matching {
+    /// The frame the tracks are matched against, or [`NO_FRAME`].
+    pub previous_frame_id: u64,
+    /// How the frame was matched.
+    pub mode: Code<MatcherMode>,
+    /// Stereo segment matches.
+    pub stereo_matches: u32,
+    /// Frame-to-frame segment matches.
+    pub tracked_matches: u32,
+    /// While in ℓ1 mode: stereo matches an LBD probe found on this frame, or
+    /// [`Matching::NO_PROBE`].
+    pub lbd_probe_matches: i32,
+}
+
+impl Matching {
+    /// [`Matching::lbd_probe_matches`] of a frame without an LBD probe.
+    pub const NO_PROBE: i32 = -1;
+}
+
+impl Default for Matching {
+    fn default() -> Self {
+        Self {
+            previous_frame_id: NO_FRAME,
+            mode: Code::default(),
+            stereo_matches: 0,
+            tracked_matches: 0,
+            lbd_probe_matches: Self::NO_PROBE,
+        }
+    }
+}
+
+/// The user header of the segments: the frame and the detector's result.
+#[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
+#[repr(C)]
+#[type_name("linetrack::SegmentsHeader")]
+#[derive(serde::Serialize, serde::Deserialize)]
+pub struct SegmentsHeader {
+    /// The frame.
+    pub frame: FrameHeader,
+    /// What the detector found.
+    pub detection: Detection,
+}
+
+/// The user header of the tracks and of the poses: the frame and the results of the
+/// detector and the matcher they derive from.
+#[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
+#[repr(C)]
+#[type_name("linetrack::TracksHeader")]
+#[derive(serde::Serialize, serde::Deserialize)]
+pub struct TracksHeader {
+    /// The frame.
+    pub frame: FrameHeader,
+    /// What the detector found.
+    pub detection: Detection,
+    /// What the matcher found.
+    pub matching: Matching,
+}
+
+/// A user header that heads a frame's message: every such header starts with the frame's
+/// [`FrameHeader`], and a stage's output header is made from its input's
+/// ([`From`]: the results upstream carried on, its own still to fill).
+pub trait FrameMessage: Copy {
+    /// The frame.
+    fn frame(&self) -> &FrameHeader;
+    /// The frame, to stamp or mark.
+    fn frame_mut(&mut self) -> &mut FrameHeader;
+}
+
+impl FrameMessage for FrameHeader {
+    fn frame(&self) -> &FrameHeader {
+        self
+    }
+    fn frame_mut(&mut self) -> &mut FrameHeader {
+        self
+    }
+}
+
+impl FrameMessage for SegmentsHeader {
+    fn frame(&self) -> &FrameHeader {
+        &self.frame
+    }
+    fn frame_mut(&mut self) -> &mut FrameHeader {
+        &mut self.frame
+    }
+}
+
+impl FrameMessage for TracksHeader {
+    fn frame(&self) -> &FrameHeader {
+        &self.frame
+    }
+    fn frame_mut(&mut self) -> &mut FrameHeader {
+        &mut self.frame
+    }
+}
+
+impl From<FrameHeader> for SegmentsHeader {
+    fn from(frame: FrameHeader) -> Self {
+        Self {
+            frame,
+            detection: Detection::default(),
+        }
+    }
+}
+
+impl From<FrameHeader> for TracksHeader {
+    fn from(frame: FrameHeader) -> Self {
+        SegmentsHeader::from(frame).into()
+    }
+}
+
+impl From<SegmentsHeader> for TracksHeader {
+    fn from(segments: SegmentsHeader) -> Self {
+        Self {
+            frame: segments.frame,
+            detection: segments.detection,
+            matching: Matching::default(),
+        }
     }
 }
 
@@ -388,54 +669,51 @@ pub struct PoseRecord {
     pub rms_px: f64,
 }
 
-/// What a [`StatusReport`] says.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, TryFromPrimitive, IntoPrimitive)]
-#[repr(u32)]
-pub enum StatusKind {
-    /// Alive; `value` = frames processed.
-    Heartbeat = 0,
-    /// Started and warmed up; for a standby detector, `frame_id` = the first frame it holds.
-    Ready = 1,
-    /// A detector handing over: it published every frame below `frame_id` and stops.
-    HandedOver = 2,
-    /// The frame source reached the end: `value` = frames published.
-    SourceFinished = 3,
-    /// A stage exits on its own (`value`: 0 done, 1 error).
-    Exiting = 4,
-    /// A stage's hold overflowed: `value` frames from `frame_id` on were released before
-    /// their other input arrived (they go on without it).
-    Overflow = 5,
-    /// Frames never arrived on a stage's input: `value` frames from `frame_id` on were
-    /// skipped (overwritten in its full queue while it was stopped or slow).
-    QueueGap = 6,
-    /// The frame source's camera failed and is being reopened: `frame_id` = the next
-    /// frame's id, `value` = the attempt (1, 2, …), `detail` = a [`CameraFailure`] code.
-    CameraLost = 7,
-    /// The frame source's camera delivers again: `frame_id` = the next frame's id,
-    /// `value` = the attempts it took.
-    CameraBack = 8,
+wire_enum! {
+    /// What a [`StatusReport`] says.
+    pub enum StatusKind: "status kind" {
+        /// Alive; `value` = frames processed.
+        #[default]
+        Heartbeat = 0,
+        /// Started and warmed up; for a standby detector, `frame_id` = the first frame it holds.
+        Ready = 1,
+        /// A detector handing over: it published every frame below `frame_id` and stops.
+        HandedOver = 2,
+        /// The frame source reached the end: `value` = frames published.
+        SourceFinished = 3,
+        /// A stage exits on its own (`value`: 0 done, 1 error).
+        Exiting = 4,
+        /// A stage's hold overflowed: `value` frames from `frame_id` on were released before
+        /// their other input arrived (they go on without it).
+        Overflow = 5,
+        /// Frames never arrived on a stage's input: `value` frames from `frame_id` on were
+        /// skipped (overwritten in its full queue while it was stopped or slow).
+        QueueGap = 6,
+        /// The frame source's camera failed and is being reopened: `frame_id` = the next
+        /// frame's id, `value` = the attempt (1, 2, …), `detail` = a [`CameraFailure`] code.
+        CameraLost = 7,
+        /// The frame source's camera delivers again: `frame_id` = the next frame's id,
+        /// `value` = the attempts it took.
+        CameraBack = 8,
+    }
 }
 
-/// Why a camera failed ([`StatusKind::CameraLost`]'s `detail`).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, TryFromPrimitive, IntoPrimitive)]
-#[repr(u32)]
-pub enum CameraFailure {
-    /// It could not be opened (no such device, busy, a pipeline that does not start).
-    Open = 0,
-    /// A read failed: the device is gone or the stream ended.
-    Read = 1,
-    /// Its frames are not the size the calibration is for.
-    Size = 2,
-    /// Anything else (a frame that cannot be split, rectified or converted).
-    Other = 3,
+wire_enum! {
+    /// Why a camera failed ([`StatusKind::CameraLost`]'s `detail`).
+    pub enum CameraFailure: "camera failure" {
+        /// It could not be opened (no such device, busy, a pipeline that does not start).
+        Open = 0,
+        /// A read failed: the device is gone or the stream ended.
+        Read = 1,
+        /// Its frames are not the size the calibration is for.
+        Size = 2,
+        /// Anything else (a frame that cannot be split, rectified or converted).
+        #[default]
+        Other = 3,
+    }
 }
 
 impl CameraFailure {
-    /// The failure with this code (unknown codes read as `Other`).
-    pub fn from_code(code: u32) -> Self {
-        Self::try_from(code).unwrap_or(Self::Other)
-    }
-
     /// What happened, for the event's text.
     pub fn describe(self) -> &'static str {
         match self {
@@ -447,11 +725,13 @@ impl CameraFailure {
     }
 }
 
-impl StatusKind {
-    /// The kind with this wire code.
-    pub fn from_code(code: u32) -> Option<Self> {
-        Self::try_from(code).ok()
-    }
+/// A `u32` argument read from the wire as an `E` (a report's `detail`, a command's
+/// `value`: arguments whose meaning depends on the message's kind), checked.
+pub fn decode<E: WireEnum>(raw: u32) -> Result<E, UnknownCode> {
+    E::try_from(raw).map_err(|_| UnknownCode {
+        what: E::WHAT,
+        code: raw,
+    })
 }
 
 /// A rectified pinhole stereo rig on the wire (`linetrack_geometry::StereoRig`).
@@ -477,13 +757,14 @@ pub struct RigRecord {
 #[repr(C)]
 #[derive(serde::Serialize, serde::Deserialize)]
 pub struct StatusReport {
-    /// [`StageKind::code`] of the sender.
-    pub stage: u32,
+    /// The sender.
+    pub stage: Code<StageKind>,
     /// Its process id.
     pub pid: u32,
-    /// [`StatusKind`] code.
-    pub kind: u32,
-    /// Detector kind for detector reports (0 LSD, 1 FLD).
+    /// What the report says.
+    pub kind: Code<StatusKind>,
+    /// The sender's [`Detector`] for detector reports, the [`CameraFailure`] of a
+    /// [`StatusKind::CameraLost`] (read with [`decode`]).
     pub detail: u32,
     /// A frame id the report is about.
     pub frame_id: u64,
@@ -491,40 +772,22 @@ pub struct StatusReport {
     pub value: u64,
 }
 
-impl StatusReport {
-    /// What the report says (`None` for a code this build does not know).
-    pub fn kind(&self) -> Option<StatusKind> {
-        StatusKind::from_code(self.kind)
-    }
-
-    /// The stage that sent it.
-    pub fn stage(&self) -> Option<StageKind> {
-        StageKind::from_code(self.stage)
-    }
-}
-
-/// Commands.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, TryFromPrimitive, IntoPrimitive)]
-#[repr(u32)]
-pub enum Command {
-    /// To the matcher: use [`MatcherMode`] `value` from the next frame.
-    SetMatcherMode = 0,
-    /// To the detector with pid `target_pid`: hand over to the standby detector, which holds
-    /// frames from `frame_id` on.
-    HandOver = 1,
-    /// To the standby detector `target_pid`: the old detector published every frame below
-    /// `frame_id`; take over from there.
-    TakeOver = 2,
-    /// To the supervisor: swap the detector for kind `value` (0 LSD, 1 FLD).
-    SwapDetector = 3,
-    /// To everyone: finish and exit.
-    Shutdown = 4,
-}
-
-impl Command {
-    /// The command with this wire code.
-    pub fn from_code(code: u32) -> Option<Self> {
-        Self::try_from(code).ok()
+wire_enum! {
+    /// Commands.
+    pub enum Command: "command" {
+        /// To the matcher: use [`MatcherMode`] `value` from the next frame.
+        #[default]
+        SetMatcherMode = 0,
+        /// To the detector with pid `target_pid`: hand over to the standby detector, which holds
+        /// frames from `frame_id` on.
+        HandOver = 1,
+        /// To the standby detector `target_pid`: the old detector published every frame below
+        /// `frame_id`; take over from there.
+        TakeOver = 2,
+        /// To the supervisor: swap the detector for [`Detector`] `value`.
+        SwapDetector = 3,
+        /// To everyone: finish and exit.
+        Shutdown = 4,
     }
 }
 
@@ -532,13 +795,13 @@ impl Command {
 #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
 #[repr(C)]
 pub struct Control {
-    /// [`Command`] code.
-    pub command: u32,
+    /// The command.
+    pub command: Code<Command>,
     /// The process the command is for; 0 = every process of `target_stage`.
     pub target_pid: u32,
-    /// [`StageKind::code`] of the stage the command is for.
-    pub target_stage: u32,
-    /// Command argument.
+    /// The stage the command is for.
+    pub target_stage: Code<StageKind>,
+    /// Command argument (a [`MatcherMode`], a [`Detector`]: read with [`decode`]).
     pub value: u32,
     /// Command argument: a frame id.
     pub frame_id: u64,
@@ -556,14 +819,9 @@ impl Control {
         }
     }
 
-    /// The command (`None` for a code this build does not know).
-    pub fn command(&self) -> Option<Command> {
-        Command::from_code(self.command)
-    }
-
     /// Whether this command is for the process `pid` of stage `stage`.
     pub fn is_for(&self, stage: StageKind, pid: u32) -> bool {
-        self.target_stage == stage.code() && (self.target_pid == 0 || self.target_pid == pid)
+        self.target_stage.is(stage) && (self.target_pid == 0 || self.target_pid == pid)
     }
 }
 
@@ -621,36 +879,112 @@ pub fn now_ns() -> u64 {
 mod tests {
     use super::*;
 
+    /// Every variant of `E` goes onto the wire and comes back; the codes are distinct; a
+    /// code past the last one is an error naming what it should have been.
+    fn round_trips<E: WireEnum + PartialEq>(all: &[E]) {
+        for &value in all {
+            let code = Code::new(value);
+            assert_eq!(code.get(), Ok(value), "{value:?}");
+            assert!(code.is(value));
+            assert_eq!(decode::<E>(code.raw()), Ok(value));
+        }
+        let mut raws: Vec<u32> = all.iter().map(|&v| v.into()).collect();
+        raws.sort_unstable();
+        raws.dedup();
+        assert_eq!(
+            raws.len(),
+            all.len(),
+            "two {} variants share a code",
+            E::WHAT
+        );
+        let unknown = raws.last().map_or(0, |&r| r + 1);
+        assert!(
+            E::try_from(unknown).is_err(),
+            "{} has more variants",
+            E::WHAT
+        );
+        assert_eq!(
+            decode::<E>(unknown),
+            Err(UnknownCode {
+                what: E::WHAT,
+                code: unknown
+            })
+        );
+    }
+
     #[test]
-    fn codes_round_trip() {
-        for stage in [
-            StageKind::FrameSource,
-            StageKind::LineDetector,
-            StageKind::Matcher,
-            StageKind::PoseEstimator,
-            StageKind::Supervisor,
-            StageKind::Recorder,
-        ] {
-            assert_eq!(StageKind::from_code(stage.code()), Some(stage));
+    fn every_code_round_trips_and_an_unknown_one_is_refused() {
+        round_trips(StageKind::ALL);
+        round_trips(FrameStatus::ALL);
+        round_trips(MatcherMode::ALL);
+        round_trips(Detector::ALL);
+        round_trips(StatusKind::ALL);
+        round_trips(CameraFailure::ALL);
+        round_trips(Command::ALL);
+    }
+
+    /// What another process left in shared memory: a header whose codes name nothing.
+    fn garbled(frame_id: u64, status: u32, stage: u32) -> FrameHeader {
+        FrameHeader {
+            status: Code {
+                raw: status,
+                kind: PhantomData,
+            },
+            status_by: Code {
+                raw: stage,
+                kind: PhantomData,
+            },
+            ..FrameHeader::new(frame_id, 0, 0)
         }
-        assert_eq!(StageKind::from_code(99), None);
-        for status in [
-            FrameStatus::Ok,
-            FrameStatus::Corrupt,
-            FrameStatus::DroppedLate,
-            FrameStatus::StageError,
-            FrameStatus::DroppedBehind,
-        ] {
-            assert_eq!(FrameStatus::from_code(status as u32), Some(status));
+    }
+
+    #[test]
+    fn an_unknown_code_read_back_is_an_error_naming_it() {
+        let header = garbled(3, 77, 9);
+        let err = header.status.get().err().map(|e| e.to_string());
+        assert_eq!(err.as_deref(), Some("unknown frame status code 77"));
+        let err = header.status_by.get().err().map(|e| e.to_string());
+        assert_eq!(err.as_deref(), Some("unknown stage code 9"));
+        assert!(!header.is_ok(), "an unknown status is not Ok");
+        assert!(format!("{header:?}").contains("unknown frame status code 77"));
+        // Known codes read back as themselves.
+        let mut ok = header;
+        ok.mark(FrameStatus::DroppedLate, StageKind::Matcher);
+        assert_eq!(ok.status.get(), Ok(FrameStatus::DroppedLate));
+        assert_eq!(ok.status_by.get(), Ok(StageKind::Matcher));
+    }
+
+    #[test]
+    fn a_code_is_a_bare_u32_on_the_wire() {
+        assert_eq!(std::mem::size_of::<Code<FrameStatus>>(), 4);
+        assert_eq!(std::mem::align_of::<Code<Command>>(), 4);
+        assert_eq!(Code::new(FrameStatus::StageError).raw(), 3);
+        assert_eq!(
+            Code::<StageKind>::default().get(),
+            Ok(StageKind::FrameSource)
+        );
+    }
+
+    #[test]
+    fn stage_results_start_empty_and_carry_downstream() {
+        let frame = FrameHeader::new(5, 1, 2);
+        assert!(frame.is_ok());
+        let mut segments = SegmentsHeader::from(frame);
+        assert_eq!(segments.detection, Detection::default());
+        segments.detection.left_count = 4;
+        let tracks = TracksHeader::from(segments);
+        assert_eq!(tracks.frame, frame);
+        assert_eq!(tracks.detection.left_count, 4);
+        assert_eq!(tracks.matching.previous_frame_id, NO_FRAME);
+        assert_eq!(tracks.matching.lbd_probe_matches, Matching::NO_PROBE);
+    }
+
+    #[test]
+    fn stage_names_come_back_to_their_stage() {
+        for &stage in StageKind::ALL {
+            assert_eq!(StageKind::from_name(stage.name()), Some(stage));
         }
-        assert_eq!(
-            Command::from_code(Command::Shutdown as u32),
-            Some(Command::Shutdown)
-        );
-        assert_eq!(
-            StatusKind::from_code(StatusKind::Exiting as u32),
-            Some(StatusKind::Exiting)
-        );
+        assert_eq!(StageKind::from_name("camera"), None);
     }
 
     #[test]
@@ -671,13 +1005,7 @@ mod tests {
 
     #[test]
     fn control_addressing() {
-        let c = Control {
-            command: Command::HandOver as u32,
-            target_pid: 42,
-            target_stage: StageKind::LineDetector.code(),
-            value: 0,
-            frame_id: 0,
-        };
+        let c = Control::new(Command::HandOver, StageKind::LineDetector, 42, 0, 0);
         assert!(c.is_for(StageKind::LineDetector, 42));
         assert!(!c.is_for(StageKind::LineDetector, 43));
         assert!(!c.is_for(StageKind::Matcher, 42));

@@ -11,7 +11,10 @@ use linetrack_geometry::{Point, Segment, StereoRig};
 use linetrack_ipc::{Bus, Inlet, IpcError, Outlet, Received, Record, Scope, Shutdown};
 
 mod runner;
-use linetrack_msgs::{Clock, FrameHeader, FrameStatus, StageKind, StatusKind, StatusReport, Topic};
+use linetrack_msgs::{
+    Clock, Detector, FrameHeader, FrameMessage, FrameStatus, StageKind, StatusKind, StatusReport,
+    Topic,
+};
 use linetrack_msgs::{RigRecord, SegmentRecord};
 use linetrack_pipeline_config::{BudgetConfig, PipelineConfig};
 use linetrack_vision::DetectorKind;
@@ -105,7 +108,7 @@ impl StageContext {
 
 /// Sends a stage's heartbeats and events on the status topic.
 pub struct Reporter {
-    outlet: Outlet<StatusReport>,
+    outlet: Outlet<StatusReport, ()>,
     stage: StageKind,
     pid: u32,
     detail: u32,
@@ -137,14 +140,14 @@ impl Reporter {
     /// `CameraLost`).
     pub fn report_detail(&mut self, kind: StatusKind, frame_id: u64, value: u64, detail: u32) {
         let report = StatusReport {
-            stage: self.stage.code(),
+            stage: self.stage.into(),
             pid: self.pid,
             kind: kind.into(),
             detail,
             frame_id,
             value,
         };
-        if let Err(e) = self.outlet.publish(&FrameHeader::default(), &[&[report]]) {
+        if let Err(e) = self.outlet.publish(&(), &[&[report]]) {
             tracing::warn!("status report lost: {e}");
         }
         if kind == StatusKind::Heartbeat {
@@ -225,37 +228,39 @@ pub struct FramePolicy<'a> {
 
 /// Takes one frame through a stage: stamps when it took it, applies the drop policy
 /// (`newer_waiting`: a newer frame is queued behind it), runs `work` on a frame still to be
-/// processed — an error marks the frame failed by this stage and is logged — and publishes
-/// what `work` returned, or `placeholder()` for a dropped or failed frame, under the
-/// stamped header.
-pub fn process_frame<O: linetrack_ipc::Record>(
+/// processed — it fills the stage's own results in the header; an error marks the frame
+/// failed by this stage and is logged — and publishes what `work` returned, or
+/// `placeholder()` for a dropped or failed frame, under the stamped header.
+pub fn process_frame<O: Record, H: Record + FrameMessage>(
     policy: FramePolicy<'_>,
-    mut header: FrameHeader,
+    mut header: H,
     newer_waiting: bool,
-    out: &mut Outlet<O>,
-    work: impl FnOnce(&mut FrameHeader) -> anyhow::Result<Vec<O>>,
+    out: &mut Outlet<O, H>,
+    work: impl FnOnce(&mut H) -> anyhow::Result<Vec<O>>,
     placeholder: impl FnOnce() -> Vec<O>,
 ) -> anyhow::Result<()> {
     let stage = policy.stage;
     let taken_ns = policy.clock.now_ns();
-    stamp_start(&mut header, stage, taken_ns);
-    if header.frame_status() == FrameStatus::Ok
-        && let Some(status) = late_drop(&header, newer_waiting, policy.budget, taken_ns)
+    let frame = header.frame_mut();
+    stamp_start(frame, stage, taken_ns);
+    if frame.is_ok()
+        && let Some(status) = late_drop(frame, newer_waiting, policy.budget, taken_ns)
     {
-        header.mark(status, stage);
+        frame.mark(status, stage);
     }
-    let records = match header.frame_status() {
-        FrameStatus::Ok => match work(&mut header) {
+    let records = if header.frame().is_ok() {
+        match work(&mut header) {
             Ok(records) => records,
             Err(e) => {
-                tracing::warn!("frame {}: {e:#}", header.frame_id);
-                header.mark(FrameStatus::StageError, stage);
+                tracing::warn!("frame {}: {e:#}", header.frame().frame_id);
+                header.frame_mut().mark(FrameStatus::StageError, stage);
                 placeholder()
             }
-        },
-        _ => placeholder(),
+        }
+    } else {
+        placeholder()
     };
-    stamp_end(&mut header, stage, policy.clock.now_ns());
+    stamp_end(header.frame_mut(), stage, policy.clock.now_ns());
     out.publish(&header, &[&records])?;
     Ok(())
 }
@@ -274,9 +279,13 @@ pub fn stamp_end(header: &mut FrameHeader, stage: StageKind, now_ns: u64) {
     }
 }
 
+/// A frame's images as received: left image then right image, row-major, under the frame's
+/// header.
+pub type Images = Received<u8, FrameHeader>;
+
 /// The two images of a frame message, read in place.
 pub fn stereo_views<'a>(
-    frame: &'a Received<u8>,
+    frame: &'a Images,
 ) -> Result<(BorrowedGray<'a>, BorrowedGray<'a>), VisionError> {
     let header = frame.header();
     let (w, h) = (header.width as usize, header.height as usize);
@@ -350,12 +359,12 @@ impl GapWatch {
 /// topic's subscriber borrow limit ([`Topic::queue_depth`], which also sizes its buffer),
 /// so that the held messages and the one being received never exceed what iceoryx2 lets a
 /// subscriber borrow, however long the stage was stopped.
-pub struct Held<P: Record> {
-    held: VecDeque<Received<P>>,
+pub struct Held<P: Record, H: Record + FrameMessage> {
+    held: VecDeque<Received<P, H>>,
     capacity: usize,
 }
 
-impl<P: Record> Held<P> {
+impl<P: Record, H: Record + FrameMessage> Held<P, H> {
     /// An empty hold for messages of `topic`.
     pub fn new(topic: Topic) -> Self {
         let capacity = held_capacity(topic);
@@ -366,11 +375,11 @@ impl<P: Record> Held<P> {
     }
 
     /// Holds `message`, releasing the oldest when full; returns the id of the frame released.
-    pub fn push(&mut self, message: Received<P>) -> Option<u64> {
+    pub fn push(&mut self, message: Received<P, H>) -> Option<u64> {
         let released = (self.held.len() >= self.capacity)
             .then(|| self.held.pop_front())
             .flatten()
-            .map(|f| f.header().frame_id);
+            .map(|f| f.header().frame().frame_id);
         self.held.push_back(message);
         released
     }
@@ -378,7 +387,7 @@ impl<P: Record> Held<P> {
     /// Receives every waiting message into the hold, one at a time (the oldest released
     /// first when full, so never more than the subscriber's borrow limit is borrowed);
     /// returns what was released to make room.
-    pub fn receive(&mut self, inlet: &mut Inlet<P>) -> Result<Overflow, IpcError> {
+    pub fn receive(&mut self, inlet: &mut Inlet<P, H>) -> Result<Overflow, IpcError> {
         let mut overflow = Overflow {
             capacity: self.capacity,
             ..Overflow::default()
@@ -392,19 +401,11 @@ impl<P: Record> Held<P> {
     }
 
     /// Takes frame `frame_id`'s message, releasing every older one (their turn has passed).
-    pub fn take(&mut self, frame_id: u64) -> Option<Received<P>> {
-        while self
-            .held
-            .front()
-            .is_some_and(|f| f.header().frame_id < frame_id)
-        {
+    pub fn take(&mut self, frame_id: u64) -> Option<Received<P, H>> {
+        while self.first_id().is_some_and(|id| id < frame_id) {
             self.held.pop_front();
         }
-        if self
-            .held
-            .front()
-            .is_some_and(|f| f.header().frame_id == frame_id)
-        {
+        if self.first_id() == Some(frame_id) {
             self.held.pop_front()
         } else {
             None
@@ -412,12 +413,12 @@ impl<P: Record> Held<P> {
     }
 
     /// The held messages, oldest first.
-    pub fn iter(&self) -> impl Iterator<Item = &Received<P>> {
+    pub fn iter(&self) -> impl Iterator<Item = &Received<P, H>> {
         self.held.iter()
     }
 
     /// Takes the oldest held message.
-    pub fn take_next(&mut self) -> Option<Received<P>> {
+    pub fn take_next(&mut self) -> Option<Received<P, H>> {
         self.held.pop_front()
     }
 
@@ -433,7 +434,7 @@ impl<P: Record> Held<P> {
 
     /// The oldest held message's frame id.
     pub fn first_id(&self) -> Option<u64> {
-        self.held.front().map(|f| f.header().frame_id)
+        self.held.front().map(|f| f.header().frame().frame_id)
     }
 }
 
@@ -508,22 +509,21 @@ pub fn rig_from_record(r: &RigRecord) -> anyhow::Result<StereoRig> {
     })
 }
 
-/// The wire code of a detector kind (in status reports and frame headers).
-pub fn detector_code(kind: DetectorKind) -> u32 {
+/// A detector kind as the wire names it (in status reports and detections).
+pub fn detector_on_wire(kind: DetectorKind) -> Detector {
     match kind {
-        DetectorKind::Lsd => 0,
-        DetectorKind::Fld => 1,
-        DetectorKind::EdgeLines => 2,
+        DetectorKind::Lsd => Detector::Lsd,
+        DetectorKind::Fld => Detector::Fld,
+        DetectorKind::EdgeLines => Detector::EdgeLines,
     }
 }
 
-/// The detector kind of a wire code.
-pub fn detector_from_code(code: u32) -> Option<DetectorKind> {
-    match code {
-        0 => Some(DetectorKind::Lsd),
-        1 => Some(DetectorKind::Fld),
-        2 => Some(DetectorKind::EdgeLines),
-        _ => None,
+/// The detector kind the wire names.
+pub fn detector_kind(detector: Detector) -> DetectorKind {
+    match detector {
+        Detector::Lsd => DetectorKind::Lsd,
+        Detector::Fld => DetectorKind::Fld,
+        Detector::EdgeLines => DetectorKind::EdgeLines,
     }
 }
 
@@ -601,15 +601,18 @@ pub fn end_with_parent(shutdown: &Shutdown, supervisor: Option<u32>) -> anyhow::
 #[cfg(test)]
 mod tests {
     use super::*;
+    use linetrack_msgs::SegmentsHeader;
 
     #[test]
-    fn every_detector_has_its_own_wire_code_and_back() {
-        let codes: Vec<u32> = DetectorKind::ALL.into_iter().map(detector_code).collect();
-        for (kind, &code) in DetectorKind::ALL.iter().zip(&codes) {
-            assert_eq!(detector_from_code(code), Some(*kind));
-            assert_eq!(codes.iter().filter(|&&c| c == code).count(), 1);
+    fn every_detector_has_its_own_wire_name_and_back() {
+        let wire: Vec<Detector> = DetectorKind::ALL
+            .into_iter()
+            .map(detector_on_wire)
+            .collect();
+        assert_eq!(wire, Detector::ALL, "one wire name per kind, in order");
+        for kind in DetectorKind::ALL {
+            assert_eq!(detector_kind(detector_on_wire(kind)), kind);
         }
-        assert_eq!(detector_from_code(99), None);
     }
 
     #[test]
@@ -622,10 +625,10 @@ mod tests {
         let bus = Bus::shared_memory(&scope, &format!("hold-{}", std::process::id()))
             .unwrap_or_else(|e| panic!("{e}"));
         let mut inlet = bus
-            .inlet::<u8>(Topic::Frames)
+            .inlet::<u8, FrameHeader>(Topic::Frames)
             .unwrap_or_else(|e| panic!("{e}"));
         let mut outlet = bus
-            .outlet::<u8>(Topic::Frames, 4)
+            .outlet::<u8, FrameHeader>(Topic::Frames, 4)
             .unwrap_or_else(|e| panic!("{e}"));
         let mut publish = |from: u64, to: u64| {
             for id in from..to {
@@ -635,7 +638,7 @@ mod tests {
             }
         };
         let depth = Topic::Frames.queue_depth() as u64;
-        let mut held = Held::<u8>::new(Topic::Frames);
+        let mut held = Held::<u8, FrameHeader>::new(Topic::Frames);
         // A stage that was stopped: its queue full (the oldest overwritten), then a hold
         // full, then the queue full again.
         publish(0, 2 * depth);
@@ -741,10 +744,10 @@ mod tests {
     fn a_frame_is_processed_dropped_or_failed_and_always_published() {
         let bus = Bus::local();
         let mut inlet = bus
-            .inlet::<SegmentRecord>(Topic::Segments)
+            .inlet::<SegmentRecord, SegmentsHeader>(Topic::Segments)
             .unwrap_or_else(|e| panic!("{e}"));
         let mut out = bus
-            .outlet::<SegmentRecord>(Topic::Segments, 4)
+            .outlet::<SegmentRecord, SegmentsHeader>(Topic::Segments, 4)
             .unwrap_or_else(|e| panic!("{e}"));
         let budget = BudgetConfig {
             end_to_end_ms: 100.0,
@@ -759,11 +762,11 @@ mod tests {
         let record = SegmentRecord {
             endpoints: [1.0, 2.0, 3.0, 4.0],
         };
-        let fresh = FrameHeader::new(1, 0, clock.now_ns() - 10_000_000);
-        let stale = FrameHeader::new(2, 0, clock.now_ns() - 500_000_000);
+        let fresh = SegmentsHeader::from(FrameHeader::new(1, 0, clock.now_ns() - 10_000_000));
+        let stale = SegmentsHeader::from(FrameHeader::new(2, 0, clock.now_ns() - 500_000_000));
         // The work takes 7 ms of the stage's clock.
-        let ok = |h: &mut FrameHeader| {
-            h.left_count = 1;
+        let ok = |h: &mut SegmentsHeader| {
+            h.detection.left_count = 1;
             clock.advance(Duration::from_millis(7));
             Ok(vec![record])
         };
@@ -797,27 +800,30 @@ mod tests {
         )
         .unwrap_or_else(|e| panic!("{e}"));
         let got = inlet.receive_all().unwrap_or_else(|e| panic!("{e}"));
-        let summary: Vec<(FrameStatus, usize)> = got
+        let summary: Vec<(Result<FrameStatus, _>, usize)> = got
             .iter()
-            .map(|m| (m.header().frame_status(), m.payload().len()))
+            .map(|m| (m.header().frame.status.get(), m.payload().len()))
             .collect();
         assert_eq!(
             summary,
             [
-                (FrameStatus::Ok, 1),
-                (FrameStatus::DroppedLate, 0),
-                (FrameStatus::DroppedBehind, 0),
-                (FrameStatus::StageError, 1)
+                (Ok(FrameStatus::Ok), 1),
+                (Ok(FrameStatus::DroppedLate), 0),
+                (Ok(FrameStatus::DroppedBehind), 0),
+                (Ok(FrameStatus::StageError), 1)
             ]
         );
         let first = got[0].header();
-        assert_eq!((first.left_count, got[0].payload()[0]), (1, record));
-        let stamp = first.stamps[1];
+        assert_eq!(
+            (first.detection.left_count, got[0].payload()[0]),
+            (1, record)
+        );
+        let stamp = first.frame.stamps[1];
         assert_eq!(stamp.end_ns - stamp.start_ns, 7_000_000, "{stamp:?}");
         assert!(
             got[1..]
                 .iter()
-                .all(|m| m.header().dropped_by == StageKind::LineDetector.code())
+                .all(|m| m.header().frame.status_by.is(StageKind::LineDetector))
         );
     }
 
@@ -832,10 +838,10 @@ mod tests {
         ctx.clock = Clock::manual(1_000_000_000);
         let every = ctx.heartbeat();
         let mut inlet = bus
-            .inlet::<StatusReport>(Topic::Status)
+            .inlet::<StatusReport, ()>(Topic::Status)
             .unwrap_or_else(|e| panic!("{e}"));
         let mut reporter = Reporter::new(&bus, &ctx, 0).unwrap_or_else(|e| panic!("{e}"));
-        let beats = |inlet: &mut Inlet<StatusReport>| -> Vec<u64> {
+        let beats = |inlet: &mut Inlet<StatusReport, ()>| -> Vec<u64> {
             inlet
                 .receive_all()
                 .unwrap_or_else(|e| panic!("{e}"))
@@ -856,6 +862,6 @@ mod tests {
             reporter.report(StatusKind::Ready, 0, 0);
             inlet.receive_all().unwrap_or_else(|e| panic!("{e}"))[0].payload()[0].stage
         };
-        assert_eq!(got_stage, StageKind::Matcher.code());
+        assert_eq!(got_stage.get(), Ok(StageKind::Matcher));
     }
 }

@@ -11,9 +11,9 @@
 //! `HandedOver(F)` and exits; the standby, told F, publishes from F on. Frames below F come
 //! only from the old instance and frames from F on only from the new one.
 
-use crate::{FramePolicy, GapWatch, Held, Reporter, StageContext, process_frame};
+use crate::{FramePolicy, GapWatch, Held, Images, Reporter, StageContext, process_frame};
 use linetrack_ipc::{Bus, Inlet, Outlet, Received, Record, Shutdown, Wake};
-use linetrack_msgs::{Command, Control, FrameHeader, StageKind, StatusKind, Topic};
+use linetrack_msgs::{Command, Control, FrameHeader, FrameMessage, StageKind, StatusKind, Topic};
 use std::time::Duration;
 use tracing::info_span;
 
@@ -24,8 +24,12 @@ const PREPARED_AHEAD: u64 = 1;
 pub trait Stage {
     /// The records of the input it processes, one message per frame.
     type Input: Record;
+    /// The user header of the input: the frame and the results upstream.
+    type InputHeader: Record + FrameMessage;
     /// The records it publishes, one message per frame.
     type Output: Record;
+    /// The user header it publishes: the input's, carried on, with this stage's results.
+    type OutputHeader: Record + FrameMessage + From<Self::InputHeader>;
     /// Which stage it is.
     const KIND: StageKind;
     /// Where its input comes from.
@@ -46,12 +50,13 @@ pub trait Stage {
 
     /// Processes one frame: `input` is the frame's message on [`Stage::INPUT`], `images`
     /// the frame's images when the stage joins them (`None` when they never arrived).
-    /// Fills `header` with what it found; an error marks the frame failed by this stage.
+    /// Fills its own results in `header` (made from the input's); an error marks the frame
+    /// failed by this stage.
     fn process(
         &mut self,
-        header: &mut FrameHeader,
-        input: &Received<Self::Input>,
-        images: Option<&Received<u8>>,
+        header: &mut Self::OutputHeader,
+        input: &Received<Self::Input, Self::InputHeader>,
+        images: Option<&Images>,
     ) -> anyhow::Result<Vec<Self::Output>>;
 
     /// Work on a frame's images that need not wait for its input (the pose estimator's
@@ -60,7 +65,7 @@ pub trait Stage {
     /// (for the next frame to process only).
     /// [`Stage::process`] must still work for a frame that was not prepared. An error is
     /// logged and the frame goes on to `process`.
-    fn prepare(&mut self, _header: &FrameHeader, _images: &Received<u8>) -> anyhow::Result<()> {
+    fn prepare(&mut self, _header: &FrameHeader, _images: &Images) -> anyhow::Result<()> {
         Ok(())
     }
 
@@ -98,10 +103,10 @@ enum Role {
 
 /// A stage's connections, opened by the runtime.
 struct Ports<S: Stage> {
-    input: Inlet<S::Input>,
-    output: Outlet<S::Output>,
-    frames: Option<Inlet<u8>>,
-    control: Inlet<Control>,
+    input: Inlet<S::Input, S::InputHeader>,
+    output: Outlet<S::Output, S::OutputHeader>,
+    frames: Option<Inlet<u8, FrameHeader>>,
+    control: Inlet<Control, ()>,
     wake: Wake,
     reporter: Reporter,
 }
@@ -112,9 +117,9 @@ struct Runner<'a, S: Stage> {
     stage: S,
     role: Role,
     /// Inputs held by a standby.
-    waiting: Held<S::Input>,
+    waiting: Held<S::Input, S::InputHeader>,
     /// Images held until the input of the same frame arrives.
-    images: Held<u8>,
+    images: Held<u8, FrameHeader>,
     gaps: GapWatch,
     next_unpublished: u64,
     /// Frames below this were prepared (or processed) already.
@@ -230,18 +235,18 @@ impl<S: Stage> Runner<'_, S> {
             if !c.is_for(S::KIND, self.ctx.pid) {
                 continue;
             }
-            match c.command() {
-                Some(Command::Shutdown) => return Ok(Turn::Finished),
-                Some(Command::HandOver) if self.role == Role::Active => {
+            match c.command.get() {
+                Ok(Command::Shutdown) => return Ok(Turn::Finished),
+                Ok(Command::HandOver) if self.role == Role::Active => {
                     let at = self.next_unpublished.max(c.frame_id);
                     tracing::info!("handing over at frame {at}");
                     self.role = Role::HandingOver { at };
                 }
-                Some(Command::TakeOver) if self.role == Role::Standby => {
+                Ok(Command::TakeOver) if self.role == Role::Standby => {
                     self.take_over(c.frame_id, ports)?
                 }
-                Some(command) => self.stage.command(command, &c),
-                None => tracing::warn!("unknown command code {}", c.command),
+                Ok(command) => self.stage.command(command, &c),
+                Err(unknown) => tracing::warn!("{unknown}: ignored"),
             }
         }
         Ok(Turn::Continue)
@@ -256,9 +261,10 @@ impl<S: Stage> Runner<'_, S> {
         {
             tracing::warn!("frames {from}..{first} were released before the take-over");
         }
-        let inputs: Vec<Received<S::Input>> = std::iter::from_fn(|| self.waiting.take_next())
-            .filter(|m| m.header().frame_id >= from)
-            .collect();
+        let inputs: Vec<Received<S::Input, S::InputHeader>> =
+            std::iter::from_fn(|| self.waiting.take_next())
+                .filter(|m| m.header().frame().frame_id >= from)
+                .collect();
         self.role = Role::Active;
         // Held inputs were queued by the swap, not by slowness: none is dropped as behind
         // (the age limit still applies).
@@ -275,7 +281,7 @@ impl<S: Stage> Runner<'_, S> {
         let full = batch.len() >= ports.input.limit();
         let count = batch.len();
         for (k, input) in batch.iter().enumerate() {
-            let id = input.header().frame_id;
+            let id = input.header().frame().frame_id;
             ports.reporter.gap(self.gaps.observe(id));
             if let Role::HandingOver { at } = self.role
                 && id >= at
@@ -319,15 +325,16 @@ impl<S: Stage> Runner<'_, S> {
     /// Takes one frame through the stage and publishes the result.
     fn one_frame(
         &mut self,
-        input: &Received<S::Input>,
+        input: &Received<S::Input, S::InputHeader>,
         newer_waiting: bool,
         ports: &mut Ports<S>,
     ) -> anyhow::Result<()> {
-        let header = *input.header();
-        let span = info_span!("frame", frame_id = header.frame_id, stage = S::KIND.name());
+        let header = S::OutputHeader::from(*input.header());
+        let frame_id = header.frame().frame_id;
+        let span = info_span!("frame", frame_id, stage = S::KIND.name());
         let _entered = span.enter();
         let images = if ports.frames.is_some() {
-            self.images.take(header.frame_id)
+            self.images.take(frame_id)
         } else {
             None
         };
@@ -346,7 +353,7 @@ impl<S: Stage> Runner<'_, S> {
             |h| stage.process(h, input, images.as_ref()),
             || placeholder,
         )?;
-        self.next_unpublished = header.frame_id + 1;
+        self.next_unpublished = frame_id + 1;
         self.processed += 1;
         Ok(())
     }
@@ -355,7 +362,7 @@ impl<S: Stage> Runner<'_, S> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use linetrack_msgs::{SegmentRecord, StatusReport};
+    use linetrack_msgs::{SegmentRecord, SegmentsHeader, StatusReport, TracksHeader};
     use linetrack_pipeline_config::PipelineConfig;
     use std::path::PathBuf;
     use std::time::Instant;
@@ -368,7 +375,9 @@ mod tests {
 
     impl Stage for Tag {
         type Input = u8;
+        type InputHeader = FrameHeader;
         type Output = SegmentRecord;
+        type OutputHeader = SegmentsHeader;
         const KIND: StageKind = StageKind::LineDetector;
         const INPUT: Topic = Topic::Frames;
         const OUTPUT: Topic = Topic::Segments;
@@ -380,13 +389,13 @@ mod tests {
 
         fn process(
             &mut self,
-            header: &mut FrameHeader,
-            input: &Received<u8>,
-            _images: Option<&Received<u8>>,
+            header: &mut SegmentsHeader,
+            input: &Images,
+            _images: Option<&Images>,
         ) -> anyhow::Result<Vec<SegmentRecord>> {
             anyhow::ensure!(input.payload().first() != Some(&0), "a blank frame");
             Ok(vec![SegmentRecord {
-                endpoints: [self.instance, header.frame_id as f32, 0.0, 0.0],
+                endpoints: [self.instance, header.frame.frame_id as f32, 0.0, 0.0],
             }])
         }
     }
@@ -402,7 +411,7 @@ mod tests {
     }
 
     /// Receives until `n` messages arrived (panics after a generous minute: a hung runtime).
-    fn collect<P: Record>(inlet: &mut Inlet<P>, n: usize) -> Vec<Received<P>> {
+    fn collect<P: Record, H: Record>(inlet: &mut Inlet<P, H>, n: usize) -> Vec<Received<P, H>> {
         let deadline = Instant::now() + Duration::from_secs(60);
         let mut got = Vec::new();
         while got.len() < n {
@@ -418,16 +427,16 @@ mod tests {
         let hub = linetrack_ipc::LocalHub::default();
         let bus = hub.bus();
         let mut frames = bus
-            .outlet::<u8>(Topic::Frames, 4)
+            .outlet::<u8, FrameHeader>(Topic::Frames, 4)
             .unwrap_or_else(|e| panic!("{e}"));
         let mut control = bus
-            .outlet::<Control>(Topic::Control, 1)
+            .outlet::<Control, ()>(Topic::Control, 1)
             .unwrap_or_else(|e| panic!("{e}"));
         let mut out = bus
-            .inlet::<SegmentRecord>(Topic::Segments)
+            .inlet::<SegmentRecord, SegmentsHeader>(Topic::Segments)
             .unwrap_or_else(|e| panic!("{e}"));
         let mut status = bus
-            .inlet::<StatusReport>(Topic::Status)
+            .inlet::<StatusReport, ()>(Topic::Status)
             .unwrap_or_else(|e| panic!("{e}"));
         let start = |pid: u32, standby: bool, instance: f32| {
             let hub = hub.clone();
@@ -451,19 +460,19 @@ mod tests {
             }
         };
         // The frame id of `pid`'s ready report, if it sent one.
-        let ready = |status: &mut Inlet<StatusReport>, pid: u32| {
+        let ready = |status: &mut Inlet<StatusReport, ()>, pid: u32| {
             status
                 .receive_all()
                 .unwrap_or_else(|e| panic!("{e}"))
                 .iter()
                 .map(|r| r.payload()[0])
-                .find(|r| r.pid == pid && r.kind() == Some(StatusKind::Ready))
+                .find(|r| r.pid == pid && r.kind.is(StatusKind::Ready))
                 .map(|r| r.frame_id)
         };
         let mut send = |pid: u32, command: Command, frame_id: u64| {
             let c = Control::new(command, StageKind::LineDetector, pid, 0, frame_id);
             control
-                .publish(&FrameHeader::default(), &[&[c]])
+                .publish(&(), &[&[c]])
                 .unwrap_or_else(|e| panic!("{e}"));
         };
         let old = start(100, false, 1.0);
@@ -502,7 +511,7 @@ mod tests {
             .iter()
             .map(|m| {
                 let instance = m.payload().first().map_or(0.0, |r| r.endpoints[0]);
-                (m.header().frame_id, instance, m.payload().len())
+                (m.header().frame.frame_id, instance, m.payload().len())
             })
             .collect();
         let expected: Vec<(u64, f32, usize)> = (0..next + 4)
@@ -514,8 +523,8 @@ mod tests {
             .collect();
         assert_eq!(seen, expected, "(frame, instance, records)");
         assert_eq!(
-            results[3].header().frame_status(),
-            linetrack_msgs::FrameStatus::StageError
+            results[3].header().frame.status.get(),
+            Ok(linetrack_msgs::FrameStatus::StageError)
         );
         assert!(
             out.receive_all()
@@ -532,7 +541,9 @@ mod tests {
 
     impl Stage for Ahead {
         type Input = SegmentRecord;
+        type InputHeader = SegmentsHeader;
         type Output = linetrack_msgs::TrackedLine;
+        type OutputHeader = TracksHeader;
         const KIND: StageKind = StageKind::Matcher;
         const INPUT: Topic = Topic::Segments;
         const OUTPUT: Topic = Topic::Tracks;
@@ -546,7 +557,7 @@ mod tests {
             true
         }
 
-        fn prepare(&mut self, header: &FrameHeader, images: &Received<u8>) -> anyhow::Result<()> {
+        fn prepare(&mut self, header: &FrameHeader, images: &Images) -> anyhow::Result<()> {
             anyhow::ensure!(images.payload().first() != Some(&0), "a blank image");
             self.prepared
                 .lock()
@@ -557,15 +568,15 @@ mod tests {
 
         fn process(
             &mut self,
-            header: &mut FrameHeader,
-            _input: &Received<SegmentRecord>,
-            images: Option<&Received<u8>>,
+            header: &mut TracksHeader,
+            _input: &Received<SegmentRecord, SegmentsHeader>,
+            images: Option<&Images>,
         ) -> anyhow::Result<Vec<linetrack_msgs::TrackedLine>> {
             let prepared = self
                 .prepared
                 .lock()
                 .map_err(|_| anyhow::anyhow!("poisoned"))?
-                .contains(&header.frame_id);
+                .contains(&header.frame.frame_id);
             Ok(vec![linetrack_msgs::TrackedLine {
                 has_stereo: u32::from(prepared),
                 previous: i32::from(images.is_some()),
@@ -579,19 +590,19 @@ mod tests {
         let hub = linetrack_ipc::LocalHub::default();
         let bus = hub.bus();
         let mut frames = bus
-            .outlet::<u8>(Topic::Frames, 4)
+            .outlet::<u8, FrameHeader>(Topic::Frames, 4)
             .unwrap_or_else(|e| panic!("{e}"));
         let mut segments = bus
-            .outlet::<SegmentRecord>(Topic::Segments, 1)
+            .outlet::<SegmentRecord, SegmentsHeader>(Topic::Segments, 1)
             .unwrap_or_else(|e| panic!("{e}"));
         let mut control = bus
-            .outlet::<Control>(Topic::Control, 1)
+            .outlet::<Control, ()>(Topic::Control, 1)
             .unwrap_or_else(|e| panic!("{e}"));
         let mut out = bus
-            .inlet::<linetrack_msgs::TrackedLine>(Topic::Tracks)
+            .inlet::<linetrack_msgs::TrackedLine, TracksHeader>(Topic::Tracks)
             .unwrap_or_else(|e| panic!("{e}"));
         let mut status = bus
-            .inlet::<StatusReport>(Topic::Status)
+            .inlet::<StatusReport, ()>(Topic::Status)
             .unwrap_or_else(|e| panic!("{e}"));
         let prepared = std::sync::Arc::new(std::sync::Mutex::new(Vec::new()));
         let stage = Ahead {
@@ -614,7 +625,7 @@ mod tests {
                 .receive_all()
                 .unwrap_or_else(|e| panic!("{e}"))
                 .iter()
-                .any(|r| r.payload()[0].kind() == Some(StatusKind::Ready));
+                .any(|r| r.payload()[0].kind.is(StatusKind::Ready));
             std::thread::sleep(Duration::from_millis(2));
         }
         // Frames 0–3's images, frame 1's blank (its preparation fails): the stage prepares
@@ -634,7 +645,10 @@ mod tests {
         let mut results = Vec::new();
         for id in 0..2u64 {
             segments
-                .publish(&FrameHeader::new(id, 0, 1), &[&[SegmentRecord::default()]])
+                .publish(
+                    &SegmentsHeader::from(FrameHeader::new(id, 0, 1)),
+                    &[&[SegmentRecord::default()]],
+                )
                 .unwrap_or_else(|e| panic!("{e}"));
             results.extend(collect(&mut out, 1));
         }
@@ -644,13 +658,16 @@ mod tests {
         }
         for id in 2..4u64 {
             segments
-                .publish(&FrameHeader::new(id, 0, 1), &[&[SegmentRecord::default()]])
+                .publish(
+                    &SegmentsHeader::from(FrameHeader::new(id, 0, 1)),
+                    &[&[SegmentRecord::default()]],
+                )
                 .unwrap_or_else(|e| panic!("{e}"));
         }
         results.extend(collect(&mut out, 2));
         control
             .publish(
-                &FrameHeader::default(),
+                &(),
                 &[&[Control::new(Command::Shutdown, StageKind::Matcher, 7, 0, 0)]],
             )
             .unwrap_or_else(|e| panic!("{e}"));
@@ -667,7 +684,7 @@ mod tests {
             .iter()
             .map(|m| {
                 let r = m.payload()[0];
-                (m.header().frame_id, r.has_stereo, r.previous)
+                (m.header().frame.frame_id, r.has_stereo, r.previous)
             })
             .collect();
         let three = u32::from(ids.contains(&3));

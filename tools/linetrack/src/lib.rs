@@ -17,7 +17,7 @@ pub mod watch;
 use anyhow::{Context, bail};
 use clap::{Parser, Subcommand};
 use linetrack_ipc::{Bus, Scope, Shutdown};
-use linetrack_msgs::{Command, Control, FrameHeader, StageKind, Topic};
+use linetrack_msgs::{Command, Control, StageKind, Topic};
 use linetrack_pipeline_config::{MatcherPolicy, Pacing, PipelineConfig};
 use linetrack_run_record::{Report, read_events, read_frames};
 use linetrack_scene_render::Preset;
@@ -402,7 +402,7 @@ pub fn ctl(args: &CtlArgs) -> anyhow::Result<()> {
                 scope = scope.with_root(root.clone());
             }
             let bus = Bus::shared_memory(&scope, &format!("ctl-{}", std::process::id()))?;
-            let mut control = bus.outlet::<Control>(Topic::Control, 1)?;
+            let mut control = bus.outlet::<Control, ()>(Topic::Control, 1)?;
             let request = Control::new(
                 Command::SwapDetector,
                 StageKind::Supervisor,
@@ -410,7 +410,7 @@ pub fn ctl(args: &CtlArgs) -> anyhow::Result<()> {
                 linetrack_supervisor::detector_wire_code(*detector),
                 0,
             );
-            control.publish(&FrameHeader::default(), &[&[request]])?;
+            control.publish(&(), &[&[request]])?;
             println!(
                 "asked the supervisor (pid {}) to swap {} -> {}",
                 status.supervisor_pid,

@@ -82,7 +82,7 @@ impl Watch {
             Message::Pose { header, pose } => {
                 self.received.frames += 1;
                 if self.monitor.is_none() {
-                    let mut monitor = Monitor::new(&self.config, header.frame_id, &self.out)?;
+                    let mut monitor = Monitor::new(&self.config, header.frame.frame_id, &self.out)?;
                     for (kind, detail) in self.early_events.drain(..) {
                         monitor.event(kind, "link", None, detail);
                     }
@@ -95,7 +95,7 @@ impl Watch {
                 }
             }
             Message::Status { report, .. } => {
-                if let (Some(m), Some(stage)) = (&mut self.monitor, report.stage()) {
+                if let (Some(m), Some(stage)) = (&mut self.monitor, report.stage.get().ok()) {
                     m.on_report(&report, stage, &self.config.camera);
                 }
             }

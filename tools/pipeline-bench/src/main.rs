@@ -7,7 +7,7 @@
 use anyhow::{Context, bail};
 use clap::Parser;
 use linetrack_ipc::{Bus, Scope, Shutdown};
-use linetrack_msgs::{FrameHeader, PoseRecord, StageKind, Topic, now_ns};
+use linetrack_msgs::{FrameHeader, PoseRecord, StageKind, Topic, TracksHeader, now_ns};
 use linetrack_odometry::Features;
 use linetrack_pipeline_config::{MatcherPolicy, Pacing, PipelineConfig};
 use linetrack_run_record::{FrameRecord, Percentiles, read_frames};
@@ -73,11 +73,11 @@ fn echo(run_id: &str, hub: Option<linetrack_ipc::LocalHub>, count: usize) -> any
         Some(h) => h.bus(),
         None => Bus::shared_memory(&Scope::new(run_id), "bench-echo")?,
     };
-    let mut frames = bus.inlet::<u8>(Topic::Frames)?;
-    let mut pongs = bus.outlet::<PoseRecord>(Topic::Poses, 1)?;
+    let mut frames = bus.inlet::<u8, FrameHeader>(Topic::Frames)?;
+    let mut pongs = bus.outlet::<PoseRecord, TracksHeader>(Topic::Poses, 1)?;
     let wake = bus.wake(StageKind::LineDetector)?;
     pongs.publish(
-        &FrameHeader::new(u64::MAX, 0, 0),
+        &TracksHeader::from(FrameHeader::new(u64::MAX, 0, 0)),
         &[&[PoseRecord::default()]],
     )?; // ready
     let mut seen = 0;
@@ -92,8 +92,8 @@ fn echo(run_id: &str, hub: Option<linetrack_ipc::LocalHub>, count: usize) -> any
                 .step_by(64)
                 .map(|&b| u64::from(b))
                 .sum();
-            let mut header = *frame.header();
-            header.sequence_ns = checksum;
+            let mut header = TracksHeader::from(*frame.header());
+            header.frame.sequence_ns = checksum;
             pongs.publish(&header, &[&[PoseRecord::default()]])?;
             seen += 1;
         }
@@ -103,16 +103,16 @@ fn echo(run_id: &str, hub: Option<linetrack_ipc::LocalHub>, count: usize) -> any
 
 /// The pinging side's ports: made before the peer starts, so its ready message is heard.
 struct Pinger {
-    frames: linetrack_ipc::Outlet<u8>,
-    pongs: linetrack_ipc::Inlet<PoseRecord>,
+    frames: linetrack_ipc::Outlet<u8, FrameHeader>,
+    pongs: linetrack_ipc::Inlet<PoseRecord, TracksHeader>,
     wake: linetrack_ipc::Wake,
 }
 
 impl Pinger {
     fn new(bus: &Bus) -> anyhow::Result<Self> {
         Ok(Self {
-            frames: bus.outlet::<u8>(Topic::Frames, 2 * WIDTH * HEIGHT)?,
-            pongs: bus.inlet::<PoseRecord>(Topic::Poses)?,
+            frames: bus.outlet::<u8, FrameHeader>(Topic::Frames, 2 * WIDTH * HEIGHT)?,
+            pongs: bus.inlet::<PoseRecord, TracksHeader>(Topic::Poses)?,
             wake: bus.wake(StageKind::Supervisor)?,
         })
     }
@@ -158,9 +158,9 @@ fn ping(pinger: Pinger, round_trips: usize) -> anyhow::Result<Vec<f64>> {
         };
         let rtt = sent.elapsed();
         anyhow::ensure!(
-            back.header().frame_id == k as u64,
+            back.header().frame.frame_id == k as u64,
             "echo of frame {} for {k}",
-            back.header().frame_id
+            back.header().frame.frame_id
         );
         if k >= 20 {
             // The first round trips warm up caches and page mappings.
