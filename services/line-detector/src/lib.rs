@@ -22,9 +22,8 @@ struct Side {
 }
 
 impl Side {
-    /// Detects in `image`, stretched first when it is dark and then smoothed when the
-    /// stretch was strong (as the odometry does: `odometry.max_contrast_gain`,
-    /// `odometry.line_smoothing`).
+    /// Detects in `image`, stretched first when it is dark (as the odometry does:
+    /// `odometry.max_contrast_gain`).
     fn detect(&mut self, image: &GrayImage, max_gain: f64) -> anyhow::Result<()> {
         let seen = self.stretch.apply(image, max_gain)?;
         self.detector.detect(seen, &mut self.segments)?;
@@ -50,7 +49,7 @@ impl Detector {
         let side = || -> anyhow::Result<Side> {
             Ok(Side {
                 detector: create_detector(kind, &ctx.config.odometry.frontend)?,
-                stretch: ContrastStretch::for_lines(ctx.config.odometry.line_smoothing),
+                stretch: ContrastStretch::new(),
                 segments: Vec::new(),
             })
         };

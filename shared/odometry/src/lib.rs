@@ -35,7 +35,7 @@ use linetrack_vision::{
     AppearanceGates, DetectorKind, FeatureMatch, FrontendConfig, GrayImage, LineDetector,
     LineFeatures, MatcherKind, OrbExtractor, OrbOptions, PointFeatures, PointMatcher,
     SegmentMatcher, VisionError, create_detector, create_segment_matcher, refine_stereo_column,
-    smoothed_for_lines, stretch_contrast,
+    stretch_contrast,
 };
 use nalgebra::{Isometry3, Point3};
 use serde::{Deserialize, Serialize};
@@ -135,16 +135,6 @@ pub struct OdometryConfig {
     /// 4.4 cm, up to 8 or 16 let noise corners carry the point matches and gave 58 cm, none
     /// lost 21 frames and gave 20 cm.
     pub max_contrast_gain: f64,
-    /// Segments are found in an image stretched by a gain of 2 or more only after a
-    /// Gaussian smoothing of σ = `line_smoothing` × √gain pixels (0: never): the stretch
-    /// multiplies the sensor's noise by its gain, and the detectors' own smoothing is sized
-    /// for a normal exposure, so in a dark scene they break edges into noisy pieces. Only
-    /// the detection sees the smoothed image (descriptors and corners the stretched one).
-    /// On the generated `lights-switching` sequences (3 seeds, lights off: gain 4), 0.3
-    /// took the worst seed's ATE / drift from 2.8 cm / 1.04 % to 1.9 cm / 0.73 % with LBD
-    /// (points and lines) and kept ℓ1 within 1.5 cm / 0.6 %; 0.5 helped LBD more and
-    /// made ℓ1 worse (3.3 cm / 1.3 %).
-    pub line_smoothing: f64,
     /// Point observations of a stretched image weighted by 1 / gain²: the stretch
     /// multiplies the sensor's noise with the contrast, so a corner found in a dimmed scene
     /// is that much less certain than one in a well-exposed image (in image units its
@@ -187,7 +177,6 @@ impl Default for OdometryConfig {
             landmarks: true,
             landmark_disparity_px: 1.0,
             max_contrast_gain: 4.0,
-            line_smoothing: 0.3,
             points_weighted_by_gain: true,
             stereo_photometric: StereoPhotometric::default(),
             lost: LostLimits::default(),
@@ -238,12 +227,6 @@ impl OdometryConfig {
             return Err(format!(
                 "field `max_contrast_gain` = {}: expected a number in [1, 255]",
                 self.max_contrast_gain
-            ));
-        }
-        if !(self.line_smoothing >= 0.0 && self.line_smoothing <= 2.0) {
-            return Err(format!(
-                "field `line_smoothing` = {}: expected a number in [0, 2]",
-                self.line_smoothing
             ));
         }
         if !(self.min_line_angle_deg >= 0.0 && self.min_line_angle_deg < 90.0) {
@@ -556,7 +539,7 @@ impl MotionTracker {
         right: &GrayImage,
     ) -> Result<PreparedImages, OdometryError> {
         let started = Instant::now();
-        let (stretched, [left_gain, _]) = stretch_pair(left, right, self.config.max_contrast_gain)?;
+        let (stretched, left_gain) = stretch_pair(left, right, self.config.max_contrast_gain)?;
         let mut prepared = self.prepare_stretched(stretched, left_gain, left, right)?;
         prepared.ms = since(started);
         Ok(prepared)
@@ -1117,20 +1100,13 @@ fn stretch_pair(
     left: &GrayImage,
     right: &GrayImage,
     max_gain: f64,
-) -> Result<([Option<GrayImage>; 2], [f64; 2]), VisionError> {
-    let mut stretched = [None, None];
-    let mut gains = [1.0; 2];
-    for ((image, out), gain) in [left, right]
-        .into_iter()
-        .zip(stretched.iter_mut())
-        .zip(gains.iter_mut())
-    {
-        if let Some((image, g)) = stretch_contrast(image, max_gain)? {
-            *out = Some(image);
-            *gain = g;
-        }
-    }
-    Ok((stretched, gains))
+) -> Result<([Option<GrayImage>; 2], f64), VisionError> {
+    let (left, left_gain) = match stretch_contrast(left, max_gain)? {
+        Some((image, gain)) => (Some(image), gain),
+        None => (None, 1.0),
+    };
+    let right = stretch_contrast(right, max_gain)?.map(|(image, _)| image);
+    Ok(([left, right], left_gain))
 }
 
 fn since(start: Instant) -> f64 {
@@ -1157,8 +1133,8 @@ impl Odometry {
     ) -> Result<FrameResult, OdometryError> {
         let mut stats = FrameStats::default();
         let started = Instant::now();
-        let (stretched, gains) = stretch_pair(left, right, self.tracker.config.max_contrast_gain)?;
-        let left_gain = gains[0];
+        let (stretched, left_gain) =
+            stretch_pair(left, right, self.tracker.config.max_contrast_gain)?;
         let PreparedImages {
             stretched: [left_stretched, right_stretched],
             points,
@@ -1169,22 +1145,9 @@ impl Odometry {
         // Stretched once, for the detectors and the back end's corners alike.
         let seen_left = left_stretched.as_ref().unwrap_or(left);
         let seen_right = right_stretched.as_ref().unwrap_or(right);
-        // ... and the detectors' smoothed where the stretch was strong (as the pipeline's
-        // detector stage does).
-        let smoothing = self.tracker.config.line_smoothing;
-        let smoothed = [
-            smoothed_for_lines(seen_left, gains[0], smoothing)?,
-            smoothed_for_lines(seen_right, gains[1], smoothing)?,
-        ];
         let (mut lines_l, mut lines_r) = (LineFeatures::default(), LineFeatures::default());
-        self.detector.detect(
-            smoothed[0].as_ref().unwrap_or(seen_left),
-            &mut lines_l.segments,
-        )?;
-        self.detector.detect(
-            smoothed[1].as_ref().unwrap_or(seen_right),
-            &mut lines_r.segments,
-        )?;
+        self.detector.detect(seen_left, &mut lines_l.segments)?;
+        self.detector.detect(seen_right, &mut lines_r.segments)?;
         stats.ms[0] = since(started);
         let started = Instant::now();
         self.matcher.describe(seen_left, &mut lines_l)?;

@@ -357,76 +357,17 @@ pub fn stretch_contrast(
     )))
 }
 
-/// Stretch gains from which a stretched image is smoothed before segments are found in it.
-pub const SMOOTHED_FROM_GAIN: f64 = 2.0;
-
-/// The Gaussian σ, pixels, that smooths an image stretched by `gain` before segments are
-/// found in it: `per_gain`·√gain from [`SMOOTHED_FROM_GAIN`] on (the stretch multiplies the
-/// sensor's noise by its gain, and the detectors' own smoothing is sized for a normal
-/// exposure); `None` below it or with `per_gain` 0.
-pub fn line_smoothing_sigma(gain: f64, per_gain: f64) -> Option<f64> {
-    (per_gain > 0.0 && gain >= SMOOTHED_FROM_GAIN).then(|| per_gain * gain.sqrt())
-}
-
-/// Smooths `image` into `out` by a Gaussian of `sigma` pixels (a kernel of ±3σ, borders
-/// reflected).
-fn smooth_into(image: &GrayImage, sigma: f64, out: &mut GrayImage) -> Result<(), VisionError> {
-    imgproc::gaussian_blur(
-        &image.mat,
-        &mut out.mat,
-        core::Size::new(0, 0),
-        sigma,
-        sigma,
-        core::BORDER_REFLECT_101,
-    )
-    .context("smoothing the image")?;
-    out.origin.clear();
-    out.origin.push_str(&image.origin);
-    Ok(())
-}
-
-/// `image`, stretched by `gain`, smoothed for the line detector as
-/// [`line_smoothing_sigma`] says, or `None` where it is not.
-pub fn smoothed_for_lines(
-    image: &GrayImage,
-    gain: f64,
-    per_gain: f64,
-) -> Result<Option<GrayImage>, VisionError> {
-    let Some(sigma) = line_smoothing_sigma(gain, per_gain) else {
-        return Ok(None);
-    };
-    let mut out = GrayImage {
-        mat: Mat::default(),
-        origin: String::new(),
-    };
-    smooth_into(image, sigma, &mut out)?;
-    Ok(Some(out))
-}
-
 /// [`stretch_contrast`] into a buffer kept from one call to the next: a stage stretching
 /// every frame allocates no image for it once warm.
-///
-/// For a line detector it also smooths what it stretched a lot ([`line_smoothing_sigma`]).
 #[derive(Debug, Default)]
 pub struct ContrastStretch {
     stretched: Option<GrayImage>,
-    smoothed: Option<GrayImage>,
-    smoothing_per_gain: f64,
 }
 
 impl ContrastStretch {
     /// A stretch with no buffer yet.
     pub fn new() -> Self {
         Self::default()
-    }
-
-    /// A stretch for a line detector: what it stretches by a gain from
-    /// [`SMOOTHED_FROM_GAIN`] on is smoothed by `per_gain`·√gain pixels (0: never).
-    pub fn for_lines(per_gain: f64) -> Self {
-        Self {
-            smoothing_per_gain: per_gain,
-            ..Self::default()
-        }
     }
 
     /// `image` stretched as [`stretch_contrast`] does, in the kept buffer, or `image`
@@ -449,15 +390,7 @@ impl ContrastStretch {
             .context("stretching the contrast")?;
         out.origin.clear();
         out.origin.push_str(&image.origin);
-        let Some(sigma) = line_smoothing_sigma(gain, self.smoothing_per_gain) else {
-            return Ok(out);
-        };
-        let smoothed = self.smoothed.get_or_insert_with(|| GrayImage {
-            mat: Mat::default(),
-            origin: String::new(),
-        });
-        smooth_into(out, sigma, smoothed)?;
-        Ok(smoothed)
+        Ok(out)
     }
 }
 

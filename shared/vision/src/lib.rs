@@ -35,8 +35,7 @@ pub use detect::{
 };
 pub use hamming::{BinaryDescriptors, FeatureMatch, HammingMatcher};
 pub use image::{
-    BorrowedGray, ContrastStretch, GrayImage, MAX_FILE_BYTES, MAX_PIXELS, SMOOTHED_FROM_GAIN,
-    line_smoothing_sigma, perturb, smoothed_for_lines, stretch_contrast,
+    BorrowedGray, ContrastStretch, GrayImage, MAX_FILE_BYTES, MAX_PIXELS, perturb, stretch_contrast,
 };
 pub use lbd::LbdExtractor;
 pub use matchers::{
