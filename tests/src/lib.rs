@@ -10,6 +10,15 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
+/// The binaries a plain `linetrack run` needs: the command and its four stages.
+pub const RUN_BINARIES: [&str; 5] = [
+    "linetrack",
+    "linetrack-frame-source",
+    "linetrack-line-detector",
+    "linetrack-matcher",
+    "linetrack-pose-estimator",
+];
+
 /// The folder holding the workspace's binaries (`linetrack`, the stages): the test binary
 /// lives in its `deps/`.
 pub fn bin_dir() -> PathBuf {
@@ -19,13 +28,7 @@ pub fn bin_dir() -> PathBuf {
         .and_then(Path::parent)
         .unwrap_or_else(|| panic!("no bin folder above {}", exe.display()))
         .to_path_buf();
-    for name in [
-        "linetrack",
-        "linetrack-frame-source",
-        "linetrack-line-detector",
-        "linetrack-matcher",
-        "linetrack-pose-estimator",
-    ] {
+    for name in RUN_BINARIES {
         assert!(
             dir.join(name).is_file(),
             "{} is missing: build the binaries first (`cargo build --workspace --bins --profile test-release`; `cargo xtask test` does it)",

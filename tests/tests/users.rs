@@ -19,15 +19,6 @@ const RUN_TIMEOUT: Duration = Duration::from_secs(120);
 const NOBODY: u32 = 65534;
 /// Every frame processed however late (the drop policy has its own tests).
 const CONFIG: &str = "[supervisor]\nrestart_backoff_ms = 100\nhang_timeout_ms = 2000\ndrain_timeout_ms = 4000\nstatus_every_ms = 0\n[budget]\ndrop_late = false\n";
-/// What `linetrack run` needs of the workspace's binaries for a plain run.
-const BINARIES: [&str; 5] = [
-    "linetrack",
-    "linetrack-frame-source",
-    "linetrack-line-detector",
-    "linetrack-matcher",
-    "linetrack-pose-estimator",
-];
-
 /// `program` as user `nobody`, with the environment of a fresh login (no `XDG_RUNTIME_DIR`,
 /// no `LINETRACK_IPC_*`), in `cwd`.
 fn as_nobody(program: &Path, cwd: &Path) -> Command {
@@ -105,7 +96,7 @@ fn another_users_run_beside_ours_completes_and_cannot_write_into_ours() {
     open_dir(&theirs_dir);
     let bin = theirs_dir.join("bin");
     open_dir(&bin);
-    for name in BINARIES {
+    for name in RUN_BINARIES {
         std::fs::copy(bin_dir().join(name), bin.join(name))
             .unwrap_or_else(|e| panic!("copying {name}: {e}"));
     }
