@@ -11,7 +11,9 @@ use linetrack_msgs::{StageKind, Topic};
 use linetrack_stage_runtime::{
     Images, Stage, StageContext, detector_on_wire, run_stage, stereo_views, to_records,
 };
-use linetrack_vision::{ContrastStretch, GrayImage, LineDetector, create_detector};
+use linetrack_vision::{
+    ContrastStretch, GrayImage, LineDetector, SideWorker, copy_image_into, create_detector,
+};
 
 /// One side's detector, its stretched image and its output buffer (all kept from frame to
 /// frame).
@@ -31,11 +33,20 @@ impl Side {
     }
 }
 
+/// The right image's side with a copy of its image, for the worker that detects it.
+struct RightJob {
+    side: Side,
+    image: Option<GrayImage>,
+    max_gain: f64,
+    result: anyhow::Result<()>,
+}
+
 /// The detector stage: a detector per image side, so that both sides can run at once.
 pub struct Detector {
     left: Side,
-    right: Side,
-    in_parallel: bool,
+    /// The right side: on a thread of its own under `detect_sides_in_parallel`, else
+    /// after the left one.
+    right: SideWorker<RightJob>,
     kind: WireDetector,
     pid: u32,
     max_contrast_gain: f64,
@@ -53,10 +64,26 @@ impl Detector {
                 segments: Vec::new(),
             })
         };
+        let right = RightJob {
+            side: side()?,
+            image: None,
+            max_gain: ctx.config.odometry.max_contrast_gain,
+            result: Ok(()),
+        };
+        let work = |job: &mut RightJob| {
+            job.result = match &job.image {
+                Some(image) => job.side.detect(image, job.max_gain),
+                None => Ok(()),
+            };
+        };
+        let right = if ctx.config.detect_sides_in_parallel {
+            SideWorker::new("detect-right", right, work)?
+        } else {
+            SideWorker::inline("detect-right", right, work)
+        };
         let mut detector = Self {
             left: side()?,
-            right: side()?,
-            in_parallel: ctx.config.detect_sides_in_parallel,
+            right,
             kind: detector_on_wire(kind),
             pid: ctx.pid,
             max_contrast_gain: ctx.config.odometry.max_contrast_gain,
@@ -73,7 +100,7 @@ impl Detector {
             .collect();
         let warm = GrayImage::from_pixels(w, h, &card, "warm-up card")?;
         detector.left.detect(&warm, 0.0)?;
-        detector.right.detect(&warm, 0.0)?;
+        detector.right.job()?.side.detect(&warm, 0.0)?;
         tracing::info!("{} detector ready", kind.name());
         Ok(detector)
     }
@@ -109,24 +136,17 @@ impl Stage for Detector {
         detection.detector_pid = self.pid;
         let (left, right) = stereo_views(frame)?;
         let gain = self.max_contrast_gain;
-        if self.in_parallel {
-            let (left_side, right_side) = (&mut self.left, &mut self.right);
-            std::thread::scope(|scope| {
-                let right_job = scope.spawn(move || right_side.detect(&right, gain));
-                let left_done = left_side.detect(&left, gain);
-                let right_done = right_job.join().unwrap_or_else(|_| {
-                    Err(anyhow::anyhow!("the right image's detection panicked"))
-                });
-                left_done.and(right_done)
-            })?;
-        } else {
-            self.left.detect(&left, gain)?;
-            self.right.detect(&right, gain)?;
-        }
+        copy_image_into(&mut self.right.job()?.image, &right)?;
+        let left_side = &mut self.left;
+        let (job, left_done) = self.right.run_while(|| left_side.detect(&left, gain));
+        let job = job?;
+        let right_done = std::mem::replace(&mut job.result, Ok(()));
+        left_done.and(right_done)?;
+        let right_segments = &job.side.segments;
         detection.left_count = self.left.segments.len() as u32;
-        detection.right_count = self.right.segments.len() as u32;
+        detection.right_count = right_segments.len() as u32;
         let mut records = to_records(&self.left.segments);
-        records.extend(to_records(&self.right.segments));
+        records.extend(to_records(right_segments));
         Ok(records)
     }
 }
@@ -141,54 +161,44 @@ pub fn run(ctx: &StageContext, bus: &Bus, shutdown: &Shutdown) -> anyhow::Result
 mod tests {
     use super::*;
     use linetrack_pipeline_config::PipelineConfig;
+    use linetrack_stage_runtime::stereo_frame;
     use std::path::PathBuf;
 
-    /// The segments of one EuRoC stereo frame, detected with the sides at once or in turn.
-    fn detect(in_parallel: bool) -> (SegmentsHeader, Vec<SegmentRecord>) {
-        let (left, right) =
-            linetrack_test_data::euroc_stereo_pair(0).unwrap_or_else(|e| panic!("{e}"));
-        let read = |p: &std::path::Path| GrayImage::load(p).unwrap_or_else(|e| panic!("{e}"));
-        let (left, right) = (read(&left), read(&right));
-        let (Some(l), Some(r)) = (left.pixels(), right.pixels()) else {
-            panic!("images not continuous");
-        };
-        let bus = Bus::local();
-        let mut inlet = bus
-            .inlet::<u8, FrameHeader>(Topic::Frames)
-            .unwrap_or_else(|e| panic!("{e}"));
-        let mut outlet = bus
-            .outlet::<u8, FrameHeader>(Topic::Frames, l.len() + r.len())
-            .unwrap_or_else(|e| panic!("{e}"));
-        let mut header = FrameHeader::new(0, 0, 1);
-        header.width = left.width() as u32;
-        header.height = left.height() as u32;
-        outlet
-            .publish(&header, &[l, r])
-            .unwrap_or_else(|e| panic!("{e}"));
-        let frame = inlet
-            .receive()
-            .unwrap_or_else(|e| panic!("{e}"))
-            .unwrap_or_else(|| panic!("no frame"));
+    /// The segments of two EuRoC stereo frames, detected with the sides at once or in turn.
+    fn detect(in_parallel: bool) -> Vec<(SegmentsHeader, Vec<SegmentRecord>)> {
         let config = PipelineConfig {
             detect_sides_in_parallel: in_parallel,
             ..PipelineConfig::default()
         };
         let ctx = StageContext::in_process(StageKind::LineDetector, config, PathBuf::new());
         let mut detector = Detector::new(&ctx).unwrap_or_else(|e| panic!("{e}"));
-        let mut segments = SegmentsHeader::from(header);
-        let records = detector
-            .process(&mut segments, &frame, None)
-            .unwrap_or_else(|e| panic!("{e}"));
-        (segments, records)
+        (0..2)
+            .map(|index| {
+                let (left, right) =
+                    linetrack_test_data::euroc_stereo_pair(index).unwrap_or_else(|e| panic!("{e}"));
+                let read =
+                    |p: &std::path::Path| GrayImage::load(p).unwrap_or_else(|e| panic!("{e}"));
+                let frame = stereo_frame(index as u64, &read(&left), &read(&right))
+                    .unwrap_or_else(|e| panic!("{e}"));
+                let mut segments = SegmentsHeader::from(*frame.header());
+                let records = detector
+                    .process(&mut segments, &frame, None)
+                    .unwrap_or_else(|e| panic!("{e}"));
+                (segments, records)
+            })
+            .collect()
     }
 
     #[test]
     fn both_sides_at_once_find_what_one_after_the_other_finds() {
-        let (serial_header, serial) = detect(false);
-        let (parallel_header, parallel) = detect(true);
-        let (serial_found, parallel_found) = (serial_header.detection, parallel_header.detection);
-        assert!(serial_found.left_count > 20 && serial_found.right_count > 20);
-        assert_eq!(parallel_found, serial_found);
-        assert_eq!(parallel, serial);
+        let (serial, parallel) = (detect(false), detect(true));
+        assert_eq!(serial.len(), 2);
+        for ((serial_header, serial), (parallel_header, parallel)) in serial.iter().zip(&parallel) {
+            let (serial_found, parallel_found) =
+                (serial_header.detection, parallel_header.detection);
+            assert!(serial_found.left_count > 20 && serial_found.right_count > 20);
+            assert_eq!(parallel_found, serial_found);
+            assert_eq!(parallel, serial);
+        }
     }
 }

@@ -17,7 +17,8 @@ use linetrack_msgs::{
 use linetrack_pipeline_config::MatcherPolicy;
 use linetrack_stage_runtime::{Images, Stage, StageContext, run_stage, stereo_views, to_segment};
 use linetrack_vision::{
-    FeatureMatch, LineFeatures, MatcherKind, SegmentMatcher, create_segment_matcher,
+    FeatureMatch, GrayImage, LineFeatures, MatcherKind, SegmentMatcher, SideWorker, VisionError,
+    copy_image_into, create_segment_matcher,
 };
 use tracing::info_span;
 
@@ -28,9 +29,20 @@ struct Previous {
     described: bool,
 }
 
+/// The right image's LBD description with a copy of its image, for the worker that does it.
+struct DescribeJob {
+    lbd: Box<dyn SegmentMatcher>,
+    image: Option<GrayImage>,
+    features: LineFeatures,
+    result: Result<(), VisionError>,
+}
+
 /// Matching state across frames.
 pub struct FrameMatcher {
     lbd: Box<dyn SegmentMatcher>,
+    /// LBD on the right image: on a thread of its own under `detect_sides_in_parallel`,
+    /// else after the left image.
+    describe_right: SideWorker<DescribeJob>,
     l1: Box<dyn SegmentMatcher>,
     mode: MatcherMode,
     /// Whether ℓ1 frames probe LBD (the `auto` policy only: under `l1` nothing would come
@@ -51,8 +63,26 @@ impl FrameMatcher {
             MatcherPolicy::Auto | MatcherPolicy::Lbd => MatcherMode::Lbd,
             MatcherPolicy::L1 => MatcherMode::L1,
         };
+        let right = DescribeJob {
+            lbd: create_segment_matcher(MatcherKind::Lbd, frontend)?,
+            image: None,
+            features: LineFeatures::default(),
+            result: Ok(()),
+        };
+        let work = |job: &mut DescribeJob| {
+            job.result = match &job.image {
+                Some(image) => job.lbd.describe(image, &mut job.features),
+                None => Ok(()),
+            };
+        };
+        let describe_right = if ctx.config.detect_sides_in_parallel {
+            SideWorker::new("describe-right", right, work)?
+        } else {
+            SideWorker::inline("describe-right", right, work)
+        };
         Ok(Self {
             lbd: create_segment_matcher(MatcherKind::Lbd, frontend)?,
+            describe_right,
             l1: create_segment_matcher(MatcherKind::L1, frontend)?,
             mode,
             probes: ctx.config.matcher.mode == MatcherPolicy::Auto,
@@ -132,8 +162,14 @@ impl FrameMatcher {
             let span = info_span!("describe");
             let _entered = span.enter();
             if mode == MatcherMode::Lbd || probe {
-                self.lbd.describe(l, &mut left)?;
-                self.lbd.describe(r, &mut right)?;
+                let job = self.describe_right.job()?;
+                copy_image_into(&mut job.image, r)?;
+                std::mem::swap(&mut job.features, &mut right);
+                let lbd = &mut self.lbd;
+                let (job, left_done) = self.describe_right.run_while(|| lbd.describe(l, &mut left));
+                let job = job?;
+                std::mem::swap(&mut job.features, &mut right);
+                left_done.and(std::mem::replace(&mut job.result, Ok(())))?;
                 described = true;
             }
             if mode == MatcherMode::L1 {
@@ -250,10 +286,17 @@ pub fn run(ctx: &StageContext, bus: &Bus, shutdown: &Shutdown) -> anyhow::Result
 mod tests {
     use super::*;
     use linetrack_pipeline_config::PipelineConfig;
+    use linetrack_stage_runtime::{stereo_frame, to_records};
+    use linetrack_vision::DetectorKind;
 
     fn matcher(policy: MatcherPolicy) -> FrameMatcher {
+        matcher_with(policy, false)
+    }
+
+    fn matcher_with(policy: MatcherPolicy, sides_in_parallel: bool) -> FrameMatcher {
         let mut config = PipelineConfig::default();
         config.matcher.mode = policy;
+        config.detect_sides_in_parallel = sides_in_parallel;
         let ctx = StageContext::in_process(StageKind::Matcher, config, std::path::PathBuf::new());
         FrameMatcher::new(&ctx).unwrap_or_else(|e| panic!("{e}"))
     }
@@ -273,6 +316,64 @@ mod tests {
         for frames in 0..10 {
             l1.frames_in_l1 = frames;
             assert!(!l1.probes_now(MatcherMode::L1), "frame {frames}");
+        }
+    }
+
+    /// Three EuRoC frames' LSD segments matched by LBD, the images described one side
+    /// after the other or at the same time.
+    fn lbd_tracks(sides_in_parallel: bool) -> Vec<(Matching, Vec<TrackedLine>)> {
+        let config = PipelineConfig::default();
+        let mut detector =
+            linetrack_vision::create_detector(DetectorKind::Lsd, &config.odometry.frontend)
+                .unwrap_or_else(|e| panic!("{e}"));
+        let mut matcher = matcher_with(MatcherPolicy::Lbd, sides_in_parallel);
+        (0..3)
+            .map(|index| {
+                let (left, right) =
+                    linetrack_test_data::euroc_stereo_pair(index).unwrap_or_else(|e| panic!("{e}"));
+                let read =
+                    |p: &std::path::Path| GrayImage::load(p).unwrap_or_else(|e| panic!("{e}"));
+                let (left, right) = (read(&left), read(&right));
+                let mut segments = Vec::new();
+                detector
+                    .detect(&left, &mut segments)
+                    .unwrap_or_else(|e| panic!("{e}"));
+                let mut records = to_records(&segments);
+                let left_count = records.len() as u32;
+                detector
+                    .detect(&right, &mut segments)
+                    .unwrap_or_else(|e| panic!("{e}"));
+                records.extend(to_records(&segments));
+                let frame =
+                    stereo_frame(index as u64, &left, &right).unwrap_or_else(|e| panic!("{e}"));
+                let mut header = TracksHeader::from(*frame.header());
+                header.detection.left_count = left_count;
+                let tracks = matcher
+                    .match_frame(&mut header, &records, Some(&frame))
+                    .unwrap_or_else(|e| panic!("{e}"));
+                (header.matching, tracks)
+            })
+            .collect()
+    }
+
+    #[test]
+    fn lbd_describing_both_sides_at_once_matches_as_one_after_the_other() {
+        let (serial, parallel) = (lbd_tracks(false), lbd_tracks(true));
+        for (frame, (one_by_one, at_once)) in serial.iter().zip(&parallel).enumerate() {
+            assert_eq!(one_by_one.0.mode, MatcherMode::Lbd.into());
+            assert!(
+                one_by_one.0.stereo_matches > 20,
+                "frame {frame}: {:?}",
+                one_by_one.0
+            );
+            if frame > 0 {
+                assert!(
+                    one_by_one.0.tracked_matches > 20,
+                    "frame {frame}: {:?}",
+                    one_by_one.0
+                );
+            }
+            assert_eq!(at_once, one_by_one, "frame {frame}");
         }
     }
 }

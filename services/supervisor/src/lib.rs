@@ -242,7 +242,7 @@ pub fn run(
     // use ends the run before any stage starts; a refused privilege is a warning.
     let mut refused = Vec::new();
     for (stage, settings) in config.stages.all() {
-        refused.extend(linetrack_sched::probe(stage, settings)?);
+        refused.extend(linetrack_sched::probe(stage.name(), settings)?);
     }
     let run_dir = run_dir::resolve(&config.output, std::time::SystemTime::now())?;
     // Held until the run is over; released by the kernel if this process dies.
@@ -599,12 +599,7 @@ impl<'m> Supervisor<'m> {
                 let code = stage_code(stage).context("the supervisor is no stage")?;
                 let stop = Shutdown::default();
                 let (hub, flag) = (hub.clone(), stop.clone());
-                let settings = self
-                    .config
-                    .stages
-                    .of(stage.name())
-                    .cloned()
-                    .unwrap_or_default();
+                let settings = self.config.stages.of(stage).cloned().unwrap_or_default();
                 let handle = std::thread::Builder::new()
                     .name(stage.name().to_string())
                     .spawn(move || {

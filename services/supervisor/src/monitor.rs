@@ -13,8 +13,8 @@ use linetrack_msgs::{
 };
 use linetrack_pipeline_config::{CameraConfig, MatcherPolicy, PipelineConfig};
 use linetrack_run_record::{
-    EventRecord, FrameRecord, Percentiles, RecordError, RecordWriter, Report, RunEnd, STAGES,
-    Summary, Tally,
+    EventRecord, FrameRecord, Percentiles, RecordError, RecordWriter, Report, RunEnd, Summary,
+    Tally,
 };
 use linetrack_stage_runtime::detector_kind;
 use linetrack_trajectory::tum::StampedPose;
@@ -234,10 +234,10 @@ impl Monitor {
             f64::NAN
         };
         let budget = &self.config.budget;
-        let over_stage = STAGES
-            .iter()
+        let over_stage = StageKind::PROCESSING
+            .into_iter()
             .zip(stage)
-            .any(|(name, ms)| budget.stage_ms(name).is_some_and(|b| ms > b));
+            .any(|(kind, ms)| budget.stage_ms(kind).is_some_and(|b| ms > b));
         let record = FrameRecord {
             frame_id: header.frame_id,
             outcome: outcome.to_string(),

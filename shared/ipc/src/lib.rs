@@ -756,6 +756,12 @@ pub enum Received<P: Record, H: Record> {
 }
 
 impl<P: Record, H: Record> Received<P, H> {
+    /// A message that never went through a bus (a stage's input built in place: tests,
+    /// tools).
+    pub fn local(header: H, payload: Vec<P>) -> Self {
+        Received::Local(Arc::new(LocalPayload { header, payload }))
+    }
+
     /// The header.
     pub fn header(&self) -> &H {
         match self {

@@ -33,9 +33,9 @@ use linetrack_stereo_vo::{
 };
 use linetrack_vision::{
     AppearanceGates, DetectorKind, FeatureMatch, FrontendConfig, GrayImage, LineDetector,
-    LineFeatures, MatcherKind, OrbExtractor, OrbOptions, PointFeatures, PointMatcher,
-    SegmentMatcher, VisionError, create_detector, create_segment_matcher, refine_stereo_column,
-    stretch_contrast,
+    LineFeatures, MatcherKind, OrbExtractor, OrbOptions, OrbWorker, PointFeatures, PointMatcher,
+    SegmentMatcher, VisionError, copy_image_into, create_detector, create_segment_matcher,
+    refine_stereo_column, refine_track, stretch_contrast,
 };
 use nalgebra::{Isometry3, Point3};
 use serde::{Deserialize, Serialize};
@@ -120,6 +120,12 @@ pub struct OdometryConfig {
     /// Refine stereo point matches to a fraction of a pixel (keypoints sit on whole pixels,
     /// which biases the depth of every point of a surface the same way).
     pub subpixel_stereo: bool,
+    /// Refine frame-to-frame point matches to a fraction of a pixel: the previous frame's
+    /// window around the point is looked for around its match (`refine_track`), so the
+    /// motion is measured against where the landmark's own point went, not against another
+    /// keypoint rounded to its pyramid level's pixel. A refined point is weighted as a
+    /// full-resolution one (its level's rounding is gone).
+    pub subpixel_tracking: bool,
     /// Follow features as landmarks: the motion is measured against positions fused over
     /// every stereo sighting of a tracked feature (placed with their frames' poses), not
     /// against the previous frame's triangulation alone (PL-StVO).
@@ -174,6 +180,7 @@ impl Default for OdometryConfig {
             frame_to_frame_ratio: 1.5,
             reject_look_alikes: true,
             subpixel_stereo: true,
+            subpixel_tracking: true,
             landmarks: true,
             landmark_disparity_px: 1.0,
             max_contrast_gain: 4.0,
@@ -391,8 +398,10 @@ struct Observations {
 pub struct MotionTracker {
     config: OdometryConfig,
     rig: StereoRig,
-    /// One ORB extractor per image: the two run at the same time.
-    orb: [OrbExtractor; 2],
+    /// One ORB extractor per image: the two run at the same time, the right one on a
+    /// thread of its own.
+    orb_left: OrbExtractor,
+    orb_right: OrbWorker,
     point_matcher: PointMatcher,
     reference: Option<Reference>,
     pose: Isometry3<f64>,
@@ -401,22 +410,28 @@ pub struct MotionTracker {
     motion_known: bool,
     /// Row profiles across this frame's left and right segments (photometric check).
     profiles: [SegmentProfiles; 2],
+    /// The reference frame's left image as its points were found in (stretched or not),
+    /// for `subpixel_tracking`; its buffer is reused from frame to frame.
+    reference_image: Option<GrayImage>,
+    /// The reference frame's left points where they were found (its `points` are moved to
+    /// their predicted positions for the search).
+    reference_found: Vec<Point>,
 }
 
 impl MotionTracker {
     /// A tracker starting at the identity pose.
     pub fn new(config: OdometryConfig, rig: StereoRig) -> Result<Self, OdometryError> {
         Ok(Self {
-            orb: [
-                OrbExtractor::new(&config.frontend.orb)?,
-                OrbExtractor::new(&config.frontend.orb)?,
-            ],
+            orb_left: OrbExtractor::new(&config.frontend.orb)?,
+            orb_right: OrbWorker::new(&config.frontend.orb)?,
             point_matcher: PointMatcher::new(),
             reference: None,
             pose: Isometry3::identity(),
             last_motion: Isometry3::identity(),
             motion_known: false,
             profiles: Default::default(),
+            reference_image: None,
+            reference_found: Vec::new(),
             config,
             rig,
         })
@@ -558,21 +573,16 @@ impl MotionTracker {
         let mut points = [PointFeatures::default(), PointFeatures::default()];
         if self.config.features == Features::PointsAndLines {
             // Left and right at the same time: a frame's corners are its pose's longest step.
-            let [orb_l, orb_r] = &mut self.orb;
             let [points_l, points_r] = &mut points;
             let (image_l, image_r) = (
                 left_stretched.as_ref().unwrap_or(left),
                 right_stretched.as_ref().unwrap_or(right),
             );
-            std::thread::scope(|scope| {
-                let right_side = scope.spawn(|| orb_r.extract(image_r, points_r));
-                let left_side = orb_l.extract(image_l, points_l);
-                // The right side's panic, if any, is ORB's own: pass it on.
-                let right_side = right_side
-                    .join()
-                    .unwrap_or_else(|panic| std::panic::resume_unwind(panic));
-                left_side.and(right_side)
-            })?;
+            let orb_left = &mut self.orb_left;
+            let (right_side, left_side) = self
+                .orb_right
+                .extract_while(image_r, points_r, || orb_left.extract(image_l, points_l));
+            left_side.and(right_side)?;
         }
         Ok(PreparedImages {
             stretched: [left_stretched, right_stretched],
@@ -698,9 +708,11 @@ impl MotionTracker {
             points: point_positions,
             lines: line_positions,
         };
+        let left_image = images.map(|(left, _)| left);
         let Some(mut previous) = self.reference.take().filter(|_| lines.tracked.is_some()) else {
             // First frame, or not matched against the previous one: start again from here.
             self.reference = Some(self.fresh_reference(self.pose, points_l, &fresh));
+            self.keep_reference_image(left_image);
             return Ok(FrameResult {
                 pose: self.pose,
                 lost: false,
@@ -725,12 +737,14 @@ impl MotionTracker {
             };
             self.observe_points(
                 &mut previous,
-                &points_l,
+                (&points_l, left_image),
                 noise_weight,
                 &mut matches,
                 &mut observations,
             );
         }
+        // This frame is the next one's reference whatever the estimate gives.
+        self.keep_reference_image(left_image);
         self.observe_lines(
             &previous,
             lines.left,
@@ -983,7 +997,7 @@ impl MotionTracker {
     fn observe_points(
         &mut self,
         previous: &mut Reference,
-        current: &PointFeatures,
+        (current, current_image): (&PointFeatures, Option<&GrayImage>),
         noise_weight: f64,
         scratch: &mut Vec<FeatureMatch>,
         observations: &mut Observations,
@@ -993,6 +1007,9 @@ impl MotionTracker {
             ..self.config.frontend.appearance_gates
         };
         let to_previous = previous.pose.inverse();
+        let mut found = std::mem::take(&mut self.reference_found);
+        found.clear();
+        found.extend_from_slice(&previous.points.points);
         // The previous frame is done with after this frame: its points are moved to their
         // predicted positions in place.
         for (point, landmark) in previous
@@ -1016,17 +1033,43 @@ impl MotionTracker {
             self.config.frame_to_frame_ratio,
             scratch,
         );
+        let images = self
+            .reference_image
+            .as_ref()
+            .zip(current_image)
+            .filter(|_| self.config.subpixel_tracking);
         for m in scratch.iter() {
             if let Some(Some(landmark)) = previous.point_landmarks.get(m.query) {
+                let refined = images
+                    .zip(found.get(m.query))
+                    .and_then(|((before, now), &from)| {
+                        refine_track(before, now, from, current.points[m.train])
+                    });
+                // A refined position no longer carries the keypoint's level's rounding.
+                let (pixel, level_weight) = match refined {
+                    Some(pixel) => (pixel, 1.0),
+                    None => (current.points[m.train], self.level_weight(current, m.train)),
+                };
                 observations.points.push(PointObservation {
                     position: to_previous * landmark.world,
-                    pixel: current.points[m.train],
-                    weight: landmark.observation_weight()
-                        * self.level_weight(current, m.train)
-                        * noise_weight,
+                    pixel,
+                    weight: landmark.observation_weight() * level_weight * noise_weight,
                 });
                 observations.point_pairs.push((m.query, m.train));
             }
+        }
+        self.reference_found = found;
+    }
+
+    /// Keeps `image` (this frame's left image, as its points were found in) for the next
+    /// frame's sub-pixel tracking, in the buffer of the last one.
+    fn keep_reference_image(&mut self, image: Option<&GrayImage>) {
+        let kept = match image.filter(|_| self.config.subpixel_tracking) {
+            Some(image) => copy_image_into(&mut self.reference_image, image).is_ok(),
+            None => false,
+        };
+        if !kept {
+            self.reference_image = None;
         }
     }
 }

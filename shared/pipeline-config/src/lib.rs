@@ -8,6 +8,7 @@
 
 mod ros2;
 
+use linetrack_msgs::StageKind;
 use linetrack_odometry::OdometryConfig;
 pub use linetrack_sched::{Policy, SchedSettings};
 use linetrack_vision::DetectorKind;
@@ -364,14 +365,14 @@ impl Default for BudgetConfig {
 }
 
 impl BudgetConfig {
-    /// The budget of the stage named `stage_name` (`frame-source`, `line-detector`, ...).
-    pub fn stage_ms(&self, stage_name: &str) -> Option<f64> {
-        match stage_name {
-            "frame-source" => Some(self.frame_source_ms),
-            "line-detector" => Some(self.line_detector_ms),
-            "matcher" => Some(self.matcher_ms),
-            "pose-estimator" => Some(self.pose_estimator_ms),
-            _ => None,
+    /// The budget of `stage` (`None` for a stage without one: supervisor, recorder, ...).
+    pub fn stage_ms(&self, stage: StageKind) -> Option<f64> {
+        match stage {
+            StageKind::FrameSource => Some(self.frame_source_ms),
+            StageKind::LineDetector => Some(self.line_detector_ms),
+            StageKind::Matcher => Some(self.matcher_ms),
+            StageKind::PoseEstimator => Some(self.pose_estimator_ms),
+            StageKind::Supervisor | StageKind::Recorder | StageKind::Ros2Bridge => None,
         }
     }
 }
@@ -461,21 +462,21 @@ pub struct StagesConfig {
 }
 
 impl StagesConfig {
-    /// The stage names, in pipeline order, with their settings.
-    pub fn all(&self) -> [(&'static str, &SchedSettings); 4] {
+    /// The processing stages, in pipeline order, with their settings.
+    pub fn all(&self) -> [(StageKind, &SchedSettings); 4] {
         [
-            ("frame-source", &self.frame_source),
-            ("line-detector", &self.line_detector),
-            ("matcher", &self.matcher),
-            ("pose-estimator", &self.pose_estimator),
+            (StageKind::FrameSource, &self.frame_source),
+            (StageKind::LineDetector, &self.line_detector),
+            (StageKind::Matcher, &self.matcher),
+            (StageKind::PoseEstimator, &self.pose_estimator),
         ]
     }
 
-    /// The settings of the stage named `stage_name` (`frame-source`, `line-detector`, ...).
-    pub fn of(&self, stage_name: &str) -> Option<&SchedSettings> {
+    /// The settings of `stage` (`None` for a stage without any: supervisor, recorder, ...).
+    pub fn of(&self, stage: StageKind) -> Option<&SchedSettings> {
         self.all()
             .into_iter()
-            .find(|(name, _)| *name == stage_name)
+            .find(|(kind, _)| *kind == stage)
             .map(|(_, settings)| settings)
     }
 }
@@ -638,7 +639,9 @@ pub struct PipelineConfig {
     pub camera: CameraConfig,
     /// Line detector at start (swappable at run time).
     pub detector: DetectorKind,
-    /// Detect the left and the right image at the same time, on two threads.
+    /// Work on the left and the right image at the same time, on two threads: the
+    /// detector's segments and the matcher's LBD descriptors (the right side on a thread
+    /// each stage starts once). The pose estimator's ORB corners always are.
     pub detect_sides_in_parallel: bool,
     /// The automatic LSD → faster detector swap under budget pressure.
     pub detector_fallback: DetectorFallbackConfig,
@@ -867,8 +870,8 @@ impl PipelineConfig {
             s.status_every_ms,
             0..=MAX_STATUS_EVERY_MS,
         )?;
-        for (name, settings) in self.stages.all() {
-            settings.validate(&format!("stages.{name}"))?;
+        for (stage, settings) in self.stages.all() {
+            settings.validate(&format!("stages.{}", stage.name()))?;
         }
         if let Some(root) = &self.ipc.root
             && !root.is_absolute()
@@ -1204,7 +1207,7 @@ mod tests {
         let config = PipelineConfig::from_toml_str(text, "x").unwrap_or_else(|e| panic!("{e}"));
         let detector = config
             .stages
-            .of("line-detector")
+            .of(StageKind::LineDetector)
             .cloned()
             .unwrap_or_default();
         assert_eq!(detector.cpus, Some(vec![1]));
@@ -1212,7 +1215,7 @@ mod tests {
         assert_eq!(detector.priority, Some(20));
         assert_eq!(config.stages.pose_estimator.nice, Some(5));
         assert!(config.stages.matcher.is_empty());
-        assert_eq!(config.stages.of("supervisor"), None);
+        assert_eq!(config.stages.of(StageKind::Supervisor), None);
         assert_eq!(
             config.ipc.root.as_deref(),
             Some(Path::new("/run/linetrack/iceoryx2"))

@@ -8,6 +8,7 @@
 //! `linetrack-vo` writes, for [`Summary::metrics`].
 
 use hdrhistogram::Histogram;
+use linetrack_msgs::StageKind;
 use linetrack_trajectory::metrics;
 use linetrack_trajectory::tum::{self, StampedPose};
 use serde::{Deserialize, Serialize};
@@ -41,9 +42,6 @@ pub enum RecordError {
     Trajectory(#[from] linetrack_trajectory::TrajectoryError),
 }
 
-/// The stages with a latency of their own, in pipeline order.
-pub const STAGES: [&str; 4] = ["frame-source", "line-detector", "matcher", "pose-estimator"];
-
 /// What became of one frame.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct FrameRecord {
@@ -55,10 +53,10 @@ pub struct FrameRecord {
     pub outcome: String,
     /// The stage that dropped it, or empty.
     pub dropped_by: String,
-    /// Per stage in [`STAGES`] order: milliseconds from taking the frame to publishing
+    /// Per stage in [`StageKind::PROCESSING`] order: milliseconds from taking the frame to publishing
     /// (NaN when the stage did not handle it).
     pub stage_ms: [f64; 4],
-    /// Per stage in [`STAGES`] order: milliseconds from the stage before it publishing the
+    /// Per stage in [`StageKind::PROCESSING`] order: milliseconds from the stage before it publishing the
     /// frame (the frame's capture, for the source) to this stage taking it — transport and
     /// the time the frame queued while the stage was busy (NaN when not handled).
     pub wait_ms: [f64; 4],
@@ -591,10 +589,10 @@ impl Tally {
             poses: self.poses,
             lost: self.lost,
             drops: self.drops.iter().map(|(k, n)| (k.clone(), *n)).collect(),
-            stage_latency: STAGES
+            stage_latency: StageKind::PROCESSING
                 .iter()
                 .zip(&self.stage)
-                .map(|(s, h)| (s.to_string(), h.percentiles()))
+                .map(|(s, h)| (s.name().to_string(), h.percentiles()))
                 .collect(),
             end_to_end: self.end_to_end.percentiles(),
             deadline_misses: self.deadline_misses,
@@ -619,7 +617,7 @@ pub struct Report {
     pub lost: usize,
     /// Dropped frames by outcome (corrupt, dropped-late, ...), sorted by name.
     pub drops: Vec<(String, usize)>,
-    /// Per stage in [`STAGES`] order, over the frames that got a pose.
+    /// Per stage in [`StageKind::PROCESSING`] order, over the frames that got a pose.
     pub stage_latency: Vec<(String, Option<Percentiles>)>,
     /// End to end.
     pub end_to_end: Option<Percentiles>,

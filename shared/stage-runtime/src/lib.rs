@@ -101,7 +101,7 @@ impl StageContext {
     pub fn budget_ms(&self) -> f64 {
         self.config
             .budget
-            .stage_ms(self.stage.name())
+            .stage_ms(self.stage)
             .unwrap_or(f64::INFINITY)
     }
 }
@@ -282,6 +282,19 @@ pub fn stamp_end(header: &mut FrameHeader, stage: StageKind, now_ns: u64) {
 /// A frame's images as received: left image then right image, row-major, under the frame's
 /// header.
 pub type Images = Received<u8, FrameHeader>;
+
+/// Frame `frame_id` carrying `left` and `right` as the frame source would publish them,
+/// built in place (tests and tools that run a stage on images of their own).
+pub fn stereo_frame(frame_id: u64, left: &GrayImage, right: &GrayImage) -> anyhow::Result<Images> {
+    left.ensure_same_size(right)?;
+    let (Some(l), Some(r)) = (left.pixels(), right.pixels()) else {
+        anyhow::bail!("{}: the pixels are not one block", left.origin());
+    };
+    let mut header = FrameHeader::new(frame_id, 0, 1);
+    header.width = u32::try_from(left.width())?;
+    header.height = u32::try_from(left.height())?;
+    Ok(Received::local(header, [l, r].concat()))
+}
 
 /// The two images of a frame message, read in place.
 pub fn stereo_views<'a>(
@@ -554,10 +567,7 @@ fn start(
     // (telemetry, iceoryx2, OpenCV) inherits them; refusals are logged once logging is up.
     let refused = linetrack_sched::apply(
         stage.name(),
-        config
-            .stages
-            .of(stage.name())
-            .unwrap_or(&Default::default()),
+        config.stages.of(stage).unwrap_or(&Default::default()),
     )?;
     let pid = std::process::id();
     let spans = config

@@ -200,6 +200,17 @@ impl GrayImage {
         })
     }
 
+    /// Makes this image a copy of `other` (pixels and origin), reusing this image's buffer
+    /// when the sizes agree: no allocation for a stream of same-sized frames.
+    pub fn copy_from(&mut self, other: &GrayImage) -> Result<(), VisionError> {
+        other
+            .mat
+            .copy_to(&mut self.mat)
+            .context("copying an image")?;
+        self.origin.clone_from(&other.origin);
+        Ok(())
+    }
+
     /// The underlying OpenCV matrix (CV_8UC1).
     pub fn mat(&self) -> &Mat {
         &self.mat

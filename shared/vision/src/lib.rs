@@ -10,7 +10,10 @@
 //!   best + ratio test) and the geometric ℓ1 matcher behind one trait ([`MatcherKind`]).
 //! - [`OrbExtractor`] and [`PointMatcher`]: ORB points matched mutual-best with a
 //!   second-best distance ratio ([`HammingMatcher`]), stereo and frame to frame, among the
-//!   candidates a grid over the second image's points gives.
+//!   candidates a grid over the second image's points gives; [`OrbWorker`] finds one
+//!   image's points on a thread of its own while the caller works on the other.
+//! - [`SideWorker`]: a thread kept for its owner's life, for the right image's side of a
+//!   stereo step.
 //!
 //! The algorithms of `linetrack-l1-matcher` stay free of OpenCV; this crate is where the
 //! two meet. Images are not rectified here (the datasets crate does that).
@@ -24,6 +27,7 @@ mod lbd;
 mod matchers;
 mod orb;
 mod pair;
+mod worker;
 
 pub use config::{
     AppearanceGates, EdgeLinesOptions, FldOptions, FrontendConfig, LbdOptions, LineOptions,
@@ -42,8 +46,12 @@ pub use matchers::{
     L1SegmentMatcher, LbdSegmentMatcher, LineFeatures, MatcherKind, SegmentMatcher,
     create_segment_matcher,
 };
-pub use orb::{OrbExtractor, PointFeatures, PointMatcher, points_may_match, refine_stereo_column};
+pub use orb::{
+    MIN_TRACK_CORRELATION, OrbExtractor, OrbWorker, PointFeatures, PointMatcher, points_may_match,
+    refine_stereo_column, refine_track,
+};
 pub use pair::{LinePairMatcher, PairResult, PairTimings};
+pub use worker::{SideWorker, copy_image_into};
 
 use std::path::PathBuf;
 
@@ -143,6 +151,14 @@ pub enum VisionError {
         context: &'static str,
         /// OpenCV's error.
         reason: opencv::Error,
+    },
+    /// A worker thread could not start or has stopped.
+    #[error("{what}: {reason}")]
+    Worker {
+        /// Which worker.
+        what: &'static str,
+        /// Why.
+        reason: String,
     },
 }
 

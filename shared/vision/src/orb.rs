@@ -1,5 +1,6 @@
 //! ORB points (OpenCV features2d) and their stereo / frame-to-frame matching.
 
+use crate::worker::{SideWorker, copy_image_into};
 use crate::{
     AppearanceGates, BinaryDescriptors, FeatureMatch, GrayImage, HammingMatcher, OpenCvContext,
     OrbOptions, VisionError,
@@ -82,6 +83,64 @@ impl OrbExtractor {
         out.descriptors.reset(out.points.len(), row_bytes);
         out.descriptors.set_rows_from_mat(&self.raw)?;
         Ok(())
+    }
+}
+
+/// An [`OrbExtractor`] on a thread of its own ([`SideWorker`]): one image's points are found
+/// there while the caller works on another. The image is copied into the worker's buffer
+/// (reused from frame to frame) and the points come back in buffers that are swapped, not
+/// reallocated.
+pub struct OrbWorker {
+    worker: SideWorker<OrbJob>,
+}
+
+/// What travels to the worker and back.
+struct OrbJob {
+    extractor: OrbExtractor,
+    image: Option<GrayImage>,
+    points: PointFeatures,
+    result: Result<(), VisionError>,
+}
+
+impl OrbWorker {
+    /// A worker with its own extractor made from `options`.
+    pub fn new(options: &OrbOptions) -> Result<Self, VisionError> {
+        let job = OrbJob {
+            extractor: OrbExtractor::new(options)?,
+            image: None,
+            points: PointFeatures::default(),
+            result: Ok(()),
+        };
+        let worker = SideWorker::new("orb-right", job, |job: &mut OrbJob| {
+            job.result = match &job.image {
+                Some(image) => job.extractor.extract(image, &mut job.points),
+                None => Ok(()),
+            };
+        })?;
+        Ok(Self { worker })
+    }
+
+    /// Finds `image`'s points into `out` on the worker while `here` runs on the calling
+    /// thread; returns both outcomes once both are done.
+    pub fn extract_while<R>(
+        &mut self,
+        image: &GrayImage,
+        out: &mut PointFeatures,
+        here: impl FnOnce() -> R,
+    ) -> (Result<(), VisionError>, R) {
+        if let Err(error) = self
+            .worker
+            .job()
+            .and_then(|job| copy_image_into(&mut job.image, image))
+        {
+            return (Err(error), here());
+        }
+        let (job, beside) = self.worker.run_while(here);
+        let result = job.and_then(|job| {
+            std::mem::swap(out, &mut job.points);
+            std::mem::replace(&mut job.result, Ok(()))
+        });
+        (result, beside)
     }
 }
 
@@ -328,34 +387,70 @@ impl PointGrid {
     }
 }
 
+/// Half the side of the windows the sub-pixel refinements compare (11 × 11).
+const HALF: i64 = 5;
+const SIDE: usize = (2 * HALF + 1) as usize;
+
+/// The window of `pixels` (an image `width` wide) centred on pixel `(u, v)`, which the caller
+/// has checked lies at least [`HALF`] pixels inside the image (on the stack: this runs for
+/// every point match of every frame).
+fn window(pixels: &[u8], width: i64, u: i64, v: i64) -> [i32; SIDE * SIDE] {
+    let mut values = [0i32; SIDE * SIDE];
+    for (row_values, y) in values.chunks_exact_mut(SIDE).zip(v - HALF..=v + HALF) {
+        let row = (y * width) as usize;
+        let pixels = &pixels[row + (u - HALF) as usize..=row + (u + HALF) as usize];
+        for (value, &p) in row_values.iter_mut().zip(pixels) {
+            *value = i32::from(p);
+        }
+    }
+    values
+}
+
+/// The fraction of a pixel, within ±0.5, by which a parabola through three costs at
+/// shifts −1, 0 and 1 puts its minimum (0 when they do not curve upwards).
+fn parabola_minimum(before: f64, at: f64, after: f64) -> f64 {
+    let curvature = before - 2.0 * at + after;
+    if curvature > 0.0 {
+        (0.5 * (before - after) / curvature).clamp(-0.5, 0.5)
+    } else {
+        0.0
+    }
+}
+
+/// The two images' pixels and their common size, or `None` when they differ in size or are
+/// not stored in one block.
+fn pixels_of_pair<'a>(
+    first: &'a GrayImage,
+    second: &'a GrayImage,
+) -> Option<(&'a [u8], &'a [u8], i64, i64)> {
+    let size = |image: &GrayImage| (i64::from(image.width()), i64::from(image.height()));
+    if size(first) != size(second) {
+        return None;
+    }
+    let (width, height) = size(first);
+    Some((first.pixels()?, second.pixels()?, width, height))
+}
+
 /// Refines the right image's column of a stereo point match to a fraction of a pixel.
 ///
 /// Detected keypoints sit on whole pixels (of their pyramid level), so disparities come in
 /// whole pixels too, and every point of a surface at one depth is rounded the same way:
-/// a depth bias that averaging cannot remove. Here an 11 × 11 window around `left` is
-/// compared with windows of the right image on the same row, up to 3 px either side of
-/// `right`, by the sum of absolute differences after removing each window's mean (so a
-/// gain offset between the cameras does not matter), and a parabola through the best
-/// shift and its two neighbours gives the fraction. `None` when a window leaves an image
-/// or the best shift is at the end of the search (the match is then left as it was).
+/// a depth bias that averaging cannot remove. Here an 11 × 11 window around the pixel
+/// nearest `left` is compared with windows of the right image on the same row, up to 3 px
+/// either side of `right`, by the sum of absolute differences after removing each window's
+/// mean (so a gain offset between the cameras does not matter), and a parabola through the
+/// best shift and its two neighbours gives the fraction. The result is the column of `left`
+/// itself: a keypoint of a coarser pyramid level lies between pixels, and its offset from
+/// the window's centre is carried over. `None` when a window leaves an image or the best
+/// shift is at the end of the search (the match is then left as it was).
 pub fn refine_stereo_column(
     left_image: &GrayImage,
     right_image: &GrayImage,
     left: Point,
     right: Point,
 ) -> Option<f64> {
-    const HALF: i64 = 5;
     const SEARCH: i64 = 3;
-    let (lp, rp) = (left_image.pixels()?, right_image.pixels()?);
-    let width = i64::from(left_image.width());
-    let height = i64::from(left_image.height());
-    if (
-        i64::from(right_image.width()),
-        i64::from(right_image.height()),
-    ) != (width, height)
-    {
-        return None;
-    }
+    let (lp, rp, width, height) = pixels_of_pair(left_image, right_image)?;
     let (ul, v) = (left.x.round() as i64, left.y.round() as i64);
     let ur = right.x.round() as i64;
     let inside = |u: i64| u - HALF >= 0 && u + HALF < width;
@@ -363,26 +458,16 @@ pub fn refine_stereo_column(
     if !(rows_inside && inside(ul) && inside(ur - SEARCH) && inside(ur + SEARCH)) {
         return None;
     }
-    const SIDE: usize = (2 * HALF + 1) as usize;
-    // The window around column `u`, mean removed (on the stack: this runs for every stereo
-    // point match of every frame).
-    let window = |pixels: &[u8], u: i64| -> [i32; SIDE * SIDE] {
-        let mut values = [0i32; SIDE * SIDE];
-        for (row_values, y) in values.chunks_exact_mut(SIDE).zip(v - HALF..=v + HALF) {
-            let row = (y * width) as usize;
-            let pixels = &pixels[row + (u - HALF) as usize..=row + (u + HALF) as usize];
-            for (value, &p) in row_values.iter_mut().zip(pixels) {
-                *value = i32::from(p);
-            }
-        }
+    let mean_removed = |pixels: &[u8], u: i64| {
+        let mut values = window(pixels, width, u, v);
         let mean = values.iter().sum::<i32>() / values.len() as i32;
         values.iter_mut().for_each(|p| *p -= mean);
         values
     };
-    let reference = window(lp, ul);
+    let reference = mean_removed(lp, ul);
     let mut costs = [0.0f64; (2 * SEARCH + 1) as usize];
     for (cost, shift) in costs.iter_mut().zip(-SEARCH..=SEARCH) {
-        let candidate = window(rp, ur + shift);
+        let candidate = mean_removed(rp, ur + shift);
         *cost = reference
             .iter()
             .zip(&candidate)
@@ -393,14 +478,89 @@ pub fn refine_stereo_column(
     if best == 0 || best == costs.len() - 1 {
         return None;
     }
-    let (before, at, after) = (costs[best - 1], costs[best], costs[best + 1]);
-    let curvature = before - 2.0 * at + after;
-    let fraction = if curvature > 0.0 {
-        (0.5 * (before - after) / curvature).clamp(-0.5, 0.5)
-    } else {
-        0.0
+    let fraction = parabola_minimum(costs[best - 1], costs[best], costs[best + 1]);
+    Some((ur + best as i64 - SEARCH) as f64 + fraction + (left.x - ul as f64))
+}
+
+/// Smallest normalised correlation at which [`refine_track`] believes its best shift.
+pub const MIN_TRACK_CORRELATION: f64 = 0.8;
+
+/// Where `from` (a point of the previous image) lies in the current image, to a fraction
+/// of a pixel, given `to`, the keypoint it was matched to there.
+///
+/// A frame-to-frame point match pairs two detections, each on a whole pixel of its own
+/// pyramid level: up to half a pixel (several full-resolution pixels at a coarse level)
+/// from where the other one's point really is. Here the 11 × 11 window around the pixel
+/// nearest `from` is looked for around `to`, up to 2 px either way in both directions, by
+/// zero-mean normalised correlation (the exposure may change between frames: gain and
+/// offset do not matter); a parabola through the best shift and its neighbours gives the
+/// fraction along each axis, and `from`'s offset from its window's centre is carried over.
+/// `None` when a window leaves an image, the best shift is at the edge of the search, or
+/// its correlation is under [`MIN_TRACK_CORRELATION`] (the match is then left as it was).
+pub fn refine_track(
+    previous_image: &GrayImage,
+    current_image: &GrayImage,
+    from: Point,
+    to: Point,
+) -> Option<Point> {
+    const SEARCH: i64 = 2;
+    const SHIFTS: usize = (2 * SEARCH + 1) as usize;
+    let (pp, cp, width, height) = pixels_of_pair(previous_image, current_image)?;
+    let (uf, vf) = (from.x.round() as i64, from.y.round() as i64);
+    let (ut, vt) = (to.x.round() as i64, to.y.round() as i64);
+    let inside = |u: i64, v: i64, margin: i64| {
+        u - HALF - margin >= 0
+            && u + HALF + margin < width
+            && v - HALF - margin >= 0
+            && v + HALF + margin < height
     };
-    Some((ur + best as i64 - SEARCH) as f64 + fraction)
+    if !(inside(uf, vf, 0) && inside(ut, vt, SEARCH)) {
+        return None;
+    }
+    // Correlations from integer sums (11 × 11 × 255² fits an i32): Σa, Σa², then per
+    // candidate Σb, Σb² and Σab.
+    let n = (SIDE * SIDE) as f64;
+    let reference = window(pp, width, uf, vf);
+    let sum_a: i32 = reference.iter().sum();
+    let sum_aa: i32 = reference.iter().map(|a| a * a).sum();
+    let var_a = f64::from(sum_aa) - f64::from(sum_a).powi(2) / n;
+    if var_a < 1.0 {
+        return None;
+    }
+    // Costs are 1 − correlation, row-major over the shifts (dy, dx).
+    let mut costs = [[0.0f64; SHIFTS]; SHIFTS];
+    for (row, dy) in costs.iter_mut().zip(-SEARCH..=SEARCH) {
+        for (cost, dx) in row.iter_mut().zip(-SEARCH..=SEARCH) {
+            let candidate = window(cp, width, ut + dx, vt + dy);
+            let (mut sum_b, mut sum_bb, mut sum_ab) = (0i32, 0i32, 0i32);
+            for (a, b) in reference.iter().zip(&candidate) {
+                sum_b += b;
+                sum_bb += b * b;
+                sum_ab += a * b;
+            }
+            let var_b = f64::from(sum_bb) - f64::from(sum_b).powi(2) / n;
+            let covariance = f64::from(sum_ab) - f64::from(sum_a) * f64::from(sum_b) / n;
+            *cost = if var_b > 0.0 {
+                1.0 - covariance / (var_a * var_b).sqrt()
+            } else {
+                2.0
+            };
+        }
+    }
+    let (by, bx) = (0..SHIFTS)
+        .flat_map(|y| (0..SHIFTS).map(move |x| (y, x)))
+        .min_by(|&(ay, ax), &(by, bx)| costs[ay][ax].total_cmp(&costs[by][bx]))?;
+    let last = SHIFTS - 1;
+    if bx == 0 || by == 0 || bx == last || by == last || 1.0 - costs[by][bx] < MIN_TRACK_CORRELATION
+    {
+        return None;
+    }
+    let fx = parabola_minimum(costs[by][bx - 1], costs[by][bx], costs[by][bx + 1]);
+    let fy = parabola_minimum(costs[by - 1][bx], costs[by][bx], costs[by + 1][bx]);
+    Some(Point::new(
+        (ut + bx as i64 - SEARCH) as f64 + fx + (from.x - uf as f64),
+        (vt + by as i64 - SEARCH) as f64 + fy + (from.y - vf as f64),
+    ))
 }
 
 #[cfg(test)]

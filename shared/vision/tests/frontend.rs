@@ -791,3 +791,90 @@ fn point_grid_skips_non_finite_points_and_an_empty_side() {
     );
     assert!(out.is_empty());
 }
+
+#[test]
+fn real_data_orb_worker_finds_the_extractors_points_frame_after_frame() {
+    let (left, right) = euroc_stereo_pair(0).unwrap_or_else(|e| panic!("{e}"));
+    let (left, right) = (
+        GrayImage::load(&left).unwrap(),
+        GrayImage::load(&right).unwrap(),
+    );
+    // A smaller image between two full ones: the worker's buffer changes size and back.
+    let checkerboard: Vec<u8> = (0..200 * 120)
+        .map(|i| {
+            if (i % 200 / 20 + i / 200 / 20) % 2 == 0 {
+                40
+            } else {
+                210
+            }
+        })
+        .collect();
+    let small = GrayImage::from_pixels(200, 120, &checkerboard, "checkerboard").unwrap();
+    let options = OrbOptions::default();
+    let mut extractor = OrbExtractor::new(&options).unwrap();
+    let mut worker = OrbWorker::new(&options).unwrap();
+    let mut on_worker = PointFeatures::default();
+    for image in [&left, &right, &small, &right] {
+        let mut here = PointFeatures::default();
+        let (from_worker, from_here) = worker.extract_while(image, &mut on_worker, || {
+            extractor.extract(image, &mut here)
+        });
+        from_worker.unwrap();
+        from_here.unwrap();
+        assert!(!here.points.is_empty(), "{}", image.origin());
+        assert_eq!(on_worker.points, here.points, "{}", image.origin());
+        assert_eq!(on_worker.levels, here.levels);
+        assert_eq!(on_worker.descriptors, here.descriptors);
+    }
+}
+
+/// A smooth texture sampled at `(x − dx, y − dy)`, times `gain` plus `bias`: the same scene
+/// moved by a known fraction of a pixel, under another exposure.
+fn smooth_texture(dx: f64, dy: f64, gain: f64, bias: f64) -> GrayImage {
+    let (w, h) = (320, 240);
+    let pixels: Vec<u8> = (0..w * h)
+        .map(|i| {
+            let (x, y) = ((i % w) as f64 - dx, (i / w) as f64 - dy);
+            let value =
+                110.0 + 45.0 * (0.31 * x + 0.17 * y).sin() + 35.0 * (0.13 * x - 0.27 * y).cos();
+            (gain * value + bias).round().clamp(0.0, 255.0) as u8
+        })
+        .collect();
+    GrayImage::from_pixels(w, h, &pixels, "smooth texture").unwrap()
+}
+
+#[test]
+fn a_tracked_point_is_found_to_a_tenth_of_a_pixel_under_another_exposure() {
+    let before = smooth_texture(0.0, 0.0, 1.0, 0.0);
+    let now = smooth_texture(1.3, -0.6, 1.2, -15.0);
+    // A keypoint of a coarse pyramid level lies between pixels; its match is a whole
+    // pixel off where it went.
+    let from = linetrack_geometry::Point::new(100.4, 80.7);
+    let to = linetrack_geometry::Point::new(102.0, 80.0);
+    let found = refine_track(&before, &now, from, to).expect("refined");
+    assert!((found.x - 101.7).abs() < 0.1, "{found:?}");
+    assert!((found.y - 80.1).abs() < 0.1, "{found:?}");
+    // Nothing alike nearby, a window off the image, or images of two sizes: no answer.
+    let noise: Vec<u8> = (0..320 * 240_u32)
+        .map(|i| (i.wrapping_mul(2_654_435_761) >> 24) as u8)
+        .collect();
+    let noise = GrayImage::from_pixels(320, 240, &noise, "noise").unwrap();
+    assert_eq!(refine_track(&before, &noise, from, to), None);
+    let edge = linetrack_geometry::Point::new(2.0, 80.0);
+    assert_eq!(refine_track(&before, &now, edge, edge), None);
+    let small = GrayImage::from_pixels(10, 10, &[0; 100], "small").unwrap();
+    assert_eq!(refine_track(&before, &small, from, to), None);
+}
+
+#[test]
+fn a_stereo_column_is_refined_for_the_keypoint_itself_not_its_pixel() {
+    let left = smooth_texture(0.0, 0.0, 1.0, 0.0);
+    // The right camera sees each point 7.4 px further left.
+    let right = smooth_texture(-7.4, 0.0, 1.0, 10.0);
+    for x in [150.0, 150.6, 151.3] {
+        let keypoint = linetrack_geometry::Point::new(x, 100.0);
+        let guess = linetrack_geometry::Point::new((x - 7.4).round(), 100.0);
+        let column = refine_stereo_column(&left, &right, keypoint, guess).expect("refined");
+        assert!((column - (x - 7.4)).abs() < 0.1, "{x}: {column}");
+    }
+}

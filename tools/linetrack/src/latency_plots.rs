@@ -7,12 +7,13 @@
 //!   (a linear axis from zero: read against the budget), with the end-to-end budget, deadline misses, dropped frames, frames whose pose was
 //!   predicted, matcher fallbacks and recoveries, detector swaps and stage restarts marked.
 
+use linetrack_msgs::StageKind;
 use linetrack_pipeline_config::BudgetConfig;
 use linetrack_plot::{
     Chart, Distribution, Distributions, EventLine, Marker, PlotError, Reference, Scale, Series,
     Style,
 };
-use linetrack_run_record::{EventRecord, FrameRecord, Percentiles, STAGES};
+use linetrack_run_record::{EventRecord, FrameRecord, Percentiles};
 use std::path::{Path, PathBuf};
 
 /// File name of the distributions picture in a run folder.
@@ -52,14 +53,14 @@ pub fn write(
 }
 
 /// Each stage's latencies and the end-to-end latency of the frames that got a pose, in
-/// [`STAGES`] order then end to end (a dropped frame's near-zero times would flatter the
+/// [`StageKind::PROCESSING`] order then end to end (a dropped frame's near-zero times would flatter the
 /// stages, as in the report).
 fn latencies(frames: &[FrameRecord]) -> Vec<(&'static str, Vec<f64>)> {
     let with_pose = || frames.iter().filter(|f| f.has_pose());
-    let mut rows: Vec<(&'static str, Vec<f64>)> = STAGES
+    let mut rows: Vec<(&'static str, Vec<f64>)> = StageKind::PROCESSING
         .iter()
         .enumerate()
-        .map(|(i, stage)| (*stage, with_pose().map(|f| f.stage_ms[i]).collect()))
+        .map(|(i, stage)| (stage.name(), with_pose().map(|f| f.stage_ms[i]).collect()))
         .collect();
     rows.push((END_TO_END, with_pose().map(|f| f.end_to_end_ms).collect()));
     rows
@@ -70,7 +71,7 @@ fn budget_of(budget: Option<&BudgetConfig>, name: &str) -> Option<f64> {
     if name == END_TO_END {
         Some(budget.end_to_end_ms)
     } else {
-        budget.stage_ms(name)
+        StageKind::from_name(name).and_then(|stage| budget.stage_ms(stage))
     }
 }
 
@@ -121,7 +122,7 @@ pub fn timeline_of(
     // show the small stages.
     chart.y_scale = Scale::Linear;
     chart.y_from_zero = true;
-    for (i, stage) in STAGES.iter().enumerate() {
+    for (i, stage) in StageKind::PROCESSING.iter().enumerate() {
         let points = frames
             .iter()
             .map(|f| {
@@ -137,7 +138,7 @@ pub fn timeline_of(
             .collect();
         chart
             .series
-            .push(Series::line(*stage, points).styled(Style::Line { width: 1 }));
+            .push(Series::line(stage.name(), points).styled(Style::Line { width: 1 }));
     }
     let end_to_end = |f: &FrameRecord| {
         if f.has_pose() {

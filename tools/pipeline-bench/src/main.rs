@@ -205,7 +205,7 @@ fn hop_local(round_trips: usize) -> anyhow::Result<Vec<f64>> {
 /// stage): how many frames each was the largest part of, and its mean share of the frame's
 /// end to end, in path order.
 fn bottlenecks(frames: &[&FrameRecord]) -> Vec<(String, usize, f64)> {
-    let mut parts: Vec<(String, usize, f64)> = linetrack_run_record::STAGES
+    let mut parts: Vec<(String, usize, f64)> = StageKind::PROCESSING
         .iter()
         .flat_map(|name| [format!("waiting for {name}"), format!("{name} working")])
         .map(|part| (part, 0, 0.0))
@@ -362,11 +362,11 @@ fn bench(args: &Args) -> anyhow::Result<()> {
         );
         let posed: Vec<&FrameRecord> = frames.iter().filter(|f| f.has_pose()).collect();
         let budget = &base.budget;
-        for (i, name) in linetrack_run_record::STAGES.iter().enumerate() {
+        for (i, &stage) in StageKind::PROCESSING.iter().enumerate() {
             let work = Percentiles::of(posed.iter().map(|f| f.stage_ms[i]));
             let waited = Percentiles::of(posed.iter().map(|f| f.wait_ms[i]));
             let misses = budget
-                .stage_ms(name)
+                .stage_ms(stage)
                 .map_or(0, |b| posed.iter().filter(|f| f.stage_ms[i] > b).count());
             let cell = |p: &Option<Percentiles>, f: fn(&Percentiles) -> f64| {
                 p.as_ref()
@@ -374,7 +374,7 @@ fn bench(args: &Args) -> anyhow::Result<()> {
             };
             let _ = writeln!(
                 out,
-                "| {name} | {} | {} | {} | {} | {} | {misses} |",
+                "| {stage} | {} | {} | {} | {} | {} | {misses} |",
                 work.as_ref().map_or(0, |p| p.count),
                 cell(&work, |p| p.p50),
                 cell(&work, |p| p.p99),
