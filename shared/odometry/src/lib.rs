@@ -124,7 +124,9 @@ pub struct OdometryConfig {
     /// window around the point is looked for around its match (`refine_track`), so the
     /// motion is measured against where the landmark's own point went, not against another
     /// keypoint rounded to its pyramid level's pixel. A refined point is weighted as a
-    /// full-resolution one (its level's rounding is gone).
+    /// full-resolution one (its level's rounding is gone), and it stays where it was
+    /// tracked: triangulated there and looked for from there in the next frame, so its
+    /// landmark follows one physical point.
     pub subpixel_tracking: bool,
     /// Follow features as landmarks: the motion is measured against positions fused over
     /// every stereo sighting of a tracked feature (placed with their frames' poses), not
@@ -416,6 +418,11 @@ pub struct MotionTracker {
     /// The reference frame's left points where they were found (its `points` are moved to
     /// their predicted positions for the search).
     reference_found: Vec<Point>,
+    /// This frame's left points tracked to a fraction of a pixel (index, position).
+    refined: Vec<(usize, Point)>,
+    /// Each left point's stereo partner this frame (right keypoint, weight of the two
+    /// keypoints' pyramid levels).
+    stereo_partners: Vec<Option<(Point, f64)>>,
 }
 
 impl MotionTracker {
@@ -432,6 +439,8 @@ impl MotionTracker {
             profiles: Default::default(),
             reference_image: None,
             reference_found: Vec::new(),
+            refined: Vec::new(),
+            stereo_partners: Vec::new(),
             config,
             rig,
         })
@@ -630,7 +639,7 @@ impl MotionTracker {
             ..TriangulationLimits::default()
         };
         let stereo_images = images.as_ref().map(|(images, ..)| *images);
-        let (images, [points_l, points_r], left_gain) = match images {
+        let (images, [mut points_l, points_r], left_gain) = match images {
             Some((images, points, gain)) if self.config.features == Features::PointsAndLines => {
                 (Some(images), points, gain)
             }
@@ -639,11 +648,12 @@ impl MotionTracker {
         let use_points = images.is_some();
         stats.points = [points_l.points.len(), points_r.points.len()];
 
-        // Stereo triangulation.
+        // Stereo matching (points are triangulated once they are where they were tracked).
         let started = Instant::now();
         let mut matches = Vec::new();
-        let mut point_positions = vec![None; points_l.points.len()];
-        if let Some((left_image, right_image)) = images {
+        self.stereo_partners.clear();
+        self.stereo_partners.resize(points_l.points.len(), None);
+        if images.is_some() {
             let gates = &self.config.frontend.appearance_gates;
             self.point_matcher.match_points(
                 MatchCase::Stereo,
@@ -654,18 +664,9 @@ impl MotionTracker {
                 &mut matches,
             );
             for m in &matches {
-                let (left, mut right) = (points_l.points[m.query], points_r.points[m.train]);
-                if self.config.subpixel_stereo
-                    && let Some(x) = refine_stereo_column(left_image, right_image, left, right)
-                {
-                    right.x = x;
-                }
-                if let Some(t) = triangulate_point(&self.rig, left, right, &limits) {
-                    let weight = disparity_weight(t.disparity_px)
-                        * self.level_weight(&points_l, m.query)
-                        * self.level_weight(&points_r, m.train);
-                    point_positions[m.query] = Some((t.position, weight));
-                }
+                let weight =
+                    self.level_weight(&points_l, m.query) * self.level_weight(&points_r, m.train);
+                self.stereo_partners[m.query] = Some((points_r.points[m.train], weight));
             }
         }
         let verified = self.photometric_profiles(stereo_images, &lines);
@@ -698,19 +699,17 @@ impl MotionTracker {
                 line_positions[m.query] = Some(([a.position, b.position], weight));
             }
         }
-        stats.triangulated = [
-            point_positions.iter().flatten().count(),
-            line_positions.iter().flatten().count(),
-        ];
+        stats.triangulated[1] = line_positions.iter().flatten().count();
         stats.ms[2] += since(started);
 
-        let fresh = Triangulations {
-            points: point_positions,
+        let mut fresh = Triangulations {
+            points: Vec::new(),
             lines: line_positions,
         };
         let left_image = images.map(|(left, _)| left);
         let Some(mut previous) = self.reference.take().filter(|_| lines.tracked.is_some()) else {
             // First frame, or not matched against the previous one: start again from here.
+            self.triangulate_points(images, &points_l, &mut fresh, &limits, &mut stats);
             self.reference = Some(self.fresh_reference(self.pose, points_l, &fresh));
             self.keep_reference_image(left_image);
             return Ok(FrameResult {
@@ -742,6 +741,9 @@ impl MotionTracker {
                 &mut matches,
                 &mut observations,
             );
+            if self.config.subpixel_tracking {
+                self.anchor_refined_points(&mut points_l);
+            }
         }
         // This frame is the next one's reference whatever the estimate gives.
         self.keep_reference_image(left_image);
@@ -753,6 +755,7 @@ impl MotionTracker {
         );
         stats.observations = [observations.points.len(), observations.lines.len()];
         stats.ms[3] += since(started);
+        self.triangulate_points(images, &points_l, &mut fresh, &limits, &mut stats);
 
         let started = Instant::now();
         // The constant-velocity prior only once a motion was measured.
@@ -984,6 +987,59 @@ impl MotionTracker {
         })
     }
 
+    /// Triangulates each of `points` (this frame's left points, where they were tracked)
+    /// with its stereo partner into `fresh`, the partner's column refined to a fraction of
+    /// a pixel around it when `subpixel_stereo` is on; weighted by disparity and by the two
+    /// keypoints' pyramid levels.
+    fn triangulate_points(
+        &self,
+        images: Option<(&GrayImage, &GrayImage)>,
+        points: &PointFeatures,
+        fresh: &mut Triangulations,
+        limits: &TriangulationLimits,
+        stats: &mut FrameStats,
+    ) {
+        let started = Instant::now();
+        fresh.points.clear();
+        fresh.points.resize(points.points.len(), None);
+        if let Some((left_image, right_image)) = images {
+            for ((position, &left), partner) in fresh
+                .points
+                .iter_mut()
+                .zip(&points.points)
+                .zip(&self.stereo_partners)
+            {
+                let Some((mut right, level_weight)) = *partner else {
+                    continue;
+                };
+                if self.config.subpixel_stereo
+                    && let Some(x) = refine_stereo_column(left_image, right_image, left, right)
+                {
+                    right.x = x;
+                }
+                *position = triangulate_point(&self.rig, left, right, limits)
+                    .map(|t| (t.position, disparity_weight(t.disparity_px) * level_weight));
+            }
+        }
+        stats.triangulated[0] = fresh.points.iter().flatten().count();
+        stats.ms[2] += since(started);
+    }
+
+    /// Moves this frame's left points that were tracked to a fraction of a pixel onto their
+    /// tracked positions, where they are then triangulated. A landmark so fuses sightings
+    /// of one physical point, the one first seen, instead of whichever pixel each frame's
+    /// detector rounded the corner to (up to a pixel of its pyramid level apart), and the
+    /// next frame's tracking starts from there too. The stereo weight stays that of the
+    /// keypoints' levels (counting the tracked left point as exact did no better on the
+    /// generated sequences).
+    fn anchor_refined_points(&self, points: &mut PointFeatures) {
+        for &(j, pixel) in &self.refined {
+            if let Some(point) = points.points.get_mut(j) {
+                *point = pixel;
+            }
+        }
+    }
+
     /// Weight of point `k` for its pyramid level: the inverse variance of its position,
     /// `scale_factor^(−2·level)` (1 at full resolution).
     fn level_weight(&self, features: &PointFeatures, k: usize) -> f64 {
@@ -1009,6 +1065,7 @@ impl MotionTracker {
         let to_previous = previous.pose.inverse();
         let mut found = std::mem::take(&mut self.reference_found);
         found.clear();
+        self.refined.clear();
         found.extend_from_slice(&previous.points.points);
         // The previous frame is done with after this frame: its points are moved to their
         // predicted positions in place.
@@ -1047,7 +1104,10 @@ impl MotionTracker {
                     });
                 // A refined position no longer carries the keypoint's level's rounding.
                 let (pixel, level_weight) = match refined {
-                    Some(pixel) => (pixel, 1.0),
+                    Some(pixel) => {
+                        self.refined.push((m.train, pixel));
+                        (pixel, 1.0)
+                    }
                     None => (current.points[m.train], self.level_weight(current, m.train)),
                 };
                 observations.points.push(PointObservation {
@@ -1358,6 +1418,66 @@ mod tests {
         // Switched off, nothing is checked.
         tracker.config.stereo_photometric.enabled = false;
         assert!(!tracker.photometric_profiles(Some((&left, &right)), &lines));
+    }
+
+    #[test]
+    fn a_tracked_point_is_triangulated_where_it_was_tracked() {
+        // A smooth texture; the right image sees it 12.4 px further left.
+        let (width, height) = (200usize, 120usize);
+        let scene = |x: f64, y: f64| {
+            128.0
+                + 40.0 * (0.31 * x + 0.17 * y).sin()
+                + 30.0 * (0.23 * y - 0.11 * x).cos()
+                + 20.0 * (0.53 * x).sin() * (0.41 * y).cos()
+        };
+        let render = |shift: f64| {
+            let pixels: Vec<u8> = (0..height)
+                .flat_map(|y| (0..width).map(move |x| (x as f64, y as f64)))
+                .map(|(x, y)| scene(x + shift, y).clamp(0.0, 255.0) as u8)
+                .collect();
+            GrayImage::from_pixels(width, height, &pixels, "test").unwrap()
+        };
+        let (left, right) = (render(0.0), render(12.4));
+        let rig = StereoRig::default();
+        let mut tracker = MotionTracker::new(OdometryConfig::default(), rig).unwrap();
+        // The detector put the corner on (101, 61) of a coarse level; tracking found the
+        // previous frame's point at (100.3, 60.7). Its stereo partner was detected at
+        // (88, 61).
+        let tracked = Point::new(100.3, 60.7);
+        let mut points = PointFeatures {
+            points: vec![Point::new(101.0, 61.0), Point::new(150.0, 30.0)],
+            levels: vec![3, 0],
+            ..PointFeatures::default()
+        };
+        let mut fresh = Triangulations {
+            points: Vec::new(),
+            lines: Vec::new(),
+        };
+        tracker.refined = vec![(0, tracked)];
+        tracker.stereo_partners = vec![Some((Point::new(88.0, 61.0), 0.35)), None];
+        tracker.anchor_refined_points(&mut points);
+        let mut stats = FrameStats::default();
+        let limits = TriangulationLimits::default();
+        tracker.triangulate_points(
+            Some((&left, &right)),
+            &points,
+            &mut fresh,
+            &limits,
+            &mut stats,
+        );
+        // The point is where it was tracked, for the next frame's tracking too…
+        assert_eq!(points.points[0], tracked);
+        assert_eq!(points.points[1], Point::new(150.0, 30.0));
+        // …and triangulated there, at the texture's disparity.
+        let (position, weight) = fresh.points[0].expect("triangulated");
+        let seen = rig.project_left(&position).unwrap();
+        assert!((seen - tracked).norm() < 1e-9, "{seen:?}");
+        let disparity = rig.focal_px * rig.baseline_m / position.z;
+        assert!((disparity - 12.4).abs() < 0.1, "disparity {disparity}");
+        assert!(weight > 0.0 && weight <= 0.35 + 1e-12, "weight {weight}");
+        // A point without a stereo partner is not triangulated.
+        assert_eq!(fresh.points[1], None);
+        assert_eq!(stats.triangulated[0], 1);
     }
 
     #[test]
