@@ -1082,9 +1082,13 @@ impl MotionTracker {
                 *point = p;
             }
         }
-        self.point_matcher.match_points(
+        // Only points with a landmark are looked for: the others could not be observed.
+        let landmarks = &previous.point_landmarks;
+        let wanted = |k: usize| landmarks.get(k).is_some_and(Option::is_some);
+        self.point_matcher.match_points_of(
             MatchCase::FrameToFrame,
             &previous.points,
+            wanted,
             current,
             &gates,
             self.config.frame_to_frame_ratio,

@@ -24,6 +24,13 @@ impl BinaryDescriptors {
         self.present.resize(rows, false);
     }
 
+    /// Sets row `row` (of the size [`BinaryDescriptors::reset`] made) to `bytes`.
+    #[cfg(test)]
+    pub(crate) fn set_row(&mut self, row: usize, bytes: &[u8]) {
+        self.bytes[row * self.row_bytes..(row + 1) * self.row_bytes].copy_from_slice(bytes);
+        self.present[row] = true;
+    }
+
     /// Copies row `source_row` of an OpenCV CV_8U descriptor matrix into row `row`.
     pub(crate) fn set_from_mat(
         &mut self,

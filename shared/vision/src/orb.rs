@@ -172,6 +172,22 @@ impl PointMatcher {
         min_ratio: f64,
         out: &mut Vec<FeatureMatch>,
     ) {
+        self.match_points_of(case, first, |_| true, second, gates, min_ratio, out);
+    }
+
+    /// [`PointMatcher::match_points`] for the first image's points `wanted` says yes to
+    /// (the others are neither matched nor compete for the second image's points).
+    #[allow(clippy::too_many_arguments)]
+    pub fn match_points_of(
+        &mut self,
+        case: MatchCase,
+        first: &PointFeatures,
+        wanted: impl Fn(usize) -> bool,
+        second: &PointFeatures,
+        gates: &AppearanceGates,
+        min_ratio: f64,
+        out: &mut Vec<FeatureMatch>,
+    ) {
         // Stereo windows are a few rows high and wide along them: flat cells list fewer
         // points outside the window than square ones.
         let cell = match case {
@@ -209,6 +225,9 @@ impl PointMatcher {
             &second.descriptors,
             min_ratio,
             |i, candidates| {
+                if !wanted(i) {
+                    return;
+                }
                 let a = first.points[i];
                 let (x, y) = window(a);
                 if gate_in_grid {
@@ -566,6 +585,52 @@ pub fn refine_track(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Points the caller does not want are neither matched nor compete: here the second
+    /// image's only point is nearer to the first image's point 0, which wins it unless it
+    /// is left out.
+    #[test]
+    fn unwanted_points_do_not_compete_for_a_match() {
+        let features = |points: &[(f64, f64)], rows: &[[u8; 4]]| {
+            let mut f = PointFeatures {
+                points: points.iter().map(|&(x, y)| Point::new(x, y)).collect(),
+                levels: vec![0; points.len()],
+                ..PointFeatures::default()
+            };
+            f.descriptors.reset(rows.len(), 4);
+            for (k, row) in rows.iter().enumerate() {
+                f.descriptors.set_row(k, row);
+            }
+            f
+        };
+        let first = features(&[(10.0, 10.0), (12.0, 10.0)], &[[0, 0, 0, 1], [0, 0, 0, 7]]);
+        let second = features(&[(11.0, 10.0)], &[[0, 0, 0, 0]]);
+        let gates = AppearanceGates::default();
+        let mut matcher = PointMatcher::new();
+        let mut out = Vec::new();
+        let pairs = |out: &[FeatureMatch]| -> Vec<(usize, usize)> {
+            out.iter().map(|m| (m.query, m.train)).collect()
+        };
+        matcher.match_points(
+            MatchCase::FrameToFrame,
+            &first,
+            &second,
+            &gates,
+            1.0,
+            &mut out,
+        );
+        assert_eq!(pairs(&out), [(0, 0)]);
+        matcher.match_points_of(
+            MatchCase::FrameToFrame,
+            &first,
+            |i| i == 1,
+            &second,
+            &gates,
+            1.0,
+            &mut out,
+        );
+        assert_eq!(pairs(&out), [(1, 0)]);
+    }
 
     /// The frame-to-frame gate settles most pairs on the squared distance; at the limit and
     /// for limits that are not a distance it answers as `|a − b| ≤ limit` does.
