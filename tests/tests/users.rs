@@ -39,10 +39,27 @@ fn as_nobody(program: &Path, cwd: &Path) -> Command {
     command
 }
 
-/// Whether user `nobody` can append 16 bytes to `file` (`sh`'s `>>`).
+/// Whether user `nobody` can append 16 bytes to `file` (`sh`'s `>>`: creating it if it
+/// does not exist).
 fn nobody_can_write(file: &Path, cwd: &Path) -> bool {
+    nobody_succeeds(cwd, "printf 0123456789abcdef >> \"$1\"", file)
+}
+
+/// Whether user `nobody` can append 16 bytes to `file` if it exists, never creating it: a
+/// file of our run that is gone by then (a run that ended, a segment replaced) is not one
+/// the other user wrote into.
+fn nobody_can_write_into(file: &Path, cwd: &Path) -> bool {
+    nobody_succeeds(
+        cwd,
+        "printf 0123456789abcdef | dd of=\"$1\" oflag=append conv=notrunc,nocreat status=none",
+        file,
+    )
+}
+
+/// Whether `script` (`sh -c`, `$1` = `file`) succeeds as user `nobody`.
+fn nobody_succeeds(cwd: &Path, script: &str, file: &Path) -> bool {
     as_nobody(Path::new("/bin/sh"), cwd)
-        .args(["-c", "printf 0123456789abcdef >> \"$1\"", "sh"])
+        .args(["-c", script, "sh"])
         .arg(file)
         .stderr(Stdio::null())
         .status()
@@ -126,13 +143,18 @@ fn another_users_run_beside_ours_completes_and_cannot_write_into_ours() {
     assert!(!our_files.is_empty() && !their_files.is_empty());
     assert_private(&our_files, 0);
     assert_private(&their_files, NOBODY);
+    let mut refused = 0;
     for file in &our_files {
         assert!(
-            !nobody_can_write(file, &home),
+            !nobody_can_write_into(file, &home),
             "user nobody wrote into {}",
             file.display()
         );
+        // Still there and still ours: the write was refused, not missed.
+        refused += usize::from(std::fs::symlink_metadata(file).is_ok_and(|m| m.uid() == 0));
     }
+    // iceoryx2's management segment stays for the next run even once ours has ended.
+    assert!(refused > 0, "none of {our_files:?} was left to try");
     // Our iceoryx2 bookkeeping: a folder of ours the other user cannot even enter.
     let our_root = linetrack_ipc::Scope::default_root();
     let root_meta =
