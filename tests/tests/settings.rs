@@ -1,7 +1,8 @@
 //! The runtime settings of `configs/pipeline.toml` on the real pipeline: a stage pinned with
 //! `[stages.<name>] cpus = [0]` runs on CPU 0 only, as the kernel reports it
 //! (`/proc/<pid>/status`, or the stage thread's `/proc/<pid>/task/<tid>/status` with
-//! `--single-process`), while the other stages keep the supervisor's CPUs; a CPU that does
+//! `--single-process`), while the other stages keep the supervisor's CPUs; the source reads
+//! ahead at its `reader_nice`; a CPU that does
 //! not exist stops the run before any stage starts, naming the stage and the CPU; the
 //! shared memory's bookkeeping goes to the config's `[ipc] root`.
 
@@ -24,6 +25,18 @@ fn cpus_allowed(status_file: &Path) -> String {
         .unwrap_or_else(|| panic!("no Cpus_allowed_list in {}", status_file.display()))
         .trim()
         .to_string()
+}
+
+/// The nice value in a process or thread `stat` file (the 19th field; the 2nd, the name in
+/// parentheses, may hold spaces).
+fn nice_of(stat_file: &Path) -> i32 {
+    let text = std::fs::read_to_string(stat_file)
+        .unwrap_or_else(|e| panic!("{}: {e}", stat_file.display()));
+    // Fields from the 3rd on: the nice value is the 17th of them.
+    text.rsplit_once(')')
+        .and_then(|(_, after_name)| after_name.split_whitespace().nth(16))
+        .and_then(|f| f.parse().ok())
+        .unwrap_or_else(|| panic!("no nice value in {}: {text}", stat_file.display()))
 }
 
 fn proc_status(pid: u32) -> PathBuf {
@@ -69,6 +82,17 @@ fn a_stage_pinned_to_cpu_0_runs_there_and_the_ipc_root_comes_from_the_config() {
     for task in tasks.flatten() {
         assert_eq!(cpus_allowed(&task.path().join("status")), "0");
     }
+    // The source reads ahead at `source.reader_nice` (10), and publishes at the nice value
+    // it inherited from the supervisor.
+    let source = pid_of("frame-source");
+    let reader = thread_status(source, "frame-reader")
+        .unwrap_or_else(|| panic!("no thread named frame-reader in process {source}"));
+    let stat = |pid: u32| PathBuf::from(format!("/proc/{pid}/stat"));
+    assert_eq!(nice_of(&reader.with_file_name("stat")), 10);
+    assert_eq!(
+        nice_of(&stat(source)),
+        nice_of(&stat(status.supervisor_pid))
+    );
     for unpinned in ["frame-source", "matcher", "pose-estimator"] {
         assert_eq!(
             cpus_allowed(&proc_status(pid_of(unpinned))),

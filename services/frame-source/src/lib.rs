@@ -116,7 +116,8 @@ fn publish(ctx: &StageContext, mut ports: Ports, shutdown: &Shutdown) -> anyhow:
     );
     // The rig goes first: the pose estimator needs it before the first frame's tracks.
     ports.rig.publish(&(), &[&[rig_record(&sequence.rig)]])?;
-    let stream = sequence.into_stream(start, 4);
+    let reader_nice = source.reader_nice;
+    let stream = sequence.into_stream_with(start, 4, move || read_in_background(reader_nice));
     ports.reporter.report(StatusKind::Ready, start as u64, 0);
 
     let began = Instant::now();
@@ -213,6 +214,21 @@ pub(crate) fn stay_until_the_run_ends(
             .wait(ports.reporter.until_due().max(Duration::from_millis(1)))?;
     }
     Ok(())
+}
+
+/// Puts the calling thread (the one reading frames ahead) under the `other` policy at nice
+/// `nice`: it then decodes in the time the stages leave. What the system refuses is a
+/// warning; the frames are read all the same.
+fn read_in_background(nice: i32) {
+    let settings = linetrack_sched::SchedSettings {
+        policy: Some(linetrack_sched::Policy::Other),
+        nice: Some(nice),
+        ..Default::default()
+    };
+    match linetrack_sched::apply("frame-source (reading ahead)", &settings) {
+        Ok(refused) => refused.iter().for_each(|r| tracing::warn!("{r}")),
+        Err(e) => tracing::warn!("{e}"),
+    }
 }
 
 #[cfg(test)]

@@ -9,7 +9,7 @@ use linetrack_ipc::{Bus, Shutdown};
 use linetrack_msgs::{Detector as WireDetector, FrameHeader, SegmentRecord, SegmentsHeader};
 use linetrack_msgs::{StageKind, Topic};
 use linetrack_stage_runtime::{
-    Images, Stage, StageContext, detector_on_wire, run_stage, stereo_views, to_records,
+    Images, Stage, StageContext, detector_on_wire, run_stage, stereo_views, to_record,
 };
 use linetrack_vision::{
     ContrastStretch, GrayImage, LineDetector, SideWorker, copy_image_into, create_detector,
@@ -130,7 +130,8 @@ impl Stage for Detector {
         header: &mut SegmentsHeader,
         frame: &Images,
         _images: Option<&Images>,
-    ) -> anyhow::Result<Vec<SegmentRecord>> {
+        out: &mut Vec<SegmentRecord>,
+    ) -> anyhow::Result<()> {
         let detection = &mut header.detection;
         detection.detector = self.kind.into();
         detection.detector_pid = self.pid;
@@ -145,9 +146,14 @@ impl Stage for Detector {
         let right_segments = &job.side.segments;
         detection.left_count = self.left.segments.len() as u32;
         detection.right_count = right_segments.len() as u32;
-        let mut records = to_records(&self.left.segments);
-        records.extend(to_records(right_segments));
-        Ok(records)
+        out.extend(
+            self.left
+                .segments
+                .iter()
+                .chain(right_segments)
+                .map(to_record),
+        );
+        Ok(())
     }
 }
 
@@ -181,8 +187,9 @@ mod tests {
                 let frame = stereo_frame(index as u64, &read(&left), &read(&right))
                     .unwrap_or_else(|e| panic!("{e}"));
                 let mut segments = SegmentsHeader::from(*frame.header());
-                let records = detector
-                    .process(&mut segments, &frame, None)
+                let mut records = Vec::new();
+                detector
+                    .process(&mut segments, &frame, None, &mut records)
                     .unwrap_or_else(|e| panic!("{e}"));
                 (segments, records)
             })

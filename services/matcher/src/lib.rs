@@ -51,6 +51,9 @@ pub struct FrameMatcher {
     probe_every: u32,
     frames_in_l1: u32,
     previous: Option<Previous>,
+    /// Features of frames done with (the left image's of the frame before the previous,
+    /// the right image's of the previous), refilled in place: none allocated per frame.
+    spare: [LineFeatures; 2],
     stereo: Vec<FeatureMatch>,
     tracked: Vec<FeatureMatch>,
 }
@@ -89,6 +92,7 @@ impl FrameMatcher {
             probe_every: ctx.config.matcher.fallback.probe_every,
             frames_in_l1: 0,
             previous: None,
+            spare: Default::default(),
             stereo: Vec::new(),
             tracked: Vec::new(),
         })
@@ -118,31 +122,25 @@ impl FrameMatcher {
     }
 
     /// Matches one frame's segments (with `images` for LBD and the ℓ1 matcher's photometric
-    /// check; without, by geometry alone); fills `header`'s [`Matching`] and returns
-    /// one record per left segment.
+    /// check; without, by geometry alone); fills `header`'s [`Matching`] and puts
+    /// one record per left segment in `out` (emptied first).
     pub fn match_frame(
         &mut self,
         header: &mut TracksHeader,
         segments: &[SegmentRecord],
         images: Option<&Images>,
-    ) -> anyhow::Result<Vec<TrackedLine>> {
+        out: &mut Vec<TrackedLine>,
+    ) -> anyhow::Result<()> {
         let frame_id = header.frame.frame_id;
         let n_left = (header.detection.left_count as usize).min(segments.len());
         let (left_records, right_records) = segments.split_at(n_left);
-        let mut left = LineFeatures {
-            segments: left_records
-                .iter()
-                .map(|r| to_segment(&r.endpoints))
-                .collect(),
-            ..LineFeatures::default()
-        };
-        let mut right = LineFeatures {
-            segments: right_records
-                .iter()
-                .map(|r| to_segment(&r.endpoints))
-                .collect(),
-            ..LineFeatures::default()
-        };
+        let [mut left, mut right] = std::mem::take(&mut self.spare);
+        for (features, records) in [(&mut left, left_records), (&mut right, right_records)] {
+            features.clear();
+            features
+                .segments
+                .extend(records.iter().map(|r| to_segment(&r.endpoints)));
+        }
         let views = match images.map(stereo_views) {
             Some(Ok(views)) => Some(views),
             Some(Err(e)) => {
@@ -216,14 +214,12 @@ impl FrameMatcher {
         matching.tracked_matches = self.tracked.len() as u32;
         header.matching = matching;
 
-        let mut out: Vec<TrackedLine> = left_records
-            .iter()
-            .map(|r| TrackedLine {
-                left: r.endpoints,
-                previous: -1,
-                ..TrackedLine::default()
-            })
-            .collect();
+        out.clear();
+        out.extend(left_records.iter().map(|r| TrackedLine {
+            left: r.endpoints,
+            previous: -1,
+            ..TrackedLine::default()
+        }));
         for m in &self.stereo {
             if let (Some(t), Some(r)) = (out.get_mut(m.query), right_records.get(m.train)) {
                 t.right = r.endpoints;
@@ -235,12 +231,13 @@ impl FrameMatcher {
                 t.previous = i32::try_from(m.query).unwrap_or(-1);
             }
         }
-        self.previous = Some(Previous {
+        let done = self.previous.replace(Previous {
             frame_id,
             features: left,
             described,
         });
-        Ok(out)
+        self.spare = [done.map(|p| p.features).unwrap_or_default(), right];
+        Ok(())
     }
 }
 
@@ -263,8 +260,9 @@ impl Stage for FrameMatcher {
         header: &mut TracksHeader,
         segments: &Received<SegmentRecord, SegmentsHeader>,
         images: Option<&Images>,
-    ) -> anyhow::Result<Vec<TrackedLine>> {
-        self.match_frame(header, segments.payload(), images)
+        out: &mut Vec<TrackedLine>,
+    ) -> anyhow::Result<()> {
+        self.match_frame(header, segments.payload(), images, out)
     }
 
     fn command(&mut self, command: Command, control: &Control) {
@@ -348,8 +346,9 @@ mod tests {
                     stereo_frame(index as u64, &left, &right).unwrap_or_else(|e| panic!("{e}"));
                 let mut header = TracksHeader::from(*frame.header());
                 header.detection.left_count = left_count;
-                let tracks = matcher
-                    .match_frame(&mut header, &records, Some(&frame))
+                let mut tracks = Vec::new();
+                matcher
+                    .match_frame(&mut header, &records, Some(&frame), &mut tracks)
                     .unwrap_or_else(|e| panic!("{e}"));
                 (header.matching, tracks)
             })

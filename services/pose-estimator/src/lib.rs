@@ -365,17 +365,15 @@ impl Stage for PoseStage {
         header: &mut TracksHeader,
         tracks: &Received<TrackedLine, TracksHeader>,
         images: Option<&Images>,
-    ) -> anyhow::Result<Vec<PoseRecord>> {
-        Ok(vec![self.tracker.track(
-            header,
-            tracks.payload(),
-            images,
-        )?])
+        out: &mut Vec<PoseRecord>,
+    ) -> anyhow::Result<()> {
+        out.push(self.tracker.track(header, tracks.payload(), images)?);
+        Ok(())
     }
 
     /// A dropped or failed frame repeats the last pose.
-    fn placeholder(&self) -> Vec<PoseRecord> {
-        vec![pose_record(&self.tracker.pose())]
+    fn placeholder(&self, out: &mut Vec<PoseRecord>) {
+        out.push(pose_record(&self.tracker.pose()));
     }
 }
 

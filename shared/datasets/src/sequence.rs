@@ -164,12 +164,24 @@ impl StereoSequence {
 
     /// Streams the frames from `start`, loading up to `read_ahead` ahead on a thread.
     pub fn into_stream(self, start: usize, read_ahead: usize) -> StereoStream {
+        self.into_stream_with(start, read_ahead, || {})
+    }
+
+    /// [`StereoSequence::into_stream`], with `on_start` called first on the reading thread
+    /// (to set its scheduling: a real-time pipeline decodes ahead at a lower priority).
+    pub fn into_stream_with(
+        self,
+        start: usize,
+        read_ahead: usize,
+        on_start: impl FnOnce() + Send + 'static,
+    ) -> StereoStream {
         let (sender, receiver) = bounded(read_ahead.max(1));
         let rig = self.rig;
         let total = self.frames.len();
         let worker = std::thread::Builder::new()
             .name("frame-reader".to_string())
             .spawn(move || {
+                on_start();
                 for index in start..self.frames.len() {
                     // A closed receiver ends the reading.
                     if sender.send(self.load_frame(index)).is_err() {

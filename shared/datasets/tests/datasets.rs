@@ -114,6 +114,19 @@ fn real_data_stream_yields_every_frame_in_order_with_read_ahead() {
     assert_eq!(stream.skipped(), 0);
 }
 
+/// The set-up given to `into_stream_with` runs on the reading thread, before any frame.
+#[test]
+fn the_reading_threads_set_up_runs_on_it_first() {
+    let (sender, receiver) = crossbeam_channel::unbounded();
+    let mut stream = euroc().into_stream_with(90, 1, move || {
+        let name = std::thread::current().name().map(str::to_string);
+        sender.send(name).unwrap();
+    });
+    assert_eq!(receiver.recv().unwrap().as_deref(), Some("frame-reader"));
+    assert_eq!(stream.by_ref().count(), 5);
+    assert_eq!(stream.skipped(), 0);
+}
+
 // ---------------------------------------------------------------- hand-made EuRoC fixture
 
 const W: usize = 64;

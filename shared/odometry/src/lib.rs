@@ -35,7 +35,7 @@ use linetrack_vision::{
     AppearanceGates, DetectorKind, FeatureMatch, FrontendConfig, GrayImage, LineDetector,
     LineFeatures, MatcherKind, OrbExtractor, OrbOptions, OrbWorker, PointFeatures, PointMatcher,
     SegmentMatcher, VisionError, copy_image_into, create_detector, create_segment_matcher,
-    refine_stereo_column, refine_track, stretch_contrast,
+    refine_stereo_column, refine_track, stretch_contrast_into,
 };
 use nalgebra::{Isometry3, Point3};
 use serde::{Deserialize, Serialize};
@@ -368,17 +368,22 @@ pub struct PreparedImages {
     ms: f64,
 }
 
+/// The landmark each left point of a frame stands for, if any.
+type PointLandmarks = Vec<Option<Landmark<Point3<f64>>>>;
+/// The landmark each left segment of a frame stands for, if any.
+type LineLandmarks = Vec<Option<Landmark<[Point3<f64>; 2]>>>;
+
 /// A frame's features as the next frame will look for them.
 struct Reference {
     /// The frame's pose (camera to world).
     pose: Isometry3<f64>,
     points: PointFeatures,
-    /// The landmark each left point or segment stands for, if any.
-    point_landmarks: Vec<Option<Landmark<Point3<f64>>>>,
-    line_landmarks: Vec<Option<Landmark<[Point3<f64>; 2]>>>,
+    point_landmarks: PointLandmarks,
+    line_landmarks: LineLandmarks,
 }
 
 /// A frame's fresh stereo triangulations (left camera frame) with their weights.
+#[derive(Default)]
 struct Triangulations {
     points: Vec<Option<(Point3<f64>, f64)>>,
     lines: Vec<Option<([Point3<f64>; 2], f64)>>,
@@ -386,11 +391,60 @@ struct Triangulations {
 
 /// Observations of the previous frame's landmarks, and which previous (`.0`) and current
 /// (`.1`) feature each came from.
+#[derive(Default)]
 struct Observations {
     points: Vec<PointObservation>,
     point_pairs: Vec<(usize, usize)>,
     lines: Vec<LineObservation>,
     line_pairs: Vec<(usize, usize)>,
+}
+
+impl Observations {
+    fn clear(&mut self) {
+        self.points.clear();
+        self.point_pairs.clear();
+        self.lines.clear();
+        self.line_pairs.clear();
+    }
+}
+
+/// The lists a frame's tracking fills, kept from frame to frame.
+#[derive(Default)]
+struct FrameLists {
+    stereo_matches: Vec<FeatureMatch>,
+    right_features: Vec<Option<SegmentFeatures>>,
+    fresh: Triangulations,
+    observations: Observations,
+}
+
+/// What frames done with leave for the next ones (images, point lists, landmark lists):
+/// once warm, tracking a frame allocates none of them.
+#[derive(Default)]
+struct Spares {
+    images: Vec<GrayImage>,
+    points: Vec<PointFeatures>,
+    point_landmarks: Vec<PointLandmarks>,
+    line_landmarks: Vec<LineLandmarks>,
+    lists: FrameLists,
+}
+
+/// At most this many of each kind are kept (frames prepared ahead hold some).
+const MAX_SPARES: usize = 4;
+
+/// Keeps `item` in `spares` unless it holds [`MAX_SPARES`] already.
+fn keep_spare<T>(spares: &mut Vec<T>, item: T) {
+    if spares.len() < MAX_SPARES {
+        spares.push(item);
+    }
+}
+
+impl Spares {
+    /// A frame's reference, its lists kept for the next frames.
+    fn keep_reference(&mut self, reference: Reference) {
+        keep_spare(&mut self.points, reference.points);
+        keep_spare(&mut self.point_landmarks, reference.point_landmarks);
+        keep_spare(&mut self.line_landmarks, reference.line_landmarks);
+    }
 }
 
 /// The back end: given matched segments (and the images, for ORB points), triangulates,
@@ -423,6 +477,7 @@ pub struct MotionTracker {
     /// Each left point's stereo partner this frame (right keypoint, weight of the two
     /// keypoints' pyramid levels).
     stereo_partners: Vec<Option<(Point, f64)>>,
+    spares: Spares,
 }
 
 impl MotionTracker {
@@ -441,6 +496,7 @@ impl MotionTracker {
             reference_found: Vec::new(),
             refined: Vec::new(),
             stereo_partners: Vec::new(),
+            spares: Spares::default(),
             config,
             rig,
         })
@@ -563,7 +619,12 @@ impl MotionTracker {
         right: &GrayImage,
     ) -> Result<PreparedImages, OdometryError> {
         let started = Instant::now();
-        let (stretched, left_gain) = stretch_pair(left, right, self.config.max_contrast_gain)?;
+        let (stretched, left_gain) = stretch_pair(
+            left,
+            right,
+            self.config.max_contrast_gain,
+            &mut self.spares.images,
+        )?;
         let mut prepared = self.prepare_stretched(stretched, left_gain, left, right)?;
         prepared.ms = since(started);
         Ok(prepared)
@@ -581,6 +642,7 @@ impl MotionTracker {
         let started = Instant::now();
         let mut points = [PointFeatures::default(), PointFeatures::default()];
         if self.config.features == Features::PointsAndLines {
+            points = [(); 2].map(|()| self.spares.points.pop().unwrap_or_default());
             // Left and right at the same time: a frame's corners are its pose's longest step.
             let [points_l, points_r] = &mut points;
             let (image_l, image_r) = (
@@ -624,12 +686,30 @@ impl MotionTracker {
             left_stretched.as_ref().unwrap_or(left),
             right_stretched.as_ref().unwrap_or(right),
         );
-        self.update_stretched(Some((seen, points, left_gain)), lines, stats)
+        let result = self.update_stretched(Some((seen, points, left_gain)), lines, stats);
+        for image in [left_stretched, right_stretched].into_iter().flatten() {
+            keep_spare(&mut self.spares.images, image);
+        }
+        result
     }
 
     /// [`MotionTracker::update`] on images already stretched, with their points.
     fn update_stretched(
         &mut self,
+        images: Option<((&GrayImage, &GrayImage), [PointFeatures; 2], f64)>,
+        lines: MatchedLines<'_>,
+        stats: FrameStats,
+    ) -> Result<FrameResult, OdometryError> {
+        let mut lists = std::mem::take(&mut self.spares.lists);
+        let result = self.track_frame(&mut lists, images, lines, stats);
+        self.spares.lists = lists;
+        result
+    }
+
+    /// [`MotionTracker::update_stretched`] with the frame's lists (cleared here).
+    fn track_frame(
+        &mut self,
+        lists: &mut FrameLists,
         images: Option<((&GrayImage, &GrayImage), [PointFeatures; 2], f64)>,
         lines: MatchedLines<'_>,
         mut stats: FrameStats,
@@ -650,7 +730,7 @@ impl MotionTracker {
 
         // Stereo matching (points are triangulated once they are where they were tracked).
         let started = Instant::now();
-        let mut matches = Vec::new();
+        let matches = &mut lists.stereo_matches;
         self.stereo_partners.clear();
         self.stereo_partners.resize(points_l.points.len(), None);
         if images.is_some() {
@@ -661,21 +741,23 @@ impl MotionTracker {
                 &points_r,
                 gates,
                 self.config.frontend.orb.min_distance_ratio,
-                &mut matches,
+                matches,
             );
-            for m in &matches {
+            for m in matches.iter() {
                 let weight =
                     self.level_weight(&points_l, m.query) * self.level_weight(&points_r, m.train);
                 self.stereo_partners[m.query] = Some((points_r.points[m.train], weight));
             }
         }
+        keep_spare(&mut self.spares.points, points_r);
         let verified = self.photometric_profiles(stereo_images, &lines);
-        let mut line_positions = vec![None; lines.left.len()];
-        let right_features: Vec<Option<SegmentFeatures>> = lines
-            .right
-            .iter()
-            .map(|s| SegmentFeatures::new(s).ok())
-            .collect();
+        let fresh = &mut lists.fresh;
+        fresh.points.clear();
+        fresh.lines.clear();
+        fresh.lines.resize(lines.left.len(), None);
+        let right_features = &mut lists.right_features;
+        right_features.clear();
+        right_features.extend(lines.right.iter().map(|s| SegmentFeatures::new(s).ok()));
         for m in lines.stereo {
             let (Some(l), Some(r)) = (lines.left.get(m.query), lines.right.get(m.train)) else {
                 continue;
@@ -684,33 +766,24 @@ impl MotionTracker {
                 continue;
             }
             if self.config.reject_look_alikes
-                && has_look_alike(
-                    l,
-                    r,
-                    &right_features,
-                    &self.config.frontend.appearance_gates,
-                )
+                && has_look_alike(l, r, right_features, &self.config.frontend.appearance_gates)
             {
                 continue;
             }
             if let Some((a, b)) = triangulate_segment(&self.rig, l, r, &limits) {
                 let weight =
                     0.5 * (disparity_weight(a.disparity_px) + disparity_weight(b.disparity_px));
-                line_positions[m.query] = Some(([a.position, b.position], weight));
+                fresh.lines[m.query] = Some(([a.position, b.position], weight));
             }
         }
-        stats.triangulated[1] = line_positions.iter().flatten().count();
+        stats.triangulated[1] = fresh.lines.iter().flatten().count();
         stats.ms[2] += since(started);
 
-        let mut fresh = Triangulations {
-            points: Vec::new(),
-            lines: line_positions,
-        };
         let left_image = images.map(|(left, _)| left);
         let Some(mut previous) = self.reference.take().filter(|_| lines.tracked.is_some()) else {
             // First frame, or not matched against the previous one: start again from here.
-            self.triangulate_points(images, &points_l, &mut fresh, &limits, &mut stats);
-            self.reference = Some(self.fresh_reference(self.pose, points_l, &fresh));
+            self.triangulate_points(images, &points_l, fresh, &limits, &mut stats);
+            self.reference = Some(self.fresh_reference(self.pose, points_l, fresh));
             self.keep_reference_image(left_image);
             return Ok(FrameResult {
                 pose: self.pose,
@@ -722,12 +795,8 @@ impl MotionTracker {
 
         // Previous landmarks seen again now.
         let started = Instant::now();
-        let mut observations = Observations {
-            points: Vec::new(),
-            point_pairs: Vec::new(),
-            lines: Vec::new(),
-            line_pairs: Vec::new(),
-        };
+        let observations = &mut lists.observations;
+        observations.clear();
         if use_points {
             let noise_weight = if self.config.points_weighted_by_gain {
                 left_gain.powi(-2)
@@ -738,8 +807,8 @@ impl MotionTracker {
                 &mut previous,
                 (&points_l, left_image),
                 noise_weight,
-                &mut matches,
-                &mut observations,
+                matches,
+                observations,
             );
             if self.config.subpixel_tracking {
                 self.anchor_refined_points(&mut points_l);
@@ -751,11 +820,11 @@ impl MotionTracker {
             &previous,
             lines.left,
             lines.tracked.unwrap_or_default(),
-            &mut observations,
+            observations,
         );
         stats.observations = [observations.points.len(), observations.lines.len()];
         stats.ms[3] += since(started);
-        self.triangulate_points(images, &points_l, &mut fresh, &limits, &mut stats);
+        self.triangulate_points(images, &points_l, fresh, &limits, &mut stats);
 
         let started = Instant::now();
         // The constant-velocity prior only once a motion was measured.
@@ -792,11 +861,12 @@ impl MotionTracker {
                 self.last_motion = e.motion;
                 self.motion_known = true;
                 self.pose *= e.motion.inverse();
-                let mut current = self.fresh_reference(self.pose, points_l, &fresh);
+                let mut current = self.fresh_reference(self.pose, points_l, fresh);
                 if self.config.landmarks {
-                    self.carry_landmarks(&previous, &mut current, &fresh, &observations, &e.motion);
+                    self.carry_landmarks(&previous, &mut current, fresh, observations, &e.motion);
                 }
                 self.reference = Some(current);
+                self.spares.keep_reference(previous);
                 Ok(FrameResult {
                     pose: self.pose,
                     lost: false,
@@ -810,7 +880,8 @@ impl MotionTracker {
                 // to the prediction, which may be what went wrong.
                 self.pose *= self.last_motion.inverse();
                 self.motion_known = false;
-                self.reference = Some(self.fresh_reference(self.pose, points_l, &fresh));
+                self.reference = Some(self.fresh_reference(self.pose, points_l, fresh));
+                self.spares.keep_reference(previous);
                 Ok(FrameResult {
                     pose: self.pose,
                     lost: true,
@@ -864,24 +935,32 @@ impl MotionTracker {
 
     /// A reference whose landmarks are this frame's fresh triangulations placed at `pose`.
     fn fresh_reference(
-        &self,
+        &mut self,
         pose: Isometry3<f64>,
         points: PointFeatures,
         fresh: &Triangulations,
     ) -> Reference {
+        let mut point_landmarks = self.spares.point_landmarks.pop().unwrap_or_default();
+        point_landmarks.clear();
+        point_landmarks.extend(
+            fresh
+                .points
+                .iter()
+                .map(|t| t.map(|(p, w)| sighted(&pose, &p, w))),
+        );
+        let mut line_landmarks = self.spares.line_landmarks.pop().unwrap_or_default();
+        line_landmarks.clear();
+        line_landmarks.extend(
+            fresh
+                .lines
+                .iter()
+                .map(|t| t.map(|(p, w)| sighted(&pose, &p, w))),
+        );
         Reference {
             pose,
             points,
-            point_landmarks: fresh
-                .points
-                .iter()
-                .map(|t| t.map(|(p, w)| sighted(&pose, &p, w)))
-                .collect(),
-            line_landmarks: fresh
-                .lines
-                .iter()
-                .map(|t| t.map(|(p, w)| sighted(&pose, &p, w)))
-                .collect(),
+            point_landmarks,
+            line_landmarks,
         }
     }
 
@@ -1207,13 +1286,23 @@ fn stretch_pair(
     left: &GrayImage,
     right: &GrayImage,
     max_gain: f64,
+    spares: &mut Vec<GrayImage>,
 ) -> Result<([Option<GrayImage>; 2], f64), VisionError> {
-    let (left, left_gain) = match stretch_contrast(left, max_gain)? {
-        Some((image, gain)) => (Some(image), gain),
-        None => (None, 1.0),
+    let mut stretch = |image: &GrayImage| {
+        let mut out = spares.pop();
+        let gain = stretch_contrast_into(image, max_gain, &mut out)?;
+        if gain.is_some() {
+            Ok((out, gain))
+        } else {
+            if let Some(unused) = out {
+                keep_spare(spares, unused);
+            }
+            Ok((None, None))
+        }
     };
-    let right = stretch_contrast(right, max_gain)?.map(|(image, _)| image);
-    Ok(([left, right], left_gain))
+    let (left, left_gain) = stretch(left)?;
+    let (right, _) = stretch(right)?;
+    Ok(([left, right], left_gain.unwrap_or(1.0)))
 }
 
 fn since(start: Instant) -> f64 {
@@ -1240,8 +1329,12 @@ impl Odometry {
     ) -> Result<FrameResult, OdometryError> {
         let mut stats = FrameStats::default();
         let started = Instant::now();
-        let (stretched, left_gain) =
-            stretch_pair(left, right, self.tracker.config.max_contrast_gain)?;
+        let (stretched, left_gain) = stretch_pair(
+            left,
+            right,
+            self.tracker.config.max_contrast_gain,
+            &mut self.tracker.spares.images,
+        )?;
         let PreparedImages {
             stretched: [left_stretched, right_stretched],
             points,

@@ -67,6 +67,10 @@ pub struct SourceConfig {
     pub rate_hz: f64,
     /// Publish at most this many frames (0 = all).
     pub max_frames: usize,
+    /// The nice value of the thread that decodes (and rectifies) the next frames ahead of
+    /// their time, under the `other` policy whatever the stage's: it works in the CPU time
+    /// the stages leave instead of taking it from a frame in flight.
+    pub reader_nice: i32,
     /// An MCAP recording (`[record]`, `linetrack replay FILE`) whose stereo frames and rig
     /// are published instead of `sequence`'s; empty: the sequence.
     #[serde(skip_serializing_if = "is_empty_path")]
@@ -135,6 +139,7 @@ impl Default for SourceConfig {
             pacing: Pacing::Realtime,
             rate_hz: 0.0,
             max_frames: 0,
+            reader_nice: 10,
             replay: PathBuf::new(),
         }
     }
@@ -734,6 +739,7 @@ impl PipelineConfig {
                 .map_err(|e| format!("{e} (or 0 = the sequence's rate)"))?;
         }
         in_range("source.max_frames", src.max_frames, 0..=MAX_FRAMES)?;
+        in_range("source.reader_nice", src.reader_nice, linetrack_sched::NICE)?;
         let rec = &self.record;
         in_range(
             "record.every_nth_image",
@@ -1084,6 +1090,7 @@ mod tests {
             ),
             ("[source]\nrate_hz = 1e-300\n", "source.rate_hz"),
             ("[source]\nrate_hz = nan\n", "source.rate_hz"),
+            ("[source]\nreader_nice = 20\n", "source.reader_nice"),
             ("[camera]\nfps = 5000.0\n", "camera.fps"),
             ("[camera]\nlate_ms = nan\n", "camera.late_ms"),
             ("[camera]\nduration_s = -1.0\n", "camera.duration_s"),

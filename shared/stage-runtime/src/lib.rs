@@ -227,41 +227,44 @@ pub struct FramePolicy<'a> {
 }
 
 /// Takes one frame through a stage: stamps when it took it, applies the drop policy
-/// (`newer_waiting`: a newer frame is queued behind it), runs `work` on a frame still to be
-/// processed — it fills the stage's own results in the header; an error marks the frame
-/// failed by this stage and is logged — and publishes what `work` returned, or
-/// `placeholder()` for a dropped or failed frame, under the stamped header.
-pub fn process_frame<O: Record, H: Record + FrameMessage>(
+/// (`newer_waiting`: a newer frame is queued behind it), runs `work` on `stage` for a frame
+/// still to be processed — it fills the stage's own results in the header and its records
+/// in `records` (emptied first; the caller keeps it from frame to frame); an error marks
+/// the frame failed by this stage and is logged — and publishes the records, or those of
+/// `placeholder` for a dropped or failed frame, under the stamped header.
+#[allow(clippy::too_many_arguments)] // the frame, where it goes, and the stage's two answers
+pub fn process_frame<S, O: Record, H: Record + FrameMessage>(
     policy: FramePolicy<'_>,
     mut header: H,
     newer_waiting: bool,
     out: &mut Outlet<O, H>,
-    work: impl FnOnce(&mut H) -> anyhow::Result<Vec<O>>,
-    placeholder: impl FnOnce() -> Vec<O>,
+    records: &mut Vec<O>,
+    stage: &mut S,
+    work: impl FnOnce(&mut S, &mut H, &mut Vec<O>) -> anyhow::Result<()>,
+    placeholder: impl FnOnce(&S, &mut Vec<O>),
 ) -> anyhow::Result<()> {
-    let stage = policy.stage;
+    let kind = policy.stage;
     let taken_ns = policy.clock.now_ns();
     let frame = header.frame_mut();
-    stamp_start(frame, stage, taken_ns);
+    stamp_start(frame, kind, taken_ns);
     if frame.is_ok()
         && let Some(status) = late_drop(frame, newer_waiting, policy.budget, taken_ns)
     {
-        frame.mark(status, stage);
+        frame.mark(status, kind);
     }
-    let records = if header.frame().is_ok() {
-        match work(&mut header) {
-            Ok(records) => records,
-            Err(e) => {
-                tracing::warn!("frame {}: {e:#}", header.frame().frame_id);
-                header.frame_mut().mark(FrameStatus::StageError, stage);
-                placeholder()
-            }
+    records.clear();
+    if header.frame().is_ok() {
+        if let Err(e) = work(stage, &mut header, records) {
+            tracing::warn!("frame {}: {e:#}", header.frame().frame_id);
+            header.frame_mut().mark(FrameStatus::StageError, kind);
+            records.clear();
+            placeholder(stage, records);
         }
     } else {
-        placeholder()
-    };
-    stamp_end(header.frame_mut(), stage, policy.clock.now_ns());
-    out.publish(&header, &[&records])?;
+        placeholder(stage, records);
+    }
+    stamp_end(header.frame_mut(), kind, policy.clock.now_ns());
+    out.publish(&header, &[records])?;
     Ok(())
 }
 
@@ -453,17 +456,19 @@ impl<P: Record, H: Record + FrameMessage> Held<P, H> {
 
 /// Segments as records.
 pub fn to_records(segments: &[Segment]) -> Vec<SegmentRecord> {
-    segments
-        .iter()
-        .map(|s| SegmentRecord {
-            endpoints: [
-                s.start.x as f32,
-                s.start.y as f32,
-                s.end.x as f32,
-                s.end.y as f32,
-            ],
-        })
-        .collect()
+    segments.iter().map(to_record).collect()
+}
+
+/// A segment as a record.
+pub fn to_record(s: &Segment) -> SegmentRecord {
+    SegmentRecord {
+        endpoints: [
+            s.start.x as f32,
+            s.start.y as f32,
+            s.end.x as f32,
+            s.end.y as f32,
+        ],
+    }
 }
 
 /// A record as a segment.
@@ -775,38 +780,55 @@ mod tests {
         let fresh = SegmentsHeader::from(FrameHeader::new(1, 0, clock.now_ns() - 10_000_000));
         let stale = SegmentsHeader::from(FrameHeader::new(2, 0, clock.now_ns() - 500_000_000));
         // The work takes 7 ms of the stage's clock.
-        let ok = |h: &mut SegmentsHeader| {
+        let ok = |_: &mut (), h: &mut SegmentsHeader, out: &mut Vec<SegmentRecord>| {
             h.detection.left_count = 1;
             clock.advance(Duration::from_millis(7));
-            Ok(vec![record])
+            out.push(record);
+            Ok(())
         };
-        process_frame(policy, fresh, false, &mut out, ok, Vec::new)
+        // One buffer for all: what a frame left in it does not reach the next.
+        let mut records = vec![record; 3];
+        let nothing = |_: &(), _: &mut Vec<SegmentRecord>| {};
+        let records = &mut records;
+        process_frame(
+            policy,
+            fresh,
+            false,
+            &mut out,
+            records,
+            &mut (),
+            ok,
+            nothing,
+        )
+        .unwrap_or_else(|e| panic!("{e}"));
+        for (header, newer_waiting, which) in [(stale, false, "late"), (fresh, true, "behind")] {
+            let not_processed = |_: &mut (), _: &mut SegmentsHeader, _: &mut Vec<_>| {
+                panic!("a frame {which} is not processed")
+            };
+            process_frame(
+                policy,
+                header,
+                newer_waiting,
+                &mut out,
+                records,
+                &mut (),
+                not_processed,
+                nothing,
+            )
             .unwrap_or_else(|e| panic!("{e}"));
-        process_frame(
-            policy,
-            stale,
-            false,
-            &mut out,
-            |_| panic!("a late frame is not processed"),
-            Vec::new,
-        )
-        .unwrap_or_else(|e| panic!("{e}"));
-        process_frame(
-            policy,
-            fresh,
-            true,
-            &mut out,
-            |_| panic!("a frame behind is not processed"),
-            Vec::new,
-        )
-        .unwrap_or_else(|e| panic!("{e}"));
+        }
         process_frame(
             policy,
             fresh,
             false,
             &mut out,
-            |_| anyhow::bail!("detector failed"),
-            || vec![SegmentRecord::default()],
+            records,
+            &mut (),
+            |_, _, out| {
+                out.push(record);
+                anyhow::bail!("detector failed")
+            },
+            |_, out| out.push(SegmentRecord::default()),
         )
         .unwrap_or_else(|e| panic!("{e}"));
         let got = inlet.receive_all().unwrap_or_else(|e| panic!("{e}"));
@@ -830,6 +852,8 @@ mod tests {
         );
         let stamp = first.frame.stamps[1];
         assert_eq!(stamp.end_ns - stamp.start_ns, 7_000_000, "{stamp:?}");
+        // A failed frame publishes the placeholder alone, not what the work left.
+        assert_eq!(got[3].payload(), [SegmentRecord::default()]);
         assert!(
             got[1..]
                 .iter()

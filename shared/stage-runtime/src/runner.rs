@@ -50,14 +50,16 @@ pub trait Stage {
 
     /// Processes one frame: `input` is the frame's message on [`Stage::INPUT`], `images`
     /// the frame's images when the stage joins them (`None` when they never arrived).
-    /// Fills its own results in `header` (made from the input's); an error marks the frame
-    /// failed by this stage.
+    /// Fills its own results in `header` (made from the input's) and its records in `out`
+    /// (given empty, and kept from frame to frame: no list is allocated per frame); an
+    /// error marks the frame failed by this stage.
     fn process(
         &mut self,
         header: &mut Self::OutputHeader,
         input: &Received<Self::Input, Self::InputHeader>,
         images: Option<&Images>,
-    ) -> anyhow::Result<Vec<Self::Output>>;
+        out: &mut Vec<Self::Output>,
+    ) -> anyhow::Result<()>;
 
     /// Work on a frame's images that need not wait for its input (the pose estimator's
     /// corners): called once per frame whose images arrived before its input, when no
@@ -74,10 +76,9 @@ pub trait Stage {
         false
     }
 
-    /// What is published for a frame that was dropped or failed (nothing by default).
-    fn placeholder(&self) -> Vec<Self::Output> {
-        Vec::new()
-    }
+    /// What is published for a frame that was dropped or failed, into `out` (given
+    /// empty; nothing by default).
+    fn placeholder(&self, _out: &mut Vec<Self::Output>) {}
 
     /// A command for this stage that the runtime does not handle itself (shutdown and the
     /// hot swap are the runtime's).
@@ -125,6 +126,8 @@ struct Runner<'a, S: Stage> {
     /// Frames below this were prepared (or processed) already.
     next_unprepared: u64,
     processed: u64,
+    /// The records of the frame being published, kept from frame to frame.
+    records: Vec<S::Output>,
 }
 
 /// How a turn of the loop ended.
@@ -168,6 +171,7 @@ pub fn run_stage<S: Stage>(
         next_unpublished: 0,
         next_unprepared: 0,
         processed: 0,
+        records: Vec::with_capacity(S::OUTPUT_LEN),
     };
     let mut ready_sent = false;
     if role == Role::Active {
@@ -338,7 +342,6 @@ impl<S: Stage> Runner<'_, S> {
         } else {
             None
         };
-        let placeholder = self.stage.placeholder();
         let stage = &mut self.stage;
         let policy = FramePolicy {
             stage: S::KIND,
@@ -350,8 +353,10 @@ impl<S: Stage> Runner<'_, S> {
             header,
             newer_waiting,
             &mut ports.output,
-            |h| stage.process(h, input, images.as_ref()),
-            || placeholder,
+            &mut self.records,
+            stage,
+            |stage, h, out| stage.process(h, input, images.as_ref(), out),
+            |stage, out| stage.placeholder(out),
         )?;
         self.next_unpublished = frame_id + 1;
         self.processed += 1;
@@ -392,11 +397,13 @@ mod tests {
             header: &mut SegmentsHeader,
             input: &Images,
             _images: Option<&Images>,
-        ) -> anyhow::Result<Vec<SegmentRecord>> {
+            out: &mut Vec<SegmentRecord>,
+        ) -> anyhow::Result<()> {
             anyhow::ensure!(input.payload().first() != Some(&0), "a blank frame");
-            Ok(vec![SegmentRecord {
+            out.push(SegmentRecord {
                 endpoints: [self.instance, header.frame.frame_id as f32, 0.0, 0.0],
-            }])
+            });
+            Ok(())
         }
     }
 
@@ -571,17 +578,19 @@ mod tests {
             header: &mut TracksHeader,
             _input: &Received<SegmentRecord, SegmentsHeader>,
             images: Option<&Images>,
-        ) -> anyhow::Result<Vec<linetrack_msgs::TrackedLine>> {
+            out: &mut Vec<linetrack_msgs::TrackedLine>,
+        ) -> anyhow::Result<()> {
             let prepared = self
                 .prepared
                 .lock()
                 .map_err(|_| anyhow::anyhow!("poisoned"))?
                 .contains(&header.frame.frame_id);
-            Ok(vec![linetrack_msgs::TrackedLine {
+            out.push(linetrack_msgs::TrackedLine {
                 has_stereo: u32::from(prepared),
                 previous: i32::from(images.is_some()),
                 ..Default::default()
-            }])
+            });
+            Ok(())
         }
     }
 

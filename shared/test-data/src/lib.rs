@@ -5,10 +5,14 @@
 //! beside the workspace (where CI has it). A test that needs it and cannot find it fails
 //! with a message saying where it looked; `cargo xtask test` leaves such tests out, and
 //! says so, on machines without the folder. The Middlebury pairs and the KITTI raw drive
-//! are found the same way ([`middlebury_dir`], [`kitti_raw_dir`]).
+//! are found the same way ([`middlebury_dir`], [`kitti_raw_dir`]). [`CountingAllocator`]
+//! counts heap allocations for the tests that check a hot path allocates nothing.
 #![warn(missing_docs)]
 
 use std::path::{Path, PathBuf};
+
+mod counting;
+pub use counting::CountingAllocator;
 
 /// Environment variable naming the EuRoC excerpt's sequence folder (the one holding `mav0/`).
 pub const EUROC_ENV: &str = "LINETRACK_EUROC_DIR";

@@ -14,7 +14,8 @@
 //! - `l1/describe`: the ℓ1 matcher's intensity profiles of one image's segments;
 //! - `l1/stereo-whole`: the whole ℓ1 stereo call with its photometric check, image access
 //!   included: profiles of both images + matching;
-//! - `orb/extract`: 600 ORB points of one image, `orb/match/stereo`.
+//! - `orb/extract`: 600 ORB points of one image, `orb/match/stereo`;
+//! - `orb/refine-track`: the sub-pixel refinement of frame 0's frame-to-frame point matches.
 //! - `stretch`: the contrast stretch of one image (the odometry's default gain limit, 4).
 //!
 //! Monocular tracking of a frame = detect + describe + frame-to-frame match; stereo =
@@ -28,7 +29,7 @@ use linetrack_geometry::MatchCase;
 use linetrack_vision::{
     DetectorKind, FrontendConfig, GrayImage, HammingMatcher, LineFeatures, MatcherKind,
     OrbExtractor, PointFeatures, PointMatcher, create_detector, create_segment_matcher,
-    points_may_match,
+    points_may_match, refine_track,
 };
 use opencv::core::{Vec4f, Vector};
 use opencv::ximgproc::{self, EdgeDrawingTrait};
@@ -190,6 +191,30 @@ fn bench_frontend(c: &mut Criterion) {
             })
         });
     }
+    // Sub-pixel tracking of every frame-to-frame point match of frame 0's left image in
+    // frame 1's (the odometry runs it on each tracked landmark).
+    let mut p_next = PointFeatures::default();
+    orb.extract(&next, &mut p_next).expect("orb");
+    point_matcher.match_points(
+        MatchCase::FrameToFrame,
+        &p_left,
+        &p_next,
+        &config.appearance_gates,
+        config.orb.min_distance_ratio,
+        &mut out,
+    );
+    let tracks: Vec<_> = out
+        .iter()
+        .map(|m| (p_left.points[m.query], p_next.points[m.train]))
+        .collect();
+    group.bench_function("orb/refine-track", |b| {
+        b.iter(|| {
+            tracks
+                .iter()
+                .filter_map(|&(from, to)| refine_track(black_box(&left), &next, from, to))
+                .count()
+        })
+    });
     group.finish();
 }
 

@@ -238,8 +238,7 @@ mod tests {
         let mut d = BinaryDescriptors::default();
         d.reset(rows.len(), 4);
         for (k, r) in rows.iter().enumerate() {
-            d.bytes[k * 4..k * 4 + 4].copy_from_slice(r);
-            d.present[k] = true;
+            d.set_row(k, r);
         }
         d
     }

@@ -351,21 +351,38 @@ pub fn stretch_contrast(
     image: &GrayImage,
     max_gain: f64,
 ) -> Result<Option<(GrayImage, f64)>, VisionError> {
+    let mut out = None;
+    let gain = stretch_contrast_into(image, max_gain, &mut out)?;
+    Ok(out.zip(gain))
+}
+
+/// [`stretch_contrast`] into `out`, whose pixels are reused when it holds an image of the
+/// same size (none is allocated then): the gain, or `None` where the image is kept as it is
+/// (`out` is then left as it was).
+pub fn stretch_contrast_into(
+    image: &GrayImage,
+    max_gain: f64,
+    out: &mut Option<GrayImage>,
+) -> Result<Option<f64>, VisionError> {
     let Some((gain, low)) = stretch_gain(image, max_gain)? else {
         return Ok(None);
     };
-    let mut out = Mat::default();
-    image
+    let stretched = out.get_or_insert_with(|| GrayImage {
+        mat: Mat::default(),
+        origin: String::new(),
+    });
+    if let Err(e) = image
         .mat
-        .convert_to(&mut out, -1, gain, -gain * low)
-        .context("stretching the contrast")?;
-    Ok(Some((
-        GrayImage {
-            mat: out,
-            origin: image.origin.clone(),
-        },
-        gain,
-    )))
+        .convert_to(&mut stretched.mat, -1, gain, -gain * low)
+        .context("stretching the contrast")
+    {
+        // Whatever the failed call left is not an image.
+        *out = None;
+        return Err(e);
+    }
+    stretched.origin.clear();
+    stretched.origin.push_str(&image.origin);
+    Ok(Some(gain))
 }
 
 /// [`stretch_contrast`] into a buffer kept from one call to the next: a stage stretching
@@ -388,20 +405,12 @@ impl ContrastStretch {
         image: &'a GrayImage,
         max_gain: f64,
     ) -> Result<&'a GrayImage, VisionError> {
-        let Some((gain, low)) = stretch_gain(image, max_gain)? else {
-            return Ok(image);
-        };
-        let out = self.stretched.get_or_insert_with(|| GrayImage {
-            mat: Mat::default(),
-            origin: String::new(),
-        });
-        image
-            .mat
-            .convert_to(&mut out.mat, -1, gain, -gain * low)
-            .context("stretching the contrast")?;
-        out.origin.clear();
-        out.origin.push_str(&image.origin);
-        Ok(out)
+        Ok(
+            match stretch_contrast_into(image, max_gain, &mut self.stretched)? {
+                Some(_) => self.stretched.as_ref().unwrap_or(image),
+                None => image,
+            },
+        )
     }
 }
 

@@ -39,7 +39,8 @@ pub use detect::{
 };
 pub use hamming::{BinaryDescriptors, FeatureMatch, HammingMatcher};
 pub use image::{
-    BorrowedGray, ContrastStretch, GrayImage, MAX_FILE_BYTES, MAX_PIXELS, perturb, stretch_contrast,
+    BorrowedGray, ContrastStretch, GrayImage, MAX_FILE_BYTES, MAX_PIXELS, perturb,
+    stretch_contrast, stretch_contrast_into,
 };
 pub use lbd::LbdExtractor;
 pub use matchers::{

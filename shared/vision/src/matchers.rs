@@ -21,6 +21,15 @@ pub struct LineFeatures {
     pub profiles: SegmentProfiles,
 }
 
+impl LineFeatures {
+    /// Empties every field, keeping the memory for the next image's.
+    pub fn clear(&mut self) {
+        self.segments.clear();
+        self.descriptors.reset(0, 0);
+        self.profiles.clear();
+    }
+}
+
 /// A segment matcher.
 pub trait SegmentMatcher: Send {
     /// Short name: `lbd` or `l1`.

@@ -425,6 +425,15 @@ fn window(pixels: &[u8], width: i64, u: i64, v: i64) -> [i32; SIDE * SIDE] {
     values
 }
 
+/// Whether the windows centred on pixel `(u, v)` and shifted by up to `reach` (columns,
+/// rows) either way all lie inside an image of `size` (width, height).
+fn windows_inside(u: i64, v: i64, reach: (i64, i64), (width, height): (i64, i64)) -> bool {
+    u - HALF - reach.0 >= 0
+        && u + HALF + reach.0 < width
+        && v - HALF - reach.1 >= 0
+        && v + HALF + reach.1 < height
+}
+
 /// The fraction of a pixel, within ±0.5, by which a parabola through three costs at
 /// shifts −1, 0 and 1 puts its minimum (0 when they do not curve upwards).
 fn parabola_minimum(before: f64, at: f64, after: f64) -> f64 {
@@ -472,9 +481,8 @@ pub fn refine_stereo_column(
     let (lp, rp, width, height) = pixels_of_pair(left_image, right_image)?;
     let (ul, v) = (left.x.round() as i64, left.y.round() as i64);
     let ur = right.x.round() as i64;
-    let inside = |u: i64| u - HALF >= 0 && u + HALF < width;
-    let rows_inside = v - HALF >= 0 && v + HALF < height;
-    if !(rows_inside && inside(ul) && inside(ur - SEARCH) && inside(ur + SEARCH)) {
+    let size = (width, height);
+    if !(windows_inside(ul, v, (0, 0), size) && windows_inside(ur, v, (SEARCH, 0), size)) {
         return None;
     }
     let mean_removed = |pixels: &[u8], u: i64| {
@@ -527,13 +535,8 @@ pub fn refine_track(
     let (pp, cp, width, height) = pixels_of_pair(previous_image, current_image)?;
     let (uf, vf) = (from.x.round() as i64, from.y.round() as i64);
     let (ut, vt) = (to.x.round() as i64, to.y.round() as i64);
-    let inside = |u: i64, v: i64, margin: i64| {
-        u - HALF - margin >= 0
-            && u + HALF + margin < width
-            && v - HALF - margin >= 0
-            && v + HALF + margin < height
-    };
-    if !(inside(uf, vf, 0) && inside(ut, vt, SEARCH)) {
+    let size = (width, height);
+    if !(windows_inside(uf, vf, (0, 0), size) && windows_inside(ut, vt, (SEARCH, SEARCH), size)) {
         return None;
     }
     // Correlations from integer sums (11 × 11 × 255² fits an i32): Σa, Σa², then per
@@ -546,13 +549,25 @@ pub fn refine_track(
     if var_a < 1.0 {
         return None;
     }
-    // Costs are 1 − correlation, row-major over the shifts (dy, dx).
+    // Costs are 1 − correlation, row-major over the shifts (dy, dx). For each dx the
+    // columns the windows of that dx cover are copied once, row after row, for all five
+    // dy: the window at dy is then the 121 values from row dy on.
     let mut costs = [[0.0f64; SHIFTS]; SHIFTS];
-    for (row, dy) in costs.iter_mut().zip(-SEARCH..=SEARCH) {
-        for (cost, dx) in row.iter_mut().zip(-SEARCH..=SEARCH) {
-            let candidate = window(cp, width, ut + dx, vt + dy);
+    let mut columns = [[0i32; SIDE * (SIDE + SHIFTS - 1)]; SHIFTS];
+    for (strip, dx) in columns.iter_mut().zip(-SEARCH..=SEARCH) {
+        let left = (ut + dx - HALF) as usize;
+        for (values, y) in strip.chunks_exact_mut(SIDE).zip(vt - HALF - SEARCH..) {
+            let start = (y * width) as usize + left;
+            for (value, &p) in values.iter_mut().zip(&cp[start..start + SIDE]) {
+                *value = i32::from(p);
+            }
+        }
+    }
+    for (row, dy) in costs.iter_mut().zip(0..) {
+        for (cost, strip) in row.iter_mut().zip(&columns) {
+            let candidate = &strip[dy * SIDE..dy * SIDE + SIDE * SIDE];
             let (mut sum_b, mut sum_bb, mut sum_ab) = (0i32, 0i32, 0i32);
-            for (a, b) in reference.iter().zip(&candidate) {
+            for (a, b) in reference.iter().zip(candidate) {
                 sum_b += b;
                 sum_bb += b * b;
                 sum_ab += a * b;

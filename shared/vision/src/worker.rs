@@ -76,11 +76,6 @@ impl<J: Send + 'static> SideWorker<J> {
         }
     }
 
-    /// Whether the work runs on a thread of its own.
-    pub fn is_threaded(&self) -> bool {
-        matches!(self.place, Place::Thread { .. })
-    }
-
     /// The job, between calls: to hand it its input, or take its output.
     pub fn job(&mut self) -> Result<&mut J, VisionError> {
         let name = self.name;

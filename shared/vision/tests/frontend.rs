@@ -240,10 +240,18 @@ fn orb_points_match_at_the_true_disparity() {
 
 // ---------------------------------------------------------------- real images
 
+/// EuRoC excerpt frame `index`, left and right, loaded.
+fn euroc_images(index: usize) -> (GrayImage, GrayImage) {
+    let (left, right) = euroc_stereo_pair(index).unwrap_or_else(|e| panic!("{e}"));
+    (
+        GrayImage::load(&left).unwrap(),
+        GrayImage::load(&right).unwrap(),
+    )
+}
+
 #[test]
 fn real_data_both_detectors_fill_their_cap_on_a_euroc_frame() {
-    let (left, _) = euroc_stereo_pair(0).unwrap_or_else(|e| panic!("{e}"));
-    let image = GrayImage::load(&left).unwrap();
+    let (image, _) = euroc_images(0);
     assert_eq!((image.width(), image.height()), (752, 480));
     for kind in DetectorKind::ALL {
         let segments = detect_all(kind, &image);
@@ -261,12 +269,7 @@ fn real_data_both_detectors_fill_their_cap_on_a_euroc_frame() {
 fn real_data_frame_to_frame_matches_of_a_still_camera_do_not_move() {
     // In these frames the vehicle is almost still: a right match barely moves. Measured
     // (matches / static ones): LSD+LBD 83/83, LSD+L1 69/69, FLD+LBD 87/86, FLD+L1 76/75.
-    let (first, _) = euroc_stereo_pair(0).unwrap_or_else(|e| panic!("{e}"));
-    let (second, _) = euroc_stereo_pair(1).unwrap_or_else(|e| panic!("{e}"));
-    let (a, b) = (
-        GrayImage::load(&first).unwrap(),
-        GrayImage::load(&second).unwrap(),
-    );
+    let ((a, _), (b, _)) = (euroc_images(0), euroc_images(1));
     for detector in DetectorKind::ALL {
         for matcher in MatcherKind::ALL {
             let (fa, fb, matches) =
@@ -302,8 +305,7 @@ fn real_data_stereo_matches_point_the_right_way() {
     // Not rectified yet (the datasets crate does that), so only coarse checks: parallel
     // within 5° and the right segment to the left of the left one. The ℓ1 matcher assumes
     // rectified rows and suffers most: measured LBD 47 matches, 40 sane; ℓ1 22, 14 sane.
-    let (l, r) = euroc_stereo_pair(0).unwrap_or_else(|e| panic!("{e}"));
-    let (left, right) = (GrayImage::load(&l).unwrap(), GrayImage::load(&r).unwrap());
+    let (left, right) = euroc_images(0);
     for matcher in MatcherKind::ALL {
         let (fa, fb, matches) =
             match_images(DetectorKind::Lsd, matcher, MatchCase::Stereo, &left, &right);
@@ -697,11 +699,7 @@ fn point_grid_finds_exactly_the_matches_of_comparing_every_pair() {
     // image standing in for the next frame), wide and narrow windows: the matcher that
     // compares only the grid's candidates returns the very matches of the one comparing
     // every pair the gates admit.
-    let (left, right) = euroc_stereo_pair(0).unwrap_or_else(|e| panic!("{e}"));
-    let (left, right) = (
-        GrayImage::load(&left).unwrap(),
-        GrayImage::load(&right).unwrap(),
-    );
+    let (left, right) = euroc_images(0);
     let options = OrbOptions {
         features: 1500,
         ..OrbOptions::default()
@@ -758,8 +756,7 @@ fn point_grid_finds_exactly_the_matches_of_comparing_every_pair() {
 #[test]
 fn point_grid_skips_non_finite_points_and_an_empty_side() {
     let mut orb = OrbExtractor::new(&OrbOptions::default()).unwrap();
-    let (left, _) = euroc_stereo_pair(0).unwrap_or_else(|e| panic!("{e}"));
-    let left = GrayImage::load(&left).unwrap();
+    let (left, _) = euroc_images(0);
     let mut a = PointFeatures::default();
     orb.extract(&left, &mut a).unwrap();
     let mut b = a.clone();
@@ -794,11 +791,7 @@ fn point_grid_skips_non_finite_points_and_an_empty_side() {
 
 #[test]
 fn real_data_orb_worker_finds_the_extractors_points_frame_after_frame() {
-    let (left, right) = euroc_stereo_pair(0).unwrap_or_else(|e| panic!("{e}"));
-    let (left, right) = (
-        GrayImage::load(&left).unwrap(),
-        GrayImage::load(&right).unwrap(),
-    );
+    let (left, right) = euroc_images(0);
     // A smaller image between two full ones: the worker's buffer changes size and back.
     let checkerboard: Vec<u8> = (0..200 * 120)
         .map(|i| {
