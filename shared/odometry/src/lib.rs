@@ -428,6 +428,23 @@ struct Spares {
     lists: FrameLists,
 }
 
+/// `spare` (or a new list) refilled with the landmarks of `triangulations` (camera frame
+/// of `pose`).
+fn sighted_all<P: Geometry>(
+    spare: Option<Vec<Option<Landmark<P>>>>,
+    triangulations: &[Option<(P, f64)>],
+    pose: &Isometry3<f64>,
+) -> Vec<Option<Landmark<P>>> {
+    let mut landmarks = spare.unwrap_or_default();
+    landmarks.clear();
+    landmarks.extend(
+        triangulations
+            .iter()
+            .map(|t| t.map(|(p, w)| sighted(pose, &p, w))),
+    );
+    landmarks
+}
+
 /// At most this many of each kind are kept (frames prepared ahead hold some).
 const MAX_SPARES: usize = 4;
 
@@ -439,6 +456,13 @@ fn keep_spare<T>(spares: &mut Vec<T>, item: T) {
 }
 
 impl Spares {
+    /// A frame's stretched images, done with, kept for the next frames' stretch.
+    fn keep_images(&mut self, images: [Option<GrayImage>; 2]) {
+        for image in images.into_iter().flatten() {
+            keep_spare(&mut self.images, image);
+        }
+    }
+
     /// A frame's reference, its lists kept for the next frames.
     fn keep_reference(&mut self, reference: Reference) {
         keep_spare(&mut self.points, reference.points);
@@ -687,9 +711,7 @@ impl MotionTracker {
             right_stretched.as_ref().unwrap_or(right),
         );
         let result = self.update_stretched(Some((seen, points, left_gain)), lines, stats);
-        for image in [left_stretched, right_stretched].into_iter().flatten() {
-            keep_spare(&mut self.spares.images, image);
-        }
+        self.spares.keep_images([left_stretched, right_stretched]);
         result
     }
 
@@ -940,27 +962,11 @@ impl MotionTracker {
         points: PointFeatures,
         fresh: &Triangulations,
     ) -> Reference {
-        let mut point_landmarks = self.spares.point_landmarks.pop().unwrap_or_default();
-        point_landmarks.clear();
-        point_landmarks.extend(
-            fresh
-                .points
-                .iter()
-                .map(|t| t.map(|(p, w)| sighted(&pose, &p, w))),
-        );
-        let mut line_landmarks = self.spares.line_landmarks.pop().unwrap_or_default();
-        line_landmarks.clear();
-        line_landmarks.extend(
-            fresh
-                .lines
-                .iter()
-                .map(|t| t.map(|(p, w)| sighted(&pose, &p, w))),
-        );
         Reference {
             pose,
             points,
-            point_landmarks,
-            line_landmarks,
+            point_landmarks: sighted_all(self.spares.point_landmarks.pop(), &fresh.points, &pose),
+            line_landmarks: sighted_all(self.spares.line_landmarks.pop(), &fresh.lines, &pose),
         }
     }
 
@@ -1389,6 +1395,9 @@ impl Odometry {
             lines,
             stats,
         );
+        self.tracker
+            .spares
+            .keep_images([left_stretched, right_stretched]);
         self.previous_lines = Some(lines_l);
         result
     }

@@ -416,13 +416,17 @@ const SIDE: usize = (2 * HALF + 1) as usize;
 fn window(pixels: &[u8], width: i64, u: i64, v: i64) -> [i32; SIDE * SIDE] {
     let mut values = [0i32; SIDE * SIDE];
     for (row_values, y) in values.chunks_exact_mut(SIDE).zip(v - HALF..=v + HALF) {
-        let row = (y * width) as usize;
-        let pixels = &pixels[row + (u - HALF) as usize..=row + (u + HALF) as usize];
-        for (value, &p) in row_values.iter_mut().zip(pixels) {
-            *value = i32::from(p);
-        }
+        let start = (y * width + u - HALF) as usize;
+        widen(&pixels[start..start + SIDE], row_values);
     }
     values
+}
+
+/// `pixels` into `values` as integers.
+fn widen(pixels: &[u8], values: &mut [i32]) {
+    for (value, &p) in values.iter_mut().zip(pixels) {
+        *value = i32::from(p);
+    }
 }
 
 /// Whether the windows centred on pixel `(u, v)` and shifted by up to `reach` (columns,
@@ -558,9 +562,7 @@ pub fn refine_track(
         let left = (ut + dx - HALF) as usize;
         for (values, y) in strip.chunks_exact_mut(SIDE).zip(vt - HALF - SEARCH..) {
             let start = (y * width) as usize + left;
-            for (value, &p) in values.iter_mut().zip(&cp[start..start + SIDE]) {
-                *value = i32::from(p);
-            }
+            widen(&cp[start..start + SIDE], values);
         }
     }
     for (row, dy) in costs.iter_mut().zip(0..) {
