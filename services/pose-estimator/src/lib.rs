@@ -1,7 +1,10 @@
 //! The pose estimator: the odometry's back end on the matcher's output. It triangulates
 //! the stereo-matched segments (and ORB points of the frame's images, read in place, when
 //! the config uses points), finds the previous frame's 3-D features through the
-//! frame-to-frame matches, and publishes the frame's pose. When the tracks were matched
+//! frame-to-frame matches, and publishes the frame's pose. The points' part (corners,
+//! their stereo matches, their search for the last frame's landmarks) needs only the
+//! images: it is done when they arrive, while the segments are still being detected and
+//! matched. When the tracks were matched
 //! against another frame than the one it last tracked (a drop upstream, a restart), it
 //! starts again from the current pose instead of using them. The stereo rig comes from the
 //! stream (the frame source publishes it on [`Topic::Rig`]): the stage never opens the
@@ -190,13 +193,21 @@ impl PoseTracker {
     }
 
     /// Stretches frame `header`'s images and finds their corners ahead of its segments
-    /// (nothing before a rig arrived); kept for [`PoseTracker::track`] of the same frame.
+    /// (nothing before a rig arrived), and their stereo partners and frame-to-frame
+    /// observations when the frame before it was tracked; kept for [`PoseTracker::track`]
+    /// of the same frame.
     pub fn prepare(&mut self, header: &FrameHeader, frame: &Images) -> anyhow::Result<()> {
         let Some(tracker) = &mut self.tracker else {
             return Ok(());
         };
         let (left, right) = stereo_views(frame)?;
-        let prepared = tracker.prepare(&left, &right)?;
+        // With no frame before it waiting for its segments, the last one tracked is the
+        // one this frame's points are searched against: that search is done now too.
+        let prepared = if self.prepared.is_empty() {
+            tracker.prepare_next(&left, &right)?
+        } else {
+            tracker.prepare(&left, &right)?
+        };
         if self.prepared.len() >= held_capacity(Topic::Frames) {
             self.prepared.pop_front();
         }

@@ -366,6 +366,33 @@ pub struct PreparedImages {
     points: [PointFeatures; 2],
     /// Milliseconds it took.
     ms: f64,
+    /// Which of the tracker's preparations it is (from 1), to tell whether the point work
+    /// [`MotionTracker::prepare_next`] did is this frame's.
+    serial: u64,
+}
+
+/// The point work [`MotionTracker::prepare_next`] did for a prepared frame.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct PointsAhead {
+    /// The preparation it was done for.
+    serial: u64,
+    /// Milliseconds: stereo matching, frame-to-frame matching.
+    ms: [f64; 2],
+}
+
+/// A frame's images as tracking sees them (stretched where they were), with what was
+/// prepared from them.
+struct SeenImages<'a> {
+    /// Left and right.
+    images: (&'a GrayImage, &'a GrayImage),
+    /// ORB points of the left and right image.
+    points: [PointFeatures; 2],
+    /// The left image's stretch gain (1: not stretched).
+    left_gain: f64,
+    /// The milliseconds of the frame's point work (stereo, frame to frame) when
+    /// [`MotionTracker::prepare_next`] did it for this frame and no frame was tracked
+    /// since; `None`: it is done with the segments.
+    points_ahead: Option<[f64; 2]>,
 }
 
 /// The landmark each left point of a frame stands for, if any.
@@ -482,7 +509,10 @@ pub struct MotionTracker {
     /// thread of its own.
     orb_left: OrbExtractor,
     orb_right: OrbWorker,
+    /// Stereo matching of the points.
     point_matcher: PointMatcher,
+    /// Frame-to-frame matching of the points.
+    tracking: PointTracking,
     reference: Option<Reference>,
     pose: Isometry3<f64>,
     last_motion: Isometry3<f64>,
@@ -493,11 +523,12 @@ pub struct MotionTracker {
     /// The reference frame's left image as its points were found in (stretched or not),
     /// for `subpixel_tracking`; its buffer is reused from frame to frame.
     reference_image: Option<GrayImage>,
-    /// The reference frame's left points where they were found (its `points` are moved to
-    /// their predicted positions for the search).
-    reference_found: Vec<Point>,
-    /// This frame's left points tracked to a fraction of a pixel (index, position).
-    refined: Vec<(usize, Point)>,
+    /// The point work done ahead for a prepared frame, if any. It was done against the
+    /// reference frame, its image and the last motion, which the next update changes:
+    /// any update uses it up, whichever frame it tracks.
+    points_ahead: Option<PointsAhead>,
+    /// The last preparation's [`PreparedImages::serial`].
+    prepared_serial: u64,
     /// Each left point's stereo partner this frame (right keypoint, weight of the two
     /// keypoints' pyramid levels).
     stereo_partners: Vec<Option<(Point, f64)>>,
@@ -511,14 +542,15 @@ impl MotionTracker {
             orb_left: OrbExtractor::new(&config.frontend.orb)?,
             orb_right: OrbWorker::new(&config.frontend.orb)?,
             point_matcher: PointMatcher::new(),
+            tracking: PointTracking::default(),
             reference: None,
             pose: Isometry3::identity(),
             last_motion: Isometry3::identity(),
             motion_known: false,
             profiles: Default::default(),
             reference_image: None,
-            reference_found: Vec::new(),
-            refined: Vec::new(),
+            points_ahead: None,
+            prepared_serial: 0,
             stereo_partners: Vec::new(),
             spares: Spares::default(),
             config,
@@ -532,6 +564,7 @@ impl MotionTracker {
         self.last_motion = motion;
         self.motion_known = true;
         self.reference = None;
+        self.points_ahead = None;
     }
 
     /// Moves the pose on by `frames` times the last motion (frames nobody tracked, as
@@ -610,11 +643,7 @@ impl MotionTracker {
     /// How far from its previous position a feature is searched for in the next frame:
     /// the predicted window once a motion is known, else the full displacement.
     pub fn search_radius_px(&self) -> f64 {
-        if self.motion_known {
-            self.config.predicted_window_px
-        } else {
-            self.config.max_displacement_px
-        }
+        search_radius_px(&self.config, self.motion_known)
     }
 
     /// Tracks one frame: `lines` matched, `stats` already holding the front end's counts and
@@ -627,7 +656,7 @@ impl MotionTracker {
         stats: FrameStats,
     ) -> Result<FrameResult, OdometryError> {
         let prepared = match images {
-            Some((left, right)) => Some(self.prepare(left, right)?),
+            Some((left, right)) => Some(self.prepare_next(left, right)?),
             None => None,
         };
         self.update_prepared(images.zip(prepared), lines, stats)
@@ -642,6 +671,29 @@ impl MotionTracker {
         left: &GrayImage,
         right: &GrayImage,
     ) -> Result<PreparedImages, OdometryError> {
+        self.prepare_images(left, right, false)
+    }
+
+    /// [`MotionTracker::prepare`] for the frame that follows the last one tracked, with
+    /// the point work that needs no segments: its left points are searched for the last
+    /// frame's landmarks while the right image's corners are being found, then stereo
+    /// matched. [`MotionTracker::update_prepared`] uses that work when no other frame was
+    /// tracked in between, and does it again otherwise.
+    pub fn prepare_next(
+        &mut self,
+        left: &GrayImage,
+        right: &GrayImage,
+    ) -> Result<PreparedImages, OdometryError> {
+        self.prepare_images(left, right, true)
+    }
+
+    /// [`MotionTracker::prepare`], with the point work when `ahead`.
+    fn prepare_images(
+        &mut self,
+        left: &GrayImage,
+        right: &GrayImage,
+        ahead: bool,
+    ) -> Result<PreparedImages, OdometryError> {
         let started = Instant::now();
         let (stretched, left_gain) = stretch_pair(
             left,
@@ -649,23 +701,34 @@ impl MotionTracker {
             self.config.max_contrast_gain,
             &mut self.spares.images,
         )?;
-        let mut prepared = self.prepare_stretched(stretched, left_gain, left, right)?;
-        prepared.ms = since(started);
+        let mut prepared = self.prepare_stretched(stretched, left_gain, left, right, ahead)?;
+        // (Less the point work, counted apart.)
+        let ahead_ms: f64 = self.points_ahead.iter().flat_map(|a| a.ms).sum();
+        prepared.ms = (since(started) - ahead_ms).max(0.0);
         Ok(prepared)
     }
 
-    /// [`MotionTracker::prepare`] after the stretch: finds the points in the stretched
-    /// images (or the originals, `None` where not stretched).
+    /// [`MotionTracker::prepare_images`] after the stretch: finds the points in the
+    /// stretched images (or the originals, `None` where not stretched), and does the point
+    /// work when `ahead`.
     fn prepare_stretched(
         &mut self,
         [left_stretched, right_stretched]: [Option<GrayImage>; 2],
         left_gain: f64,
         left: &GrayImage,
         right: &GrayImage,
+        ahead: bool,
     ) -> Result<PreparedImages, OdometryError> {
         let started = Instant::now();
+        // (Without the point work, that of a frame prepared before stays for its update.)
+        if ahead {
+            self.points_ahead = None;
+        }
+        self.prepared_serial += 1;
         let mut points = [PointFeatures::default(), PointFeatures::default()];
-        if self.config.features == Features::PointsAndLines {
+        let uses_points = self.config.features == Features::PointsAndLines;
+        let mut tracking_ms = 0.0;
+        if uses_points {
             points = [(); 2].map(|()| self.spares.points.pop().unwrap_or_default());
             // Left and right at the same time: a frame's corners are its pose's longest step.
             let [points_l, points_r] = &mut points;
@@ -674,17 +737,112 @@ impl MotionTracker {
                 right_stretched.as_ref().unwrap_or(right),
             );
             let orb_left = &mut self.orb_left;
-            let (right_side, left_side) = self
-                .orb_right
-                .extract_while(image_r, points_r, || orb_left.extract(image_l, points_l));
-            left_side.and(right_side)?;
+            // Ahead, the left points are then searched for the reference's landmarks while
+            // the right image's corners are still being found.
+            let search = PointSearch::of(
+                self.reference.as_ref().filter(|_| ahead),
+                self.reference_image.as_ref(),
+                (&self.rig, &self.config),
+                (self.last_motion, self.motion_known),
+                left_gain,
+            );
+            let tracking = &mut self.tracking;
+            let observations = &mut self.spares.lists.observations;
+            let (right_side, left_side) = self.orb_right.extract_while(image_r, points_r, || {
+                orb_left.extract(image_l, points_l)?;
+                let started = Instant::now();
+                if ahead {
+                    tracking.observe(search.as_ref(), points_l, image_l, observations);
+                }
+                Ok::<_, VisionError>(since(started))
+            });
+            tracking_ms = left_side?;
+            right_side?;
         }
-        Ok(PreparedImages {
+        let prepared = PreparedImages {
             stretched: [left_stretched, right_stretched],
             left_gain,
             points,
             ms: since(started),
-        })
+            serial: self.prepared_serial,
+        };
+        if ahead && uses_points {
+            let mut lists = std::mem::take(&mut self.spares.lists);
+            let [points_l, points_r] = &prepared.points;
+            let stereo_ms = self.match_stereo(&mut lists, [points_l, points_r]);
+            self.spares.lists = lists;
+            self.points_ahead = Some(PointsAhead {
+                serial: prepared.serial,
+                ms: [stereo_ms, tracking_ms],
+            });
+        }
+        Ok(prepared)
+    }
+
+    /// The milliseconds of the point work done ahead for preparation `serial`, if it was
+    /// (and no frame was tracked since: tracking one uses it up).
+    fn take_points_ahead(&mut self, serial: u64) -> Option<[f64; 2]> {
+        self.points_ahead
+            .take()
+            .filter(|a| a.serial == serial)
+            .map(|a| a.ms)
+    }
+
+    /// A frame's point work that needs no segments, into `lists` and the tracker's
+    /// per-frame state: the stereo partners of `points_l` among `points_r` and, when there
+    /// is a reference frame and `observe` says so, their observations of its landmarks.
+    /// Returns its milliseconds: stereo, frame to frame.
+    fn track_points(
+        &mut self,
+        lists: &mut FrameLists,
+        [points_l, points_r]: [&PointFeatures; 2],
+        left_image: &GrayImage,
+        left_gain: f64,
+        observe: bool,
+    ) -> [f64; 2] {
+        let stereo_ms = self.match_stereo(lists, [points_l, points_r]);
+        let started = Instant::now();
+        let search = PointSearch::of(
+            self.reference.as_ref().filter(|_| observe),
+            self.reference_image.as_ref(),
+            (&self.rig, &self.config),
+            (self.last_motion, self.motion_known),
+            left_gain,
+        );
+        self.tracking.observe(
+            search.as_ref(),
+            points_l,
+            left_image,
+            &mut lists.observations,
+        );
+        [stereo_ms, since(started)]
+    }
+
+    /// The stereo partners of `points_l` among `points_r`; returns its milliseconds.
+    fn match_stereo(
+        &mut self,
+        lists: &mut FrameLists,
+        [points_l, points_r]: [&PointFeatures; 2],
+    ) -> f64 {
+        let started = Instant::now();
+        let matches = &mut lists.stereo_matches;
+        self.stereo_partners.clear();
+        self.stereo_partners.resize(points_l.points.len(), None);
+        let gates = &self.config.frontend.appearance_gates;
+        self.point_matcher.match_points(
+            MatchCase::Stereo,
+            points_l,
+            points_r,
+            gates,
+            self.config.frontend.orb.min_distance_ratio,
+            matches,
+        );
+        for m in matches.iter() {
+            let weight = level_weight(&self.config, points_l, m.query)
+                * level_weight(&self.config, points_r, m.train);
+            self.stereo_partners[m.query] = Some((points_r.points[m.train], weight));
+        }
+        since(started)
     }
 
     /// Tracks one frame whose images were [prepared](MotionTracker::prepare) (`images`:
@@ -704,13 +862,19 @@ impl MotionTracker {
             left_gain,
             points,
             ms,
+            serial,
         } = prepared;
         stats.ms[0] += ms;
-        let seen = (
-            left_stretched.as_ref().unwrap_or(left),
-            right_stretched.as_ref().unwrap_or(right),
-        );
-        let result = self.update_stretched(Some((seen, points, left_gain)), lines, stats);
+        let seen = SeenImages {
+            images: (
+                left_stretched.as_ref().unwrap_or(left),
+                right_stretched.as_ref().unwrap_or(right),
+            ),
+            points,
+            left_gain,
+            points_ahead: self.take_points_ahead(serial),
+        };
+        let result = self.update_stretched(Some(seen), lines, stats);
         self.spares.keep_images([left_stretched, right_stretched]);
         result
     }
@@ -718,13 +882,15 @@ impl MotionTracker {
     /// [`MotionTracker::update`] on images already stretched, with their points.
     fn update_stretched(
         &mut self,
-        images: Option<((&GrayImage, &GrayImage), [PointFeatures; 2], f64)>,
+        images: Option<SeenImages<'_>>,
         lines: MatchedLines<'_>,
         stats: FrameStats,
     ) -> Result<FrameResult, OdometryError> {
         let mut lists = std::mem::take(&mut self.spares.lists);
         let result = self.track_frame(&mut lists, images, lines, stats);
         self.spares.lists = lists;
+        // Point work done ahead for another frame is stale now.
+        self.points_ahead = None;
         result
     }
 
@@ -732,7 +898,7 @@ impl MotionTracker {
     fn track_frame(
         &mut self,
         lists: &mut FrameLists,
-        images: Option<((&GrayImage, &GrayImage), [PointFeatures; 2], f64)>,
+        images: Option<SeenImages<'_>>,
         lines: MatchedLines<'_>,
         mut stats: FrameStats,
     ) -> Result<FrameResult, OdometryError> {
@@ -740,37 +906,37 @@ impl MotionTracker {
             min_sin_from_horizontal: self.config.min_line_angle_deg.to_radians().sin(),
             ..TriangulationLimits::default()
         };
-        let stereo_images = images.as_ref().map(|(images, ..)| *images);
-        let (images, [mut points_l, points_r], left_gain) = match images {
-            Some((images, points, gain)) if self.config.features == Features::PointsAndLines => {
-                (Some(images), points, gain)
+        let stereo_images = images.as_ref().map(|seen| seen.images);
+        let (images, [mut points_l, points_r]) = match images {
+            Some(seen) if self.config.features == Features::PointsAndLines => {
+                // Stereo partners, and observations of the reference's landmarks when this
+                // frame continues from it, unless done ahead (points are triangulated once
+                // they are where they were tracked).
+                let ms = match seen.points_ahead {
+                    Some(ms) => ms,
+                    None => self.track_points(
+                        lists,
+                        [&seen.points[0], &seen.points[1]],
+                        seen.images.0,
+                        seen.left_gain,
+                        lines.tracked.is_some(),
+                    ),
+                };
+                stats.ms[2] += ms[0];
+                stats.ms[3] += ms[1];
+                (Some(seen.images), seen.points)
             }
-            _ => (None, Default::default(), 1.0),
+            _ => {
+                self.stereo_partners.clear();
+                self.tracking.refined.clear();
+                lists.observations.clear();
+                (None, Default::default())
+            }
         };
         let use_points = images.is_some();
         stats.points = [points_l.points.len(), points_r.points.len()];
 
-        // Stereo matching (points are triangulated once they are where they were tracked).
         let started = Instant::now();
-        let matches = &mut lists.stereo_matches;
-        self.stereo_partners.clear();
-        self.stereo_partners.resize(points_l.points.len(), None);
-        if images.is_some() {
-            let gates = &self.config.frontend.appearance_gates;
-            self.point_matcher.match_points(
-                MatchCase::Stereo,
-                &points_l,
-                &points_r,
-                gates,
-                self.config.frontend.orb.min_distance_ratio,
-                matches,
-            );
-            for m in matches.iter() {
-                let weight =
-                    self.level_weight(&points_l, m.query) * self.level_weight(&points_r, m.train);
-                self.stereo_partners[m.query] = Some((points_r.points[m.train], weight));
-            }
-        }
         keep_spare(&mut self.spares.points, points_r);
         let verified = self.photometric_profiles(stereo_images, &lines);
         let fresh = &mut lists.fresh;
@@ -802,7 +968,7 @@ impl MotionTracker {
         stats.ms[2] += since(started);
 
         let left_image = images.map(|(left, _)| left);
-        let Some(mut previous) = self.reference.take().filter(|_| lines.tracked.is_some()) else {
+        let Some(previous) = self.reference.take().filter(|_| lines.tracked.is_some()) else {
             // First frame, or not matched against the previous one: start again from here.
             self.triangulate_points(images, &points_l, fresh, &limits, &mut stats);
             self.reference = Some(self.fresh_reference(self.pose, points_l, fresh));
@@ -815,26 +981,13 @@ impl MotionTracker {
             });
         };
 
-        // Previous landmarks seen again now.
+        // Previous landmarks seen again now (the points' observations are made).
         let started = Instant::now();
         let observations = &mut lists.observations;
-        observations.clear();
-        if use_points {
-            let noise_weight = if self.config.points_weighted_by_gain {
-                left_gain.powi(-2)
-            } else {
-                1.0
-            };
-            self.observe_points(
-                &mut previous,
-                (&points_l, left_image),
-                noise_weight,
-                matches,
-                observations,
-            );
-            if self.config.subpixel_tracking {
-                self.anchor_refined_points(&mut points_l);
-            }
+        observations.lines.clear();
+        observations.line_pairs.clear();
+        if use_points && self.config.subpixel_tracking {
+            self.anchor_refined_points(&mut points_l);
         }
         // This frame is the next one's reference whatever the estimate gives.
         self.keep_reference_image(left_image);
@@ -1118,96 +1271,11 @@ impl MotionTracker {
     /// keypoints' levels (counting the tracked left point as exact did no better on the
     /// generated sequences).
     fn anchor_refined_points(&self, points: &mut PointFeatures) {
-        for &(j, pixel) in &self.refined {
+        for &(j, pixel) in &self.tracking.refined {
             if let Some(point) = points.points.get_mut(j) {
                 *point = pixel;
             }
         }
-    }
-
-    /// Weight of point `k` for its pyramid level: the inverse variance of its position,
-    /// `scale_factor^(−2·level)` (1 at full resolution).
-    fn level_weight(&self, features: &PointFeatures, k: usize) -> f64 {
-        let level = features.levels.get(k).copied().unwrap_or(0);
-        f64::from(self.config.frontend.orb.scale_factor).powi(-2 * i32::from(level))
-    }
-
-    /// Observations of `previous`'s point landmarks among `current` (this frame's left
-    /// points, their weights scaled by `noise_weight`), searched for around where the last
-    /// motion moves them.
-    fn observe_points(
-        &mut self,
-        previous: &mut Reference,
-        (current, current_image): (&PointFeatures, Option<&GrayImage>),
-        noise_weight: f64,
-        scratch: &mut Vec<FeatureMatch>,
-        observations: &mut Observations,
-    ) {
-        let gates = AppearanceGates {
-            max_displacement_px: self.search_radius_px(),
-            ..self.config.frontend.appearance_gates
-        };
-        let to_previous = previous.pose.inverse();
-        let mut found = std::mem::take(&mut self.reference_found);
-        found.clear();
-        self.refined.clear();
-        found.extend_from_slice(&previous.points.points);
-        // The previous frame is done with after this frame: its points are moved to their
-        // predicted positions in place.
-        for (point, landmark) in previous
-            .points
-            .points
-            .iter_mut()
-            .zip(&previous.point_landmarks)
-        {
-            if let Some(p) = landmark.and_then(|l| {
-                self.rig
-                    .project_left(&(self.last_motion * (to_previous * l.world)))
-            }) {
-                *point = p;
-            }
-        }
-        // Only points with a landmark are looked for: the others could not be observed.
-        let landmarks = &previous.point_landmarks;
-        let wanted = |k: usize| landmarks.get(k).is_some_and(Option::is_some);
-        self.point_matcher.match_points_of(
-            MatchCase::FrameToFrame,
-            &previous.points,
-            wanted,
-            current,
-            &gates,
-            self.config.frame_to_frame_ratio,
-            scratch,
-        );
-        let images = self
-            .reference_image
-            .as_ref()
-            .zip(current_image)
-            .filter(|_| self.config.subpixel_tracking);
-        for m in scratch.iter() {
-            if let Some(Some(landmark)) = previous.point_landmarks.get(m.query) {
-                let refined = images
-                    .zip(found.get(m.query))
-                    .and_then(|((before, now), &from)| {
-                        refine_track(before, now, from, current.points[m.train])
-                    });
-                // A refined position no longer carries the keypoint's level's rounding.
-                let (pixel, level_weight) = match refined {
-                    Some(pixel) => {
-                        self.refined.push((m.train, pixel));
-                        (pixel, 1.0)
-                    }
-                    None => (current.points[m.train], self.level_weight(current, m.train)),
-                };
-                observations.points.push(PointObservation {
-                    position: to_previous * landmark.world,
-                    pixel,
-                    weight: landmark.observation_weight() * level_weight * noise_weight,
-                });
-                observations.point_pairs.push((m.query, m.train));
-            }
-        }
-        self.reference_found = found;
     }
 
     /// Keeps `image` (this frame's left image, as its points were found in) for the next
@@ -1219,6 +1287,166 @@ impl MotionTracker {
         };
         if !kept {
             self.reference_image = None;
+        }
+    }
+}
+
+/// Weight of point `k` of `features` for its pyramid level: the inverse variance of its
+/// position, `scale_factor^(−2·level)` (1 at full resolution).
+fn level_weight(config: &OdometryConfig, features: &PointFeatures, k: usize) -> f64 {
+    let level = features.levels.get(k).copied().unwrap_or(0);
+    f64::from(config.frontend.orb.scale_factor).powi(-2 * i32::from(level))
+}
+
+/// [`MotionTracker::search_radius_px`] for `config`, once a motion is known or before.
+fn search_radius_px(config: &OdometryConfig, motion_known: bool) -> f64 {
+    if motion_known {
+        config.predicted_window_px
+    } else {
+        config.max_displacement_px
+    }
+}
+
+/// The weight of a frame's point observations for its left image's stretch `gain` (the
+/// noise grows with it), when the config says so.
+fn noise_weight(config: &OdometryConfig, gain: f64) -> f64 {
+    if config.points_weighted_by_gain {
+        gain.powi(-2)
+    } else {
+        1.0
+    }
+}
+
+/// What a frame's points are searched for and where: the reference frame's landmarks,
+/// moved by the last motion.
+struct PointSearch<'a> {
+    reference: &'a Reference,
+    /// The reference's left image for sub-pixel tracking (`None`: not refined).
+    reference_image: Option<&'a GrayImage>,
+    rig: &'a StereoRig,
+    config: &'a OdometryConfig,
+    last_motion: Isometry3<f64>,
+    /// How far from its prediction a landmark is searched for, pixels.
+    radius_px: f64,
+    /// Weight factor of this frame's observations.
+    noise_weight: f64,
+}
+
+impl<'a> PointSearch<'a> {
+    /// The search for `reference`'s landmarks (none without it; `reference_image`: its left
+    /// image, used when the config refines to a fraction of a pixel) from a rig and config,
+    /// the last motion and whether it was measured, and this frame's left stretch gain.
+    fn of(
+        reference: Option<&'a Reference>,
+        reference_image: Option<&'a GrayImage>,
+        (rig, config): (&'a StereoRig, &'a OdometryConfig),
+        (last_motion, motion_known): (Isometry3<f64>, bool),
+        left_gain: f64,
+    ) -> Option<Self> {
+        Some(Self {
+            reference: reference?,
+            reference_image: reference_image.filter(|_| config.subpixel_tracking),
+            rig,
+            config,
+            last_motion,
+            radius_px: search_radius_px(config, motion_known),
+            noise_weight: noise_weight(config, left_gain),
+        })
+    }
+}
+
+/// Frame-to-frame tracking of the points: its results and buffers, kept from frame to
+/// frame.
+#[derive(Default)]
+struct PointTracking {
+    matcher: PointMatcher,
+    /// The reference frame's left points moved to where the last motion predicts them (the
+    /// search's centres).
+    predicted: Vec<Point>,
+    /// The frame's matches.
+    matches: Vec<FeatureMatch>,
+    /// This frame's left points tracked to a fraction of a pixel (index, position).
+    refined: Vec<(usize, Point)>,
+}
+
+impl PointTracking {
+    /// Replaces `observations` with those of `search`'s point landmarks among `current`
+    /// (this frame's left points, found in `current_image`), searched for around where
+    /// the last motion moves them; none without a search.
+    fn observe(
+        &mut self,
+        search: Option<&PointSearch<'_>>,
+        current: &PointFeatures,
+        current_image: &GrayImage,
+        observations: &mut Observations,
+    ) {
+        observations.clear();
+        self.refined.clear();
+        let Some(search) = search else {
+            return;
+        };
+        let previous = search.reference;
+        let gates = AppearanceGates {
+            max_displacement_px: search.radius_px,
+            ..search.config.frontend.appearance_gates
+        };
+        let to_previous = previous.pose.inverse();
+        let found = &previous.points.points;
+        self.predicted.clear();
+        self.predicted
+            .extend(
+                found
+                    .iter()
+                    .zip(&previous.point_landmarks)
+                    .map(|(&point, landmark)| {
+                        landmark
+                            .and_then(|l| {
+                                search
+                                    .rig
+                                    .project_left(&(search.last_motion * (to_previous * l.world)))
+                            })
+                            .unwrap_or(point)
+                    }),
+            );
+        // Only points with a landmark are looked for: the others could not be observed.
+        let landmarks = &previous.point_landmarks;
+        let wanted = |k: usize| landmarks.get(k).is_some_and(Option::is_some);
+        self.matcher.match_points_of(
+            MatchCase::FrameToFrame,
+            (&self.predicted, &previous.points.descriptors),
+            wanted,
+            current,
+            &gates,
+            search.config.frame_to_frame_ratio,
+            &mut self.matches,
+        );
+        for m in &self.matches {
+            if let Some(Some(landmark)) = previous.point_landmarks.get(m.query) {
+                let refined =
+                    search
+                        .reference_image
+                        .zip(found.get(m.query))
+                        .and_then(|(before, &from)| {
+                            refine_track(before, current_image, from, current.points[m.train])
+                        });
+                // A refined position no longer carries the keypoint's level's rounding.
+                let (pixel, level_weight) = match refined {
+                    Some(pixel) => {
+                        self.refined.push((m.train, pixel));
+                        (pixel, 1.0)
+                    }
+                    None => (
+                        current.points[m.train],
+                        level_weight(search.config, current, m.train),
+                    ),
+                };
+                observations.points.push(PointObservation {
+                    position: to_previous * landmark.world,
+                    pixel,
+                    weight: landmark.observation_weight() * level_weight * search.noise_weight,
+                });
+                observations.point_pairs.push((m.query, m.train));
+            }
         }
     }
 }
@@ -1341,20 +1569,19 @@ impl Odometry {
             self.tracker.config.max_contrast_gain,
             &mut self.tracker.spares.images,
         )?;
-        let PreparedImages {
-            stretched: [left_stretched, right_stretched],
-            points,
-            ..
-        } = self
+        // The pipeline's steps, one after the other.
+        let mut prepared = self
             .tracker
-            .prepare_stretched(stretched, left_gain, left, right)?;
+            .prepare_stretched(stretched, left_gain, left, right, true)?;
+        let points_ahead = self.tracker.take_points_ahead(prepared.serial);
         // Stretched once, for the detectors and the back end's corners alike.
-        let seen_left = left_stretched.as_ref().unwrap_or(left);
-        let seen_right = right_stretched.as_ref().unwrap_or(right);
+        let seen_left = prepared.stretched[0].as_ref().unwrap_or(left);
+        let seen_right = prepared.stretched[1].as_ref().unwrap_or(right);
         let (mut lines_l, mut lines_r) = (LineFeatures::default(), LineFeatures::default());
         self.detector.detect(seen_left, &mut lines_l.segments)?;
         self.detector.detect(seen_right, &mut lines_r.segments)?;
-        stats.ms[0] = since(started);
+        // (Less the point work, counted apart.)
+        stats.ms[0] = (since(started) - points_ahead.iter().flatten().sum::<f64>()).max(0.0);
         let started = Instant::now();
         self.matcher.describe(seen_left, &mut lines_l)?;
         self.matcher.describe(seen_right, &mut lines_r)?;
@@ -1390,11 +1617,14 @@ impl Odometry {
             stereo: &stereo,
             tracked: self.previous_lines.as_ref().map(|_| tracked.as_slice()),
         };
-        let result = self.tracker.update_stretched(
-            Some(((seen_left, seen_right), points, left_gain)),
-            lines,
-            stats,
-        );
+        let seen = SeenImages {
+            images: (seen_left, seen_right),
+            points: std::mem::take(&mut prepared.points),
+            left_gain,
+            points_ahead,
+        };
+        let result = self.tracker.update_stretched(Some(seen), lines, stats);
+        let [left_stretched, right_stretched] = prepared.stretched;
         self.tracker
             .spares
             .keep_images([left_stretched, right_stretched]);
@@ -1406,6 +1636,126 @@ impl Odometry {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Segments left out: the frames are tracked on their points alone.
+    const NO_LINES: MatchedLines<'static> = MatchedLines {
+        left: &[],
+        right: &[],
+        stereo: &[],
+        tracked: Some(&[]),
+    };
+
+    /// Real EuRoC frames (a parked vehicle: small motion, many corners) and their rig.
+    fn euroc_frames(indices: &[usize]) -> (Vec<linetrack_datasets::StereoFrame>, StereoRig) {
+        let dir = linetrack_test_data::euroc_dir().unwrap_or_else(|e| panic!("{e}"));
+        let sequence = linetrack_datasets::StereoSequence::open(&dir).unwrap();
+        let frames = indices
+            .iter()
+            .map(|&i| sequence.load_frame(i).unwrap())
+            .collect();
+        (frames, sequence.rig)
+    }
+
+    /// A frame's result without its timings (measured, so never the same twice).
+    fn untimed(mut result: FrameResult) -> FrameResult {
+        result.stats.ms = [0.0; 5];
+        result
+    }
+
+    /// Tracks `frame` as the pose stage does: prepared, its point work done ahead when
+    /// `ahead`, then updated.
+    fn track_prepared(
+        tracker: &mut MotionTracker,
+        frame: &linetrack_datasets::StereoFrame,
+        ahead: bool,
+    ) -> FrameResult {
+        let prepared = if ahead {
+            tracker.prepare_next(&frame.left, &frame.right)
+        } else {
+            tracker.prepare(&frame.left, &frame.right)
+        }
+        .unwrap();
+        let images = Some(((&frame.left, &frame.right), prepared));
+        untimed(
+            tracker
+                .update_prepared(images, NO_LINES, FrameStats::default())
+                .unwrap(),
+        )
+    }
+
+    /// EuRoC frames 0, 4 and 8, and two trackers that tracked frame 0.
+    fn two_trackers_past_frame_0() -> (Vec<linetrack_datasets::StereoFrame>, [MotionTracker; 2]) {
+        let (frames, rig) = euroc_frames(&[0, 4, 8]);
+        let trackers = [(); 2].map(|()| {
+            let mut tracker = MotionTracker::new(OdometryConfig::default(), rig).unwrap();
+            track_prepared(&mut tracker, &frames[0], true);
+            tracker
+        });
+        (frames, trackers)
+    }
+
+    #[test]
+    fn point_work_done_ahead_tracks_a_frame_as_it_does_with_the_segments() {
+        let (frames, rig) = euroc_frames(&[0, 4, 8, 12, 16]);
+        let new = || MotionTracker::new(OdometryConfig::default(), rig).unwrap();
+        let (mut ahead, mut along) = (new(), new());
+        for frame in &frames {
+            let a = track_prepared(&mut ahead, frame, true);
+            let b = track_prepared(&mut along, frame, false);
+            assert_eq!(a, b, "frame {}", frame.index);
+            assert_eq!(a.pose, b.pose, "frame {}", frame.index);
+            if frame.index > 0 {
+                assert!(a.stats.observations[0] > 100, "{:?}", a.stats);
+            }
+        }
+        // The update takes what was done ahead instead of doing it again: observations
+        // emptied after `prepare_next` stay empty…
+        let frame = &frames[0];
+        let prepared = ahead.prepare_next(&frame.left, &frame.right).unwrap();
+        ahead.spares.lists.observations.clear();
+        let images = Some(((&frame.left, &frame.right), prepared));
+        let result = ahead
+            .update_prepared(images, NO_LINES, FrameStats::default())
+            .unwrap();
+        assert_eq!(result.stats.observations[0], 0, "{:?}", result.stats);
+        // …and it is used up: the next update of the same frame looks again.
+        let again = track_prepared(&mut ahead, frame, false);
+        assert!(again.stats.observations[0] > 100, "{:?}", again.stats);
+    }
+
+    #[test]
+    fn point_work_done_ahead_for_another_frame_is_not_used() {
+        // As in the pose stage when a frame's segments never arrive: frame 4 is prepared
+        // with its point work, then frame 8 is tracked.
+        let (frames, [mut skipped, mut direct]) = two_trackers_past_frame_0();
+        skipped
+            .prepare_next(&frames[1].left, &frames[1].right)
+            .unwrap();
+        let a = track_prepared(&mut skipped, &frames[2], false);
+        let b = track_prepared(&mut direct, &frames[2], false);
+        assert!(a.stats.observations[0] > 100, "{:?}", a.stats);
+        assert_eq!(a, b);
+        assert_eq!(a.pose, b.pose);
+    }
+
+    #[test]
+    fn a_frame_prepared_while_another_waits_leaves_it_its_point_work() {
+        // As in the pose stage when frame 8's images arrive before frame 4's segments.
+        let (frames, [mut queued, mut direct]) = two_trackers_past_frame_0();
+        let [f4, f8] = [&frames[1], &frames[2]];
+        let p4 = queued.prepare_next(&f4.left, &f4.right).unwrap();
+        let p8 = queued.prepare(&f8.left, &f8.right).unwrap();
+        assert_eq!(queued.points_ahead.map(|a| a.serial), Some(p4.serial));
+        for (frame, prepared) in [(f4, p4), (f8, p8)] {
+            let images = Some(((&frame.left, &frame.right), prepared));
+            let a = queued
+                .update_prepared(images, NO_LINES, FrameStats::default())
+                .unwrap();
+            let b = track_prepared(&mut direct, frame, true);
+            assert!(a.stats.observations[0] > 100, "{:?}", a.stats);
+            assert_eq!(untimed(a), b, "frame {}", frame.index);
+        }
+    }
 
     #[test]
     fn segments_are_predicted_where_the_last_motion_moves_their_landmarks() {
@@ -1559,7 +1909,7 @@ mod tests {
             points: Vec::new(),
             lines: Vec::new(),
         };
-        tracker.refined = vec![(0, tracked)];
+        tracker.tracking.refined = vec![(0, tracked)];
         tracker.stereo_partners = vec![Some((Point::new(88.0, 61.0), 0.35)), None];
         tracker.anchor_refined_points(&mut points);
         let mut stats = FrameStats::default();

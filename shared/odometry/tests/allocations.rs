@@ -1,4 +1,4 @@
-//! Once warm, the pose estimator's hot path (`MotionTracker::prepare` and
+//! Once warm, the pose estimator's hot path (`MotionTracker::prepare_next` and
 //! `update_prepared`, as the pose stage calls them) allocates no point list, descriptor
 //! table, landmark list or observation list: it reuses those of the frames before. A global
 //! allocator in this test binary counts the large allocations (Rust's heap: OpenCV's own
@@ -32,7 +32,7 @@ fn a_warm_tracker_allocates_no_large_list_per_frame() {
     for index in 0..24 {
         let frame = sequence.load_frame(index).unwrap();
         let before = ALLOCATOR.count();
-        let prepared = tracker.prepare(&frame.left, &frame.right).unwrap();
+        let prepared = tracker.prepare_next(&frame.left, &frame.right).unwrap();
         let images = Some(((&frame.left, &frame.right), prepared));
         let result = tracker
             .update_prepared(images, no_lines, FrameStats::default())

@@ -109,6 +109,7 @@ pub struct FeatureMatch {
 }
 
 /// Hamming distance in bits between two equally long byte strings.
+#[inline(always)]
 pub(crate) fn hamming(a: &[u8], b: &[u8]) -> u32 {
     let mut bits = 0;
     let (a_words, a_tail) = a.split_at(a.len() - a.len() % 8);
@@ -171,6 +172,49 @@ impl HammingMatcher {
     /// ties go to the lower index, as there (and a tie for the nearest fails the ratio
     /// test, as there).
     pub fn match_mutual_among(
+        &mut self,
+        first: &BinaryDescriptors,
+        second: &BinaryDescriptors,
+        min_ratio: f64,
+        candidates: impl FnMut(usize, &mut Vec<usize>),
+        admit: impl Fn(usize, usize) -> bool,
+        out: &mut Vec<FeatureMatch>,
+    ) {
+        #[cfg(target_arch = "x86_64")]
+        if std::arch::is_x86_feature_detected!("popcnt") {
+            // SAFETY: the CPU has the instruction the function is compiled for, as just
+            // checked.
+            #[allow(unsafe_code)]
+            unsafe {
+                self.match_with_popcnt(first, second, min_ratio, candidates, admit, out);
+            }
+            return;
+        }
+        self.match_portably(first, second, min_ratio, candidates, admit, out);
+    }
+
+    /// [`HammingMatcher::match_mutual_among`] compiled for x86-64 CPUs with the POPCNT
+    /// instruction (all since 2008; the baseline x86-64 target lacks it): the bit count of
+    /// the distances, most of a match's work, takes one instruction per word instead of a
+    /// dozen. The same results.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "popcnt")]
+    fn match_with_popcnt(
+        &mut self,
+        first: &BinaryDescriptors,
+        second: &BinaryDescriptors,
+        min_ratio: f64,
+        candidates: impl FnMut(usize, &mut Vec<usize>),
+        admit: impl Fn(usize, usize) -> bool,
+        out: &mut Vec<FeatureMatch>,
+    ) {
+        self.match_portably(first, second, min_ratio, candidates, admit, out);
+    }
+
+    /// [`HammingMatcher::match_mutual_among`] for any CPU; inlined into the callers that
+    /// are compiled for more.
+    #[inline(always)]
+    fn match_portably(
         &mut self,
         first: &BinaryDescriptors,
         second: &BinaryDescriptors,
@@ -277,6 +321,39 @@ mod tests {
         // Gating the best away leaves the other, unique candidate.
         matcher.match_mutual(&first, &second, 2.5, |_, j| j == 1, &mut out);
         assert_eq!(out.first().map(|m| m.train), Some(1));
+    }
+
+    #[test]
+    fn the_popcnt_build_matches_as_the_portable_one() {
+        use rand::{Rng, SeedableRng};
+        // ORB-sized descriptors, near copies of shared patterns (close pairs,
+        // ties and ratio-test calls), a few missing.
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
+        let patterns: Vec<[u8; 32]> = (0..200).map(|_| rng.random()).collect();
+        let mut noisy = |n: usize| {
+            let mut d = BinaryDescriptors::default();
+            d.reset(n, 32);
+            for k in 0..n {
+                let mut row = patterns[rng.random_range(0..patterns.len())];
+                for _ in 0..rng.random_range(0..24) {
+                    row[rng.random_range(0..32)] ^= 1 << rng.random_range(0..8);
+                }
+                d.set_row(k, &row);
+                d.present[k] = rng.random_range(0..20) > 0;
+            }
+            d
+        };
+        let (first, second) = (noisy(300), noisy(280));
+        let admit = |i: usize, j: usize| !(i + 2 * j).is_multiple_of(7);
+        let (mut dispatched, mut portable) = (Vec::new(), Vec::new());
+        let mut matcher = HammingMatcher::new();
+        for ratio in [1.0, 1.2, 1.5] {
+            let all = |_: usize, c: &mut Vec<usize>| c.extend(0..280);
+            matcher.match_mutual_among(&first, &second, ratio, all, admit, &mut dispatched);
+            matcher.match_portably(&first, &second, ratio, all, admit, &mut portable);
+            assert!(dispatched.len() > 20, "{}", dispatched.len());
+            assert_eq!(dispatched, portable, "ratio {ratio}");
+        }
     }
 
     #[test]

@@ -172,16 +172,19 @@ impl PointMatcher {
         min_ratio: f64,
         out: &mut Vec<FeatureMatch>,
     ) {
+        let first = (first.points.as_slice(), &first.descriptors);
         self.match_points_of(case, first, |_| true, second, gates, min_ratio, out);
     }
 
     /// [`PointMatcher::match_points`] for the first image's points `wanted` says yes to
-    /// (the others are neither matched nor compete for the second image's points).
+    /// (the others are neither matched nor compete for the second image's points), their
+    /// positions and descriptors given apart (positions moved to where they are predicted,
+    /// say).
     #[allow(clippy::too_many_arguments)]
     pub fn match_points_of(
         &mut self,
         case: MatchCase,
-        first: &PointFeatures,
+        (first_points, first_descriptors): (&[Point], &BinaryDescriptors),
         wanted: impl Fn(usize) -> bool,
         second: &PointFeatures,
         gates: &AppearanceGates,
@@ -221,14 +224,14 @@ impl PointMatcher {
         // that did not pay (criterion): the matcher applies the gate.
         let gate_in_grid = case == MatchCase::Stereo;
         self.hamming.match_mutual_among(
-            &first.descriptors,
+            first_descriptors,
             &second.descriptors,
             min_ratio,
             |i, candidates| {
                 if !wanted(i) {
                     return;
                 }
-                let a = first.points[i];
+                let a = first_points[i];
                 let (x, y) = window(a);
                 if gate_in_grid {
                     grid.extend_within(x, y, |b| points_may_match(case, gates, a, b), candidates);
@@ -236,7 +239,7 @@ impl PointMatcher {
                     grid.extend_within(x, y, |_| true, candidates);
                 }
             },
-            |i, j| gate_in_grid || points_may_match(case, gates, first.points[i], second.points[j]),
+            |i, j| gate_in_grid || points_may_match(case, gates, first_points[i], second.points[j]),
             out,
         );
     }
@@ -639,7 +642,7 @@ mod tests {
         assert_eq!(pairs(&out), [(0, 0)]);
         matcher.match_points_of(
             MatchCase::FrameToFrame,
-            &first,
+            (&first.points, &first.descriptors),
             |i| i == 1,
             &second,
             &gates,
