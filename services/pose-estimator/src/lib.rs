@@ -17,7 +17,7 @@ use linetrack_msgs::{
     FrameHeader, NO_FRAME, PoseRecord, RigRecord, StageKind, Topic, TrackedLine, TracksHeader,
 };
 use linetrack_odometry::{
-    Features, FrameStats, MatchedLines, MotionTracker, OdometryConfig, PreparedImages,
+    Features, FrameStats, MatchedLines, MotionTracker, OdometryConfig, Preparation, PreparedImages,
 };
 use linetrack_stage_runtime::{
     Images, Stage, StageContext, held_capacity, rig_from_record, run_stage, stereo_views,
@@ -194,8 +194,8 @@ impl PoseTracker {
 
     /// Stretches frame `header`'s images and finds their corners ahead of its segments
     /// (nothing before a rig arrived), and their stereo partners and frame-to-frame
-    /// observations when the frame before it was tracked; kept for [`PoseTracker::track`]
-    /// of the same frame.
+    /// observations when no earlier frame still waits for its segments; kept for
+    /// [`PoseTracker::track`] of the same frame.
     pub fn prepare(&mut self, header: &FrameHeader, frame: &Images) -> anyhow::Result<()> {
         let Some(tracker) = &mut self.tracker else {
             return Ok(());
@@ -203,11 +203,12 @@ impl PoseTracker {
         let (left, right) = stereo_views(frame)?;
         // With no frame before it waiting for its segments, the last one tracked is the
         // one this frame's points are searched against: that search is done now too.
-        let prepared = if self.prepared.is_empty() {
-            tracker.prepare_next(&left, &right)?
+        let preparation = if self.prepared.is_empty() {
+            Preparation::CornersAndPoints
         } else {
-            tracker.prepare(&left, &right)?
+            Preparation::Corners
         };
+        let prepared = tracker.prepare(&left, &right, preparation)?;
         if self.prepared.len() >= held_capacity(Topic::Frames) {
             self.prepared.pop_front();
         }

@@ -364,14 +364,32 @@ pub struct PreparedImages {
     left_gain: f64,
     /// ORB points of the left and right image (empty when the odometry uses lines only).
     points: [PointFeatures; 2],
-    /// Milliseconds it took.
+    /// Milliseconds it took, less the point work done ahead (counted with the stereo and
+    /// frame-to-frame steps; the search ran beside the right image's corners, so this
+    /// leaves out up to its time of the corners').
     ms: f64,
-    /// Which of the tracker's preparations it is (from 1), to tell whether the point work
-    /// [`MotionTracker::prepare_next`] did is this frame's.
+    /// Which preparation it is (unique in the process, from 1), to tell whether the point
+    /// work [`Preparation::CornersAndPoints`] did is this frame's.
     serial: u64,
 }
 
-/// The point work [`MotionTracker::prepare_next`] did for a prepared frame.
+/// The last [`PreparedImages::serial`] given out.
+static PREPARED_SERIAL: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+
+/// How much of a frame's work [`MotionTracker::prepare`] does before its segments arrive.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Preparation {
+    /// The images stretched and their corners found.
+    Corners,
+    /// Also the points' work that needs no segments: the left points searched for the last
+    /// tracked frame's landmarks (while the right image's corners are being found), then
+    /// stereo matched. For the frame that follows the last one tracked:
+    /// [`MotionTracker::update_prepared`] uses that work when no other frame was tracked in
+    /// between, and does it again otherwise.
+    CornersAndPoints,
+}
+
+/// The point work [`Preparation::CornersAndPoints`] did for a prepared frame.
 #[derive(Debug, Clone, Copy, PartialEq)]
 struct PointsAhead {
     /// The preparation it was done for.
@@ -390,7 +408,7 @@ struct SeenImages<'a> {
     /// The left image's stretch gain (1: not stretched).
     left_gain: f64,
     /// The milliseconds of the frame's point work (stereo, frame to frame) when
-    /// [`MotionTracker::prepare_next`] did it for this frame and no frame was tracked
+    /// [`Preparation::CornersAndPoints`] did it for this frame and no frame was tracked
     /// since; `None`: it is done with the segments.
     points_ahead: Option<[f64; 2]>,
 }
@@ -445,7 +463,8 @@ struct FrameLists {
 }
 
 /// What frames done with leave for the next ones (images, point lists, landmark lists):
-/// once warm, tracking a frame allocates none of them.
+/// once warm, tracking a frame allocates none of them. `lists` also carries the point
+/// work [`Preparation::CornersAndPoints`] did, from then until the frame's update.
 #[derive(Default)]
 struct Spares {
     images: Vec<GrayImage>,
@@ -527,8 +546,6 @@ pub struct MotionTracker {
     /// reference frame, its image and the last motion, which the next update changes:
     /// any update uses it up, whichever frame it tracks.
     points_ahead: Option<PointsAhead>,
-    /// The last preparation's [`PreparedImages::serial`].
-    prepared_serial: u64,
     /// Each left point's stereo partner this frame (right keypoint, weight of the two
     /// keypoints' pyramid levels).
     stereo_partners: Vec<Option<(Point, f64)>>,
@@ -550,7 +567,6 @@ impl MotionTracker {
             profiles: Default::default(),
             reference_image: None,
             points_ahead: None,
-            prepared_serial: 0,
             stereo_partners: Vec::new(),
             spares: Spares::default(),
             config,
@@ -656,44 +672,26 @@ impl MotionTracker {
         stats: FrameStats,
     ) -> Result<FrameResult, OdometryError> {
         let prepared = match images {
-            Some((left, right)) => Some(self.prepare_next(left, right)?),
+            Some((left, right)) => {
+                Some(self.prepare(left, right, Preparation::CornersAndPoints)?)
+            }
             None => None,
         };
         self.update_prepared(images.zip(prepared), lines, stats)
     }
 
     /// The part of a frame's work that needs only its images, not its segments: dark images
-    /// stretched (for the corner detector as for the segment detector) and their ORB points
-    /// found. The pipeline's pose stage does it while the frame's segments are still being
-    /// detected and matched; [`MotionTracker::update_prepared`] finishes the frame.
+    /// stretched (for the corner detector as for the segment detector), their ORB points
+    /// found, and with [`Preparation::CornersAndPoints`] the points' work. The pipeline's
+    /// pose stage does it while the frame's segments are still being detected and matched;
+    /// [`MotionTracker::update_prepared`] finishes the frame.
     pub fn prepare(
         &mut self,
         left: &GrayImage,
         right: &GrayImage,
+        preparation: Preparation,
     ) -> Result<PreparedImages, OdometryError> {
-        self.prepare_images(left, right, false)
-    }
-
-    /// [`MotionTracker::prepare`] for the frame that follows the last one tracked, with
-    /// the point work that needs no segments: its left points are searched for the last
-    /// frame's landmarks while the right image's corners are being found, then stereo
-    /// matched. [`MotionTracker::update_prepared`] uses that work when no other frame was
-    /// tracked in between, and does it again otherwise.
-    pub fn prepare_next(
-        &mut self,
-        left: &GrayImage,
-        right: &GrayImage,
-    ) -> Result<PreparedImages, OdometryError> {
-        self.prepare_images(left, right, true)
-    }
-
-    /// [`MotionTracker::prepare`], with the point work when `ahead`.
-    fn prepare_images(
-        &mut self,
-        left: &GrayImage,
-        right: &GrayImage,
-        ahead: bool,
-    ) -> Result<PreparedImages, OdometryError> {
+        let ahead = preparation == Preparation::CornersAndPoints;
         let started = Instant::now();
         let (stretched, left_gain) = stretch_pair(
             left,
@@ -703,12 +701,17 @@ impl MotionTracker {
         )?;
         let mut prepared = self.prepare_stretched(stretched, left_gain, left, right, ahead)?;
         // (Less the point work, counted apart.)
-        let ahead_ms: f64 = self.points_ahead.iter().flat_map(|a| a.ms).sum();
+        let ahead_ms: f64 = self
+            .points_ahead
+            .iter()
+            .filter(|a| a.serial == prepared.serial)
+            .flat_map(|a| a.ms)
+            .sum();
         prepared.ms = (since(started) - ahead_ms).max(0.0);
         Ok(prepared)
     }
 
-    /// [`MotionTracker::prepare_images`] after the stretch: finds the points in the
+    /// [`MotionTracker::prepare`] after the stretch: finds the points in the
     /// stretched images (or the originals, `None` where not stretched), and does the point
     /// work when `ahead`.
     fn prepare_stretched(
@@ -719,12 +722,11 @@ impl MotionTracker {
         right: &GrayImage,
         ahead: bool,
     ) -> Result<PreparedImages, OdometryError> {
-        let started = Instant::now();
         // (Without the point work, that of a frame prepared before stays for its update.)
         if ahead {
             self.points_ahead = None;
         }
-        self.prepared_serial += 1;
+        let serial = PREPARED_SERIAL.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
         let mut points = [PointFeatures::default(), PointFeatures::default()];
         let uses_points = self.config.features == Features::PointsAndLines;
         let mut tracking_ms = 0.0;
@@ -763,8 +765,9 @@ impl MotionTracker {
             stretched: [left_stretched, right_stretched],
             left_gain,
             points,
-            ms: since(started),
-            serial: self.prepared_serial,
+            // (Set by the caller, which times the stretch too.)
+            ms: 0.0,
+            serial,
         };
         if ahead && uses_points {
             let mut lists = std::mem::take(&mut self.spares.lists);
@@ -894,7 +897,8 @@ impl MotionTracker {
         result
     }
 
-    /// [`MotionTracker::update_stretched`] with the frame's lists (cleared here).
+    /// [`MotionTracker::update_stretched`] with the frame's lists (cleared here, but for
+    /// the points' stereo matches and observations when they were made ahead).
     fn track_frame(
         &mut self,
         lists: &mut FrameLists,
@@ -1662,19 +1666,15 @@ mod tests {
         result
     }
 
-    /// Tracks `frame` as the pose stage does: prepared, its point work done ahead when
-    /// `ahead`, then updated.
+    /// Tracks `frame` as the pose stage does: prepared, then updated.
     fn track_prepared(
         tracker: &mut MotionTracker,
         frame: &linetrack_datasets::StereoFrame,
-        ahead: bool,
+        preparation: Preparation,
     ) -> FrameResult {
-        let prepared = if ahead {
-            tracker.prepare_next(&frame.left, &frame.right)
-        } else {
-            tracker.prepare(&frame.left, &frame.right)
-        }
-        .unwrap();
+        let prepared = tracker
+            .prepare(&frame.left, &frame.right, preparation)
+            .unwrap();
         let images = Some(((&frame.left, &frame.right), prepared));
         untimed(
             tracker
@@ -1688,7 +1688,7 @@ mod tests {
         let (frames, rig) = euroc_frames(&[0, 4, 8]);
         let trackers = [(); 2].map(|()| {
             let mut tracker = MotionTracker::new(OdometryConfig::default(), rig).unwrap();
-            track_prepared(&mut tracker, &frames[0], true);
+            track_prepared(&mut tracker, &frames[0], Preparation::CornersAndPoints);
             tracker
         });
         (frames, trackers)
@@ -1697,21 +1697,34 @@ mod tests {
     #[test]
     fn point_work_done_ahead_tracks_a_frame_as_it_does_with_the_segments() {
         let (frames, rig) = euroc_frames(&[0, 4, 8, 12, 16]);
+        // The frames as they are, and darkened to a quarter: those are stretched first,
+        // and their points weighted by the gain.
+        let dark: Vec<_> = frames.iter().map(darkened).collect();
         let new = || MotionTracker::new(OdometryConfig::default(), rig).unwrap();
-        let (mut ahead, mut along) = (new(), new());
-        for frame in &frames {
-            let a = track_prepared(&mut ahead, frame, true);
-            let b = track_prepared(&mut along, frame, false);
-            assert_eq!(a, b, "frame {}", frame.index);
-            assert_eq!(a.pose, b.pose, "frame {}", frame.index);
-            if frame.index > 0 {
-                assert!(a.stats.observations[0] > 100, "{:?}", a.stats);
+        for frames in [&frames, &dark] {
+            let (mut ahead, mut along) = (new(), new());
+            for frame in frames {
+                let a = track_prepared(&mut ahead, frame, Preparation::CornersAndPoints);
+                let b = track_prepared(&mut along, frame, Preparation::Corners);
+                assert_eq!(a, b, "frame {}", frame.index);
+                assert_eq!(a.pose, b.pose, "frame {}", frame.index);
+                if frame.index > 0 {
+                    assert!(a.stats.observations[0] > 100, "{:?}", a.stats);
+                }
             }
         }
+        let stretched = new()
+            .prepare(&dark[0].left, &dark[0].right, Preparation::Corners)
+            .unwrap();
+        assert!(stretched.left_gain > 2.0, "gain {}", stretched.left_gain);
+        let mut ahead = new();
+        track_prepared(&mut ahead, &frames[0], Preparation::CornersAndPoints);
         // The update takes what was done ahead instead of doing it again: observations
-        // emptied after `prepare_next` stay empty…
+        // emptied after the preparation stay empty…
         let frame = &frames[0];
-        let prepared = ahead.prepare_next(&frame.left, &frame.right).unwrap();
+        let prepared = ahead
+            .prepare(&frame.left, &frame.right, Preparation::CornersAndPoints)
+            .unwrap();
         ahead.spares.lists.observations.clear();
         let images = Some(((&frame.left, &frame.right), prepared));
         let result = ahead
@@ -1719,8 +1732,29 @@ mod tests {
             .unwrap();
         assert_eq!(result.stats.observations[0], 0, "{:?}", result.stats);
         // …and it is used up: the next update of the same frame looks again.
-        let again = track_prepared(&mut ahead, frame, false);
+        let again = track_prepared(&mut ahead, frame, Preparation::Corners);
         assert!(again.stats.observations[0] > 100, "{:?}", again.stats);
+        // A restart lets it go too.
+        ahead
+            .prepare(&frame.left, &frame.right, Preparation::CornersAndPoints)
+            .unwrap();
+        assert!(ahead.points_ahead.is_some());
+        ahead.resume_from(ahead.pose(), ahead.last_motion());
+        assert!(ahead.points_ahead.is_none());
+    }
+
+    /// `frame` with its pixels divided by 4.
+    fn darkened(frame: &linetrack_datasets::StereoFrame) -> linetrack_datasets::StereoFrame {
+        let darken = |image: &GrayImage| {
+            let pixels: Vec<u8> = image.pixels().unwrap().iter().map(|p| p / 4).collect();
+            let (width, height) = (image.width() as usize, image.height() as usize);
+            GrayImage::from_pixels(width, height, &pixels, "darkened").unwrap()
+        };
+        linetrack_datasets::StereoFrame {
+            left: darken(&frame.left),
+            right: darken(&frame.right),
+            ..frame.clone()
+        }
     }
 
     #[test]
@@ -1729,10 +1763,14 @@ mod tests {
         // with its point work, then frame 8 is tracked.
         let (frames, [mut skipped, mut direct]) = two_trackers_past_frame_0();
         skipped
-            .prepare_next(&frames[1].left, &frames[1].right)
+            .prepare(
+                &frames[1].left,
+                &frames[1].right,
+                Preparation::CornersAndPoints,
+            )
             .unwrap();
-        let a = track_prepared(&mut skipped, &frames[2], false);
-        let b = track_prepared(&mut direct, &frames[2], false);
+        let a = track_prepared(&mut skipped, &frames[2], Preparation::Corners);
+        let b = track_prepared(&mut direct, &frames[2], Preparation::Corners);
         assert!(a.stats.observations[0] > 100, "{:?}", a.stats);
         assert_eq!(a, b);
         assert_eq!(a.pose, b.pose);
@@ -1743,15 +1781,19 @@ mod tests {
         // As in the pose stage when frame 8's images arrive before frame 4's segments.
         let (frames, [mut queued, mut direct]) = two_trackers_past_frame_0();
         let [f4, f8] = [&frames[1], &frames[2]];
-        let p4 = queued.prepare_next(&f4.left, &f4.right).unwrap();
-        let p8 = queued.prepare(&f8.left, &f8.right).unwrap();
+        let p4 = queued
+            .prepare(&f4.left, &f4.right, Preparation::CornersAndPoints)
+            .unwrap();
+        let p8 = queued
+            .prepare(&f8.left, &f8.right, Preparation::Corners)
+            .unwrap();
         assert_eq!(queued.points_ahead.map(|a| a.serial), Some(p4.serial));
         for (frame, prepared) in [(f4, p4), (f8, p8)] {
             let images = Some(((&frame.left, &frame.right), prepared));
             let a = queued
                 .update_prepared(images, NO_LINES, FrameStats::default())
                 .unwrap();
-            let b = track_prepared(&mut direct, frame, true);
+            let b = track_prepared(&mut direct, frame, Preparation::CornersAndPoints);
             assert!(a.stats.observations[0] > 100, "{:?}", a.stats);
             assert_eq!(untimed(a), b, "frame {}", frame.index);
         }
