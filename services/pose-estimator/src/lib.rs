@@ -4,9 +4,9 @@
 //! frame-to-frame matches, and publishes the frame's pose. The points' part (corners,
 //! their stereo matches, their search for the last frame's landmarks) needs only the
 //! images: it is done when they arrive, while the segments are still being detected and
-//! matched. When the tracks were matched
-//! against another frame than the one it last tracked (a drop upstream, a restart), it
-//! starts again from the current pose instead of using them. The stereo rig comes from the
+//! matched. When the tracks were matched against another frame than the one it last
+//! tracked (a drop upstream, a restart), it starts again from the current pose instead of
+//! using them. The stereo rig comes from the
 //! stream (the frame source publishes it on [`Topic::Rig`]): the stage never opens the
 //! data set, so any source (a live camera) can feed it.
 

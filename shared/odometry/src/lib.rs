@@ -1706,8 +1706,8 @@ mod tests {
             for frame in frames {
                 let a = track_prepared(&mut ahead, frame, Preparation::CornersAndPoints);
                 let b = track_prepared(&mut along, frame, Preparation::Corners);
+                // (The pose included.)
                 assert_eq!(a, b, "frame {}", frame.index);
-                assert_eq!(a.pose, b.pose, "frame {}", frame.index);
                 if frame.index > 0 {
                     assert!(a.stats.observations[0] > 100, "{:?}", a.stats);
                 }
@@ -1773,7 +1773,6 @@ mod tests {
         let b = track_prepared(&mut direct, &frames[2], Preparation::Corners);
         assert!(a.stats.observations[0] > 100, "{:?}", a.stats);
         assert_eq!(a, b);
-        assert_eq!(a.pose, b.pose);
     }
 
     #[test]
