@@ -33,7 +33,9 @@ pub use calib::{PinholeCamera, Rectifier};
 pub use euroc::read_euroc_camera;
 pub use kitti::read_kitti_poses;
 pub use middlebury::{DisparityMap, LoadedPair, MiddleburyPair, list_middlebury};
-pub use sequence::{FrameEntry, FrameError, StereoFrame, StereoSequence, StereoStream};
+pub use sequence::{
+    FrameEntry, FrameError, StereoFrame, StereoSequence, StereoStream, opencv_on_calling_threads,
+};
 pub use writer::EurocWriter;
 
 use std::path::PathBuf;

@@ -200,6 +200,18 @@ impl StereoSequence {
     }
 }
 
+/// Makes OpenCV do its work on the thread that asks for it instead of on its thread pool,
+/// for the whole process. A process that only reads frames calls it first: the pool's
+/// threads run at the priority of the thread that started them, so without this the
+/// rectification of the frames read ahead ([`StereoSequence::into_stream_with`]) spills onto
+/// threads at the process's priority instead of the reading thread's lower one.
+pub fn opencv_on_calling_threads() -> Result<(), DatasetError> {
+    opencv::core::set_num_threads(1).map_err(|reason| DatasetError::OpenCv {
+        context: "setting OpenCV's threads to the caller's",
+        reason,
+    })
+}
+
 /// Frames of a sequence, loaded ahead on a thread. Yields `Err` for a frame that could not
 /// be loaded (counted in [`StereoStream::skipped`]) and goes on with the next.
 pub struct StereoStream {

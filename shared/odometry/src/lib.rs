@@ -729,7 +729,7 @@ impl MotionTracker {
         let serial = PREPARED_SERIAL.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
         let mut points = [PointFeatures::default(), PointFeatures::default()];
         let uses_points = self.config.features == Features::PointsAndLines;
-        let mut tracking_ms = 0.0;
+        let (mut stereo_ms, mut tracking_ms) = (0.0, 0.0);
         if uses_points {
             points = [(); 2].map(|()| self.spares.points.pop().unwrap_or_default());
             // Left and right at the same time: a frame's corners are its pose's longest step.
@@ -739,7 +739,7 @@ impl MotionTracker {
                 right_stretched.as_ref().unwrap_or(right),
             );
             let orb_left = &mut self.orb_left;
-            // Ahead, the left points are then searched for the reference's landmarks while
+            // Ahead, the left points are then matched with the reference's landmarks while
             // the right image's corners are still being found.
             let search = PointSearch::of(
                 self.reference.as_ref().filter(|_| ahead),
@@ -749,17 +749,40 @@ impl MotionTracker {
                 left_gain,
             );
             let tracking = &mut self.tracking;
-            let observations = &mut self.spares.lists.observations;
             let (right_side, left_side) = self.orb_right.extract_while(image_r, points_r, || {
                 orb_left.extract(image_l, points_l)?;
                 let started = Instant::now();
                 if ahead {
-                    tracking.observe(search.as_ref(), points_l, image_l, observations);
+                    tracking.find(search.as_ref(), points_l);
                 }
                 Ok::<_, VisionError>(since(started))
             });
             tracking_ms = left_side?;
             right_side?;
+            if ahead {
+                // Then the stereo matches are found on the worker while the landmarks'
+                // matches are refined here.
+                let lists = &mut self.spares.lists;
+                let gates = &self.config.frontend.appearance_gates;
+                let ratio = self.config.frontend.orb.min_distance_ratio;
+                let (stereo, refine_ms) = self.orb_right.match_stereo_while(
+                    [points_l, points_r],
+                    (gates, ratio),
+                    &mut lists.stereo_matches,
+                    || {
+                        let started = Instant::now();
+                        tracking.observe_found(
+                            search.as_ref(),
+                            points_l,
+                            image_l,
+                            &mut lists.observations,
+                        );
+                        since(started)
+                    },
+                );
+                stereo_ms = stereo?;
+                tracking_ms += refine_ms;
+            }
         }
         let prepared = PreparedImages {
             stretched: [left_stretched, right_stretched],
@@ -770,13 +793,14 @@ impl MotionTracker {
             serial,
         };
         if ahead && uses_points {
-            let mut lists = std::mem::take(&mut self.spares.lists);
+            let started = Instant::now();
             let [points_l, points_r] = &prepared.points;
-            let stereo_ms = self.match_stereo(&mut lists, [points_l, points_r]);
-            self.spares.lists = lists;
+            let matches = std::mem::take(&mut self.spares.lists.stereo_matches);
+            self.set_stereo_partners(&matches, [points_l, points_r]);
+            self.spares.lists.stereo_matches = matches;
             self.points_ahead = Some(PointsAhead {
                 serial: prepared.serial,
-                ms: [stereo_ms, tracking_ms],
+                ms: [stereo_ms + since(started), tracking_ms],
             });
         }
         Ok(prepared)
@@ -828,24 +852,32 @@ impl MotionTracker {
         [points_l, points_r]: [&PointFeatures; 2],
     ) -> f64 {
         let started = Instant::now();
-        let matches = &mut lists.stereo_matches;
-        self.stereo_partners.clear();
-        self.stereo_partners.resize(points_l.points.len(), None);
-        let gates = &self.config.frontend.appearance_gates;
         self.point_matcher.match_points(
             MatchCase::Stereo,
             points_l,
             points_r,
-            gates,
+            &self.config.frontend.appearance_gates,
             self.config.frontend.orb.min_distance_ratio,
-            matches,
+            &mut lists.stereo_matches,
         );
-        for m in matches.iter() {
+        self.set_stereo_partners(&lists.stereo_matches, [points_l, points_r]);
+        since(started)
+    }
+
+    /// Each of `points_l`'s stereo partner among `points_r`, from their `matches`, with
+    /// the weight of the two keypoints' levels.
+    fn set_stereo_partners(
+        &mut self,
+        matches: &[FeatureMatch],
+        [points_l, points_r]: [&PointFeatures; 2],
+    ) {
+        self.stereo_partners.clear();
+        self.stereo_partners.resize(points_l.points.len(), None);
+        for m in matches {
             let weight = level_weight(&self.config, points_l, m.query)
                 * level_weight(&self.config, points_r, m.train);
             self.stereo_partners[m.query] = Some((points_r.points[m.train], weight));
         }
-        since(started)
     }
 
     /// Tracks one frame whose images were [prepared](MotionTracker::prepare) (`images`:
@@ -1384,8 +1416,15 @@ impl PointTracking {
         current_image: &GrayImage,
         observations: &mut Observations,
     ) {
-        observations.clear();
-        self.refined.clear();
+        self.find(search, current);
+        self.observe_found(search, current, current_image, observations);
+    }
+
+    /// The first half of [`PointTracking::observe`]: matches `search`'s point landmarks
+    /// with `current`'s points, around where the last motion moves them (no matches
+    /// without a search).
+    fn find(&mut self, search: Option<&PointSearch<'_>>, current: &PointFeatures) {
+        self.matches.clear();
         let Some(search) = search else {
             return;
         };
@@ -1395,23 +1434,23 @@ impl PointTracking {
             ..search.config.frontend.appearance_gates
         };
         let to_previous = previous.pose.inverse();
-        let found = &previous.points.points;
         self.predicted.clear();
-        self.predicted
-            .extend(
-                found
-                    .iter()
-                    .zip(&previous.point_landmarks)
-                    .map(|(&point, landmark)| {
-                        landmark
-                            .and_then(|l| {
-                                search
-                                    .rig
-                                    .project_left(&(search.last_motion * (to_previous * l.world)))
-                            })
-                            .unwrap_or(point)
-                    }),
-            );
+        self.predicted.extend(
+            previous
+                .points
+                .points
+                .iter()
+                .zip(&previous.point_landmarks)
+                .map(|(&point, landmark)| {
+                    landmark
+                        .and_then(|l| {
+                            search
+                                .rig
+                                .project_left(&(search.last_motion * (to_previous * l.world)))
+                        })
+                        .unwrap_or(point)
+                }),
+        );
         // Only points with a landmark are looked for: the others could not be observed.
         let landmarks = &previous.point_landmarks;
         let wanted = |k: usize| landmarks.get(k).is_some_and(Option::is_some);
@@ -1424,6 +1463,26 @@ impl PointTracking {
             search.config.frame_to_frame_ratio,
             &mut self.matches,
         );
+    }
+
+    /// The second half of [`PointTracking::observe`]: replaces `observations` with those
+    /// the matches [`PointTracking::find`] made for the same `search` and `current`
+    /// give, each refined to a fraction of a pixel when the config says so.
+    fn observe_found(
+        &mut self,
+        search: Option<&PointSearch<'_>>,
+        current: &PointFeatures,
+        current_image: &GrayImage,
+        observations: &mut Observations,
+    ) {
+        observations.clear();
+        self.refined.clear();
+        let Some(search) = search else {
+            return;
+        };
+        let previous = search.reference;
+        let to_previous = previous.pose.inverse();
+        let found = &previous.points.points;
         for m in &self.matches {
             if let Some(Some(landmark)) = previous.point_landmarks.get(m.query) {
                 let refined =

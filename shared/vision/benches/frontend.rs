@@ -15,6 +15,8 @@
 //! - `l1/stereo-whole`: the whole ℓ1 stereo call with its photometric check, image access
 //!   included: profiles of both images + matching;
 //! - `orb/extract`: 600 ORB points of one image, `orb/match/stereo`;
+//! - `orb/match/frame-to-frame/odometry`: the odometry's frame-to-frame point search (1500
+//!   points an image, a 30 px window);
 //! - `orb/refine-track`: the sub-pixel refinement of frame 0's frame-to-frame point matches.
 //! - `stretch`: the contrast stretch of one image (the odometry's default gain limit, 4).
 //!
@@ -27,9 +29,9 @@
 use criterion::{Criterion, criterion_group, criterion_main};
 use linetrack_geometry::MatchCase;
 use linetrack_vision::{
-    DetectorKind, FrontendConfig, GrayImage, HammingMatcher, LineFeatures, MatcherKind,
-    OrbExtractor, PointFeatures, PointMatcher, create_detector, create_segment_matcher,
-    points_may_match, refine_track,
+    AppearanceGates, DetectorKind, FrontendConfig, GrayImage, HammingMatcher, LineFeatures,
+    MatcherKind, OrbExtractor, OrbOptions, PointFeatures, PointMatcher, create_detector,
+    create_segment_matcher, points_may_match, refine_track,
 };
 use opencv::core::{Vec4f, Vector};
 use opencv::ximgproc::{self, EdgeDrawingTrait};
@@ -191,6 +193,37 @@ fn bench_frontend(c: &mut Criterion) {
             })
         });
     }
+    // The odometry's frame-to-frame search: its 1500 points an image, frame 0's left
+    // points looked for among frame 1's within the window it uses once a motion is known
+    // (`predicted_window_px`, 30 px; here around where they were, every point wanted).
+    let odometry_orb = OrbOptions {
+        features: 1500,
+        ..config.orb
+    };
+    let mut odometry_extractor = OrbExtractor::new(&odometry_orb).expect("ORB");
+    let (mut o_first, mut o_second) = (PointFeatures::default(), PointFeatures::default());
+    odometry_extractor
+        .extract(&left, &mut o_first)
+        .expect("orb");
+    odometry_extractor
+        .extract(&next, &mut o_second)
+        .expect("orb");
+    let window = AppearanceGates {
+        max_displacement_px: 30.0,
+        ..config.appearance_gates
+    };
+    group.bench_function("orb/match/frame-to-frame/odometry", |b| {
+        b.iter(|| {
+            point_matcher.match_points(
+                MatchCase::FrameToFrame,
+                black_box(&o_first),
+                black_box(&o_second),
+                &window,
+                1.5,
+                &mut out,
+            )
+        })
+    });
     // Sub-pixel tracking of every frame-to-frame point match of frame 0's left image in
     // frame 1's (the odometry runs it on each tracked landmark).
     let mut p_next = PointFeatures::default();

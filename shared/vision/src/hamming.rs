@@ -24,6 +24,14 @@ impl BinaryDescriptors {
         self.present.resize(rows, false);
     }
 
+    /// Makes this a copy of `other`, in the buffers it has (no allocation once they are
+    /// large enough).
+    pub fn copy_from(&mut self, other: &Self) {
+        self.bytes.clone_from(&other.bytes);
+        self.row_bytes = other.row_bytes;
+        self.present.clone_from(&other.present);
+    }
+
     /// Sets row `row` (of the size [`BinaryDescriptors::reset`] made) to `bytes`.
     #[cfg(test)]
     pub(crate) fn set_row(&mut self, row: usize, bytes: &[u8]) {
@@ -111,6 +119,10 @@ pub struct FeatureMatch {
 /// Hamming distance in bits between two equally long byte strings.
 #[inline(always)]
 pub(crate) fn hamming(a: &[u8], b: &[u8]) -> u32 {
+    // ORB's 32 bytes (LBD's too): four words, unrolled.
+    if let (Ok(x), Ok(y)) = (<&[u8; 32]>::try_from(a), <&[u8; 32]>::try_from(b)) {
+        return hamming_32(x, y);
+    }
     let mut bits = 0;
     let (a_words, a_tail) = a.split_at(a.len() - a.len() % 8);
     let (b_words, b_tail) = b.split_at(b.len() - b.len() % 8);
@@ -122,6 +134,24 @@ pub(crate) fn hamming(a: &[u8], b: &[u8]) -> u32 {
         bits += (x ^ y).count_ones();
     }
     bits
+}
+
+/// [`hamming`] of two 32-byte strings.
+#[inline(always)]
+fn hamming_32(a: &[u8; 32], b: &[u8; 32]) -> u32 {
+    let word = |c: &[u8; 32], k: usize| {
+        u64::from_le_bytes([
+            c[8 * k],
+            c[8 * k + 1],
+            c[8 * k + 2],
+            c[8 * k + 3],
+            c[8 * k + 4],
+            c[8 * k + 5],
+            c[8 * k + 6],
+            c[8 * k + 7],
+        ])
+    };
+    (0..4).map(|k| (word(a, k) ^ word(b, k)).count_ones()).sum()
 }
 
 /// Mutual-best Hamming matcher with a second-best ratio test; keeps its buffers.
@@ -295,6 +325,27 @@ mod tests {
         b[10] = 0xFE;
         assert_eq!(hamming(&a, &b), 5);
         assert_eq!(hamming(&a, &a), 0);
+    }
+
+    /// ORB's and LBD's 32 bytes take the unrolled path: each bit of each word counts once.
+    #[test]
+    fn hamming_of_32_bytes_counts_every_bit() {
+        let bitwise = |a: &[u8], b: &[u8]| -> u32 {
+            a.iter()
+                .zip(b)
+                .map(|(x, y)| (0..8).filter(|k| (x ^ y) >> k & 1 == 1).count() as u32)
+                .sum()
+        };
+        let a = [0u8; 32];
+        for k in 0..256 {
+            let mut b = [0u8; 32];
+            b[k / 8] = 1 << (k % 8);
+            b[31 - k / 8] |= 0x80;
+            assert_eq!(hamming(&a, &b), bitwise(&a, &b), "bit {k}");
+        }
+        let (x, y) = ([0x5Au8; 32], [0xC3u8; 32]);
+        assert_eq!(hamming(&x, &y), bitwise(&x, &y));
+        assert_eq!(hamming(&x, &y), 4 * 32);
     }
 
     #[test]

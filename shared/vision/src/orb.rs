@@ -21,6 +21,16 @@ pub struct PointFeatures {
     pub descriptors: BinaryDescriptors,
 }
 
+impl PointFeatures {
+    /// Makes this a copy of `other`, in the buffers it has (no allocation once they are
+    /// large enough).
+    pub fn copy_from(&mut self, other: &Self) {
+        self.points.clone_from(&other.points);
+        self.levels.clone_from(&other.levels);
+        self.descriptors.copy_from(&other.descriptors);
+    }
+}
+
 /// ORB detection and description; keeps its buffers.
 pub struct OrbExtractor {
     orb: Ptr<ORB>,
@@ -87,34 +97,75 @@ impl OrbExtractor {
 }
 
 /// An [`OrbExtractor`] on a thread of its own ([`SideWorker`]): one image's points are found
-/// there while the caller works on another. The image is copied into the worker's buffer
-/// (reused from frame to frame) and the points come back in buffers that are swapped, not
-/// reallocated.
+/// there while the caller works on another, and two images' points can be matched there
+/// too. The inputs are copied into the worker's buffers (reused from frame to frame) and
+/// the results come back in buffers that are swapped, not reallocated.
 pub struct OrbWorker {
     worker: SideWorker<OrbJob>,
 }
 
 /// What travels to the worker and back.
 struct OrbJob {
+    task: OrbTask,
     extractor: OrbExtractor,
     image: Option<GrayImage>,
     points: PointFeatures,
+    stereo: StereoJob,
     result: Result<(), VisionError>,
+}
+
+/// What the worker is to do with its job.
+#[derive(Debug, Clone, Copy)]
+enum OrbTask {
+    /// Find the points of `image`.
+    Extract,
+    /// Match the stereo job's points.
+    MatchStereo,
+}
+
+/// A stereo matching of points: copies of the two images' points, the matcher and its
+/// settings, and the matches.
+#[derive(Default)]
+struct StereoJob {
+    left: PointFeatures,
+    right: PointFeatures,
+    matcher: PointMatcher,
+    gates: AppearanceGates,
+    min_ratio: f64,
+    matches: Vec<FeatureMatch>,
+    /// How long the matching took, milliseconds.
+    ms: f64,
 }
 
 impl OrbWorker {
     /// A worker with its own extractor made from `options`.
     pub fn new(options: &OrbOptions) -> Result<Self, VisionError> {
         let job = OrbJob {
+            task: OrbTask::Extract,
             extractor: OrbExtractor::new(options)?,
             image: None,
             points: PointFeatures::default(),
+            stereo: StereoJob::default(),
             result: Ok(()),
         };
         let worker = SideWorker::new("orb-right", job, |job: &mut OrbJob| {
-            job.result = match &job.image {
-                Some(image) => job.extractor.extract(image, &mut job.points),
-                None => Ok(()),
+            job.result = match (job.task, &job.image) {
+                (OrbTask::Extract, Some(image)) => job.extractor.extract(image, &mut job.points),
+                (OrbTask::Extract, None) => Ok(()),
+                (OrbTask::MatchStereo, _) => {
+                    let started = std::time::Instant::now();
+                    let stereo = &mut job.stereo;
+                    stereo.matcher.match_points(
+                        MatchCase::Stereo,
+                        &stereo.left,
+                        &stereo.right,
+                        &stereo.gates,
+                        stereo.min_ratio,
+                        &mut stereo.matches,
+                    );
+                    stereo.ms = started.elapsed().as_secs_f64() * 1e3;
+                    Ok(())
+                }
             };
         })?;
         Ok(Self { worker })
@@ -128,17 +179,46 @@ impl OrbWorker {
         out: &mut PointFeatures,
         here: impl FnOnce() -> R,
     ) -> (Result<(), VisionError>, R) {
-        if let Err(error) = self
-            .worker
-            .job()
-            .and_then(|job| copy_image_into(&mut job.image, image))
-        {
+        let handed = self.worker.job().and_then(|job| {
+            job.task = OrbTask::Extract;
+            copy_image_into(&mut job.image, image)
+        });
+        if let Err(error) = handed {
             return (Err(error), here());
         }
         let (job, beside) = self.worker.run_while(here);
         let result = job.and_then(|job| {
             std::mem::swap(out, &mut job.points);
             std::mem::replace(&mut job.result, Ok(()))
+        });
+        (result, beside)
+    }
+
+    /// Replaces `out` with the stereo matches of `left`'s points among `right`'s
+    /// ([`PointMatcher::match_points`] with `gates` and `min_ratio`), found on the worker
+    /// while `here` runs on the calling thread; returns both outcomes once both are done
+    /// (the matching's: its milliseconds).
+    pub fn match_stereo_while<R>(
+        &mut self,
+        [left, right]: [&PointFeatures; 2],
+        (gates, min_ratio): (&AppearanceGates, f64),
+        out: &mut Vec<FeatureMatch>,
+        here: impl FnOnce() -> R,
+    ) -> (Result<f64, VisionError>, R) {
+        match self.worker.job() {
+            Ok(job) => {
+                job.task = OrbTask::MatchStereo;
+                job.stereo.left.copy_from(left);
+                job.stereo.right.copy_from(right);
+                job.stereo.gates = *gates;
+                job.stereo.min_ratio = min_ratio;
+            }
+            Err(error) => return (Err(error), here()),
+        }
+        let (job, beside) = self.worker.run_while(here);
+        let result = job.and_then(|job| {
+            std::mem::swap(out, &mut job.stereo.matches);
+            std::mem::replace(&mut job.result, Ok(())).map(|()| job.stereo.ms)
         });
         (result, beside)
     }
@@ -184,45 +264,55 @@ impl PointMatcher {
     pub fn match_points_of(
         &mut self,
         case: MatchCase,
-        (first_points, first_descriptors): (&[Point], &BinaryDescriptors),
+        first: (&[Point], &BinaryDescriptors),
         wanted: impl Fn(usize) -> bool,
         second: &PointFeatures,
         gates: &AppearanceGates,
         min_ratio: f64,
         out: &mut Vec<FeatureMatch>,
     ) {
-        // Stereo windows are a few rows high and wide along them: flat cells list fewer
-        // points outside the window than square ones.
-        let cell = match case {
-            MatchCase::Stereo => STEREO_CELL_PX,
-            MatchCase::FrameToFrame => GRID_CELL_PX,
-        };
-        self.grid.rebuild(&second.points, cell);
+        match PairGate::new(case, gates) {
+            PairGate::Stereo(gate) => {
+                let window = |a: Point| {
+                    (
+                        [a.x - gate.max_disparity_px, a.x - gate.min_disparity_px],
+                        [
+                            a.y - gate.max_row_difference_px,
+                            a.y + gate.max_row_difference_px,
+                        ],
+                    )
+                };
+                // Stereo windows are a few rows high and wide along them: flat cells list
+                // fewer points outside the window than square ones.
+                self.grid.rebuild(&second.points, STEREO_CELL_PX);
+                self.match_gated(first, wanted, second, min_ratio, out, window, gate);
+            }
+            PairGate::Displacement(gate) => {
+                let r = gate.limit_px;
+                let window = |a: Point| ([a.x - r, a.x + r], [a.y - r, a.y + r]);
+                self.grid.rebuild(&second.points, GRID_CELL_PX);
+                self.match_gated(first, wanted, second, min_ratio, out, window, gate);
+            }
+        }
+    }
+
+    /// [`PointMatcher::match_points_of`] once the grid holds the second image's points:
+    /// each wanted first point is compared with the second image's points in the cells
+    /// its `window` (columns, rows) meets that `gate` admits, the gate applied while the
+    /// cells are listed (over the grid's own copy of the positions, contiguous cell by
+    /// cell), so the Hamming matcher sees only admitted pairs.
+    #[allow(clippy::too_many_arguments)]
+    fn match_gated(
+        &mut self,
+        (first_points, first_descriptors): (&[Point], &BinaryDescriptors),
+        wanted: impl Fn(usize) -> bool,
+        second: &PointFeatures,
+        min_ratio: f64,
+        out: &mut Vec<FeatureMatch>,
+        window: impl Fn(Point) -> ([f64; 2], [f64; 2]),
+        gate: impl Gate,
+    ) {
         let grid = &self.grid;
-        let window = |a: Point| match case {
-            MatchCase::Stereo => (
-                [a.x - gates.max_disparity_px, a.x - gates.min_disparity_px],
-                [
-                    a.y - gates.max_row_difference_px,
-                    a.y + gates.max_row_difference_px,
-                ],
-            ),
-            MatchCase::FrameToFrame => (
-                [
-                    a.x - gates.max_displacement_px,
-                    a.x + gates.max_displacement_px,
-                ],
-                [
-                    a.y - gates.max_displacement_px,
-                    a.y + gates.max_displacement_px,
-                ],
-            ),
-        };
-        // Stereo: the gate is applied while the cells are listed, over the grid's own copy
-        // of the positions (contiguous, cell by cell), and the matcher gets only admitted
-        // pairs. Frame to frame, where most listed points are inside the window's circle,
-        // that did not pay (criterion): the matcher applies the gate.
-        let gate_in_grid = case == MatchCase::Stereo;
         self.hamming.match_mutual_among(
             first_descriptors,
             &second.descriptors,
@@ -233,15 +323,102 @@ impl PointMatcher {
                 }
                 let a = first_points[i];
                 let (x, y) = window(a);
-                if gate_in_grid {
-                    grid.extend_within(x, y, |b| points_may_match(case, gates, a, b), candidates);
-                } else {
-                    grid.extend_within(x, y, |_| true, candidates);
-                }
+                grid.extend_within(x, y, |b| gate.admits(a, b), candidates);
             },
-            |i, j| gate_in_grid || points_may_match(case, gates, first_points[i], second.points[j]),
+            |_, _| true,
             out,
         );
+    }
+}
+
+/// Which pairs of points may match: [`points_may_match`] with what it derives from the
+/// gates worked out once.
+trait Gate: Copy {
+    /// Whether point `a` of the first image and `b` of the second may match.
+    fn admits(&self, a: Point, b: Point) -> bool;
+}
+
+/// [`points_may_match`]'s gate for one case.
+#[derive(Debug, Clone, Copy)]
+enum PairGate {
+    Stereo(StereoGate),
+    Displacement(DisplacementGate),
+}
+
+impl PairGate {
+    fn new(case: MatchCase, gates: &AppearanceGates) -> Self {
+        match case {
+            MatchCase::Stereo => Self::Stereo(StereoGate {
+                min_disparity_px: gates.min_disparity_px,
+                max_disparity_px: gates.max_disparity_px,
+                max_row_difference_px: gates.max_row_difference_px,
+            }),
+            MatchCase::FrameToFrame => {
+                let limit_px = gates.max_displacement_px;
+                let squared = limit_px * limit_px;
+                Self::Displacement(DisplacementGate {
+                    limit_px,
+                    // (Limits whose square is not a normal number, or not a distance, get
+                    // only the exact test.)
+                    exact_only: !(1e-100..=1e100).contains(&limit_px),
+                    surely_within: squared * (1.0 - 1e-9),
+                    surely_beyond: squared * (1.0 + 1e-9),
+                })
+            }
+        }
+    }
+
+    fn admits(&self, a: Point, b: Point) -> bool {
+        match self {
+            Self::Stereo(gate) => gate.admits(a, b),
+            Self::Displacement(gate) => gate.admits(a, b),
+        }
+    }
+}
+
+/// Stereo: on the same rows, with a disparity in range.
+#[derive(Debug, Clone, Copy)]
+struct StereoGate {
+    min_disparity_px: f64,
+    max_disparity_px: f64,
+    max_row_difference_px: f64,
+}
+
+impl Gate for StereoGate {
+    #[inline(always)]
+    fn admits(&self, a: Point, b: Point) -> bool {
+        let disparity = a.x - b.x;
+        (a.y - b.y).abs() <= self.max_row_difference_px
+            && disparity >= self.min_disparity_px
+            && disparity <= self.max_disparity_px
+    }
+}
+
+/// Frame to frame: at most `limit_px` apart.
+#[derive(Debug, Clone, Copy)]
+struct DisplacementGate {
+    limit_px: f64,
+    exact_only: bool,
+    /// Squared distances below this are within the limit, above `surely_beyond` beyond it;
+    /// those between (within a rounding error of the limit) get the exact test.
+    surely_within: f64,
+    surely_beyond: f64,
+}
+
+impl Gate for DisplacementGate {
+    #[inline(always)]
+    fn admits(&self, a: Point, b: Point) -> bool {
+        let (dx, dy) = (a.x - b.x, a.y - b.y);
+        let squared = dx * dx + dy * dy;
+        if self.exact_only {
+            (a - b).norm() <= self.limit_px
+        } else if squared < self.surely_within {
+            true
+        } else if squared > self.surely_beyond || squared.is_nan() {
+            false
+        } else {
+            (a - b).norm() <= self.limit_px
+        }
     }
 }
 
@@ -249,36 +426,11 @@ impl PointMatcher {
 /// (within `max_row_difference_px`) with a disparity in range (stereo), or at most
 /// `max_displacement_px` apart (frame to frame).
 pub fn points_may_match(case: MatchCase, gates: &AppearanceGates, a: Point, b: Point) -> bool {
-    match case {
-        MatchCase::Stereo => {
-            let disparity = a.x - b.x;
-            (a.y - b.y).abs() <= gates.max_row_difference_px
-                && disparity >= gates.min_disparity_px
-                && disparity <= gates.max_disparity_px
-        }
-        MatchCase::FrameToFrame => {
-            // The squared distance settles all but the pairs within a rounding error of the
-            // limit, which get the exact test.
-            let (dx, dy) = (a.x - b.x, a.y - b.y);
-            let squared = dx * dx + dy * dy;
-            let limit = gates.max_displacement_px * gates.max_displacement_px;
-            // (Limits whose square is not a normal number, or not a distance, get only
-            // the exact test.)
-            if !(1e-100..=1e100).contains(&gates.max_displacement_px) {
-                (a - b).norm() <= gates.max_displacement_px
-            } else if squared < limit * (1.0 - 1e-9) {
-                true
-            } else if squared > limit * (1.0 + 1e-9) || squared.is_nan() {
-                false
-            } else {
-                (a - b).norm() <= gates.max_displacement_px
-            }
-        }
-    }
+    PairGate::new(case, gates).admits(a, b)
 }
 
 /// Side of a square [`PointGrid`] cell for frame-to-frame windows, pixels.
-const GRID_CELL_PX: [f64; 2] = [16.0, 16.0];
+const GRID_CELL_PX: [f64; 2] = [8.0, 8.0];
 
 /// Width and height of a [`PointGrid`] cell for stereo windows (±3 rows by default), pixels.
 const STEREO_CELL_PX: [f64; 2] = [32.0, 4.0];

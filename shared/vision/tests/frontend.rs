@@ -724,6 +724,14 @@ fn point_grid_finds_exactly_the_matches_of_comparing_every_pair() {
             },
         ),
         (MatchCase::FrameToFrame, AppearanceGates::default()),
+        // The odometry's window once a motion is known.
+        (
+            MatchCase::FrameToFrame,
+            AppearanceGates {
+                max_displacement_px: 30.0,
+                ..AppearanceGates::default()
+            },
+        ),
         (
             MatchCase::FrameToFrame,
             AppearanceGates {
@@ -818,6 +826,47 @@ fn real_data_orb_worker_finds_the_extractors_points_frame_after_frame() {
         assert_eq!(on_worker.points, here.points, "{}", image.origin());
         assert_eq!(on_worker.levels, here.levels);
         assert_eq!(on_worker.descriptors, here.descriptors);
+    }
+}
+
+/// The worker's stereo matching gives the matches the calling thread's matcher gives, on
+/// real EuRoC pairs (as recorded: unrectified, so a few dozen matches), between extractions
+/// on the same worker (its task changes back and forth) and with the caller's own work
+/// beside it.
+#[test]
+fn real_data_the_worker_matches_stereo_points_as_the_caller_does() {
+    let options = OrbOptions::default();
+    let gates = AppearanceGates::default();
+    let mut extractor = OrbExtractor::new(&options).unwrap();
+    let mut worker = OrbWorker::new(&options).unwrap();
+    let mut matcher = PointMatcher::new();
+    let (mut from_worker, mut from_here) = (Vec::new(), Vec::new());
+    for frame in [0, 1, 0] {
+        let (left, right) = euroc_images(frame);
+        let (mut points_l, mut points_r) = (PointFeatures::default(), PointFeatures::default());
+        let (right_side, left_side) = worker.extract_while(&right, &mut points_r, || {
+            extractor.extract(&left, &mut points_l)
+        });
+        right_side.unwrap();
+        left_side.unwrap();
+        let (on_worker, ()) = worker.match_stereo_while(
+            [&points_l, &points_r],
+            (&gates, options.min_distance_ratio),
+            &mut from_worker,
+            || {
+                matcher.match_points(
+                    MatchCase::Stereo,
+                    &points_l,
+                    &points_r,
+                    &gates,
+                    options.min_distance_ratio,
+                    &mut from_here,
+                )
+            },
+        );
+        assert!(on_worker.unwrap() >= 0.0);
+        assert!(from_here.len() > 10, "frame {frame}: {}", from_here.len());
+        assert_eq!(from_worker, from_here, "frame {frame}");
     }
 }
 
