@@ -77,6 +77,18 @@ pub(crate) fn shutdown_ordered(control: &mut Inlet<Control, ()>, pid: u32) -> an
     }))
 }
 
+/// [`run`] as a process of its own (`linetrack-frame-source`): OpenCV is first set to one
+/// thread, so that its work (rectifying the frames read ahead, or a camera's on the capture
+/// thread) runs on the thread that asks for it, at that thread's priority
+/// (`source.reader_nice` for the frames read ahead). In one process with the other stages
+/// (`--single-process`) the setting would reach them too, so [`run`] leaves it alone.
+pub fn run_process(ctx: &StageContext, bus: &Bus, shutdown: &Shutdown) -> anyhow::Result<()> {
+    if let Err(e) = linetrack_datasets::opencv_on_calling_threads() {
+        tracing::warn!("{e}");
+    }
+    run(ctx, bus, shutdown)
+}
+
 /// Runs the source: publishes the rig and the sequence, then holds the rig until the run
 /// ends (shutdown by signal or command).
 pub fn run(ctx: &StageContext, bus: &Bus, shutdown: &Shutdown) -> anyhow::Result<()> {

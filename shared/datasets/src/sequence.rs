@@ -207,7 +207,7 @@ impl StereoSequence {
 /// threads at the process's priority instead of the reading thread's lower one.
 pub fn opencv_on_calling_threads() -> Result<(), DatasetError> {
     opencv::core::set_num_threads(1).map_err(|reason| DatasetError::OpenCv {
-        context: "setting OpenCV's threads to the caller's",
+        context: "set_num_threads(1)",
         reason,
     })
 }

@@ -22,11 +22,17 @@ fn opening_and_reading_rectified_frames_starts_only_the_reading_thread() {
     let sequence = StereoSequence::open_euroc(&dir).unwrap();
     assert_eq!(threads_of_this_process(), before);
     // The last frames, read to the end: the reading thread is done before the process
-    // ends (OpenCV must not be torn down under it).
+    // ends (OpenCV must not be torn down under it). It is still reading when the first
+    // frame arrives (it holds two ahead); after the last it may already be gone.
     let mut read = 0;
     for frame in sequence.into_stream(88, 2) {
         frame.unwrap();
-        assert_eq!(threads_of_this_process(), before + 1);
+        let threads = threads_of_this_process();
+        if read == 0 {
+            assert_eq!(threads, before + 1);
+        } else {
+            assert!(threads <= before + 1, "{threads} threads, {before} before");
+        }
         read += 1;
     }
     assert_eq!(read, 7);

@@ -765,9 +765,11 @@ impl MotionTracker {
                 let lists = &mut self.spares.lists;
                 let gates = &self.config.frontend.appearance_gates;
                 let ratio = self.config.frontend.orb.min_distance_ratio;
+                let both_started = Instant::now();
                 let (stereo, refine_ms) = self.orb_right.match_stereo_while(
                     [points_l, points_r],
-                    (gates, ratio),
+                    gates,
+                    ratio,
                     &mut lists.stereo_matches,
                     || {
                         let started = Instant::now();
@@ -780,7 +782,10 @@ impl MotionTracker {
                         since(started)
                     },
                 );
-                stereo_ms = stereo?;
+                stereo?;
+                // The stereo matching's share is the time waited beyond the refinement (its
+                // own time on the worker overlaps the refinement's).
+                stereo_ms = (since(both_started) - refine_ms).max(0.0);
                 tracking_ms += refine_ms;
             }
         }
@@ -1484,24 +1489,22 @@ impl PointTracking {
         let to_previous = previous.pose.inverse();
         let found = &previous.points.points;
         for m in &self.matches {
-            if let Some(Some(landmark)) = previous.point_landmarks.get(m.query) {
-                let refined =
-                    search
-                        .reference_image
-                        .zip(found.get(m.query))
-                        .and_then(|(before, &from)| {
-                            refine_track(before, current_image, from, current.points[m.train])
-                        });
+            // (Matches of another `current` would be out of range: left out.)
+            if let (Some(Some(landmark)), Some(&to)) = (
+                previous.point_landmarks.get(m.query),
+                current.points.get(m.train),
+            ) {
+                let refined = search
+                    .reference_image
+                    .zip(found.get(m.query))
+                    .and_then(|(before, &from)| refine_track(before, current_image, from, to));
                 // A refined position no longer carries the keypoint's level's rounding.
                 let (pixel, level_weight) = match refined {
                     Some(pixel) => {
                         self.refined.push((m.train, pixel));
                         (pixel, 1.0)
                     }
-                    None => (
-                        current.points[m.train],
-                        level_weight(search.config, current, m.train),
-                    ),
+                    None => (to, level_weight(search.config, current, m.train)),
                 };
                 observations.points.push(PointObservation {
                     position: to_previous * landmark.world,

@@ -148,6 +148,8 @@ impl OrbWorker {
             stereo: StereoJob::default(),
             result: Ok(()),
         };
+        // (Named for its main work, the right image's corners; it matches the stereo pair's
+        // points too.)
         let worker = SideWorker::new("orb-right", job, |job: &mut OrbJob| {
             job.result = match (job.task, &job.image) {
                 (OrbTask::Extract, Some(image)) => job.extractor.extract(image, &mut job.points),
@@ -197,14 +199,17 @@ impl OrbWorker {
     /// Replaces `out` with the stereo matches of `left`'s points among `right`'s
     /// ([`PointMatcher::match_points`] with `gates` and `min_ratio`), found on the worker
     /// while `here` runs on the calling thread; returns both outcomes once both are done
-    /// (the matching's: its milliseconds).
+    /// (the matching's: its milliseconds on the worker). `out` is left empty when the
+    /// worker's thread is lost.
     pub fn match_stereo_while<R>(
         &mut self,
         [left, right]: [&PointFeatures; 2],
-        (gates, min_ratio): (&AppearanceGates, f64),
+        gates: &AppearanceGates,
+        min_ratio: f64,
         out: &mut Vec<FeatureMatch>,
         here: impl FnOnce() -> R,
     ) -> (Result<f64, VisionError>, R) {
+        out.clear();
         match self.worker.job() {
             Ok(job) => {
                 job.task = OrbTask::MatchStereo;
@@ -272,36 +277,18 @@ impl PointMatcher {
         out: &mut Vec<FeatureMatch>,
     ) {
         match PairGate::new(case, gates) {
-            PairGate::Stereo(gate) => {
-                let window = |a: Point| {
-                    (
-                        [a.x - gate.max_disparity_px, a.x - gate.min_disparity_px],
-                        [
-                            a.y - gate.max_row_difference_px,
-                            a.y + gate.max_row_difference_px,
-                        ],
-                    )
-                };
-                // Stereo windows are a few rows high and wide along them: flat cells list
-                // fewer points outside the window than square ones.
-                self.grid.rebuild(&second.points, STEREO_CELL_PX);
-                self.match_gated(first, wanted, second, min_ratio, out, window, gate);
-            }
+            PairGate::Stereo(gate) => self.match_gated(first, wanted, second, min_ratio, out, gate),
             PairGate::Displacement(gate) => {
-                let r = gate.limit_px;
-                let window = |a: Point| ([a.x - r, a.x + r], [a.y - r, a.y + r]);
-                self.grid.rebuild(&second.points, GRID_CELL_PX);
-                self.match_gated(first, wanted, second, min_ratio, out, window, gate);
+                self.match_gated(first, wanted, second, min_ratio, out, gate)
             }
         }
     }
 
-    /// [`PointMatcher::match_points_of`] once the grid holds the second image's points:
-    /// each wanted first point is compared with the second image's points in the cells
-    /// its `window` (columns, rows) meets that `gate` admits, the gate applied while the
-    /// cells are listed (over the grid's own copy of the positions, contiguous cell by
+    /// [`PointMatcher::match_points_of`] with `gate`: the grid buckets the second image's
+    /// points into the gate's cells, and each wanted first point is compared with the
+    /// points in the cells its window meets that the gate admits, the gate applied while
+    /// the cells are listed (over the grid's own copy of the positions, contiguous cell by
     /// cell), so the Hamming matcher sees only admitted pairs.
-    #[allow(clippy::too_many_arguments)]
     fn match_gated(
         &mut self,
         (first_points, first_descriptors): (&[Point], &BinaryDescriptors),
@@ -309,9 +296,9 @@ impl PointMatcher {
         second: &PointFeatures,
         min_ratio: f64,
         out: &mut Vec<FeatureMatch>,
-        window: impl Fn(Point) -> ([f64; 2], [f64; 2]),
         gate: impl Gate,
     ) {
+        self.grid.rebuild(&second.points, gate.cell_px());
         let grid = &self.grid;
         self.hamming.match_mutual_among(
             first_descriptors,
@@ -322,7 +309,7 @@ impl PointMatcher {
                     return;
                 }
                 let a = first_points[i];
-                let (x, y) = window(a);
+                let (x, y) = gate.window(a);
                 grid.extend_within(x, y, |b| gate.admits(a, b), candidates);
             },
             |_, _| true,
@@ -332,10 +319,16 @@ impl PointMatcher {
 }
 
 /// Which pairs of points may match: [`points_may_match`] with what it derives from the
-/// gates worked out once.
+/// gates worked out once, and where to look.
 trait Gate: Copy {
     /// Whether point `a` of the first image and `b` of the second may match.
     fn admits(&self, a: Point, b: Point) -> bool;
+
+    /// The columns and rows that hold every second-image point `a` may match.
+    fn window(&self, a: Point) -> ([f64; 2], [f64; 2]);
+
+    /// Width and height of the grid's cells that suit the windows, pixels.
+    fn cell_px(&self) -> [f64; 2];
 }
 
 /// [`points_may_match`]'s gate for one case.
@@ -392,6 +385,22 @@ impl Gate for StereoGate {
             && disparity >= self.min_disparity_px
             && disparity <= self.max_disparity_px
     }
+
+    fn window(&self, a: Point) -> ([f64; 2], [f64; 2]) {
+        (
+            [a.x - self.max_disparity_px, a.x - self.min_disparity_px],
+            [
+                a.y - self.max_row_difference_px,
+                a.y + self.max_row_difference_px,
+            ],
+        )
+    }
+
+    /// Stereo windows are a few rows high and wide along them: flat cells list fewer
+    /// points outside the window than square ones.
+    fn cell_px(&self) -> [f64; 2] {
+        STEREO_CELL_PX
+    }
 }
 
 /// Frame to frame: at most `limit_px` apart.
@@ -419,6 +428,15 @@ impl Gate for DisplacementGate {
         } else {
             (a - b).norm() <= self.limit_px
         }
+    }
+
+    fn window(&self, a: Point) -> ([f64; 2], [f64; 2]) {
+        let r = self.limit_px;
+        ([a.x - r, a.x + r], [a.y - r, a.y + r])
+    }
+
+    fn cell_px(&self) -> [f64; 2] {
+        GRID_CELL_PX
     }
 }
 

@@ -829,10 +829,11 @@ fn real_data_orb_worker_finds_the_extractors_points_frame_after_frame() {
     }
 }
 
-/// The worker's stereo matching gives the matches the calling thread's matcher gives, on
-/// real EuRoC pairs (as recorded: unrectified, so a few dozen matches), between extractions
-/// on the same worker (its task changes back and forth) and with the caller's own work
-/// beside it.
+/// The worker's stereo matching gives the matches the calling thread's matcher gives (the
+/// same matching code: what is tested is the hand-over, the points copied in and the
+/// matches swapped out) on real EuRoC pairs (as recorded: unrectified, so a few dozen
+/// matches), between extractions on the same worker (its task changes back and forth) and
+/// with the caller's own work beside it.
 #[test]
 fn real_data_the_worker_matches_stereo_points_as_the_caller_does() {
     let options = OrbOptions::default();
@@ -851,7 +852,8 @@ fn real_data_the_worker_matches_stereo_points_as_the_caller_does() {
         left_side.unwrap();
         let (on_worker, ()) = worker.match_stereo_while(
             [&points_l, &points_r],
-            (&gates, options.min_distance_ratio),
+            &gates,
+            options.min_distance_ratio,
             &mut from_worker,
             || {
                 matcher.match_points(
@@ -864,7 +866,7 @@ fn real_data_the_worker_matches_stereo_points_as_the_caller_does() {
                 )
             },
         );
-        assert!(on_worker.unwrap() >= 0.0);
+        on_worker.unwrap();
         assert!(from_here.len() > 10, "frame {frame}: {}", from_here.len());
         assert_eq!(from_worker, from_here, "frame {frame}");
     }
