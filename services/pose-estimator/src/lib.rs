@@ -6,9 +6,9 @@
 //! images: it is done when they arrive, while the segments are still being detected and
 //! matched. When the tracks were matched against another frame than the one it last
 //! tracked (a drop upstream, a restart), it starts again from the current pose instead of
-//! using them. The stereo rig comes from the
-//! stream (the frame source publishes it on [`Topic::Rig`]): the stage never opens the
-//! data set, so any source (a live camera) can feed it.
+//! using them. The stereo rig comes from the stream (the frame source publishes it on
+//! [`Topic::Rig`]): the stage never opens the data set, so any source (a live camera) can
+//! feed it.
 
 use anyhow::Context;
 use linetrack_geometry::{Segment, StereoRig};

@@ -383,7 +383,8 @@ pub enum Preparation {
     Corners,
     /// Also the points' work that needs no segments: the left points searched for the last
     /// tracked frame's landmarks (while the right image's corners are being found), then
-    /// stereo matched. For the frame that follows the last one tracked:
+    /// stereo matched on the worker while those matches are refined. For the frame that
+    /// follows the last one tracked:
     /// [`MotionTracker::update_prepared`] uses that work when no other frame was tracked in
     /// between, and does it again otherwise.
     CornersAndPoints,

@@ -37,6 +37,9 @@ use opencv::core::{Vec4f, Vector};
 use opencv::ximgproc::{self, EdgeDrawingTrait};
 use std::hint::black_box;
 
+/// The odometry's `frame_to_frame_ratio` (configs/odometry.toml).
+const FRAME_TO_FRAME_RATIO: f64 = 1.5;
+
 fn load(index: usize) -> (GrayImage, GrayImage) {
     let (l, r) = linetrack_test_data::euroc_stereo_pair(index)
         .expect("EuRoC excerpt (set LINETRACK_EUROC_DIR)");
@@ -193,9 +196,10 @@ fn bench_frontend(c: &mut Criterion) {
             })
         });
     }
-    // The odometry's frame-to-frame search: its 1500 points an image, frame 0's left
-    // points looked for among frame 1's within the window it uses once a motion is known
-    // (`predicted_window_px`, 30 px; here around where they were, every point wanted).
+    // The odometry's frame-to-frame search with its defaults (configs/odometry.toml):
+    // 1500 points an image, frame 0's left points looked for among frame 1's within the
+    // window it uses once a motion is known (`predicted_window_px`, 30 px; here around
+    // where they were, every point wanted), its ratio test (`frame_to_frame_ratio`).
     let odometry_orb = OrbOptions {
         features: 1500,
         ..config.orb
@@ -219,7 +223,7 @@ fn bench_frontend(c: &mut Criterion) {
                 black_box(&o_first),
                 black_box(&o_second),
                 &window,
-                1.5,
+                FRAME_TO_FRAME_RATIO,
                 &mut out,
             )
         })

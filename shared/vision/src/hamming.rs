@@ -119,39 +119,28 @@ pub struct FeatureMatch {
 /// Hamming distance in bits between two equally long byte strings.
 #[inline(always)]
 pub(crate) fn hamming(a: &[u8], b: &[u8]) -> u32 {
-    // ORB's 32 bytes (LBD's too): four words, unrolled.
+    // ORB's and LBD's 32 bytes: with the length known, the four words are unrolled.
     if let (Ok(x), Ok(y)) = (<&[u8; 32]>::try_from(a), <&[u8; 32]>::try_from(b)) {
-        return hamming_32(x, y);
+        return differing_bits(x, y);
     }
-    let mut bits = 0;
-    let (a_words, a_tail) = a.split_at(a.len() - a.len() % 8);
-    let (b_words, b_tail) = b.split_at(b.len() - b.len() % 8);
-    for (x, y) in a_words.chunks_exact(8).zip(b_words.chunks_exact(8)) {
-        let word = |c: &[u8]| u64::from_le_bytes(c.try_into().unwrap_or([0; 8]));
-        bits += (word(x) ^ word(y)).count_ones();
-    }
-    for (x, y) in a_tail.iter().zip(b_tail) {
-        bits += (x ^ y).count_ones();
-    }
-    bits
+    differing_bits(a, b)
 }
 
-/// [`hamming`] of two 32-byte strings.
+/// [`hamming`] a word at a time, then byte by byte for the tail.
 #[inline(always)]
-fn hamming_32(a: &[u8; 32], b: &[u8; 32]) -> u32 {
-    let word = |c: &[u8; 32], k: usize| {
-        u64::from_le_bytes([
-            c[8 * k],
-            c[8 * k + 1],
-            c[8 * k + 2],
-            c[8 * k + 3],
-            c[8 * k + 4],
-            c[8 * k + 5],
-            c[8 * k + 6],
-            c[8 * k + 7],
-        ])
-    };
-    (0..4).map(|k| (word(a, k) ^ word(b, k)).count_ones()).sum()
+fn differing_bits(a: &[u8], b: &[u8]) -> u32 {
+    let ((a_words, a_tail), (b_words, b_tail)) = (a.as_chunks::<8>(), b.as_chunks::<8>());
+    let words: u32 = a_words
+        .iter()
+        .zip(b_words)
+        .map(|(x, y)| (u64::from_le_bytes(*x) ^ u64::from_le_bytes(*y)).count_ones())
+        .sum();
+    let tail: u32 = a_tail
+        .iter()
+        .zip(b_tail)
+        .map(|(x, y)| (x ^ y).count_ones())
+        .sum();
+    words + tail
 }
 
 /// Mutual-best Hamming matcher with a second-best ratio test; keeps its buffers.

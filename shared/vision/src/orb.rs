@@ -349,13 +349,21 @@ impl PairGate {
             MatchCase::FrameToFrame => {
                 let limit_px = gates.max_displacement_px;
                 let squared = limit_px * limit_px;
+                // Limits whose square is not a normal number, or that are not a distance,
+                // settle nothing on the square: every pair gets the exact test.
+                let exact_only = !(1e-100..=1e100).contains(&limit_px);
                 Self::Displacement(DisplacementGate {
                     limit_px,
-                    // (Limits whose square is not a normal number, or not a distance, get
-                    // only the exact test.)
-                    exact_only: !(1e-100..=1e100).contains(&limit_px),
-                    surely_within: squared * (1.0 - 1e-9),
-                    surely_beyond: squared * (1.0 + 1e-9),
+                    surely_within: if exact_only {
+                        f64::NEG_INFINITY
+                    } else {
+                        squared * (1.0 - 1e-9)
+                    },
+                    surely_beyond: if exact_only {
+                        f64::INFINITY
+                    } else {
+                        squared * (1.0 + 1e-9)
+                    },
                 })
             }
         }
@@ -407,9 +415,8 @@ impl Gate for StereoGate {
 #[derive(Debug, Clone, Copy)]
 struct DisplacementGate {
     limit_px: f64,
-    exact_only: bool,
-    /// Squared distances below this are within the limit, above `surely_beyond` beyond it;
-    /// those between (within a rounding error of the limit) get the exact test.
+    /// Squared distances below this are within the limit, above `surely_beyond` (or NaN)
+    /// beyond it; those between (within a rounding error of the limit) get the exact test.
     surely_within: f64,
     surely_beyond: f64,
 }
@@ -419,9 +426,7 @@ impl Gate for DisplacementGate {
     fn admits(&self, a: Point, b: Point) -> bool {
         let (dx, dy) = (a.x - b.x, a.y - b.y);
         let squared = dx * dx + dy * dy;
-        if self.exact_only {
-            (a - b).norm() <= self.limit_px
-        } else if squared < self.surely_within {
+        if squared < self.surely_within {
             true
         } else if squared > self.surely_beyond || squared.is_nan() {
             false
