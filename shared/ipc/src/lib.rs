@@ -1019,24 +1019,35 @@ mod tests {
         assert!(inlet.receive().unwrap_or_else(|e| panic!("{e}")).is_none());
     }
 
-    #[test]
-    fn local_messages_fan_out_with_payload_intact() {
+    /// Runs `test` with a publishing and a subscribing bus of one process (threads).
+    fn with_local_buses(test: fn(&Bus, &Bus)) {
         let bus = Bus::local();
         let peer = bus
             .local_hub()
             .unwrap_or_else(|| panic!("local bus has peers"))
             .bus();
-        round_trip(&bus, &peer);
+        test(&bus, &peer);
     }
 
-    #[test]
-    fn shared_memory_messages_arrive_in_place() {
-        let scope = unique_scope("rt");
+    /// Runs `test` with a publishing and a subscribing shared-memory bus, in a scope of its
+    /// own named by `tag`.
+    fn with_shared_memory_buses(tag: &str, test: fn(&Bus, &Bus)) {
+        let scope = unique_scope(tag);
         let publisher =
             Bus::shared_memory(&scope, "test-publisher").unwrap_or_else(|e| panic!("{e}"));
         let subscriber =
             Bus::shared_memory(&scope, "test-subscriber").unwrap_or_else(|e| panic!("{e}"));
-        round_trip(&publisher, &subscriber);
+        test(&publisher, &subscriber);
+    }
+
+    #[test]
+    fn local_messages_fan_out_with_payload_intact() {
+        with_local_buses(round_trip);
+    }
+
+    #[test]
+    fn shared_memory_messages_arrive_in_place() {
+        with_shared_memory_buses("rt", round_trip);
     }
 
     #[test]
@@ -1054,6 +1065,58 @@ mod tests {
             scope.resources().unwrap_or_else(|e| panic!("{e}")),
             Resources::default()
         );
+    }
+
+    /// Whether `wake` has a wake-up pending (taking it), without waiting.
+    fn woken(wake: &Wake) -> bool {
+        match &wake.inner {
+            WakeInner::Shm(listener) => {
+                listener
+                    .try_wait(|_| {})
+                    .unwrap_or_else(|e| panic!("{e:?}"))
+                    > 0
+            }
+            WakeInner::Local(rx) => rx.try_recv().is_ok(),
+        }
+    }
+
+    /// A frame wakes the stages that start on it (the pose estimator, the detector), not
+    /// the matcher, which reads its images only once the segments wake it.
+    fn a_frame_wakes_the_stages_that_start_on_it(publisher_bus: &Bus, subscriber_bus: &Bus) {
+        let wake = |stage| subscriber_bus.wake(stage).unwrap_or_else(|e| panic!("{e}"));
+        let (pose, detector, matcher) = (
+            wake(StageKind::PoseEstimator),
+            wake(StageKind::LineDetector),
+            wake(StageKind::Matcher),
+        );
+        let _images = subscriber_bus
+            .inlet::<u8, FrameHeader>(Topic::Frames)
+            .unwrap_or_else(|e| panic!("{e}"));
+        let mut frames = publisher_bus
+            .outlet::<u8, FrameHeader>(Topic::Frames, 4)
+            .unwrap_or_else(|e| panic!("{e}"));
+        frames
+            .publish(&FrameHeader::new(3, 0, 0), &[&[1, 2], &[3, 4]])
+            .unwrap_or_else(|e| panic!("{e}"));
+        assert!(woken(&pose) && woken(&detector));
+        assert!(!woken(&matcher));
+        let mut segments = publisher_bus
+            .outlet::<SegmentRecord, SegmentsHeader>(Topic::Segments, 4)
+            .unwrap_or_else(|e| panic!("{e}"));
+        segments
+            .publish(&SegmentsHeader::from(FrameHeader::new(3, 0, 0)), &[])
+            .unwrap_or_else(|e| panic!("{e}"));
+        assert!(woken(&matcher));
+    }
+
+    #[test]
+    fn a_frame_wakes_the_stages_that_start_on_it_locally() {
+        with_local_buses(a_frame_wakes_the_stages_that_start_on_it);
+    }
+
+    #[test]
+    fn a_frame_wakes_the_stages_that_start_on_it_in_shared_memory() {
+        with_shared_memory_buses("wake", a_frame_wakes_the_stages_that_start_on_it);
     }
 
     #[test]

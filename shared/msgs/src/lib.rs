@@ -270,13 +270,22 @@ impl Topic {
         }
     }
 
-    /// The stages that subscribe, and so are woken when a message is published.
+    /// The stages woken when a message is published, in the order they are woken.
+    ///
+    /// A frame wakes the pose estimator first, then the detector: they start on it at once,
+    /// and the pose estimator's corners are the longer path. The matcher reads the frames'
+    /// images too but is not woken for them: it needs a frame's images only with its
+    /// segments, which come later and wake it. Woken at the frame, it would take a core for
+    /// nothing at the moment the other two start, and the kernel then queues one of them
+    /// behind a busy core instead of the one about to be idle: in `perf sched timehist` of
+    /// `linetrack run` on the EuRoC excerpt, the pose estimator waited 4 ms (one timer tick)
+    /// to start on 30–38 of 95 frames, while the other core sat idle.
     pub fn consumers(self) -> &'static [StageKind] {
         use StageKind::*;
         // The recorder reads every topic but control's commands to others; it is woken like
         // a stage (a notification costs the publisher no wait) and sleeps otherwise.
         match self {
-            Topic::Frames => &[LineDetector, Matcher, PoseEstimator, Recorder],
+            Topic::Frames => &[PoseEstimator, LineDetector, Recorder],
             Topic::Segments => &[Matcher, Recorder],
             Topic::Tracks => &[PoseEstimator, Recorder],
             Topic::Poses => &[Supervisor, Recorder],

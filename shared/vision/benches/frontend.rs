@@ -14,10 +14,12 @@
 //! - `l1/describe`: the ℓ1 matcher's intensity profiles of one image's segments;
 //! - `l1/stereo-whole`: the whole ℓ1 stereo call with its photometric check, image access
 //!   included: profiles of both images + matching;
-//! - `orb/extract`: 600 ORB points of one image, `orb/match/stereo`;
+//! - `orb/extract`: 600 ORB points of one image (the stereo front end's), `orb/match/stereo`;
+//! - `orb/extract/odometry`: 1500 ORB points of one image (the odometry's);
 //! - `orb/match/frame-to-frame/odometry`: the odometry's frame-to-frame point search (1500
 //!   points an image, a 30 px window);
-//! - `orb/refine-track`: the sub-pixel refinement of frame 0's frame-to-frame point matches.
+//! - `orb/refine-track`: the sub-pixel refinement of frame 0's frame-to-frame point matches;
+//! - `orb/refine-stereo`: the sub-pixel columns of frame 0's stereo point matches.
 //! - `stretch`: the contrast stretch of one image (the odometry's default gain limit, 4).
 //!
 //! Monocular tracking of a frame = detect + describe + frame-to-frame match; stereo =
@@ -31,7 +33,7 @@ use linetrack_geometry::MatchCase;
 use linetrack_vision::{
     AppearanceGates, DetectorKind, FrontendConfig, GrayImage, HammingMatcher, LineFeatures,
     MatcherKind, OrbExtractor, OrbOptions, PointFeatures, PointMatcher, create_detector,
-    create_segment_matcher, points_may_match, refine_track,
+    create_segment_matcher, points_may_match, refine_stereo_column, refine_track,
 };
 use opencv::core::{Vec4f, Vector};
 use opencv::ximgproc::{self, EdgeDrawingTrait};
@@ -206,6 +208,9 @@ fn bench_frontend(c: &mut Criterion) {
     };
     let mut odometry_extractor = OrbExtractor::new(&odometry_orb).expect("ORB");
     let (mut o_first, mut o_second) = (PointFeatures::default(), PointFeatures::default());
+    group.bench_function("orb/extract/odometry", |b| {
+        b.iter(|| odometry_extractor.extract(black_box(&left), &mut o_first))
+    });
     odometry_extractor
         .extract(&left, &mut o_first)
         .expect("orb");
@@ -228,27 +233,41 @@ fn bench_frontend(c: &mut Criterion) {
             )
         })
     });
+    // The positions of frame 0's left points' matches among `second`'s points.
+    let mut matched_pairs = |case, second: &PointFeatures| {
+        point_matcher.match_points(
+            case,
+            &p_left,
+            second,
+            &config.appearance_gates,
+            config.orb.min_distance_ratio,
+            &mut out,
+        );
+        out.iter()
+            .map(|m| (p_left.points[m.query], second.points[m.train]))
+            .collect::<Vec<_>>()
+    };
     // Sub-pixel tracking of every frame-to-frame point match of frame 0's left image in
-    // frame 1's (the odometry runs it on each tracked landmark).
+    // frame 1's (the odometry runs it on each tracked landmark), and the sub-pixel columns
+    // of every stereo point match of frame 0 (the odometry refines each stereo partner it
+    // triangulates).
     let mut p_next = PointFeatures::default();
     orb.extract(&next, &mut p_next).expect("orb");
-    point_matcher.match_points(
-        MatchCase::FrameToFrame,
-        &p_left,
-        &p_next,
-        &config.appearance_gates,
-        config.orb.min_distance_ratio,
-        &mut out,
-    );
-    let tracks: Vec<_> = out
-        .iter()
-        .map(|m| (p_left.points[m.query], p_next.points[m.train]))
-        .collect();
+    let tracks = matched_pairs(MatchCase::FrameToFrame, &p_next);
+    let partners = matched_pairs(MatchCase::Stereo, &p_right);
     group.bench_function("orb/refine-track", |b| {
         b.iter(|| {
             tracks
                 .iter()
                 .filter_map(|&(from, to)| refine_track(black_box(&left), &next, from, to))
+                .count()
+        })
+    });
+    group.bench_function("orb/refine-stereo", |b| {
+        b.iter(|| {
+            partners
+                .iter()
+                .filter_map(|&(l, r)| refine_stereo_column(black_box(&left), &right, l, r))
                 .count()
         })
     });

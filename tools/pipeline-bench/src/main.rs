@@ -31,7 +31,12 @@ EXAMPLES:
 The critical path: a frame's end-to-end latency is the sum, over the four stages, of the time
 it waited before the stage took it (transport, and queueing while the stage was busy with an
 earlier frame) and the stage's own work on it. For each frame the largest of these eight parts
-is its bottleneck; the table counts the frames per bottleneck."
+is its bottleneck; the table counts the frames per bottleneck.
+
+Detector per frame: with `--detector lsd`, the automatic policy ([detector_fallback], on by
+default) swaps LSD for a faster detector when LSD misses its budget; the figures then mix
+the two, and this line says how many frames each worked on. To measure LSD alone, pass a
+--config with `[detector_fallback] enabled = false`."
 )]
 struct Args {
     /// Round trips per transport for the hop cost.
@@ -236,6 +241,32 @@ fn bottlenecks(frames: &[&FrameRecord]) -> Vec<(String, usize, f64)> {
     parts
 }
 
+/// Which detector worked on the frames, e.g. "detector per frame: lsd 9, fld 86 (the
+/// automatic policy's swap, `[detector_fallback]`)": a run asked for LSD can run mostly FLD,
+/// and its figures are then FLD's.
+fn detectors_used(frames: &[FrameRecord]) -> String {
+    let mut counts = std::collections::BTreeMap::<&str, usize>::new();
+    for f in frames {
+        let name = if f.detector.is_empty() {
+            "none recorded"
+        } else {
+            f.detector.as_str()
+        };
+        *counts.entry(name).or_default() += 1;
+    }
+    let listed: Vec<String> = counts.iter().map(|(k, n)| format!("{k} {n}")).collect();
+    let swapped = counts.keys().filter(|k| **k != "none recorded").count() > 1;
+    format!(
+        "detector per frame: {}{}",
+        listed.join(", "),
+        if swapped {
+            " (swapped during the run: the figures mix the detectors; see `[detector_fallback]`)"
+        } else {
+            ""
+        }
+    )
+}
+
 fn row(out: &mut String, name: &str, p: &Percentiles, unit: &str) {
     let _ = writeln!(
         out,
@@ -402,6 +433,7 @@ fn bench(args: &Args) -> anyhow::Result<()> {
             p.p90,
             p.max
         );
+        let _ = writeln!(out, "{}\n", detectors_used(frames));
         let _ = writeln!(
             out,
             "Critical path: frames per bottleneck (the largest part of the frame's end to end), and the parts' mean share of it\n\n| part | frames | mean share |\n|---|---|---|"
