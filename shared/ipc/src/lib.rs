@@ -1080,9 +1080,9 @@ mod tests {
         }
     }
 
-    /// A frame wakes the stages that start on it (the pose estimator, the detector), not
-    /// the matcher, which reads its images only once the segments wake it.
-    fn a_frame_wakes_the_stages_that_start_on_it(publisher_bus: &Bus, subscriber_bus: &Bus) {
+    /// A frame wakes the stages that read it (the pose estimator, the detector, the
+    /// matcher), and segments only theirs (the matcher).
+    fn each_topic_wakes_its_readers_only(publisher_bus: &Bus, subscriber_bus: &Bus) {
         let wake = |stage| subscriber_bus.wake(stage).unwrap_or_else(|e| panic!("{e}"));
         let (pose, detector, matcher) = (
             wake(StageKind::PoseEstimator),
@@ -1098,8 +1098,7 @@ mod tests {
         frames
             .publish(&FrameHeader::new(3, 0, 0), &[&[1, 2], &[3, 4]])
             .unwrap_or_else(|e| panic!("{e}"));
-        assert!(woken(&pose) && woken(&detector));
-        assert!(!woken(&matcher));
+        assert!(woken(&pose) && woken(&detector) && woken(&matcher));
         let mut segments = publisher_bus
             .outlet::<SegmentRecord, SegmentsHeader>(Topic::Segments, 4)
             .unwrap_or_else(|e| panic!("{e}"));
@@ -1107,16 +1106,17 @@ mod tests {
             .publish(&SegmentsHeader::from(FrameHeader::new(3, 0, 0)), &[])
             .unwrap_or_else(|e| panic!("{e}"));
         assert!(woken(&matcher));
+        assert!(!woken(&pose) && !woken(&detector));
     }
 
     #[test]
-    fn a_frame_wakes_the_stages_that_start_on_it_locally() {
-        with_local_buses(a_frame_wakes_the_stages_that_start_on_it);
+    fn each_topic_wakes_its_readers_only_locally() {
+        with_local_buses(each_topic_wakes_its_readers_only);
     }
 
     #[test]
-    fn a_frame_wakes_the_stages_that_start_on_it_in_shared_memory() {
-        with_shared_memory_buses("wake", a_frame_wakes_the_stages_that_start_on_it);
+    fn each_topic_wakes_its_readers_only_in_shared_memory() {
+        with_shared_memory_buses("wake", each_topic_wakes_its_readers_only);
     }
 
     #[test]

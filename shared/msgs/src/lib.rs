@@ -270,22 +270,22 @@ impl Topic {
         }
     }
 
-    /// The stages woken when a message is published, in the order they are woken.
+    /// The stages that subscribe, and so are woken when a message is published, in the
+    /// order they are woken.
     ///
     /// A frame wakes the pose estimator first, then the detector: they start on it at once,
-    /// and the pose estimator's corners are the longer path. The matcher reads the frames'
-    /// images too but is not woken for them: it needs a frame's images only with its
-    /// segments, which come later and wake it. Woken at the frame, it would take a core for
-    /// nothing at the moment the other two start, and the kernel then queues one of them
-    /// behind a busy core instead of the one about to be idle: in `perf sched timehist` of
-    /// `linetrack run` on the EuRoC excerpt, the pose estimator waited 4 ms (one timer tick)
-    /// to start on 30–38 of 95 frames, while the other core sat idle.
+    /// and the pose estimator's corners are the longer path. The matcher, which needs a
+    /// frame's images only with its segments, is woken last. Woken before the pose
+    /// estimator, it took the idle core for nothing at that moment, and the kernel queued
+    /// the pose estimator behind the busy one: in `perf sched timehist` of `linetrack run`
+    /// on the EuRoC excerpt, the pose estimator then waited 4 ms (one timer tick) to start
+    /// on 30–38 of 95 frames; in this order, on 4–11.
     pub fn consumers(self) -> &'static [StageKind] {
         use StageKind::*;
         // The recorder reads every topic but control's commands to others; it is woken like
         // a stage (a notification costs the publisher no wait) and sleeps otherwise.
         match self {
-            Topic::Frames => &[PoseEstimator, LineDetector, Recorder],
+            Topic::Frames => &[PoseEstimator, LineDetector, Matcher, Recorder],
             Topic::Segments => &[Matcher, Recorder],
             Topic::Tracks => &[PoseEstimator, Recorder],
             Topic::Poses => &[Supervisor, Recorder],
@@ -1010,6 +1010,21 @@ mod tests {
                 "{stage} consumes nothing"
             );
         }
+    }
+
+    /// The pose estimator is woken by a frame before the detector, and the matcher after
+    /// both (see [`Topic::consumers`]: the order was measured).
+    #[test]
+    fn a_frame_wakes_the_longest_path_first_and_the_matcher_last() {
+        let order = Topic::Frames.consumers();
+        let at = |stage| order.iter().position(|&s| s == stage);
+        let (pose, detector, matcher) = (
+            at(StageKind::PoseEstimator),
+            at(StageKind::LineDetector),
+            at(StageKind::Matcher),
+        );
+        assert!(pose.is_some() && detector.is_some() && matcher.is_some());
+        assert!(pose < detector && detector < matcher, "{order:?}");
     }
 
     #[test]

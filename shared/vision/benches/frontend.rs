@@ -19,7 +19,7 @@
 //! - `orb/match/frame-to-frame/odometry`: the odometry's frame-to-frame point search (1500
 //!   points an image, a 30 px window);
 //! - `orb/refine-track`: the sub-pixel refinement of frame 0's frame-to-frame point matches;
-//! - `orb/refine-stereo`: the sub-pixel columns of frame 0's stereo point matches.
+//! - `orb/refine-stereo`: the sub-pixel columns of frame 0's stereo point matches;
 //! - `stretch`: the contrast stretch of one image (the odometry's default gain limit, 4).
 //!
 //! Monocular tracking of a frame = detect + describe + frame-to-frame match; stereo =

@@ -614,9 +614,10 @@ fn widen<T: From<u8>>(pixels: &[u8], values: &mut [T]) {
 
 /// Runs `work` compiled for x86-64 CPUs with AVX2 where the CPU has it (most since 2013;
 /// the baseline x86-64 target stops at SSE2), else as it is: for the sub-pixel
-/// refinements, whose integer sums over windows of pixels then take 16 values per
-/// instruction instead of 4. The same results: the sums are exact, and the floating-point
-/// steps are the same operations in the same order (no fused multiply-add).
+/// refinements, whose integer sums over windows of pixels then run on vectors twice as
+/// wide. The same results: the sums are exact, and the floating-point steps are the same
+/// operations in the same order (AVX2 brings no fused multiply-add, and Rust fuses
+/// nothing by itself).
 #[inline(always)]
 fn with_avx2<R>(work: impl FnOnce() -> R) -> R {
     #[cfg(target_arch = "x86_64")]
@@ -633,23 +634,33 @@ fn with_avx2<R>(work: impl FnOnce() -> R) -> R {
     work()
 }
 
-/// The sum of the products of `a`'s and `b`'s values, pair by pair (exact for two 11 × 11
-/// windows of pixels).
+/// The sum of the products of `a`'s and `b`'s values, pair by pair. Exact for windows of
+/// pixels: 121 products of at most 255² stay far below `i32::MAX`. (Wrapping operations,
+/// which cannot wrap here, so that the sum is vectorised in builds with overflow checks
+/// too, such as the tests'.)
 #[inline(always)]
-fn multiply_add(a: &[i16], b: &[i16]) -> i32 {
-    a.iter()
-        .zip(b)
-        .map(|(&a, &b)| i32::from(a) * i32::from(b))
-        .sum()
+fn sum_of_products(a: &[i16], b: &[i16]) -> i32 {
+    a.iter().zip(b).fold(0i32, |sum, (&a, &b)| {
+        sum.wrapping_add(i32::from(a).wrapping_mul(i32::from(b)))
+    })
+}
+
+/// The sum of `values` (exact for a window of pixels, see [`sum_of_products`]).
+#[inline(always)]
+fn sum_of(values: &[i16]) -> i32 {
+    values
+        .iter()
+        .fold(0i32, |sum, &v| sum.wrapping_add(i32::from(v)))
 }
 
 /// Whether the windows centred on pixel `(u, v)` and shifted by up to `reach` (columns,
 /// rows) either way all lie inside an image of `size` (width, height).
 fn windows_inside(u: i64, v: i64, reach: (i64, i64), (width, height): (i64, i64)) -> bool {
-    u - HALF - reach.0 >= 0
-        && u + HALF + reach.0 < width
-        && v - HALF - reach.1 >= 0
-        && v + HALF + reach.1 < height
+    // (Compared so that no sum overflows: a point at infinity rounds to i64::MAX.)
+    u >= HALF + reach.0
+        && u < width - HALF - reach.0
+        && v >= HALF + reach.1
+        && v < height - HALF - reach.1
 }
 
 /// The fraction of a pixel, within ±0.5, by which a parabola through three costs at
@@ -728,12 +739,12 @@ fn refine_stereo_column_portably(
     let mut costs = [0.0f64; (2 * SEARCH + 1) as usize];
     for (cost, shift) in costs.iter_mut().zip(-SEARCH..=SEARCH) {
         let candidate = mean_removed(rp, ur + shift);
-        // (An integer sum: exact, as a sum of these small integers in f64 is, in any order.)
-        let sum: i32 = reference
+        // Summed as integers, then converted: the same value as summing them as f64 (a sum
+        // of small integers is exact in f64, in any order). At most 121 × 510: no wrap.
+        let sum = reference
             .iter()
             .zip(&candidate)
-            .map(|(a, b)| (a - b).abs())
-            .sum();
+            .fold(0i32, |sum, (a, b)| sum.wrapping_add((a - b).abs()));
         *cost = f64::from(sum);
     }
     let best = (0..costs.len()).min_by(|&a, &b| costs[a].total_cmp(&costs[b]))?;
@@ -794,8 +805,8 @@ fn refine_track_portably(
     // (Pixels as i16: products of two fit an i32, and the sums of products of 16-bit
     // values are what the vector units multiply-add fastest.)
     let reference: [i16; SIDE * SIDE] = window(pp, width, uf, vf);
-    let sum_a: i32 = reference.iter().map(|&a| i32::from(a)).sum();
-    let sum_aa: i32 = reference.iter().map(|&a| i32::from(a) * i32::from(a)).sum();
+    let sum_a = sum_of(&reference);
+    let sum_aa = sum_of_products(&reference, &reference);
     let var_a = f64::from(sum_aa) - f64::from(sum_a).powi(2) / n;
     if var_a < 1.0 {
         return None;
@@ -815,9 +826,9 @@ fn refine_track_portably(
     for (row, dy) in costs.iter_mut().zip(0..) {
         for (cost, strip) in row.iter_mut().zip(&columns) {
             let candidate = &strip[dy * SIDE..dy * SIDE + SIDE * SIDE];
-            let sum_b: i32 = candidate.iter().map(|&b| i32::from(b)).sum();
-            let sum_bb = multiply_add(candidate, candidate);
-            let sum_ab = multiply_add(&reference, candidate);
+            let sum_b = sum_of(candidate);
+            let sum_bb = sum_of_products(candidate, candidate);
+            let sum_ab = sum_of_products(&reference, candidate);
             let var_b = f64::from(sum_bb) - f64::from(sum_b).powi(2) / n;
             let covariance = f64::from(sum_ab) - f64::from(sum_a) * f64::from(sum_b) / n;
             *cost = if var_b > 0.0 {
@@ -850,7 +861,7 @@ mod tests {
     /// The sub-pixel refinements give the same answers, bit for bit, built for AVX2 (where
     /// this CPU has it: what the public functions run) and for the baseline CPU, at every
     /// position of a grid over two textured images that differ by a shift, a gain and
-    /// noise: both refined and refused matches.
+    /// noise: both refined and refused matches. Points at infinity or NaN are refused.
     #[test]
     fn the_refinements_answer_the_same_for_every_cpu() {
         let textured = |shift: f64, gain: f64, seed: u32| {
@@ -888,6 +899,14 @@ mod tests {
             refined > 100 && refused > 100,
             "{refined} refined, {refused} refused"
         );
+        // A point at infinity or NaN is refused, not an overflow or an index out of range.
+        for odd in [f64::INFINITY, f64::NEG_INFINITY, f64::NAN, 1e300] {
+            let (good, bad) = (Point::new(50.0, 50.0), Point::new(odd, odd));
+            assert_eq!(refine_track(&first, &second, bad, good), None);
+            assert_eq!(refine_track(&first, &second, good, bad), None);
+            assert_eq!(refine_stereo_column(&first, &second, bad, good), None);
+            assert_eq!(refine_stereo_column(&first, &second, good, bad), None);
+        }
     }
 
     /// Points the caller does not want are neither matched nor compete: here the second

@@ -241,9 +241,10 @@ fn bottlenecks(frames: &[&FrameRecord]) -> Vec<(String, usize, f64)> {
     parts
 }
 
-/// Which detector worked on the frames, e.g. "detector per frame: lsd 9, fld 86 (the
-/// automatic policy's swap, `[detector_fallback]`)": a run asked for LSD can run mostly FLD,
-/// and its figures are then FLD's.
+/// Which detector worked on the frames, all of them (dropped ones too), e.g. "detector per
+/// frame: fld 86, lsd 9 (swapped during the run: …)": a run asked for LSD can run mostly
+/// FLD once the automatic policy (`[detector_fallback]`) swaps it, and its figures are then
+/// mostly FLD's.
 fn detectors_used(frames: &[FrameRecord]) -> String {
     let mut counts = std::collections::BTreeMap::<&str, usize>::new();
     for f in frames {
