@@ -2,6 +2,7 @@
 //! when the second-best distance is clearly larger. Shared by LBD (segments) and ORB
 //! (points); which pairs may match at all is decided by the caller's gate.
 
+use crate::cpu::with_popcnt;
 use crate::{OpenCvContext, VisionError};
 use opencv::core::{Mat, MatTraitConst, MatTraitConstManual};
 use serde::{Deserialize, Serialize};
@@ -199,35 +200,12 @@ impl HammingMatcher {
         admit: impl Fn(usize, usize) -> bool,
         out: &mut Vec<FeatureMatch>,
     ) {
-        #[cfg(target_arch = "x86_64")]
-        if std::arch::is_x86_feature_detected!("popcnt") {
-            // SAFETY: the CPU has the instruction the function is compiled for, as just
-            // checked.
-            #[allow(unsafe_code)]
-            unsafe {
-                self.match_with_popcnt(first, second, min_ratio, candidates, admit, out);
-            }
-            return;
-        }
-        self.match_portably(first, second, min_ratio, candidates, admit, out);
-    }
-
-    /// [`HammingMatcher::match_mutual_among`] compiled for x86-64 CPUs with the POPCNT
-    /// instruction (all since 2008; the baseline x86-64 target lacks it): the bit count of
-    /// the distances, most of a match's work, takes one instruction per word instead of a
-    /// dozen. The same results.
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "popcnt")]
-    fn match_with_popcnt(
-        &mut self,
-        first: &BinaryDescriptors,
-        second: &BinaryDescriptors,
-        min_ratio: f64,
-        candidates: impl FnMut(usize, &mut Vec<usize>),
-        admit: impl Fn(usize, usize) -> bool,
-        out: &mut Vec<FeatureMatch>,
-    ) {
-        self.match_portably(first, second, min_ratio, candidates, admit, out);
+        // (The bit counts, most of a match's work, with the POPCNT instruction where the
+        // CPU has it; the same results.)
+        with_popcnt(
+            #[inline(always)]
+            || self.match_portably(first, second, min_ratio, candidates, admit, out),
+        );
     }
 
     /// [`HammingMatcher::match_mutual_among`] for any CPU; inlined into the callers that
@@ -393,11 +371,7 @@ mod tests {
         let mut matcher = HammingMatcher::new();
         for ratio in [1.0, 1.2, 1.5] {
             let all = |_: usize, c: &mut Vec<usize>| c.extend(0..280);
-            // SAFETY: the CPU has the instruction, as asserted above.
-            #[allow(unsafe_code)]
-            unsafe {
-                matcher.match_with_popcnt(&first, &second, ratio, all, admit, &mut popcnt);
-            }
+            matcher.match_mutual_among(&first, &second, ratio, all, admit, &mut popcnt);
             matcher.match_portably(&first, &second, ratio, all, admit, &mut portable);
             assert!(popcnt.len() > 20, "{}", popcnt.len());
             assert_eq!(popcnt, portable, "ratio {ratio}");

@@ -20,6 +20,7 @@
 #![warn(missing_docs)]
 
 mod config;
+mod cpu;
 mod detect;
 mod hamming;
 mod image;

@@ -1,5 +1,6 @@
 //! ORB points (OpenCV features2d) and their stereo / frame-to-frame matching.
 
+use crate::cpu::with_avx2;
 use crate::worker::{SideWorker, copy_image_into};
 use crate::{
     AppearanceGates, BinaryDescriptors, FeatureMatch, GrayImage, HammingMatcher, OpenCvContext,
@@ -610,28 +611,6 @@ fn widen<T: From<u8>>(pixels: &[u8], values: &mut [T]) {
     for (value, &p) in values.iter_mut().zip(pixels) {
         *value = T::from(p);
     }
-}
-
-/// Runs `work` compiled for x86-64 CPUs with AVX2 where the CPU has it (most since 2013;
-/// the baseline x86-64 target stops at SSE2), else as it is: for the sub-pixel
-/// refinements, whose integer sums over windows of pixels then run on vectors twice as
-/// wide. The same results: the sums are exact, and the floating-point steps are the same
-/// operations in the same order (AVX2 brings no fused multiply-add, and Rust fuses
-/// nothing by itself).
-#[inline(always)]
-fn with_avx2<R>(work: impl FnOnce() -> R) -> R {
-    #[cfg(target_arch = "x86_64")]
-    if std::arch::is_x86_feature_detected!("avx2") {
-        #[target_feature(enable = "avx2")]
-        fn compiled_for_avx2<R>(work: impl FnOnce() -> R) -> R {
-            work()
-        }
-        // SAFETY: the CPU has the instructions the function is compiled for, as just
-        // checked.
-        #[allow(unsafe_code)]
-        return unsafe { compiled_for_avx2(work) };
-    }
-    work()
 }
 
 /// The sum of the products of `a`'s and `b`'s values, pair by pair. Exact for windows of
