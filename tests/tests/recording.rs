@@ -3,7 +3,7 @@
 //! independent reader (PyPI `mcap` + `mcap-protobuf-support`, `tests/scripts/check_mcap.py`,
 //! installed by `cargo xtask setup|test`), and replaying it gives the run's poses again.
 //!
-//! They need the binaries built with the `mcap` feature (`cargo xtask test` does it).
+//! They need the binaries built with the `mcap` feature (`cargo xtask test-features` does it).
 
 use linetrack_e2e::{Records, base_sequence, bin_dir, scratch, signal, start_with_args};
 use linetrack_ipc::Scope;
@@ -26,7 +26,7 @@ fn recorder_built() {
     let bin = bin_dir().join("linetrack-recorder");
     assert!(
         bin.is_file(),
-        "{} is missing: build with --features linetrack/mcap (`cargo xtask test` does it)",
+        "{} is missing: build with --features linetrack/mcap (`cargo xtask test-features` does it)",
         bin.display()
     );
 }

@@ -13,7 +13,9 @@
 //!    depends on GDAL, which is not co-installable);
 //! 3. builds `cargo build --release --target aarch64-unknown-linux-gnu` of every binary but
 //!    xtask, with the opencv crate, its C++ glue and the linker pointed at the sysroot;
-//! 4. unless `--no-run`: builds the native release binaries, runs the same commands with
+//! 4. unless `--no-run`: builds the native binaries (release, or the profile
+//!    `--native-profile` names: CI compares with the `test-release` binaries its tests
+//!    built, which compute the same), runs the same commands with
 //!    both (`linetrack run --pacing fastest` with [`RUN_CONFIG`] on the first frames of the
 //!    EuRoC excerpt, and `linetrack-vo` on them; the aarch64 ones under
 //!    `qemu-aarch64-static`), and compares the poses: it fails when they differ by more than
@@ -153,6 +155,11 @@ struct Args {
     /// Where the runs write (default: target/cross-check).
     #[arg(long)]
     output: Option<PathBuf>,
+    /// The cargo profile of the native binaries compared with (`test-release` reuses the
+    /// test build's: the same code and optimisation, with overflow checks, so the same
+    /// poses).
+    #[arg(long, default_value = "release")]
+    native_profile: String,
 }
 
 /// Runs `cargo xtask cross ARGS…`.
@@ -222,15 +229,28 @@ pub fn run(args: &[String]) -> anyhow::Result<ExitCode> {
         return Ok(ExitCode::SUCCESS);
     }
     let started = Instant::now();
-    let built = crate::cargo(
-        &["build", "--release", "--quiet", "--workspace", "--bins"],
-        &[],
-    )?;
+    let profile = args.native_profile.as_str();
+    // The tests' profile is built as the tests build it, so their binaries are reused.
+    let build = if profile == crate::tiers::PROFILE {
+        crate::tiers::test_build(&["--quiet"])
+    } else {
+        [
+            "build",
+            "--profile",
+            profile,
+            "--quiet",
+            "--workspace",
+            "--bins",
+        ]
+        .map(String::from)
+        .to_vec()
+    };
+    let built = crate::cargo(&build.iter().map(String::as_str).collect::<Vec<_>>(), &[])?;
     if built != ExitCode::SUCCESS {
-        bail!("the native release build failed");
+        bail!("the native {profile} build failed");
     }
     eprintln!(
-        "xtask: native release build: {:.1} s",
+        "xtask: native {profile} build: {:.1} s",
         started.elapsed().as_secs_f64()
     );
 
@@ -243,7 +263,7 @@ pub fn run(args: &[String]) -> anyhow::Result<ExitCode> {
     };
     let native = Machine {
         name: "x86-64",
-        bin_dir: target_dir.join("release"),
+        bin_dir: target_dir.join(profile),
         runner: Vec::new(),
     };
     let emulated = Machine {

@@ -151,9 +151,23 @@ pub fn run(args: &[String], install: impl Fn(&[&str]) -> anyhow::Result<()>) -> 
             ]);
         }
         None => {
-            let mut build = vec!["build", "--workspace", "--bins", "--quiet"];
-            build.extend(["--profile", profile]);
-            cargo(&build)?;
+            // The tests' profile is built as the tests build it (so CI's test build is
+            // reused, not redone with another feature resolution).
+            let build = if profile == crate::tiers::PROFILE {
+                crate::tiers::test_build(&["--quiet"])
+            } else {
+                [
+                    "build",
+                    "--workspace",
+                    "--bins",
+                    "--quiet",
+                    "--profile",
+                    profile,
+                ]
+                .map(String::from)
+                .to_vec()
+            };
+            cargo(&build.iter().map(String::as_str).collect::<Vec<_>>())?;
             // The release profile keeps line tables (`debug = "line-tables-only"`), which
             // cargo-deb would then package: 135 MB instead of a stripped package.
             deb_args.push("--strip".into());

@@ -5,11 +5,15 @@
 //!   generated sequence (`cargo xtask demo --help` lists the options).
 //! - `cargo xtask match-demo [ARGS…]` — the ℓ1 matcher demo on one scene and one stereo pair.
 //! - `cargo xtask test [ARGS…]` — install system packages if missing, build the binaries the
-//!   end-to-end tests start, then run the whole test suite with cargo-nextest (or `cargo
-//!   test` where nextest is not installed).
+//!   end-to-end tests start, then run every test of the default build (no optional
+//!   feature) with cargo-nextest (or `cargo test` where nextest is not installed).
+//! - `cargo xtask test-features [ARGS…]` — the same for what the `mcap` and `link` features
+//!   add ([`tiers`]).
 //! - `cargo xtask test-ros2 [ARGS…]` — the ROS 2 output (cargo feature `ros2`): install the
 //!   DDS peer if missing ([`python_env`]), build `linetrack-ros2`, run its crate's tests and
 //!   the end-to-end test in which Cyclone DDS receives the poses, and clippy with the feature.
+//!
+//! The test commands print each step's wall time.
 //! - `cargo xtask setup` — only install the system packages, the MCAP checker and the DDS
 //!   peer.
 //! - `cargo xtask cross [--no-run]` — aarch64 release binaries of every service and tool,
@@ -22,14 +26,10 @@ mod cross;
 mod deb;
 mod pose_diff;
 mod python_env;
+mod tiers;
 
 use anyhow::{Context, bail};
 use std::process::{Command, ExitCode};
-
-/// The features the test suite builds and tests on top of the default build: MCAP
-/// recording and replay (`tests/tests/recording.rs`), the ground-station link (zenoh) and
-/// its end-to-end test (`tests/tests/link.rs`).
-const TEST_FEATURES: &str = "linetrack/mcap,linetrack/link,linetrack-e2e/link";
 
 /// Debian packages the workspace builds against: OpenCV with its contrib modules
 /// (LSD, FLD, LBD, ORB) and libclang for the `opencv` crate's binding generator; and
@@ -49,7 +49,8 @@ const SYSTEM_PACKAGES: &[&str] = &[
 const USAGE: &str = "usage: cargo xtask <demo|match-demo|test|setup> [ARGS…]
   demo        run the pipeline: `linetrack run ARGS…` (try `cargo xtask demo --help`)
   match-demo  the l1 matcher demo (ARGS are passed on)
-  test        run the whole test suite (ARGS are passed to cargo nextest run / cargo test)
+  test        every test of the default build (ARGS are passed to cargo nextest run / cargo test)
+  test-features  the tests the optional features mcap (recording) and link (zenoh) add
   test-ros2   the ROS 2 output's tests (feature `ros2`) against a Cyclone DDS subscriber
   setup       install the system packages and the DDS peer of test-ros2
   cross       aarch64 release binaries, checked under qemu (try `cargo xtask cross --help`)
@@ -76,11 +77,7 @@ fn run() -> anyhow::Result<ExitCode> {
             python_env::DDS_PEER.install()?;
             Ok(ExitCode::SUCCESS)
         }
-        "test-ros2" => {
-            install_system_packages()?;
-            python_env::DDS_PEER.install()?;
-            test_ros2(&rest)
-        }
+        "test-ros2" => tiers::ros2_suite(&rest),
         "demo" => {
             install_system_packages()?;
             // The supervisor starts the stage binaries from its own folder: build them all.
@@ -118,63 +115,8 @@ fn run() -> anyhow::Result<ExitCode> {
                 &rest,
             )
         }
-        "test" => {
-            install_system_packages()?;
-            python_env::MCAP_CHECKER.install()?;
-            // The end-to-end tests start the real stage processes.
-            let built = cargo(
-                &[
-                    "build",
-                    "--workspace",
-                    "--bins",
-                    "--profile",
-                    "test-release",
-                    "--features",
-                    TEST_FEATURES,
-                ],
-                &[],
-            )?;
-            if built != ExitCode::SUCCESS {
-                return Ok(built);
-            }
-            let with_real_data = real_data_present();
-            if has_nextest() {
-                let mut fixed = vec![
-                    "nextest",
-                    "run",
-                    "--workspace",
-                    "--cargo-profile",
-                    "test-release",
-                    "--features",
-                    TEST_FEATURES,
-                ];
-                if !with_real_data {
-                    fixed.extend(["-E", "not test(/real_data/)"]);
-                }
-                cargo(&fixed, &rest)
-            } else {
-                eprintln!("xtask: cargo-nextest not found, running `cargo test` instead");
-                let mut extra = rest.clone();
-                if !with_real_data {
-                    extra.extend([
-                        "--".to_string(),
-                        "--skip".to_string(),
-                        "real_data".to_string(),
-                    ]);
-                }
-                cargo(
-                    &[
-                        "test",
-                        "--workspace",
-                        "--profile",
-                        "test-release",
-                        "--features",
-                        TEST_FEATURES,
-                    ],
-                    &extra,
-                )
-            }
-        }
+        "test" => tiers::default_suite(&rest),
+        "test-features" => tiers::feature_suite(&rest),
         "cross" => cross::run(&rest),
         "deb" => {
             install_system_packages()?;
@@ -187,113 +129,6 @@ fn run() -> anyhow::Result<ExitCode> {
         }
         other => bail!("unknown command {other:?}\n{USAGE}"),
     }
-}
-
-/// The ROS 2 output's checks: the binaries the end-to-end test starts (the bridge with its
-/// `ros2` feature), its crate's tests, the end-to-end test, then clippy on the feature's
-/// code (the default clippy run does not see it). The bridge and the end-to-end tests go
-/// in separate cargo calls: together, ros2-client's dependencies would unify features with
-/// the workspace's and rebuild most of it.
-fn test_ros2(rest: &[String]) -> anyhow::Result<ExitCode> {
-    const PROFILE: [&str; 2] = ["--profile", "test-release"];
-    const BRIDGE: [&str; 4] = ["--package", "linetrack-ros2-bridge", "--features", "ros2"];
-    const E2E: [&str; 4] = ["--package", "linetrack-e2e", "--features", "ros2"];
-    let nextest = has_nextest();
-    let test = |package: &[&str], filter: &[&str]| -> Vec<String> {
-        let mut args: Vec<&str> = if nextest {
-            vec!["nextest", "run", "--cargo-profile", "test-release"]
-        } else {
-            let mut test = vec!["test"];
-            test.extend(PROFILE);
-            test
-        };
-        args.extend(package);
-        if nextest {
-            args.extend(filter);
-        } else if filter.contains(&"binary(ros2)") {
-            args.extend(["--test", "ros2"]);
-        }
-        args.into_iter()
-            .map(String::from)
-            .chain(rest.iter().cloned())
-            .collect()
-    };
-    let fixed = |parts: &[&[&str]]| -> Vec<String> {
-        parts
-            .iter()
-            .flat_map(|p| p.iter().map(|s| s.to_string()))
-            .collect()
-    };
-    let steps: Vec<Vec<String>> = vec![
-        fixed(&[&["build", "--workspace", "--bins"], &PROFILE]),
-        fixed(&[&["build", "--bins"], &BRIDGE, &PROFILE]),
-        test(&BRIDGE, &[]),
-        test(&E2E, &["-E", "binary(ros2)"]),
-        fixed(&[
-            &["clippy", "--all-targets"],
-            &BRIDGE,
-            &PROFILE,
-            &["--", "-D", "warnings"],
-        ]),
-        fixed(&[
-            &["clippy", "--all-targets"],
-            &E2E,
-            &PROFILE,
-            &["--", "-D", "warnings"],
-        ]),
-    ];
-    for step in &steps {
-        let args: Vec<&str> = step.iter().map(String::as_str).collect();
-        let code = cargo(&args, &[])?;
-        if code != ExitCode::SUCCESS {
-            return Ok(code);
-        }
-    }
-    Ok(ExitCode::SUCCESS)
-}
-
-/// The real data the `real_data_*` tests read: what it is, the environment variable that
-/// names its folder, the default folder beside the workspace, and a file that must be in it.
-const REAL_DATA: &[(&str, &str, &str, &str)] = &[
-    (
-        "EuRoC excerpt",
-        "LINETRACK_EUROC_DIR",
-        "../shared/data/euroc/V1_01_easy_micro",
-        "mav0/cam0/data.csv",
-    ),
-    (
-        "Middlebury pairs",
-        "LINETRACK_MIDDLEBURY_DIR",
-        "../shared/data/middlebury",
-        "2001-2003/Tsukuba/imL.png",
-    ),
-    (
-        "KITTI raw drive",
-        "LINETRACK_KITTI_RAW_DIR",
-        "../shared/data/kitti-raw/2011_09_26/2011_09_26_drive_0001_sync",
-        "image_00/timestamps.txt",
-    ),
-];
-
-/// Whether every real data set the `real_data_*` tests read is on this machine (each at its
-/// environment variable, else beside the workspace). When one is not, says so: those
-/// tests are left out and counted as skipped.
-fn real_data_present() -> bool {
-    let workspace = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
-    let mut present = true;
-    for (what, env, default, marker) in REAL_DATA {
-        let dir = std::env::var_os(env)
-            .map(std::path::PathBuf::from)
-            .unwrap_or_else(|| workspace.join(default));
-        if !dir.join(marker).is_file() {
-            eprintln!(
-                "xtask: {what} not found at {} (set {env}); the real_data tests are left out and reported as skipped",
-                dir.display()
-            );
-            present = false;
-        }
-    }
-    present
 }
 
 /// Runs cargo with `fixed` then `extra` arguments; returns its exit code.
@@ -309,14 +144,6 @@ fn cargo(fixed: &[&str], extra: &[String]) -> anyhow::Result<ExitCode> {
         Some(code) => ExitCode::from(u8::try_from(code).unwrap_or(1)),
         None => ExitCode::FAILURE,
     })
-}
-
-fn has_nextest() -> bool {
-    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".to_string());
-    Command::new(cargo)
-        .args(["nextest", "--version"])
-        .output()
-        .is_ok_and(|o| o.status.success())
 }
 
 /// Installs the missing ones of [`SYSTEM_PACKAGES`] with apt-get (through sudo when not
