@@ -1068,9 +1068,10 @@ impl<'m> Supervisor<'m> {
             }
         }
         if !exited.is_empty() {
-            // What a stage said before it ended (a hand-over, the source's last frame) is
-            // queued by now: read it before its exit is judged.
+            // What a stage said before it ended (a hand-over, the source's last frame) and
+            // the poses it published are queued by now: read them before its exit is judged.
             self.handle_status()?;
+            self.handle_poses()?;
         }
         for (i, status, success) in exited.into_iter().rev() {
             let mut p = self.processes.remove(i);
@@ -1110,6 +1111,9 @@ impl<'m> Supervisor<'m> {
                 );
                 self.swap_to = None;
                 continue;
+            }
+            if p.stage == StageKind::PoseEstimator {
+                self.monitor.pose_estimator_died();
             }
             if let Err(given_up) = self.restarts[stage_slot(p.stage)].schedule(now) {
                 bail!(

@@ -90,6 +90,9 @@ pub struct Monitor {
     /// Frames a stage saw skipped in its full queue, by the stage: dropped unless they
     /// still turn up (an earlier frame arriving late is no loss).
     presumed_lost: BTreeMap<u64, String>,
+    /// The pose estimator died: frames from this one up to the first its successor
+    /// publishes died with it (the last stage: no stage after it sees them skipped).
+    lost_with_pose_estimator: Option<u64>,
     fallback: Option<FallbackController>,
     last_pose: Option<(u64, PoseRecord)>,
     /// The pose before `last_pose` (a restarted pose estimator predicts from the two).
@@ -150,6 +153,7 @@ impl Monitor {
             recent_end_to_end_ms: VecDeque::with_capacity(STATUS_WINDOW),
             duplicates: 0,
             presumed_lost: BTreeMap::new(),
+            lost_with_pose_estimator: None,
             fallback,
             last_pose: None,
             previous_pose: None,
@@ -216,6 +220,14 @@ impl Monitor {
             detection,
             matching,
         } = message;
+        if let Some(first) = self.lost_with_pose_estimator
+            && header.frame_id >= first
+        {
+            self.lost_with_pose_estimator = None;
+            if header.frame_id > first {
+                self.presume_lost(first, header.frame_id - first, "pose-estimator");
+            }
+        }
         let status = header.status.get().unwrap_or_else(|unknown| {
             tracing::warn!("frame {}: {unknown}: recorded as failed", header.frame_id);
             FrameStatus::StageError
@@ -400,6 +412,14 @@ impl Monitor {
         for id in ids.filter(|&id| !self.accounted.contains(id)) {
             self.presumed_lost.insert(id, stage.to_string());
         }
+    }
+
+    /// The pose estimator died, after every pose it published was taken: the frames it had
+    /// taken and not published died with it. Its successor's first pose says which (those
+    /// from the first frame without an outcome up to it): they are recorded as `skipped`
+    /// unless they still arrive, and the run does not wait for them.
+    pub fn pose_estimator_died(&mut self) {
+        self.lost_with_pose_estimator = Some(self.accounted.below);
     }
 
     /// The mode the matcher should be in (re-sent to a restarted matcher).
@@ -713,6 +733,49 @@ mod tests {
             .map(|f| (f.frame_id, f.dropped_by.as_str()))
             .collect();
         assert_eq!(skipped, [(2, "pose-estimator"), (4, "pose-estimator")]);
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn frames_that_died_with_the_pose_estimator_are_drops_once_its_successor_publishes() {
+        let dir = scratch("monitor-pose-estimator-died");
+        let mut monitor =
+            Monitor::new(&PipelineConfig::default(), 0, &dir).unwrap_or_else(|e| panic!("{e}"));
+        for f in [0, 1] {
+            pose_of(&mut monitor, f);
+        }
+        // Frames 2 and 3 were in the pose estimator when it died; its successor's first
+        // frame is 4.
+        monitor.pose_estimator_died();
+        monitor.source_finished(5);
+        assert!(!monitor.complete());
+        pose_of(&mut monitor, 4);
+        assert!(!monitor.complete(), "frame 5 is still on its way");
+        pose_of(&mut monitor, 5);
+        assert!(
+            monitor.complete(),
+            "no wait for the frames that died with it"
+        );
+        let report = monitor
+            .finish(RunEnd::Completed, None)
+            .unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(report.drops, [("skipped".to_string(), 2)]);
+        let frames = read_frames(&dir.join("frames.csv")).unwrap_or_else(|e| panic!("{e}"));
+        let outcomes: Vec<(u64, &str)> = frames
+            .iter()
+            .map(|f| (f.frame_id, f.outcome.as_str()))
+            .collect();
+        assert_eq!(
+            outcomes,
+            [
+                (0, "pose"),
+                (1, "pose"),
+                (2, "skipped"),
+                (3, "skipped"),
+                (4, "pose"),
+                (5, "pose")
+            ]
+        );
         let _ = std::fs::remove_dir_all(&dir);
     }
 }

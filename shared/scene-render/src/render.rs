@@ -82,7 +82,7 @@ struct CameraQuad {
     normal: Vector3<f64>,
     u_norm2: f64,
     v_norm2: f64,
-    /// Pixel bounding box (inclusive), or the whole image when a corner is behind.
+    /// Pixel bounding box (inclusive) of its part in front of the near plane.
     bbox: (usize, usize, usize, usize),
     shade: f32,
 }
@@ -108,10 +108,15 @@ pub fn render_view(
         .map(|q| {
             let corners: Vec<Point3<f64>> =
                 q.corners().iter().map(|c| camera_from_world * c).collect();
-            let all_in_front = corners.iter().all(|c| c.z > NEAR_M);
-            let bbox = if all_in_front {
-                let us = corners.iter().map(|c| rig.focal_px * c.x / c.z + rig.cx_px);
-                let vs = corners.iter().map(|c| rig.focal_px * c.y / c.z + rig.cy_px);
+            // Only the part in front of the near plane can be hit: its projection bounds
+            // the pixels to visit (a quad reaching behind the camera no longer costs the
+            // whole image).
+            let visible = clip_to_near(&corners);
+            let bbox = if visible.is_empty() {
+                (1, 0, 1, 0) // empty
+            } else {
+                let us = visible.iter().map(|c| rig.focal_px * c.x / c.z + rig.cx_px);
+                let vs = visible.iter().map(|c| rig.focal_px * c.y / c.z + rig.cy_px);
                 let (u0, u1) = us.fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), u| {
                     (a.min(u), b.max(u))
                 });
@@ -130,8 +135,6 @@ pub fn render_view(
                         clamp_v(v1.ceil() + 1.0),
                     )
                 }
-            } else {
-                (0, width - 1, 0, height - 1)
             };
             let u = camera_from_world.rotation * q.u;
             let v = camera_from_world.rotation * q.v;
@@ -230,6 +233,26 @@ pub fn render_view(
     }
 }
 
+/// The part of the convex polygon `corners` (camera frame) in front of the near plane
+/// (z ≥ [`NEAR_M`]), as its corners; empty when none of it is. A sample only counts a hit
+/// beyond the near plane, so this part's projection holds every pixel the polygon can cover.
+fn clip_to_near(corners: &[Point3<f64>]) -> Vec<Point3<f64>> {
+    let mut visible = Vec::with_capacity(corners.len() + 1);
+    for (i, a) in corners.iter().enumerate() {
+        let b = &corners[(i + 1) % corners.len()];
+        if a.z > NEAR_M {
+            visible.push(*a);
+        }
+        if (a.z > NEAR_M) != (b.z > NEAR_M) {
+            let along = (NEAR_M - a.z) / (b.z - a.z);
+            let mut crossing = a + (b - a) * along;
+            crossing.z = NEAR_M;
+            visible.push(crossing);
+        }
+    }
+    visible
+}
+
 /// Separable blur with kernel [w, 1 − 2w, w], clamped at the borders.
 fn blur_3tap(image: &mut [f32], width: usize, height: usize, w: f32) {
     if w <= 0.0 {
@@ -250,5 +273,40 @@ fn blur_3tap(image: &mut [f32], width: usize, height: usize, w: f32) {
             image[y * width + x] =
                 w * at(y.saturating_sub(1)) + centre * at(y) + w * at((y + 1).min(height - 1));
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_near_clip_keeps_the_part_of_a_quad_in_front_of_the_camera() {
+        let quad = |z: [f64; 4]| {
+            [
+                Point3::new(-1.0, -1.0, z[0]),
+                Point3::new(1.0, -1.0, z[1]),
+                Point3::new(1.0, 1.0, z[2]),
+                Point3::new(-1.0, 1.0, z[3]),
+            ]
+        };
+        // In front: unchanged.
+        let front = quad([2.0; 4]);
+        assert_eq!(clip_to_near(&front), front);
+        // Behind: nothing.
+        assert!(clip_to_near(&quad([-1.0, -1.0, NEAR_M, NEAR_M])).is_empty());
+        // Across (a floor from behind the camera to 3 m ahead): the part from the near
+        // plane on, x spanning the whole quad.
+        let across = clip_to_near(&quad([-1.0, -1.0, 3.0, 3.0]));
+        assert_eq!(across.len(), 4, "{across:?}");
+        assert!(across.iter().all(|c| c.z >= NEAR_M), "{across:?}");
+        assert!(across.iter().any(|c| c.x == -1.0) && across.iter().any(|c| c.x == 1.0));
+        let near: Vec<&Point3<f64>> = across.iter().filter(|c| c.z == NEAR_M).collect();
+        assert_eq!(near.len(), 2, "{across:?}");
+        let y_at_near = -1.0 + 2.0 * (NEAR_M + 1.0) / 4.0;
+        assert!(
+            near.iter().all(|c| (c.y - y_at_near).abs() < 1e-12),
+            "{near:?}"
+        );
     }
 }
