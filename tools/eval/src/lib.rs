@@ -29,6 +29,7 @@ use tracking::{COMBINATIONS, TrackingResult, median};
     after_help = concat!("EXAMPLES:
     linetrack-eval                 # full: 200 frames of every preset + the EuRoC excerpt (tens of minutes)
     linetrack-eval --quick         # CI-sized: 8 frames of three presets + 10 EuRoC frames
+    linetrack-eval --no-generated --real-frames 50   # the real sequences only, their first 50 frames
 
 Generated sequences are made on first use in <sequences>/<preset> and reused. The report is
 <output>/report.md; plots are PNG files beside it.\n\n", linetrack_progress::progress_help!("work"), "\n\n", linetrack_vision::images_help!())
@@ -37,9 +38,17 @@ pub struct Args {
     /// Small settings: three presets, 8 frames each (the EuRoC excerpt: 10 frames).
     #[arg(long)]
     pub quick: bool,
-    /// Frames per sequence (default: 200, or 8 with --quick).
+    /// Frames per generated sequence (default: 200, or 8 with --quick).
     #[arg(long)]
     pub frames: Option<usize>,
+    /// Frames of each real sequence, from its start (default: all of them, or 10 with
+    /// --quick).
+    #[arg(long, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..))]
+    pub real_frames: Option<usize>,
+    /// Leave the generated sequences out: the real sequences (and Middlebury) only, nothing
+    /// rendered.
+    #[arg(long)]
+    pub no_generated: bool,
     /// Where generated sequences are kept.
     #[arg(long, default_value = "out/eval/sequences")]
     pub sequences: PathBuf,
@@ -147,11 +156,10 @@ fn real_entry(
     };
     let sequence =
         StereoSequence::open(&dir).with_context(|| format!("cannot open {}", dir.display()))?;
-    let frames = if args.quick {
-        quick_frames.min(sequence.frames.len())
-    } else {
-        sequence.frames.len()
-    };
+    let frames = args
+        .real_frames
+        .unwrap_or(if args.quick { quick_frames } else { usize::MAX })
+        .min(sequence.frames.len());
     Ok(Some(Entry {
         name: format!("{name} {}", sequence.name),
         dir,
@@ -163,7 +171,9 @@ fn real_entry(
 }
 
 fn prepare(args: &Args, frames: usize) -> anyhow::Result<Vec<Entry>> {
-    let presets: &[Preset] = if args.quick {
+    let presets: &[Preset] = if args.no_generated {
+        &[]
+    } else if args.quick {
         &[
             Preset::Normal,
             Preset::HdrFlicker,
