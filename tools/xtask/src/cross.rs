@@ -11,8 +11,9 @@
 //!    packages the workspace links against, unpacked, never installed on the host (the arm64
 //!    OpenCV cannot be installed next to the amd64 one through multiarch: its imgcodecs
 //!    depends on GDAL, which is not co-installable);
-//! 3. builds `cargo build --release --target aarch64-unknown-linux-gnu` of every binary but
-//!    xtask, with the opencv crate, its C++ glue and the linker pointed at the sysroot;
+//! 3. builds `cargo build --release --target aarch64-unknown-linux-gnu` (or the profile
+//!    `--profile` names) of every binary but xtask, with the opencv crate, its C++ glue and
+//!    the linker pointed at the sysroot;
 //! 4. unless `--no-run`: builds the native binaries (release, or the profile
 //!    `--native-profile` names: CI compares with the `test-release` binaries its tests
 //!    built, which compute the same), runs the same commands with
@@ -160,6 +161,16 @@ struct Args {
     /// poses).
     #[arg(long, default_value = "release")]
     native_profile: String,
+    /// The cargo profile of the aarch64 build. CI checks the `test-release` build (the
+    /// orchestration crates at optimisation level 1: a cold build some minutes shorter);
+    /// the package is made from the `release` one.
+    #[arg(long, default_value = "release")]
+    profile: String,
+}
+
+/// The folder under `target/TRIPLE/` that cargo writes `profile`'s binaries to.
+fn profile_dir(profile: &str) -> &str {
+    if profile == "dev" { "debug" } else { profile }
 }
 
 /// Runs `cargo xtask cross ARGS…`.
@@ -199,11 +210,13 @@ pub fn run(args: &[String]) -> anyhow::Result<ExitCode> {
     }
 
     let started = Instant::now();
-    cross_build(&workspace, &sysroot)?;
+    cross_build(&workspace, &sysroot, &args.profile)?;
+    let bin_dir = target_dir.join(TARGET).join(profile_dir(&args.profile));
     eprintln!(
-        "xtask: aarch64 release build: {:.1} s; binaries in {}",
+        "xtask: aarch64 {} build: {:.1} s; binaries in {}",
+        args.profile,
         started.elapsed().as_secs_f64(),
-        target_dir.join(TARGET).join("release").display()
+        bin_dir.display()
     );
     if args.no_run {
         return Ok(ExitCode::SUCCESS);
@@ -268,7 +281,7 @@ pub fn run(args: &[String]) -> anyhow::Result<ExitCode> {
     };
     let emulated = Machine {
         name: "aarch64 (qemu)",
-        bin_dir: target_dir.join(TARGET).join("release"),
+        bin_dir,
         runner: vec![QEMU.to_string(), "-L".to_string(), path_text(&sysroot)?],
     };
     let check = Check {
@@ -591,15 +604,17 @@ fn make_sysroot(sysroot: &Path) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// `cargo build --release --target aarch64-unknown-linux-gnu` of every binary but xtask.
-fn cross_build(workspace: &Path, sysroot: &Path) -> anyhow::Result<()> {
+/// `cargo build --profile PROFILE --target aarch64-unknown-linux-gnu` of every binary but
+/// xtask.
+fn cross_build(workspace: &Path, sysroot: &Path, profile: &str) -> anyhow::Result<()> {
     let sysroot_text = path_text(sysroot)?;
     let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".to_string());
     let status = Command::new(&cargo)
         .current_dir(workspace)
         .args([
             "build",
-            "--release",
+            "--profile",
+            profile,
             "--target",
             TARGET,
             "--workspace",

@@ -11,7 +11,9 @@
 //!   add ([`tiers`]).
 //! - `cargo xtask test-ros2 [ARGS…]` — the ROS 2 output (cargo feature `ros2`): install the
 //!   DDS peer if missing ([`python_env`]), build `linetrack-ros2`, run its crate's tests and
-//!   the end-to-end test in which Cyclone DDS receives the poses, and clippy with the feature.
+//!   the end-to-end test in which Cyclone DDS receives the poses.
+//! - `cargo xtask feature-drift` — fails when an optional feature set would compile a
+//!   shared dependency with other features than the default build ([`feature_drift`]).
 //!
 //! The test commands print each step's wall time.
 //! - `cargo xtask setup` — only install the system packages, the MCAP checker and the DDS
@@ -24,6 +26,7 @@
 
 mod cross;
 mod deb;
+mod feature_drift;
 mod pose_diff;
 mod python_env;
 mod tiers;
@@ -52,6 +55,7 @@ const USAGE: &str = "usage: cargo xtask <demo|match-demo|test|setup> [ARGS…]
   test        every test of the default build (ARGS are passed to cargo nextest run / cargo test)
   test-features  the tests the optional features mcap (recording) and link (zenoh) add
   test-ros2   the ROS 2 output's tests (feature `ros2`) against a Cyclone DDS subscriber
+  feature-drift  fails when an optional feature set would recompile a shared dependency
   setup       install the system packages and the DDS peer of test-ros2
   cross       aarch64 release binaries, checked under qemu (try `cargo xtask cross --help`)
   deb         the Debian package; --check unpacks and checks it (`cargo xtask deb --help`)";
@@ -117,6 +121,7 @@ fn run() -> anyhow::Result<ExitCode> {
         }
         "test" => tiers::default_suite(&rest),
         "test-features" => tiers::feature_suite(&rest),
+        "feature-drift" => feature_drift::run(&rest),
         "cross" => cross::run(&rest),
         "deb" => {
             install_system_packages()?;

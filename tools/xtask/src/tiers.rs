@@ -8,6 +8,10 @@
 //!   whose code they change and the end-to-end tests that need them.
 //! - `cargo xtask test-ros2` — the ROS 2 output (feature `ros2`) against a Cyclone DDS peer.
 //!
+//! The optional features' builds compile only what the features add: `tools/workspace-hack`
+//! gives the shared dependencies the same features in every tier, and `cargo xtask
+//! feature-drift` ([`crate::feature_drift`]) checks that it still does.
+//!
 //! Every tier builds with the `test-release` profile, so what one tier built the next one
 //! (and `cargo xtask deb --check --profile test-release`, `cargo xtask cross
 //! --native-profile test-release`, clippy with `--profile test-release`) reuses.
@@ -23,12 +27,17 @@ pub const PROFILE: &str = "test-release";
 /// ground-station link (zenoh), and the end-to-end tests that need them.
 pub const FEATURES: &str = "linetrack/mcap,linetrack/link,linetrack-e2e/mcap,linetrack-e2e/link";
 
+/// The features `cargo xtask test-ros2` turns on: the bridge's ROS 2 output and the
+/// end-to-end test that receives it.
+pub const ROS2_FEATURES: &str = "linetrack-ros2-bridge/ros2,linetrack-e2e/ros2";
+
 /// The crates whose code the features change (their tests run again with them).
 const FEATURE_PACKAGES: &[&str] = &[
     "linetrack",
     "linetrack-frame-source",
     "linetrack-link",
     "linetrack-recorder",
+    "linetrack-supervisor",
 ];
 
 /// The end-to-end test binaries that need the features (`required-features`).
@@ -169,57 +178,46 @@ pub fn feature_suite(rest: &[String]) -> anyhow::Result<ExitCode> {
     steps.cargo_steps(&[("build binaries", build), ("tests", tests)])
 }
 
-/// `cargo xtask test-ros2 ARGS…`: the binaries the end-to-end test starts (the bridge with
-/// its `ros2` feature), its crate's tests, the end-to-end test, then clippy on the
-/// feature's code (the workspace's clippy run does not see it). The bridge and the
-/// end-to-end tests go in separate cargo calls: together, ros2-client's dependencies would
-/// unify features with the workspace's and rebuild most of it.
+/// `cargo xtask test-ros2 ARGS…`: the binaries the end-to-end test starts, the bridge with
+/// its `ros2` feature among them, then the bridge crate's tests and the end-to-end test in
+/// one run. The whole workspace is built with [`ROS2_FEATURES`]: `tools/workspace-hack`
+/// turns on the features ros2-client's dependencies add to shared crates, so this build
+/// compiles only ros2-client and the bridge and reuses the default tier's binaries.
 pub fn ros2_suite(rest: &[String]) -> anyhow::Result<ExitCode> {
-    const BRIDGE: [&str; 4] = ["--package", "linetrack-ros2-bridge", "--features", "ros2"];
-    // The whole workspace with the end-to-end tests' `ros2` switch (it changes no
-    // dependency): the test binaries of the default tier are reused as they are.
-    const E2E: [&str; 3] = ["--workspace", "--features", "linetrack-e2e/ros2"];
     let mut steps = Steps::new("test-ros2");
     steps.run("system packages", install_system_packages)?;
     steps.run("DDS peer", || python_env::DDS_PEER.install())?;
     let nextest = steps.run("find cargo-nextest", has_nextest);
-    let test = |package: &[&str], e2e: bool| -> Vec<String> {
-        let mut args = if nextest {
-            words(&["nextest", "run", "--cargo-profile", PROFILE])
-        } else {
-            words(&["test", "--profile", PROFILE])
-        };
-        args.extend(words(package));
-        if e2e {
-            args.extend(if nextest {
-                words(&["-E", "binary_id(linetrack-e2e::ros2)"])
-            } else {
-                words(&["--test", "ros2"])
-            });
-        }
-        args.extend(rest.iter().cloned());
-        args
-    };
-    let clippy = |package: &[&str]| -> Vec<String> {
-        let mut args = words(&["clippy", "--all-targets", "--profile", PROFILE]);
-        args.extend(words(package));
-        args.extend(words(&["--", "-D", "warnings"]));
-        args
-    };
-    // The bridge's binary and tests in one build, so that they share one feature
-    // resolution (its own: ros2-client's dependencies are kept out of the workspace's).
-    let mut bridge_build = words(&["build", "--bins", "--tests", "--profile", PROFILE]);
-    bridge_build.extend(words(&BRIDGE));
-    steps.cargo_steps(&[
-        (
-            "build binaries",
-            test_build(&["--features", "linetrack-e2e/ros2"]),
-        ),
-        ("build bridge", bridge_build),
-        ("bridge tests", test(&BRIDGE, false)),
-        ("end-to-end test", test(&E2E, true)),
-        ("clippy bridge", clippy(&BRIDGE)),
-    ])
+    let features = ["--features", ROS2_FEATURES];
+    if !nextest {
+        eprintln!("xtask: cargo-nextest not found, running `cargo test` instead");
+        let mut bridge = words(&[
+            "test",
+            "--profile",
+            PROFILE,
+            "--package",
+            "linetrack-ros2-bridge",
+        ]);
+        bridge.extend(words(&features));
+        bridge.extend(rest.iter().cloned());
+        let mut e2e = words(&["test", "--profile", PROFILE, "--package", "linetrack-e2e"]);
+        e2e.extend(words(&features));
+        e2e.extend(words(&["--test", "ros2"]));
+        e2e.extend(rest.iter().cloned());
+        return steps.cargo_steps(&[
+            ("build binaries", test_build(&features)),
+            ("bridge tests", bridge),
+            ("end-to-end test", e2e),
+        ]);
+    }
+    let mut tests = words(&["nextest", "run", "--workspace", "--cargo-profile", PROFILE]);
+    tests.extend(words(&features));
+    tests.extend(words(&[
+        "-E",
+        "package(linetrack-ros2-bridge) | binary_id(linetrack-e2e::ros2)",
+    ]));
+    tests.extend(rest.iter().cloned());
+    steps.cargo_steps(&[("build binaries", test_build(&features)), ("tests", tests)])
 }
 
 /// The one build of the `test-release` binaries: every binary with every test target,
@@ -227,7 +225,8 @@ pub fn ros2_suite(rest: &[String]) -> anyhow::Result<ExitCode> {
 /// resolution (dev-dependencies turn on features of shared crates, e.g. rand's `os_rng`,
 /// rustix's `fs`): built apart, half the workspace was compiled twice. `cargo xtask deb
 /// --profile test-release` and `cargo xtask cross --native-profile test-release` build
-/// through this too, so they find the tests' binaries fresh.
+/// through this too, so they find the tests' binaries fresh. With `LINETRACK_BUILD_TIMINGS`
+/// set, cargo writes its build report (`--timings`) to `target/cargo-timings/`.
 pub fn test_build(extra: &[&str]) -> Vec<String> {
     let mut args = words(&[
         "build",
@@ -237,6 +236,11 @@ pub fn test_build(extra: &[&str]) -> Vec<String> {
         "--profile",
         PROFILE,
     ]);
+    // cargo's build report (which crate took how long, on how many cores) in
+    // target/cargo-timings/, when asked for.
+    if std::env::var_os("LINETRACK_BUILD_TIMINGS").is_some() {
+        args.push("--timings".to_string());
+    }
     args.extend(words(extra));
     args
 }
