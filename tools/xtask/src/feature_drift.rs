@@ -107,7 +107,6 @@ fn tree(edges: &str, features: Option<&str>) -> anyhow::Result<String> {
         "{p} {f}",
         "--prefix",
         "none",
-        "--no-dedupe",
     ]);
     if let Some(features) = features {
         command.args(["--features", features]);
