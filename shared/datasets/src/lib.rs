@@ -32,7 +32,9 @@ mod writer;
 pub use calib::{PinholeCamera, Rectifier};
 pub use euroc::read_euroc_camera;
 pub use kitti::read_kitti_poses;
-pub use middlebury::{DisparityMap, LoadedPair, MiddleburyPair, list_middlebury};
+pub use middlebury::{
+    DisparityMap, LoadedPair, MiddleburyPair, list_middlebury, select_middlebury,
+};
 pub use sequence::{
     FrameEntry, FrameError, StereoFrame, StereoSequence, StereoStream, opencv_on_calling_threads,
 };

@@ -140,6 +140,26 @@ pub fn list_middlebury(root: &Path) -> Result<Vec<MiddleburyPair>, DatasetError>
     Ok(pairs)
 }
 
+/// The pairs under `root` named in `names` (scene folder names), or every pair when
+/// `names` is empty. Errs, naming it, on a name that is no scene there.
+pub fn select_middlebury(
+    root: &Path,
+    names: &[String],
+) -> Result<Vec<MiddleburyPair>, DatasetError> {
+    let mut pairs = list_middlebury(root)?;
+    if let Some(missing) = names.iter().find(|n| !pairs.iter().any(|p| &p.name == *n)) {
+        return Err(crate::parse_error(
+            root,
+            0,
+            format!("no scene {missing:?} here"),
+        ));
+    }
+    if !names.is_empty() {
+        pairs.retain(|p| names.contains(&p.name));
+    }
+    Ok(pairs)
+}
+
 fn sub_folders(dir: &Path) -> Result<Vec<PathBuf>, DatasetError> {
     let io = |reason| DatasetError::Io {
         path: dir.to_path_buf(),
@@ -248,6 +268,37 @@ impl DisparityMap {
         v.is_finite().then_some(f64::from(v))
     }
 
+    /// The disparity at (x, y) between pixel centres: bilinear over the four pixels around
+    /// it. `None` outside the map, where one of them is unknown, or where they differ by
+    /// more than `max_spread_px` (a depth edge: no single surface to interpolate).
+    pub fn interpolated(&self, x: f64, y: f64, max_spread_px: f64) -> Option<f64> {
+        let (col, row) = (x.floor(), y.floor());
+        let inside = |c: f64, r: f64| {
+            c >= 0.0 && r >= 0.0 && c < self.width as f64 && r < self.height as f64
+        };
+        if !(inside(col, row) && inside(col + 1.0, row + 1.0)) {
+            return None;
+        }
+        let (c, r) = (col as usize, row as usize);
+        let at = |dc: usize, dr: usize| f64::from(self.values[(r + dr) * self.width + c + dc]);
+        let corners = [at(0, 0), at(1, 0), at(0, 1), at(1, 1)];
+        if corners.iter().any(|v| !v.is_finite()) {
+            return None;
+        }
+        let (low, high) = corners
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &v| {
+                (lo.min(v), hi.max(v))
+            });
+        if !(high - low <= max_spread_px) {
+            return None;
+        }
+        let (fx, fy) = (x - col, y - row);
+        let top = corners[0] + (corners[1] - corners[0]) * fx;
+        let bottom = corners[2] + (corners[3] - corners[2]) * fx;
+        Some(top + (bottom - top) * fy)
+    }
+
     /// Fraction of pixels with a known disparity.
     pub fn coverage(&self) -> f64 {
         let known = self.values.iter().filter(|v| v.is_finite()).count();
@@ -278,5 +329,31 @@ mod tests {
         assert_eq!(map.at(f64::NAN, 0.0), None);
         assert!((map.coverage() - 4.0 / 6.0).abs() < 1e-12);
         assert!(DisparityMap::from_values(3, 2, vec![1.0; 5]).is_none());
+    }
+
+    #[test]
+    fn interpolation_is_bilinear_and_refuses_unknown_edges_and_outside() {
+        // A plane d = 10 + 0.5·x + 0.25·y on 4 × 3 pixels: bilinear reproduces it exactly.
+        let plane = |x: f64, y: f64| 10.0 + 0.5 * x + 0.25 * y;
+        let values = (0..3)
+            .flat_map(|r| (0..4).map(move |c| plane(f64::from(c), f64::from(r)) as f32))
+            .collect();
+        let map = DisparityMap::from_values(4, 3, values).unwrap();
+        for (x, y) in [(0.0, 0.0), (1.3, 0.6), (2.9, 1.99), (3.0, 2.0)] {
+            let d = map.interpolated(x, y, 1.0);
+            // The last column and row have no neighbour beyond them: outside.
+            if x >= 3.0 || y >= 2.0 {
+                assert_eq!(d, None, "({x}, {y})");
+            } else {
+                assert!((d.unwrap() - plane(x, y)).abs() < 1e-5, "({x}, {y}): {d:?}");
+            }
+        }
+        assert_eq!(map.interpolated(-0.1, 0.0, 1.0), None);
+        // The four pixels around (1.5, 0.5) span 0.75 px: refused under a tighter limit.
+        assert_eq!(map.interpolated(1.5, 0.5, 0.7), None);
+        let mut holed = map.clone();
+        holed.values[5] = f32::NAN;
+        assert_eq!(holed.interpolated(1.5, 0.5, 1.0), None);
+        assert!(holed.interpolated(2.5, 1.5, 1.0).is_some());
     }
 }

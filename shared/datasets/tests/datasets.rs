@@ -661,6 +661,26 @@ fn malformed_kitti_raw_files_are_refused_naming_them() {
 // ---------------------------------------------------------------- Middlebury
 
 #[test]
+fn real_data_middlebury_scenes_are_selected_by_name_and_an_unknown_one_is_named() {
+    let dir = linetrack_test_data::middlebury_dir().unwrap();
+    let names = ["Venus".to_string(), "Cones".to_string()];
+    let pairs = linetrack_datasets::select_middlebury(&dir, &names).unwrap();
+    let found: Vec<&str> = pairs.iter().map(|p| p.name.as_str()).collect();
+    assert_eq!(found, ["Cones", "Venus"]);
+    assert_eq!(
+        linetrack_datasets::select_middlebury(&dir, &[])
+            .unwrap()
+            .len(),
+        28
+    );
+    let error = linetrack_datasets::select_middlebury(&dir, &["Atlantis".to_string()])
+        .unwrap_err()
+        .to_string();
+    assert!(error.contains("\"Atlantis\""), "{error}");
+    assert!(error.contains(dir.to_str().unwrap()), "{error}");
+}
+
+#[test]
 fn real_data_middlebury_lists_every_pair_with_its_disparity_scale() {
     let dir = linetrack_test_data::middlebury_dir().unwrap();
     let pairs = linetrack_datasets::list_middlebury(&dir).unwrap();

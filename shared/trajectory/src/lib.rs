@@ -1,8 +1,8 @@
 //! Camera trajectories and how far an estimate is from the truth.
 //!
 //! - [`tum`]: TUM-format trajectory files (`t tx ty tz qx qy qz qw`), read and written.
-//! - [`metrics`]: RPE, ATE (first-pose and SE(3)-aligned), drift and the zero-motion
-//!   baseline, gathered in [`metrics::Summary`]: the one set of metric names that
+//! - [`metrics`]: RPE, ATE (first-pose and SE(3)-aligned), drift, the step ratio (scale
+//!   bias) and the zero-motion baseline, gathered in [`metrics::Summary`]: the one set of metric names that
 //!   `linetrack-vo` writes to `metrics.json` and `linetrack run` to `summary.json`.
 //!
 //! No image or dataset code here, so the run records (`linetrack-run-record`) can score a

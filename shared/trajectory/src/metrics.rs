@@ -11,6 +11,20 @@
 //!   the RMSE of the position differences.
 //! - **Drift per metre**: final position error (first-pose aligned) over the length of the
 //!   true path, percent; not given for a path under 1 m, where it means nothing.
+//! - **Step ratio** ([`StepRatio`]): a scale bias made visible. For each pair of
+//!   consecutive poses both trajectories have, the estimated step length over the true one,
+//!   ‖trans(P_i⁻¹ P_{i+1})‖ / ‖trans(Q_i⁻¹ Q_{i+1})‖ (the distance between consecutive
+//!   positions, so world frames and rotations do not enter). Steps over which the truth moves
+//!   less than [`MIN_RATIO_STEP_M`] (1 cm) are left out and counted: over so short a step,
+//!   millimetres of noise in either position make the ratio anything (a parked vehicle's
+//!   steps are nothing but noise; the KITTI car steps about 1 m a frame, the generated
+//!   handheld camera 1.5–3.2 cm, 10th to 90th percentile of its motion model at 20 Hz).
+//!   A pose pair of [`Summary::of_stamped`] that spans a dropped frame is one step of both
+//!   trajectories over the same interval. Reported as the overall ratio (sum
+//!   of estimated over sum of true step lengths, so long steps weigh more), the median, and
+//!   the 10th and 90th percentiles (nearest rank) of the per-step ratios; none with fewer
+//!   than [`MIN_RATIO_STEPS`] steps kept. 1 is unbiased; 1.1 means the estimate moves 10 %
+//!   too far.
 //! - [`Summary`] gathers them with the zero-motion baseline (the ATE of a trajectory that
 //!   never moves), which a parked-vehicle excerpt needs: there, "no motion" can beat any
 //!   estimator.
@@ -94,22 +108,93 @@ pub fn ate_rmse_aligned(estimate: &[Isometry3<f64>], truth: &[Isometry3<f64>]) -
     Some((sum / n as f64).sqrt())
 }
 
-/// Length of the true path, metres.
-pub fn path_length(truth: &[Isometry3<f64>]) -> f64 {
-    truth
+/// The distance between each pose's position and the next one's, metres.
+fn step_lengths(poses: &[Isometry3<f64>]) -> impl Iterator<Item = f64> + '_ {
+    poses
         .windows(2)
         .map(|w| (w[1].translation.vector - w[0].translation.vector).norm())
-        .sum()
+}
+
+/// Length of the true path, metres.
+pub fn path_length(truth: &[Isometry3<f64>]) -> f64 {
+    step_lengths(truth).sum()
+}
+
+/// Steps over which the truth moves less than this are left out of the step ratio, metres.
+pub const MIN_RATIO_STEP_M: f64 = 0.01;
+
+/// The step ratio needs at least this many steps kept: a single step has no spread to
+/// take percentiles of.
+pub const MIN_RATIO_STEPS: usize = 2;
+
+/// Estimated over true step length, frame to frame: a scale bias shows as a ratio away
+/// from 1 (the module documentation defines it).
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct StepRatio {
+    /// Steps compared: consecutive pose pairs over which the truth moves at least
+    /// [`MIN_RATIO_STEP_M`].
+    pub steps: usize,
+    /// Steps left out because the truth moves less than [`MIN_RATIO_STEP_M`] over them.
+    pub skipped: usize,
+    /// Sum of the estimated step lengths over the sum of the true ones (steps compared).
+    pub overall: f64,
+    /// Median of the per-step ratios.
+    pub median: f64,
+    /// 10th percentile of the per-step ratios (nearest rank).
+    pub p10: f64,
+    /// 90th percentile of the per-step ratios (nearest rank).
+    pub p90: f64,
+}
+
+/// The `percent`th percentile of increasingly sorted values by nearest rank: the smallest
+/// value with at least `percent` % of them at or below it; `None` for no values.
+fn nearest_rank(sorted: &[f64], percent: f64) -> Option<f64> {
+    // Multiplied before dividing, so whole percentages of whole counts stay exact.
+    let rank = (percent * sorted.len() as f64 / 100.0).ceil() as usize;
+    sorted.get(rank.clamp(1, sorted.len().max(1)) - 1).copied()
+}
+
+impl StepRatio {
+    /// The step ratio of `estimate` against `truth` over the poses both have; `None` with
+    /// fewer than [`MIN_RATIO_STEPS`] steps of at least [`MIN_RATIO_STEP_M`] in the truth.
+    pub fn new(estimate: &[Isometry3<f64>], truth: &[Isometry3<f64>]) -> Option<Self> {
+        let n = estimate.len().min(truth.len());
+        let pairs: Vec<(f64, f64)> = step_lengths(&estimate[..n])
+            .zip(step_lengths(&truth[..n]))
+            .collect();
+        let kept: Vec<(f64, f64)> = pairs
+            .iter()
+            .copied()
+            .filter(|&(_, true_m)| true_m >= MIN_RATIO_STEP_M)
+            .collect();
+        if kept.len() < MIN_RATIO_STEPS {
+            return None;
+        }
+        let (estimated_m, true_m) = kept.iter().fold((0.0, 0.0), |(e, t), &(step_e, step_t)| {
+            (e + step_e, t + step_t)
+        });
+        let mut ratios: Vec<f64> = kept.iter().map(|&(e, t)| e / t).collect();
+        ratios.sort_by(f64::total_cmp);
+        Some(Self {
+            steps: kept.len(),
+            skipped: pairs.len() - kept.len(),
+            overall: estimated_m / true_m,
+            median: nearest_rank(&ratios, 50.0)?,
+            p10: nearest_rank(&ratios, 10.0)?,
+            p90: nearest_rank(&ratios, 90.0)?,
+        })
+    }
 }
 
 /// The names of [`Summary`]'s fields as written to JSON, in order.
-pub const METRIC_NAMES: [&str; 7] = [
+pub const METRIC_NAMES: [&str; 8] = [
     "poses",
     "path_m",
     "rpe_m",
     "ate_m",
     "ate_aligned_m",
     "drift_percent",
+    "step_ratio",
     "zero_motion_ate_m",
 ];
 
@@ -133,6 +218,9 @@ pub struct Summary {
     pub ate_aligned_m: Option<f64>,
     /// Final error over path length, percent (none under [`MIN_DRIFT_PATH_M`]).
     pub drift_percent: Option<f64>,
+    /// Estimated over true step length (none with too few steps that move, see
+    /// [`StepRatio::new`]).
+    pub step_ratio: Option<StepRatio>,
     /// ATE RMSE of a trajectory that stays at the first pose, metres.
     pub zero_motion_ate_m: Option<f64>,
 }
@@ -149,6 +237,7 @@ impl Summary {
             ate_m: ate_rmse(estimate, truth),
             ate_aligned_m: ate_rmse_aligned(estimate, truth),
             drift_percent: drift_percent(estimate, truth),
+            step_ratio: StepRatio::new(estimate, truth),
             zero_motion_ate_m: ate_rmse(&still, truth),
         }
     }
@@ -236,6 +325,12 @@ mod tests {
         let expected = ((0..21).map(|k| (0.01 * k as f64).powi(2)).sum::<f64>() / 21.0).sqrt();
         assert!((ate_rmse(&estimate, &truth).unwrap() - expected).abs() < 1e-12);
         assert!(rpe_translation_rmse(&estimate, &truth, 30).is_none());
+        // Every step 10 % too long.
+        let ratio = StepRatio::new(&estimate, &truth).unwrap();
+        assert_eq!((ratio.steps, ratio.skipped), (20, 0));
+        for value in statistics(&ratio) {
+            assert!((value - 1.1).abs() < 1e-12, "{ratio:?}");
+        }
     }
 
     #[test]
@@ -292,6 +387,119 @@ mod tests {
         let mut expected = METRIC_NAMES.to_vec();
         expected.sort_unstable();
         assert_eq!(names, expected);
+    }
+
+    /// Every statistic of `ratio`, in the order overall, median, p10, p90.
+    fn statistics(ratio: &StepRatio) -> [f64; 4] {
+        [ratio.overall, ratio.median, ratio.p10, ratio.p90]
+    }
+
+    #[test]
+    fn a_trajectory_scaled_by_1_1_has_a_step_ratio_of_1_1_in_every_world_frame() {
+        // Turning, climbing, with steps of changing length (10 to 29 cm).
+        let truth: Vec<Isometry3<f64>> = walk([0.1, 0.02, 0.05], 0.05, 40)
+            .iter()
+            .enumerate()
+            .map(|(k, p)| {
+                let stretch = 1.0 + 0.05 * (k % 20) as f64;
+                Isometry3::from_parts((p.translation.vector * stretch).into(), p.rotation)
+            })
+            .collect();
+        let scaled: Vec<_> = truth
+            .iter()
+            .map(|p| Isometry3::from_parts((p.translation.vector * 1.1).into(), p.rotation))
+            .collect();
+        let offset = Isometry3::from_parts(
+            Translation3::new(5.0, -2.0, 1.0),
+            UnitQuaternion::from_euler_angles(0.3, 0.1, -0.7),
+        );
+        let moved: Vec<_> = scaled.iter().map(|p| offset * p).collect();
+        for estimate in [&scaled, &moved] {
+            let ratio = StepRatio::new(estimate, &truth).unwrap();
+            assert_eq!((ratio.steps, ratio.skipped), (39, 0));
+            for value in statistics(&ratio) {
+                assert!((value - 1.1).abs() < 1e-12, "{ratio:?}");
+            }
+        }
+        // The same trajectory rigidly moved, or shifted by a constant: no bias.
+        let shifted: Vec<_> = truth
+            .iter()
+            .map(|p| Translation3::new(3.0, 0.5, -7.0) * p)
+            .collect();
+        let unmoved: Vec<_> = truth.iter().map(|p| offset * p).collect();
+        for estimate in [&shifted, &unmoved] {
+            let ratio = StepRatio::new(estimate, &truth).unwrap();
+            for value in statistics(&ratio) {
+                assert!((value - 1.0).abs() < 1e-12, "{ratio:?}");
+            }
+        }
+    }
+
+    #[test]
+    fn step_ratio_percentiles_are_nearest_rank_and_overall_weighs_by_length() {
+        // 20 true steps of 10 cm along x; the estimate's k-th smallest ratio is 0.5 + 0.05 k,
+        // in a shuffled order.
+        let truth = walk([0.1, 0.0, 0.0], 0.0, 21);
+        let ratios: Vec<f64> = (0..20)
+            .map(|k| 0.5 + 0.05 * ((7 * k) % 20) as f64)
+            .collect();
+        let estimate: Vec<Isometry3<f64>> = std::iter::once(0.0)
+            .chain(ratios.iter().scan(0.0, |x, r| {
+                *x += 0.1 * r;
+                Some(*x)
+            }))
+            .map(|x| Isometry3::translation(x, 0.0, 0.0))
+            .collect();
+        let ratio = StepRatio::new(&estimate, &truth).unwrap();
+        // Nearest rank of 20 sorted values: p10 the 2nd, median the 10th, p90 the 18th.
+        let expected = [0.975, 0.95, 0.55, 1.35];
+        for (value, want) in statistics(&ratio).into_iter().zip(expected) {
+            assert!((value - want).abs() < 1e-9, "{ratio:?}");
+        }
+        // One long step 1.5 times too long among short exact ones: the overall ratio weighs
+        // it by its length, the median does not see it.
+        let truth: Vec<_> = [0.0, 0.1, 0.2, 0.3, 1.3]
+            .map(|x| Isometry3::translation(x, 0.0, 0.0))
+            .into();
+        let estimate: Vec<_> = [0.0, 0.1, 0.2, 0.3, 1.8]
+            .map(|x| Isometry3::translation(x, 0.0, 0.0))
+            .into();
+        let ratio = StepRatio::new(&estimate, &truth).unwrap();
+        assert!((ratio.overall - 1.8 / 1.3).abs() < 1e-12, "{ratio:?}");
+        assert!((ratio.median - 1.0).abs() < 1e-12 && (ratio.p90 - 1.5).abs() < 1e-12);
+    }
+
+    #[test]
+    fn steps_where_the_truth_stands_still_are_left_out_and_too_few_give_none() {
+        // 10 steps of 10 cm, then 10 parked steps of 5 mm over which the estimate jumps 1 m.
+        let along_x = |moving_m: f64, parked_m: f64| -> Vec<Isometry3<f64>> {
+            (0..21usize)
+                .map(|k| {
+                    let x = moving_m * k.min(10) as f64 + parked_m * k.saturating_sub(10) as f64;
+                    Isometry3::translation(x, 0.0, 0.0)
+                })
+                .collect()
+        };
+        let (truth, estimate) = (along_x(0.1, 0.005), along_x(0.1, 1.0));
+        let ratio = StepRatio::new(&estimate, &truth).unwrap();
+        assert_eq!((ratio.steps, ratio.skipped), (10, 10));
+        for value in statistics(&ratio) {
+            assert!((value - 1.0).abs() < 1e-12, "{ratio:?}");
+        }
+        // Parked all along, a single step, a single pose, nothing: no ratio (not NaN).
+        let parked = &truth[10..];
+        assert_eq!(StepRatio::new(&estimate[10..], parked), None);
+        assert_eq!(StepRatio::new(&estimate[..2], &truth[..2]), None);
+        assert_eq!(StepRatio::new(&estimate[..1], &truth[..1]), None);
+        assert_eq!(StepRatio::new(&[], &truth), None);
+        assert_eq!(
+            StepRatio::new(&estimate[..3], &truth[..3]).map(|r| r.steps),
+            Some(2)
+        );
+        let summary = Summary::new(&estimate[10..], parked);
+        assert_eq!(summary.step_ratio, None);
+        let json = serde_json::to_value(summary).unwrap();
+        assert!(json["step_ratio"].is_null(), "{json}");
     }
 
     #[test]

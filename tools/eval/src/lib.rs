@@ -1,7 +1,8 @@
 //! One command that reproduces the paper's three tables over generated sequences (one per
 //! illumination preset) and the real EuRoC excerpt, and writes a Markdown report with PNG
-//! plots: Table I (tracking: matches per frame and inlier ratio), Table II (odometry: RPE
-//! and ATE, with and without simulated illumination changes), Table III (cost per frame),
+//! plots: Table I (tracking: matches per frame and inlier ratio), Table II (odometry: RPE,
+//! ATE, drift and step ratio, with and without simulated illumination changes), Table III
+//! (cost per frame),
 //! and stereo matching scored on the real Middlebury pairs (`linetrack-stereo-bench`).
 #![warn(missing_docs)]
 
@@ -376,8 +377,9 @@ pub fn run(args: &Args) -> anyhow::Result<String> {
         "---|".repeat(COMBINATIONS.len())
     );
     let mut costs: Vec<(Vec<f64>, Vec<f64>)> = vec![(Vec::new(), Vec::new()); COMBINATIONS.len()];
-    let mut table2 =
-        String::from("| sequence | P+L, LBD | P+L, ℓ1 | L, LBD | L, ℓ1 |\n|---|---|---|---|---|\n");
+    let mut table2 = String::from(
+        "| sequence | P+L, LBD | step ratio | P+L, ℓ1 | step ratio | L, LBD | step ratio | L, ℓ1 | step ratio |\n|---|---|---|---|---|---|---|---|---|\n",
+    );
     let mut plots = Vec::new();
     let mut baselines = String::new();
     let progress = Progress::new("eval frames", work_units(args, &entries), args.quiet);
@@ -538,6 +540,7 @@ pub fn run(args: &Args) -> anyhow::Result<String> {
                     }
                 }
                 cells.push(odometry::cell(&runs));
+                cells.push(odometry::step_ratio_cell(&runs));
                 let run = &runs[0];
                 if trajectories.is_empty()
                     && let Some(truth) = &run.truth
@@ -620,6 +623,10 @@ pub fn run(args: &Args) -> anyhow::Result<String> {
             real.join(", ")
         )
     };
+    let (min_step_cm, min_steps) = (
+        linetrack_odometry::metrics::MIN_RATIO_STEP_M * 1e2,
+        linetrack_odometry::metrics::MIN_RATIO_STEPS,
+    );
     let report = format!(
         "# linetrack evaluation\n\n\
          Settings: {frames} frames per generated sequence (seed 1, 20 Hz, 752×480, 11 cm baseline){}; starred rows add simulated \
@@ -628,11 +635,15 @@ pub fn run(args: &Args) -> anyhow::Result<String> {
          ## Table I — tracking\n\nMean matches per frame / inlier ratio, for each detector + matcher. {}\n\n{table1}\n\
          ## Table II — visual odometry\n\nTranslational RPE RMSE per frame (step 1) / ATE RMSE / drift, LSD segments; P+L = ORB \
          points and segments, L = segments only. Generated presets: {seeds} seed(s), the median ATE and its drift, then the worst \
-         ATE and the worst drift. A lost frame keeps the last motion as a prediction; lost frames are counted in bold (summed over \
+         ATE and the worst drift. Beside each configuration its step ratio: overall / median (p10–p90), and over seeds those of \
+         the median-ATE seed, then the overall ratio furthest from 1. A lost frame keeps the last motion as a prediction; lost frames are counted in bold (summed over \
          seeds).\n\n{table2}\n{baselines}\n\
          Definitions (as the TUM benchmark tools): RPE over pose pairs one frame apart, E_i = (Q_i⁻¹Q_{{i+1}})⁻¹(P_i⁻¹P_{{i+1}}), RMSE \
          of ‖trans(E_i)‖; ATE after aligning both trajectories at their first pose (no scale, no least-squares fit), RMSE of \
-         ‖trans(Q₀⁻¹Q_i) − trans(P₀⁻¹P_i)‖; drift: final position error over the true path length, not given under 1 m. P: \
+         ‖trans(Q₀⁻¹Q_i) − trans(P₀⁻¹P_i)‖; drift: final position error over the true path length, not given under 1 m; step \
+         ratio: estimated over true step length ‖trans(P_i⁻¹P_{{i+1}})‖ / ‖trans(Q_i⁻¹Q_{{i+1}})‖ of each pair of consecutive frames, \
+         steps where the truth moves under {min_step_cm} cm left out (none with fewer than {min_steps} steps left: –), overall = sum of estimated over \
+         sum of true step lengths, percentiles by nearest rank; 1 is unbiased, above 1 the estimate moves too far. P: \
          estimate, Q: ground truth.\n\n\
          ## Table III — cost\n\nMedian milliseconds per frame over all frames and sequences of Table I, this machine. Mono = detect + \
          describe one image + frame-to-frame match; stereo = both images + stereo match + frame-to-frame match, processed one after \

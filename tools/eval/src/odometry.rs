@@ -27,6 +27,17 @@ pub struct OdometryRun {
     pub metrics: Option<metrics::Summary>,
 }
 
+/// The summaries in increasing ATE (a run without an ATE last).
+fn by_ate<'a>(summaries: &[&'a metrics::Summary]) -> Vec<&'a metrics::Summary> {
+    let mut sorted = summaries.to_vec();
+    sorted.sort_by(|a, b| {
+        a.ate_m
+            .unwrap_or(f64::NAN)
+            .total_cmp(&b.ate_m.unwrap_or(f64::NAN))
+    });
+    sorted
+}
+
 /// One Table II cell: RPE / ATE / drift of a single run, or, over several seeds, the median
 /// and worst ATE and drift; lost frames (summed) in bold.
 pub fn cell(runs: &[OdometryRun]) -> String {
@@ -45,12 +56,7 @@ pub fn cell(runs: &[OdometryRun]) -> String {
             drift(one)
         ),
         many => {
-            let mut by_ate = many.to_vec();
-            by_ate.sort_by(|a, b| {
-                a.ate_m
-                    .unwrap_or(f64::NAN)
-                    .total_cmp(&b.ate_m.unwrap_or(f64::NAN))
-            });
+            let by_ate = by_ate(many);
             let median = by_ate[by_ate.len() / 2];
             let worst = by_ate[by_ate.len() - 1];
             let worst_drift = many
@@ -71,6 +77,40 @@ pub fn cell(runs: &[OdometryRun]) -> String {
         text.push_str(&format!(" (**{lost} lost**)"));
     }
     text
+}
+
+/// The Table II step-ratio cell beside [`cell`]: the overall ratio / median (p10–p90) of
+/// a single run; over several seeds, those of the run with the median ATE (the run [`cell`]
+/// reports) and the overall ratio furthest from 1 among them. "–" without a ratio (no
+/// ground truth, or too few steps that move).
+pub fn step_ratio_cell(runs: &[OdometryRun]) -> String {
+    let summaries: Vec<&metrics::Summary> =
+        runs.iter().filter_map(|r| r.metrics.as_ref()).collect();
+    let one = |s: &metrics::Summary| {
+        s.step_ratio.map_or("–".to_string(), |r| {
+            format!(
+                "{:.3} / {:.3} ({:.3}–{:.3})",
+                r.overall, r.median, r.p10, r.p90
+            )
+        })
+    };
+    match summaries.as_slice() {
+        [] => "–".to_string(),
+        [single] => one(single),
+        many => {
+            let by_ate = by_ate(many);
+            let median = by_ate[by_ate.len() / 2];
+            let worst = many
+                .iter()
+                .filter_map(|s| s.step_ratio)
+                .map(|r| r.overall)
+                .max_by(|a, b| a.ln().abs().total_cmp(&b.ln().abs()));
+            match worst {
+                Some(worst) => format!("{} (worst {worst:.3})", one(median)),
+                None => one(median),
+            }
+        }
+    }
 }
 
 /// Runs one configuration over the first `frames` frames.

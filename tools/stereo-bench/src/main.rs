@@ -94,17 +94,7 @@ fn run() -> anyhow::Result<String> {
         Some(dir) => dir.clone(),
         None => linetrack_test_data::middlebury_dir().map_err(anyhow::Error::msg)?,
     };
-    let mut pairs = linetrack_datasets::list_middlebury(&data)?;
-    if !args.pairs.is_empty() {
-        if let Some(missing) = args
-            .pairs
-            .iter()
-            .find(|n| !pairs.iter().any(|p| &p.name == *n))
-        {
-            anyhow::bail!("no scene {missing:?} in {}", data.display());
-        }
-        pairs.retain(|p| args.pairs.contains(&p.name));
-    }
+    let pairs = linetrack_datasets::select_middlebury(&data, &args.pairs)?;
     let config = match &args.config {
         Some(path) => FrontendConfig::from_file(path)?,
         None => FrontendConfig::default(),

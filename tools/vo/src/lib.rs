@@ -1,7 +1,7 @@
 //! Runs PL-StVO over a dataset folder (EuRoC, KITTI, or a generated sequence) and writes
 //! the estimated trajectory in TUM format, the ground truth in the same frame, per-frame
 //! statistics as CSV, and a summary with the lost-frame count and, given ground truth, the
-//! RPE, ATE and drift (definitions in `linetrack_odometry::metrics`).
+//! RPE, ATE, drift and step ratio (definitions in `linetrack_odometry::metrics`).
 #![warn(missing_docs)]
 
 use anyhow::Context;
@@ -34,7 +34,8 @@ camera), groundtruth.txt (the same frame, when the dataset has ground truth), fr
 row per frame: lost, features, matches, inliers, iterations, conditioning, departure from the
 prediction, milliseconds per step), metrics.json (the run's settings, lost frames and, with
 ground truth, under `metrics`: poses, path_m, rpe_m, ate_m, ate_aligned_m, drift_percent,
-zero_motion_ate_m — the names `linetrack run` writes to summary.json).\n\n", linetrack_progress::progress_help!("frames"), "\n\n", linetrack_vision::images_help!())
+step_ratio {steps, skipped, overall, median, p10, p90} (estimated over true step length, steps
+under 1 cm left out), zero_motion_ate_m — the names `linetrack run` writes to summary.json).\n\n", linetrack_progress::progress_help!("frames"), "\n\n", linetrack_vision::images_help!())
 )]
 pub struct Args {
     /// Dataset folder: EuRoC (holding mav0/), a KITTI odometry sequence, or linetrack-synth output.
@@ -126,11 +127,11 @@ impl FrameRow {
             conditioning: s.conditioning,
             departure_m: s.departure[0],
             departure_deg: s.departure[1],
-            detect_ms: s.ms[0],
-            describe_ms: s.ms[1],
-            stereo_ms: s.ms[2],
-            f2f_ms: s.ms[3],
-            motion_ms: s.ms[4],
+            detect_ms: s.detect_ms,
+            describe_ms: s.describe_ms,
+            stereo_ms: s.stereo_ms,
+            f2f_ms: s.frame_to_frame_ms,
+            motion_ms: s.motion_ms,
             reason: result.reason.clone().unwrap_or_default(),
         }
     }
@@ -272,10 +273,16 @@ pub fn run(args: &Args) -> anyhow::Result<String> {
         let m = metrics::Summary::new(&estimate, &truth);
         let fmt =
             |v: Option<f64>, unit: &str| v.map_or("n/a".to_string(), |v| format!("{v:.4}{unit}"));
+        let step_ratio = m.step_ratio.map_or("n/a".to_string(), |r| {
+            format!(
+                "{:.3} (median {:.3}, p10–p90 {:.3}–{:.3}, {} steps)",
+                r.overall, r.median, r.p10, r.p90, r.steps
+            )
+        });
         write!(
             summary,
-            " | path {:.2} m, RPE {} per frame, ATE {} (SE(3)-aligned {}), drift {}; \
-             staying put would score ATE {}",
+            " | path {:.2} m, RPE {} per frame, ATE {} (SE(3)-aligned {}), drift {}, \
+             step ratio {step_ratio}; staying put would score ATE {}",
             m.path_m,
             fmt(m.rpe_m, " m"),
             fmt(m.ate_m, " m"),

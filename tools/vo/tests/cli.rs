@@ -85,12 +85,24 @@ fn a_generated_sequence_gives_trajectory_ground_truth_stats_and_metrics() {
     assert!(
         metrics["ate_aligned_m"].as_f64().unwrap() <= metrics["ate_m"].as_f64().unwrap() + 1e-9
     );
+    // The step ratio over the 7 steps (about 1.4 cm each, measured: none left out, overall
+    // 0.98), and its line in the summary.
+    let ratio = &metrics["step_ratio"];
+    let statistic = |name: &str| ratio[name].as_f64().unwrap();
+    assert_eq!(
+        ratio["steps"].as_u64().unwrap() + ratio["skipped"].as_u64().unwrap(),
+        7,
+        "{ratio}"
+    );
+    assert!((statistic("overall") - 1.0).abs() < 0.05, "{ratio}");
+    assert!(statistic("p10") <= statistic("median") && statistic("median") <= statistic("p90"));
+    assert!(stdout.contains(", step ratio "), "{stdout}");
     let _ = std::fs::remove_dir_all(dir);
 }
 
 /// The real moving drive: 108 frames, 107 m. Measured (LSD, points and lines): LBD ATE
-/// 0.19 m, drift 0.20 %; ℓ1 ATE 0.16 m, drift 0.20 %; no frame lost; staying put would score
-/// ATE 68 m. The two runs are independent processes (about 22 s each), so they go side by side,
+/// 0.19 m, drift 0.20 %, step ratio 0.999; ℓ1 ATE 0.16 m, drift 0.20 %, step ratio 1.001;
+/// no frame lost; staying put would score ATE 68 m. The two runs are independent processes (about 22 s each), so they go side by side,
 /// one per core.
 #[test]
 fn real_data_kitti_raw_drive_drifts_under_one_percent() {
@@ -138,6 +150,25 @@ fn real_data_kitti_raw_drive_drifts_under_one_percent() {
         // The path is 107 m; staying put would be off by tens of metres.
         assert!(metrics["path_m"].as_f64().unwrap() > 100.0);
         assert!(metrics["zero_motion_ate_m"].as_f64().unwrap() > 10.0);
+        // No scale bias: measured overall step ratio 0.999 (LBD) and 1.001 (ℓ1) over all 107
+        // steps (about 1 m each, none left out). The per-step spread (p10–p90 0.93–1.05) is
+        // the OXTS ground truth's: a third of its steps are 10 % longer than their neighbours.
+        let ratio = &metrics["step_ratio"];
+        let statistic = |name: &str| ratio[name].as_f64().unwrap();
+        assert_eq!(
+            (ratio["steps"].as_u64(), ratio["skipped"].as_u64()),
+            (Some(107), Some(0)),
+            "{matcher}: {ratio}"
+        );
+        assert!(
+            (statistic("overall") - 1.0).abs() < 0.02,
+            "{matcher}: {ratio}"
+        );
+        assert!(
+            statistic("p10") <= statistic("median") && statistic("median") <= statistic("p90"),
+            "{matcher}: {ratio}"
+        );
+        assert!(String::from_utf8_lossy(&result.stdout).contains("step ratio "));
         let _ = std::fs::remove_dir_all(out);
     }
 }
@@ -195,6 +226,11 @@ fn real_data_euroc_excerpt_is_tracked_without_losing_a_frame() {
     );
     // Measured: 95 frames, 0 lost, ATE 1.5 mm (the vehicle is almost still).
     assert!(stdout.contains("95 frames (0 skipped), 0 lost"), "{stdout}");
+    // 17 mm of path in 94 steps: every step is under a centimetre, so no step ratio.
+    assert!(stdout.contains("step ratio n/a"), "{stdout}");
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("metrics.json")).unwrap()).unwrap();
+    assert!(json["metrics"]["step_ratio"].is_null(), "{json}");
     let ate: f64 = stdout
         .split("ATE ")
         .nth(1)

@@ -1,0 +1,106 @@
+//! [`Odometry`], the whole PL-StVO over stereo frames: its own front end detects, describes
+//! and matches the segments (stereo, and against the previous frame where the last motion
+//! predicts them), and a [`MotionTracker`] does the rest.
+
+use crate::stats::since;
+use crate::{
+    FrameResult, FrameStats, MatchedLines, MotionTracker, OdometryConfig, OdometryError,
+    Preparation,
+};
+use linetrack_geometry::{MatchCase, Segment, StereoRig};
+use linetrack_vision::{
+    GrayImage, LineDetector, LineFeatures, SegmentMatcher, create_detector, create_segment_matcher,
+};
+use std::time::Instant;
+
+/// The odometry: feed frames in order with [`Odometry::track`].
+pub struct Odometry {
+    detector: Box<dyn LineDetector>,
+    matcher: Box<dyn SegmentMatcher>,
+    previous_lines: Option<LineFeatures>,
+    /// Where the last motion moves the previous frame's segments (kept between frames).
+    predicted: Vec<Segment>,
+    tracker: MotionTracker,
+}
+
+impl Odometry {
+    /// An odometry for frames from `rig`.
+    pub fn new(config: OdometryConfig, rig: StereoRig) -> Result<Self, OdometryError> {
+        Ok(Self {
+            detector: create_detector(config.detector, &config.frontend)?,
+            matcher: create_segment_matcher(config.matcher, &config.frontend)?,
+            previous_lines: None,
+            predicted: Vec::new(),
+            tracker: MotionTracker::new(config, rig)?,
+        })
+    }
+
+    /// The stereo matches the last frame was triangulated from
+    /// ([`MotionTracker::stereo_sightings`]).
+    pub fn stereo_sightings(&self) -> Vec<crate::StereoSighting> {
+        self.tracker.stereo_sightings()
+    }
+
+    /// Tracks one stereo frame (rectified, the rig's size).
+    pub fn track(
+        &mut self,
+        left: &GrayImage,
+        right: &GrayImage,
+    ) -> Result<FrameResult, OdometryError> {
+        let mut stats = FrameStats::default();
+        // The pipeline's steps, one after the other: the images stretched, their corners
+        // found and the points' work done (its time counted apart)…
+        let prepared = self
+            .tracker
+            .prepare(left, right, Preparation::CornersAndPoints)?;
+        // …then the segments detected (stretched once, for the detectors and the back
+        // end's corners alike), described and matched.
+        let started = Instant::now();
+        let (seen_left, seen_right) = prepared.seen(left, right);
+        let (mut lines_l, mut lines_r) = (LineFeatures::default(), LineFeatures::default());
+        self.detector.detect(seen_left, &mut lines_l.segments)?;
+        self.detector.detect(seen_right, &mut lines_r.segments)?;
+        stats.detect_ms = since(started);
+        let started = Instant::now();
+        self.matcher.describe(seen_left, &mut lines_l)?;
+        self.matcher.describe(seen_right, &mut lines_r)?;
+        stats.describe_ms = since(started);
+        stats.segments = [lines_l.segments.len(), lines_r.segments.len()];
+
+        let started = Instant::now();
+        let mut stereo = Vec::new();
+        self.matcher
+            .match_lines(MatchCase::Stereo, &lines_l, &lines_r, &mut stereo);
+        stats.stereo_ms = since(started);
+        let started = Instant::now();
+        let mut tracked = Vec::new();
+        if let Some(previous) = &mut self.previous_lines {
+            // Matched where the last motion puts them, when it is known.
+            let predicted = &mut self.predicted;
+            let moved = self.tracker.config().predicted_matching
+                && self.matcher.matches_predicted_positions()
+                && self.tracker.predict_segments(&previous.segments, predicted);
+            if moved {
+                std::mem::swap(&mut previous.segments, predicted);
+            }
+            self.matcher
+                .match_lines(MatchCase::FrameToFrame, previous, &lines_l, &mut tracked);
+            if moved {
+                std::mem::swap(&mut previous.segments, predicted);
+            }
+        }
+        stats.frame_to_frame_ms = since(started);
+        let lines = MatchedLines {
+            left: &lines_l.segments,
+            right: &lines_r.segments,
+            stereo: &stereo,
+            tracked: self.previous_lines.as_ref().map(|_| tracked.as_slice()),
+        };
+        // (The preparation's milliseconds are added to `detect_ms`.)
+        let result = self
+            .tracker
+            .update_prepared(Some(((left, right), prepared)), lines, stats);
+        self.previous_lines = Some(lines_l);
+        result
+    }
+}

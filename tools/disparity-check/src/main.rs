@@ -1,0 +1,164 @@
+//! `linetrack-disparity-check`: the odometry's triangulated disparities against the
+//! Middlebury ground truth, per disparity band.
+
+use anyhow::Context;
+use clap::Parser;
+use linetrack_disparity_check::{Row, check_pair, markdown, rows};
+use linetrack_odometry::{OdometryConfig, SightingKind};
+use linetrack_vision::MatcherKind;
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+/// Command-line arguments.
+#[derive(Debug, Parser)]
+#[command(
+    name = "linetrack-disparity-check",
+    version,
+    about = "Run the odometry's stereo front end on the real Middlebury pairs and compare every disparity it triangulates (stereo points, segment endpoints) with the ground truth: signed error per disparity band.",
+    after_help = concat!("EXAMPLES:
+    linetrack-disparity-check                         # every pair, LBD and l1
+    linetrack-disparity-check --matcher l1 --pair Cones
+    linetrack-disparity-check --config configs/odometry.toml
+
+The error is the odometry's disparity minus the ground truth under the left pixel
+(bilinear between pixel centres). A sighting off by more than --inlier-px is a wrong match:
+counted, and left out of the bias of the correct ones. A negative mean in a band is a depth
+read too long there, by about |mean| / d. Sightings over a depth edge (the four pixels around differ by
+more than --max-spread-px) or over unknown ground truth are left out and counted.
+
+OUTPUT: <output>/disparity-check.md (the table), disparity-check.json (the rows) and, with
+--samples, samples.jsonl (every sighting: scene, matcher, kind, disparities, error).
+
+", linetrack_progress::progress_help!("pairs"))
+)]
+struct Args {
+    /// Folder of the Middlebury scenes (default: ../shared/data/middlebury beside the workspace).
+    #[arg(long)]
+    data: Option<PathBuf>,
+    /// Only these scenes (repeatable, by folder name).
+    #[arg(long = "pair")]
+    pairs: Vec<String>,
+    /// Segment matchers to run the odometry with (repeatable; default: lbd and l1).
+    #[arg(long = "matcher")]
+    matchers: Vec<MatcherKind>,
+    /// Odometry configuration (TOML, see configs/odometry.toml; default: the defaults).
+    #[arg(long)]
+    config: Option<PathBuf>,
+    /// Ground truth whose four pixels around a sighting differ by more than this is a depth
+    /// edge: the sighting is left out, pixels.
+    #[arg(long, default_value_t = 1.0)]
+    max_spread_px: f64,
+    /// Folder of the outputs.
+    #[arg(long, default_value = "out/disparity-check")]
+    output: PathBuf,
+    /// A sighting off the ground truth by more than this is a wrong match (counted apart,
+    /// left out of the bias), pixels.
+    #[arg(long, default_value_t = 2.0)]
+    inlier_px: f64,
+    /// Also write every sighting with its error (samples.jsonl).
+    #[arg(long)]
+    samples: bool,
+    /// No progress on stderr.
+    #[arg(long)]
+    quiet: bool,
+}
+
+fn main() -> ExitCode {
+    match run() {
+        Ok(table) => {
+            print!("{table}");
+            ExitCode::SUCCESS
+        }
+        Err(error) => {
+            eprintln!("linetrack-disparity-check: {error:#}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+fn run() -> anyhow::Result<String> {
+    let args = Args::parse();
+    if !(args.max_spread_px.is_finite() && args.max_spread_px >= 0.0) {
+        anyhow::bail!("--max-spread-px {}: must be ≥ 0", args.max_spread_px);
+    }
+    if !(args.inlier_px.is_finite() && args.inlier_px > 0.0) {
+        anyhow::bail!("--inlier-px {}: must be > 0", args.inlier_px);
+    }
+    let data = match &args.data {
+        Some(dir) => dir.clone(),
+        None => linetrack_test_data::middlebury_dir().map_err(anyhow::Error::msg)?,
+    };
+    let pairs = linetrack_datasets::select_middlebury(&data, &args.pairs)?;
+    let config = match &args.config {
+        Some(path) => OdometryConfig::from_file(path)
+            .map_err(anyhow::Error::msg)
+            .with_context(|| format!("--config {}", path.display()))?,
+        None => OdometryConfig::default(),
+    };
+    let matchers = if args.matchers.is_empty() {
+        vec![MatcherKind::Lbd, MatcherKind::L1]
+    } else {
+        args.matchers.clone()
+    };
+    let progress = linetrack_progress::Progress::new("pairs", pairs.len() as u64, args.quiet);
+    // Points do not depend on the segment matcher: they are taken from the first run.
+    let mut points = Vec::new();
+    let mut endpoints = vec![Vec::new(); matchers.len()];
+    let mut without_truth = 0;
+    let mut all_samples = Vec::new();
+    for (done, pair) in pairs.iter().enumerate() {
+        progress.step(pair.name.as_str());
+        let loaded = pair
+            .load()
+            .with_context(|| format!("scene {}", pair.name))?;
+        for (m, &matcher) in matchers.iter().enumerate() {
+            let found = check_pair(&loaded, &config, matcher, args.max_spread_px)
+                .with_context(|| format!("scene {} with {}", pair.name, matcher.name()))?;
+            for sample in found.samples {
+                if args.samples {
+                    all_samples.push(serde_json::json!({
+                        "scene": pair.name,
+                        "matcher": matcher.name(),
+                        "sample": sample,
+                        "error_px": sample.error_px(),
+                    }));
+                }
+                match sample.kind {
+                    SightingKind::Point if m == 0 => points.push(sample),
+                    SightingKind::Point => {}
+                    SightingKind::SegmentEndpoint => endpoints[m].push(sample),
+                }
+            }
+            without_truth += found.without_truth;
+        }
+        progress.set(done as u64 + 1);
+    }
+    progress.finish();
+    let mut table: Vec<Row> = rows(SightingKind::Point, "(any)", &points, args.inlier_px);
+    for (matcher, samples) in matchers.iter().zip(&endpoints) {
+        table.extend(rows(
+            SightingKind::SegmentEndpoint,
+            matcher.name(),
+            samples,
+            args.inlier_px,
+        ));
+    }
+    let text = format!(
+        "{}\n{} scenes; {without_truth} sightings without ground truth (unknown or a depth edge) left out.\n",
+        markdown(&table),
+        pairs.len()
+    );
+    std::fs::create_dir_all(&args.output)
+        .with_context(|| format!("creating {}", args.output.display()))?;
+    let md = args.output.join("disparity-check.md");
+    std::fs::write(&md, &text).with_context(|| format!("writing {}", md.display()))?;
+    let json = args.output.join("disparity-check.json");
+    std::fs::write(&json, serde_json::to_string_pretty(&table)?)
+        .with_context(|| format!("writing {}", json.display()))?;
+    if args.samples {
+        let path = args.output.join("samples.jsonl");
+        let lines: String = all_samples.iter().map(|v| format!("{v}\n")).collect();
+        std::fs::write(&path, lines).with_context(|| format!("writing {}", path.display()))?;
+    }
+    Ok(text)
+}

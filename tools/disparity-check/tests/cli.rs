@@ -1,0 +1,90 @@
+//! `linetrack-disparity-check` as a user runs it: on the three 2001–2003 Middlebury scenes
+//! (`real_data_*`), and on bad input.
+
+#![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failure here is a test failure
+
+use std::process::{Command, Output};
+
+fn check(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_linetrack-disparity-check"))
+        .args(args)
+        .output()
+        .unwrap()
+}
+
+#[test]
+fn real_data_correct_point_disparities_are_unbiased_on_the_2001_2003_scenes() {
+    let out = linetrack_test_data::scratch_path("disparity-check", "three-scenes");
+    let result = check(&[
+        "--pair",
+        "Tsukuba",
+        "--pair",
+        "Venus",
+        "--pair",
+        "Cones",
+        "--samples",
+        "--quiet",
+        "--output",
+        out.to_str().unwrap(),
+    ]);
+    assert!(
+        result.status.success(),
+        "{}",
+        String::from_utf8_lossy(&result.stderr)
+    );
+    let stdout = String::from_utf8_lossy(&result.stdout);
+    assert!(stdout.contains("3 scenes"), "{stdout}");
+    for needle in [
+        "| points | (any) | < 10 |",
+        "| segment endpoints | lbd | all |",
+        "| segment endpoints | l1 | all |",
+    ] {
+        assert!(stdout.contains(needle), "{needle} missing:\n{stdout}");
+    }
+    let rows: Vec<serde_json::Value> =
+        serde_json::from_str(&std::fs::read_to_string(out.join("disparity-check.json")).unwrap())
+            .unwrap();
+    // Points in every band, then segment endpoints per matcher: 5 rows each (4 bands, all).
+    assert_eq!(rows.len(), 15);
+    let all_points = &rows[4];
+    assert_eq!(all_points["band"], "all");
+    let count = all_points["count"].as_u64().unwrap();
+    let mismatched = all_points["mismatched"].as_u64().unwrap();
+    // Measured: 1278 points, 44 of them wrong matches, the others' mean −0.001 px.
+    assert!(count > 500, "{all_points}");
+    assert!(
+        mismatched * 10 < count,
+        "over 10 % wrong matches: {all_points}"
+    );
+    let bias = all_points["correct"]["mean_px"].as_f64().unwrap();
+    assert!(bias.abs() <= 0.05, "a bias of {bias} px: {all_points}");
+    // Every sighting is written, each with its error.
+    let samples = std::fs::read_to_string(out.join("samples.jsonl")).unwrap();
+    let first: serde_json::Value = serde_json::from_str(samples.lines().next().unwrap()).unwrap();
+    let (measured, truth) = (
+        first["sample"]["measured_px"].as_f64().unwrap(),
+        first["sample"]["true_px"].as_f64().unwrap(),
+    );
+    assert!((first["error_px"].as_f64().unwrap() - (measured - truth)).abs() < 1e-9);
+    let _ = std::fs::remove_dir_all(&out);
+}
+
+#[test]
+fn an_unknown_scene_and_bad_limits_are_refused_by_name() {
+    let data = linetrack_test_data::scratch_dir("disparity-check", "empty").unwrap();
+    let result = check(&["--data", data.to_str().unwrap(), "--quiet"]);
+    assert!(!result.status.success());
+    let stderr = String::from_utf8_lossy(&result.stderr);
+    assert!(stderr.contains(data.to_str().unwrap()), "{stderr}");
+    for (args, needle) in [
+        (["--inlier-px", "0"], "--inlier-px 0"),
+        (["--max-spread-px", "NaN"], "--max-spread-px NaN"),
+        (["--matcher", "sift"], "sift"),
+    ] {
+        let result = check(&args);
+        assert!(!result.status.success(), "{args:?}");
+        let stderr = String::from_utf8_lossy(&result.stderr);
+        assert!(stderr.contains(needle), "{args:?}: {stderr}");
+    }
+    let _ = std::fs::remove_dir_all(&data);
+}
