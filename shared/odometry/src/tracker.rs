@@ -16,7 +16,7 @@ use crate::stats::since;
 use crate::{FrameResult, FrameStats, OdometryConfig, OdometryError};
 use linetrack_geometry::{Point, Segment, SegmentFeatures, StereoRig};
 use linetrack_l1_matcher::SegmentProfiles;
-use linetrack_stereo_vo::motion::{line_residual, point_residual};
+use linetrack_stereo_vo::motion::{line_residual, normalised_line, point_residual};
 use linetrack_stereo_vo::{
     LineObservation, MotionEstimate, PointObservation, TriangulationLimits, estimate_motion,
     estimate_motion_near,
@@ -71,6 +71,28 @@ struct Reference {
     points: PointFeatures,
     point_landmarks: PointLandmarks,
     line_landmarks: LineLandmarks,
+}
+
+/// Gives each segment observation the line of its current left segment's stereo partner
+/// in the right image, where that match was triangulated this frame (so it passed the
+/// photometric and look-alike checks).
+fn observe_right_lines(
+    observations: &mut Observations,
+    fresh: &Triangulations,
+    lines: &MatchedLines<'_>,
+) {
+    for (obs, &(_, j)) in observations.lines.iter_mut().zip(&observations.line_pairs) {
+        obs.right_line = None;
+        if !matches!(fresh.lines.get(j), Some(Some(_))) {
+            continue;
+        }
+        obs.right_line = lines
+            .stereo
+            .iter()
+            .find(|m| m.query == j)
+            .and_then(|m| lines.right.get(m.train))
+            .and_then(normalised_line);
+    }
 }
 
 /// A frame's fresh stereo triangulations (left camera frame) with their weights.
@@ -378,6 +400,8 @@ impl MotionTracker {
             &mut stats,
         );
         self.triangulate_points(images, &points_l, &mut lists.fresh, &limits, &mut stats);
+        self.observe_right_columns(&mut lists.observations, &lists.fresh);
+        observe_right_lines(&mut lists.observations, &lists.fresh, &lines);
         let verdict = self.estimate(&lists.observations, &mut stats);
         Ok(self.conclude(verdict, previous, points_l, lists, stats))
     }
@@ -412,6 +436,25 @@ impl MotionTracker {
         );
         stats.observations = [observations.points.len(), observations.lines.len()];
         stats.frame_to_frame_ms += since(started);
+    }
+
+    /// Gives each point observation the right image's column of its current stereo
+    /// partner, where the point was triangulated this frame (the refined column when
+    /// `subpixel_stereo` is on: the triangulation's own).
+    fn observe_right_columns(&self, observations: &mut Observations, fresh: &Triangulations) {
+        let rig = &self.rig;
+        for (obs, &(_, j)) in observations
+            .points
+            .iter_mut()
+            .zip(&observations.point_pairs)
+        {
+            obs.right_x = fresh
+                .points
+                .get(j)
+                .copied()
+                .flatten()
+                .map(|(p, _)| rig.focal_px * (p.x - rig.baseline_m) / p.z + rig.cx_px);
+        }
     }
 
     /// The motion from `observations` (the constant-velocity prior only once a motion was

@@ -1,10 +1,12 @@
-//! Deterministic renderer of indoor stereo sequences with exact ground truth, for testing
-//! line tracking under illumination changes where no real HDR dataset can be downloaded.
+//! Deterministic renderer of stereo sequences with exact ground truth, for testing line
+//! tracking under illumination changes where no real HDR dataset can be downloaded, and the
+//! odometry's scale where most structure is far.
 //!
 //! A seeded [`Scene`] (a room of textured rectangles: tiled floor, walls, doors, posters, a
 //! bright window, a checkerboard, striped radiators and shelves, plain low-texture areas)
 //! is seen by a rectified stereo rig moving along a smooth [`Trajectory`] (hand-held or
-//! drone-like). Each frame is rendered with 2×2 anti-aliasing, optics blur, exposure with
+//! drone-like); or a road ([`RoadPath`]: lane paint, a guard rail, posts, buildings, a far
+//! tree line, sky) is driven along at 10 m/s with KITTI's rig ([`Preset::Highway`]). Each frame is rendered with 2×2 anti-aliasing, optics blur, exposure with
 //! the frame's [`FrameIllumination`] (gain/bias jumps, flicker, local lights, saturation,
 //! left/right mismatch), sensor noise and 8-bit quantisation. Every frame comes with the
 //! exact pose and per-pixel depth maps of both cameras; the scene's 3-D segments are known.
@@ -14,10 +16,14 @@
 
 mod motion;
 mod render;
+mod road;
 mod scene;
 
-pub use motion::{FrameIllumination, IlluminationConfig, Trajectory, TrajectoryKind};
+pub use motion::{
+    FrameIllumination, IlluminationConfig, ROAD_SPEED_M_S, Trajectory, TrajectoryKind,
+};
 pub use render::{SensorOptions, View, render_view};
+pub use road::{CAMERA_HEIGHT_M, RoadPath};
 pub use scene::{Quad, Scene, Texture};
 
 use linetrack_geometry::StereoRig;
@@ -76,11 +82,14 @@ pub enum Preset {
     LightsSwitching,
     /// Hand-held, right camera at gain 0.5 and bias +15 (left/right mismatch).
     LeftRightMismatch,
+    /// A car at 10 m/s (1 m per frame at 10 Hz) on a road with a curve, KITTI's rig, steady
+    /// daylight: far-field structure (most of it 30–150 m away), sky, few near features.
+    Highway,
 }
 
 impl Preset {
     /// Every preset.
-    pub const ALL: [Preset; 7] = [
+    pub const ALL: [Preset; 8] = [
         Preset::Normal,
         Preset::HandheldGainJumps,
         Preset::DroneGainJumps,
@@ -88,6 +97,7 @@ impl Preset {
         Preset::HdrSaturation,
         Preset::LightsSwitching,
         Preset::LeftRightMismatch,
+        Preset::Highway,
     ];
 
     /// The preset's name on the command line.
@@ -100,6 +110,7 @@ impl Preset {
             Preset::HdrSaturation => "hdr-saturation",
             Preset::LightsSwitching => "lights-switching",
             Preset::LeftRightMismatch => "left-right-mismatch",
+            Preset::Highway => "highway",
         }
     }
 
@@ -154,6 +165,17 @@ impl Preset {
                     ..illumination
                 },
             ),
+            Preset::Highway => {
+                return SequenceConfig {
+                    seed,
+                    frames,
+                    rate_hz: 10.0,
+                    rig: kitti_rig(),
+                    trajectory: TrajectoryKind::Road,
+                    illumination,
+                    ..SequenceConfig::default()
+                };
+            }
         };
         SequenceConfig {
             seed,
@@ -162,6 +184,18 @@ impl Preset {
             illumination,
             ..SequenceConfig::default()
         }
+    }
+}
+
+/// The rectified grey rig of the KITTI odometry benchmark (sequences 00–02: P0 and P1).
+fn kitti_rig() -> StereoRig {
+    StereoRig {
+        focal_px: 718.856,
+        cx_px: 607.1928,
+        cy_px: 185.2157,
+        baseline_m: 0.537,
+        width_px: 1241,
+        height_px: 376,
     }
 }
 
@@ -209,8 +243,17 @@ pub struct SequenceRenderer {
 impl SequenceRenderer {
     /// Builds the scene and trajectory of `config`.
     pub fn new(config: SequenceConfig) -> Self {
-        let scene = Scene::random_room(config.seed);
-        let trajectory = Trajectory::new(config.trajectory, scene.room_m, config.seed);
+        let (scene, trajectory) = if config.trajectory == TrajectoryKind::Road {
+            let trajectory =
+                Trajectory::new(config.trajectory, nalgebra::Vector3::zeros(), config.seed);
+            let length_m = config.frames as f64 / config.rate_hz * ROAD_SPEED_M_S;
+            let scene = Scene::random_road(config.seed, trajectory.road(), length_m);
+            (scene, trajectory)
+        } else {
+            let scene = Scene::random_room(config.seed);
+            let trajectory = Trajectory::new(config.trajectory, scene.room_m, config.seed);
+            (scene, trajectory)
+        };
         Self {
             config,
             scene,

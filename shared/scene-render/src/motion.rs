@@ -1,5 +1,6 @@
 //! Camera trajectories and illumination over time.
 
+use crate::road::{CAMERA_HEIGHT_M, RoadPath};
 use nalgebra::{Isometry3, Matrix3, Rotation3, Translation3, UnitQuaternion, Vector3};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -14,12 +15,19 @@ pub enum TrajectoryKind {
     Handheld,
     /// Faster, wider loops, steady yaw rotation.
     Drone,
+    /// A car on a road at 10 m/s (see [`RoadPath`]), the camera 1.65 m above it, with a
+    /// little suspension bounce.
+    Road,
 }
+
+/// Speed of the [`TrajectoryKind::Road`] car, m/s.
+pub const ROAD_SPEED_M_S: f64 = 10.0;
 
 /// A smooth trajectory through the middle of a room.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Trajectory {
     kind: TrajectoryKind,
+    road: RoadPath,
     centre: Vector3<f64>,
     amplitude: Vector3<f64>,
     phase: [f64; 4],
@@ -39,9 +47,11 @@ impl Trajectory {
         let amplitude = match kind {
             TrajectoryKind::Handheld => Vector3::new(0.6, 0.5, 0.06).inf(&free),
             TrajectoryKind::Drone => Vector3::new(1.4, 1.2, 0.25).inf(&free),
+            TrajectoryKind::Road => Vector3::zeros(),
         };
         Self {
             kind,
+            road: RoadPath::new(seed),
             centre: Vector3::new(room_m.x / 2.0, room_m.y / 2.0, 1.4),
             amplitude,
             phase,
@@ -50,6 +60,9 @@ impl Trajectory {
 
     /// Pose of the left camera (x right, y down, z forward) in the world at `t` seconds.
     pub fn pose_at(&self, t: f64) -> Isometry3<f64> {
+        if self.kind == TrajectoryKind::Road {
+            return self.on_road(t);
+        }
         let p = &self.phase;
         let (freq, yaw, pitch, roll, shake) = match self.kind {
             TrajectoryKind::Handheld => (
@@ -60,6 +73,7 @@ impl Trajectory {
                 0.004,
             ),
             TrajectoryKind::Drone => ([0.12, 0.17, 0.2], TAU * 0.07 * t + p[3], 0.04, 0.02, 0.0),
+            TrajectoryKind::Road => unreachable!("handled by on_road"),
         };
         let position = self.centre
             + Vector3::new(
@@ -69,18 +83,40 @@ impl Trajectory {
             );
         let pitch = pitch * (TAU * 0.09 * t + p[1]).sin() + shake * (TAU * 2.3 * t).sin();
         let roll = roll * (TAU * 0.13 * t + p[2]).sin() + shake * (TAU * 1.7 * t + 1.0).sin();
-        // Camera axes in the world when looking along +x: right = −y, down = −z, forward = +x.
-        let base = Rotation3::from_matrix_unchecked(Matrix3::new(
-            0.0, 0.0, 1.0, -1.0, 0.0, 0.0, 0.0, -1.0, 0.0,
-        ));
         let turn = Rotation3::from_axis_angle(&Vector3::z_axis(), yaw)
             * Rotation3::from_axis_angle(&Vector3::y_axis(), -pitch)
             * Rotation3::from_axis_angle(&Vector3::x_axis(), roll);
         Isometry3::from_parts(
             Translation3::from(position),
-            UnitQuaternion::from_rotation_matrix(&(turn * base)),
+            UnitQuaternion::from_rotation_matrix(&(turn * looking_along_x())),
         )
     }
+
+    /// The road's path, for a [`TrajectoryKind::Road`] trajectory.
+    pub fn road(&self) -> &RoadPath {
+        &self.road
+    }
+
+    /// On the road: along the path at [`ROAD_SPEED_M_S`], facing the direction of travel,
+    /// with a 1–2 Hz suspension bounce of a centimetre and a tenth of a degree of pitch.
+    fn on_road(&self, t: f64) -> Isometry3<f64> {
+        let p = &self.phase;
+        let s = ROAD_SPEED_M_S * t;
+        let ground = self.road.point(s);
+        let bounce = 0.01 * (TAU * 1.3 * t + p[0]).sin();
+        let pitch = 0.1f64.to_radians() * (TAU * 1.7 * t + p[1]).sin();
+        let turn = Rotation3::from_axis_angle(&Vector3::z_axis(), self.road.heading(s))
+            * Rotation3::from_axis_angle(&Vector3::y_axis(), -pitch);
+        Isometry3::from_parts(
+            Translation3::new(ground.x, ground.y, CAMERA_HEIGHT_M + bounce),
+            UnitQuaternion::from_rotation_matrix(&(turn * looking_along_x())),
+        )
+    }
+}
+
+/// Camera axes in the world when looking along +x: right = −y, down = −z, forward = +x.
+fn looking_along_x() -> Rotation3<f64> {
+    Rotation3::from_matrix_unchecked(Matrix3::new(0.0, 0.0, 1.0, -1.0, 0.0, 0.0, 0.0, -1.0, 0.0))
 }
 
 /// Illumination effects, each switchable; all seeded.

@@ -154,7 +154,7 @@ pub fn render_view(
     // Per sample: nearest depth and the radiance found there.
     let samples = width * height;
     let mut depth = vec![f64::INFINITY; samples * SAMPLES.len()];
-    let mut radiance = vec![0.0f32; samples * SAMPLES.len()];
+    let mut radiance = vec![scene.background; samples * SAMPLES.len()];
     for (qi, cq) in quads.iter().enumerate() {
         let quad = &scene.quads[qi];
         let light = illumination.lights.get(quad.light).copied().unwrap_or(1.0);

@@ -170,7 +170,10 @@ pub struct Scene {
     /// Seed of the textures' noise.
     pub noise_seed: u64,
     /// Room extent `(x, y, z)` in metres; the room spans [0, x] × [0, y] × [0, z], z up.
+    /// For a road: the extent of its path.
     pub room_m: Vector3<f64>,
+    /// Radiance where a ray hits nothing (a room: none, 0; a road: the sky).
+    pub background: f32,
 }
 
 impl Scene {
@@ -439,6 +442,7 @@ impl Scene {
             lights: 2,
             noise_seed: seed ^ 0x5EED,
             room_m: Vector3::new(w, d, h),
+            background: 0.0,
         }
     }
 }

@@ -353,3 +353,48 @@ fn lsd_finds_the_rendered_edges() {
         long.len()
     );
 }
+
+#[test]
+fn the_highway_car_drives_a_metre_a_frame_through_a_curve_with_far_structure() {
+    for seed in 1..=3 {
+        let r = SequenceRenderer::new(Preset::Highway.config(seed, 200));
+        assert_eq!((r.config.rig.width_px, r.config.rig.height_px), (1241, 376));
+        let poses: Vec<Isometry3<f64>> = (0..200).map(|k| r.render_pose(k)).collect();
+        for w in poses.windows(2) {
+            let step = (w[1].translation.vector - w[0].translation.vector).norm();
+            assert!(
+                (0.98..1.02).contains(&step),
+                "seed {seed}: {step} m in one frame"
+            );
+        }
+        for p in &poses {
+            let height = p.translation.z;
+            assert!(
+                (1.6..1.7).contains(&height),
+                "seed {seed}: camera {height} m up"
+            );
+        }
+        // The curve turns the car by 11–38° (a 150–300 m radius over 60–100 m).
+        let turned = poses[0]
+            .rotation
+            .angle_to(&poses[199].rotation)
+            .to_degrees();
+        assert!(
+            (10.0..40.0).contains(&turned),
+            "seed {seed}: turned {turned}°"
+        );
+        // Above the horizon: sky (no depth) and structure, most of it beyond 30 m.
+        let frame = r.render(100);
+        let (width, horizon) = (frame.left.width, r.config.rig.cy_px as usize);
+        let above: Vec<f32> = frame.left.depth_m[..width * horizon].to_vec();
+        let sky = above.iter().filter(|z| **z == 0.0).count();
+        let far = above.iter().filter(|z| **z > 30.0).count();
+        let seen = above.len() - sky;
+        assert!(
+            sky > above.len() / 4,
+            "seed {seed}: {sky} sky pixels of {}",
+            above.len()
+        );
+        assert!(far * 2 > seen, "seed {seed}: {far} of {seen} beyond 30 m");
+    }
+}

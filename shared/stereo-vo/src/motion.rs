@@ -11,7 +11,7 @@
 use crate::robust::{apply_update, robust_start};
 use linetrack_geometry::{Point, Segment, StereoRig};
 use nalgebra::{
-    Isometry3, Matrix2x3, Matrix3, Matrix6, Point3, SMatrix, Vector2, Vector3, Vector6,
+    Isometry3, Matrix2x3, Matrix3, Matrix6, Point3, SMatrix, Vector2, Vector3, Vector4, Vector6,
 };
 use serde::{Deserialize, Serialize};
 
@@ -22,6 +22,10 @@ pub struct PointObservation {
     pub position: Point3<f64>,
     /// Pixel in the current left image.
     pub pixel: Point,
+    /// Column of its stereo partner in the current right image (same row: the rig is
+    /// rectified), when it has one: with [`MotionConfig::stereo_reprojection`] the point
+    /// is reprojected into both images, so the current disparity is observed too.
+    pub right_x: Option<f64>,
     /// Uncertainty weight in (0, 1].
     pub weight: f64,
 }
@@ -33,6 +37,9 @@ pub struct LineObservation {
     pub endpoints: [Point3<f64>; 2],
     /// The observed line `a·u + b·v + c = 0` with `a² + b² = 1` (so residuals are pixels).
     pub line: Vector3<f64>,
+    /// The line of its stereo partner in the current right image, in the same form, when
+    /// it has one (see [`MotionConfig::stereo_reprojection`]).
+    pub right_line: Option<Vector3<f64>>,
     /// Uncertainty weight in (0, 1].
     pub weight: f64,
 }
@@ -41,15 +48,22 @@ impl LineObservation {
     /// The observation of `endpoints` on the current segment `seen`; `None` if `seen` has
     /// no direction.
     pub fn new(endpoints: [Point3<f64>; 2], seen: &Segment, weight: f64) -> Option<Self> {
-        let (a, b) = (seen.start, seen.end);
-        let line = Vector3::new(a.y - b.y, b.x - a.x, a.x * b.y - b.x * a.y);
-        let norm = line.xy().norm();
-        (norm > 1e-9 && line.iter().all(|v| v.is_finite())).then(|| Self {
+        Some(Self {
             endpoints,
-            line: line / norm,
+            line: normalised_line(seen)?,
+            right_line: None,
             weight,
         })
     }
+}
+
+/// The line through `segment` as `(a, b, c)` with `a·u + b·v + c = 0` and `a² + b² = 1`;
+/// `None` when it has no direction.
+pub fn normalised_line(segment: &Segment) -> Option<Vector3<f64>> {
+    let (a, b) = (segment.start, segment.end);
+    let line = Vector3::new(a.y - b.y, b.x - a.x, a.x * b.y - b.x * a.y);
+    let norm = line.xy().norm();
+    (norm > 1e-9 && line.iter().all(|v| v.is_finite())).then(|| line / norm)
 }
 
 /// Gauss–Newton settings.
@@ -88,6 +102,13 @@ pub struct MotionConfig {
     pub prior_translation_m: f64,
     /// The same for the rotation, degrees (0: no prior).
     pub prior_rotation_deg: f64,
+    /// Reproject points and segment endpoints into the current right image too, where
+    /// their stereo partner is known ([`PointObservation::right_x`],
+    /// [`LineObservation::right_line`]): a landmark whose previous depth disagrees with its
+    /// current disparity then has a residual of its own and is weighed down or dropped as
+    /// an outlier, instead of stretching or shrinking the step to fit the left image
+    /// alone.
+    pub stereo_reprojection: bool,
 }
 
 impl Default for MotionConfig {
@@ -109,6 +130,7 @@ impl Default for MotionConfig {
             // gain jumps, ℓ1).
             prior_translation_m: 0.1,
             prior_rotation_deg: 1.0,
+            stereo_reprojection: false,
         }
     }
 }
@@ -168,6 +190,12 @@ fn project(rig: &StereoRig, p: &Point3<f64>) -> Option<(Vector2<f64>, Matrix2x3<
     Some((pixel, jacobian))
 }
 
+/// `(π_right(p), ∂π_right/∂p)`: the right camera sits `baseline` along the left one's x
+/// axis; `None` behind it.
+fn project_right(rig: &StereoRig, p: &Point3<f64>) -> Option<(Vector2<f64>, Matrix2x3<f64>)> {
+    project(rig, &Point3::new(p.x - rig.baseline_m, p.y, p.z))
+}
+
 /// `∂p'/∂δ = [I | −[p']×]` for the left-multiplied update.
 fn transform_jacobian(p: &Point3<f64>) -> SMatrix<f64, 3, 6> {
     let mut j = SMatrix::<f64, 3, 6>::zeros();
@@ -192,6 +220,39 @@ pub fn point_residual(
     ))
 }
 
+/// The right-image column residual and its Jacobian row of one point observation under
+/// `t`; `None` without a right column or behind the camera.
+pub fn point_right_residual(
+    rig: &StereoRig,
+    t: &Isometry3<f64>,
+    obs: &PointObservation,
+) -> Option<(f64, SMatrix<f64, 1, 6>)> {
+    let right_x = obs.right_x?;
+    let p = t * obs.position;
+    let (pixel, dpi) = project_right(rig, &p)?;
+    Some((pixel.x - right_x, dpi.row(0) * transform_jacobian(&p)))
+}
+
+/// A point observation's residual rows under `t`: the left image's two, and the right
+/// image's column when `stereo` and the observation has one (else 0 with a zero row).
+fn point_rows(
+    rig: &StereoRig,
+    t: &Isometry3<f64>,
+    obs: &PointObservation,
+    stereo: bool,
+) -> Option<(Vector3<f64>, SMatrix<f64, 3, 6>)> {
+    let (left, j_left) = point_residual(rig, t, obs)?;
+    let (right, j_right) = if stereo {
+        point_right_residual(rig, t, obs).unwrap_or((0.0, SMatrix::zeros()))
+    } else {
+        (0.0, SMatrix::zeros())
+    };
+    let mut j = SMatrix::<f64, 3, 6>::zeros();
+    j.fixed_view_mut::<2, 6>(0, 0).copy_from(&j_left);
+    j.set_row(2, &j_right);
+    Some((Vector3::new(left.x, left.y, right), j))
+}
+
 /// Residuals (signed endpoint-to-line distances, pixels) and Jacobians of one line
 /// observation under `t`: 2 rows.
 pub fn line_residual(
@@ -206,6 +267,48 @@ pub fn line_residual(
         let p = t * endpoint;
         let (pixel, dpi) = project(rig, &p)?;
         r[row] = obs.line.x * pixel.x + obs.line.y * pixel.y + obs.line.z;
+        j.set_row(row, &(normal * dpi * transform_jacobian(&p)));
+    }
+    Some((r, j))
+}
+
+/// A line observation's residual rows under `t`: the left image's two endpoint distances,
+/// then the right image's two when `stereo` and the observation has a right line (else 0
+/// with zero rows).
+fn line_rows(
+    rig: &StereoRig,
+    t: &Isometry3<f64>,
+    obs: &LineObservation,
+    stereo: bool,
+) -> Option<(Vector4<f64>, SMatrix<f64, 4, 6>)> {
+    let (left, j_left) = line_residual(rig, t, obs)?;
+    let (right, j_right) = if stereo {
+        line_right_residual(rig, t, obs).unwrap_or_default()
+    } else {
+        Default::default()
+    };
+    let mut j = SMatrix::<f64, 4, 6>::zeros();
+    j.fixed_view_mut::<2, 6>(0, 0).copy_from(&j_left);
+    j.fixed_view_mut::<2, 6>(2, 0).copy_from(&j_right);
+    Some((Vector4::new(left.x, left.y, right.x, right.y), j))
+}
+
+/// The signed distances of the endpoints, projected into the current right image, to the
+/// right line ([`LineObservation::right_line`]), and their Jacobian; `None` without a
+/// right line or behind the camera.
+pub fn line_right_residual(
+    rig: &StereoRig,
+    t: &Isometry3<f64>,
+    obs: &LineObservation,
+) -> Option<(Vector2<f64>, SMatrix<f64, 2, 6>)> {
+    let line = obs.right_line?;
+    let normal = line.xy().transpose();
+    let mut r = Vector2::zeros();
+    let mut j = SMatrix::<f64, 2, 6>::zeros();
+    for (row, endpoint) in obs.endpoints.iter().enumerate() {
+        let p = t * endpoint;
+        let (pixel, dpi) = project_right(rig, &p)?;
+        r[row] = line.x * pixel.x + line.y * pixel.y + line.z;
         j.set_row(row, &(normal * dpi * transform_jacobian(&p)));
     }
     Some((r, j))
@@ -287,19 +390,18 @@ fn optimise(
     for iteration in 1..=config.max_iterations {
         let mut h = Matrix6::zeros();
         let mut g = Vector6::zeros();
-        let mut accumulate = |r: Vector2<f64>, j: SMatrix<f64, 2, 6>, weight: f64| {
-            let w = weight * robust(r.norm());
-            h += w * j.transpose() * j;
-            g += w * j.transpose() * r;
-        };
         for (obs, _) in points.iter().zip(active.points).filter(|(_, on)| **on) {
-            if let Some((r, j)) = point_residual(rig, &t, obs) {
-                accumulate(r, j, obs.weight);
+            if let Some((r, j)) = point_rows(rig, &t, obs, config.stereo_reprojection) {
+                let w = obs.weight * robust(r.norm());
+                h += w * j.transpose() * j;
+                g += w * j.transpose() * r;
             }
         }
         for (obs, _) in lines.iter().zip(active.lines).filter(|(_, on)| **on) {
-            if let Some((r, j)) = line_residual(rig, &t, obs) {
-                accumulate(r, j, obs.weight);
+            if let Some((r, j)) = line_rows(rig, &t, obs, config.stereo_reprojection) {
+                let w = obs.weight * robust(r.norm());
+                h += w * j.transpose() * j;
+                g += w * j.transpose() * r;
             }
         }
         if let Some(prior) = prior {
@@ -421,16 +523,23 @@ fn estimate(
         },
         start,
     )?;
-    let within = |r: Option<Vector2<f64>>, weight: f64| {
-        r.is_some_and(|r| r.amax() * weight.sqrt() <= config.outlier_px)
+    let stereo = config.stereo_reprojection;
+    let within = |amax: Option<f64>, weight: f64| {
+        amax.is_some_and(|amax| amax * weight.sqrt() <= config.outlier_px)
     };
     let inlier_points: Vec<bool> = points
         .iter()
-        .map(|o| within(point_residual(rig, &first, o).map(|(r, _)| r), o.weight))
+        .map(|o| {
+            let rows = point_rows(rig, &first, o, stereo);
+            within(rows.map(|(r, _)| r.amax()), o.weight)
+        })
         .collect();
     let inlier_lines: Vec<bool> = lines
         .iter()
-        .map(|o| within(line_residual(rig, &first, o).map(|(r, _)| r), o.weight))
+        .map(|o| {
+            let rows = line_rows(rig, &first, o, stereo);
+            within(rows.map(|(r, _)| r.amax()), o.weight)
+        })
         .collect();
     let count = |v: &[bool]| v.iter().filter(|b| **b).count();
     let (n_points, n_lines) = (count(&inlier_points), count(&inlier_lines));
@@ -449,15 +558,23 @@ fn estimate(
     let mut sum = 0.0;
     let mut n = 0usize;
     for (obs, _) in points.iter().zip(&inlier_points).filter(|(_, on)| **on) {
-        if let Some((r, _)) = point_residual(rig, &motion, obs) {
+        if let Some((r, _)) = point_rows(rig, &motion, obs, stereo) {
             sum += r.norm_squared();
-            n += 2;
+            n += if stereo && obs.right_x.is_some() {
+                3
+            } else {
+                2
+            };
         }
     }
     for (obs, _) in lines.iter().zip(&inlier_lines).filter(|(_, on)| **on) {
-        if let Some((r, _)) = line_residual(rig, &motion, obs) {
+        if let Some((r, _)) = line_rows(rig, &motion, obs, stereo) {
             sum += r.norm_squared();
-            n += 2;
+            n += if stereo && obs.right_line.is_some() {
+                4
+            } else {
+                2
+            };
         }
     }
     Ok(MotionEstimate {

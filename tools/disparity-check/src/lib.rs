@@ -9,10 +9,17 @@
 //! (bilinear between pixel centres; left out at depth edges, where the four pixels around
 //! it differ by more than a limit, and where it is unknown). The signed errors are summed up
 //! per kind (points, segment endpoints), matcher and disparity band.
+//!
+//! The same check runs on generated frames ([`rendered_pair`]), whose truth is the
+//! renderer's exact depth at each pixel centre: no quantisation and no convention to
+//! interpret, so a bias found on both is the odometry's, and one found only on Middlebury
+//! is the ground truth's.
 
-use linetrack_datasets::LoadedPair;
+use linetrack_datasets::{DisparityMap, LoadedPair};
 use linetrack_geometry::StereoRig;
 use linetrack_odometry::{Odometry, OdometryConfig, SightingKind};
+use linetrack_scene_render::{Preset, SequenceRenderer};
+use linetrack_vision::GrayImage;
 use linetrack_vision::MatcherKind;
 use serde::Serialize;
 
@@ -81,6 +88,39 @@ pub fn nominal_rig(width: u32, height: u32) -> StereoRig {
         width_px: width,
         height_px: height,
     }
+}
+
+/// Frame `index` of the generated sequence `preset` / `seed` (`frames` long) as a stereo
+/// pair with its true disparity: `f · b / z` of the renderer's depth at each left pixel
+/// centre (unknown where the ray hits nothing: the sky).
+pub fn rendered_pair(
+    preset: Preset,
+    seed: u64,
+    frames: usize,
+    index: usize,
+) -> anyhow::Result<LoadedPair> {
+    let renderer = SequenceRenderer::new(preset.config(seed, frames));
+    let frame = renderer.render(index);
+    let rig = &renderer.config.rig;
+    let origin = |side: &str| format!("{} seed {seed} frame {index} {side}", preset.name());
+    let image = |view: &linetrack_scene_render::View, side: &str| {
+        GrayImage::from_pixels(view.width, view.height, &view.pixels, &origin(side))
+    };
+    let (left, right) = (image(&frame.left, "left")?, image(&frame.right, "right")?);
+    let scale = (rig.focal_px * rig.baseline_m) as f32;
+    let values = frame
+        .left
+        .depth_m
+        .iter()
+        .map(|&z| if z > 0.0 { scale / z } else { f32::NAN })
+        .collect();
+    let disparity = DisparityMap::from_values(frame.left.width, frame.left.height, values)
+        .ok_or_else(|| anyhow::anyhow!("{}: depth map of the wrong size", origin("left")))?;
+    Ok(LoadedPair {
+        left,
+        right,
+        disparity,
+    })
 }
 
 /// Runs the odometry configured by `config` with `matcher` on `pair` (one frame) and

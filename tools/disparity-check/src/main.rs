@@ -3,8 +3,10 @@
 
 use anyhow::Context;
 use clap::Parser;
-use linetrack_disparity_check::{Row, check_pair, markdown, rows};
+use linetrack_datasets::LoadedPair;
+use linetrack_disparity_check::{Row, check_pair, markdown, rendered_pair, rows};
 use linetrack_odometry::{OdometryConfig, SightingKind};
+use linetrack_scene_render::Preset;
 use linetrack_vision::MatcherKind;
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -19,11 +21,14 @@ use std::process::ExitCode;
     linetrack-disparity-check                         # every pair, LBD and l1
     linetrack-disparity-check --matcher l1 --pair Cones
     linetrack-disparity-check --config configs/odometry.toml
+    linetrack-disparity-check --generated highway --generated normal --seed 2   # exact truth
 
 The error is the odometry's disparity minus the ground truth under the left pixel
 (bilinear between pixel centres). A sighting off by more than --inlier-px is a wrong match:
 counted, and left out of the bias of the correct ones. A negative mean in a band is a depth
-read too long there, by about |mean| / d. Sightings over a depth edge (the four pixels around differ by
+read too long there, by about |mean| / d. With --generated, the pairs are frames of generated
+sequences (rendered in memory, 100 frames long, --frames of them evenly spaced) and the truth
+is the renderer's exact depth at each pixel centre. Sightings over a depth edge (the four pixels around differ by
 more than --max-spread-px) or over unknown ground truth are left out and counted.
 
 OUTPUT: <output>/disparity-check.md (the table), disparity-check.json (the rows) and, with
@@ -38,6 +43,15 @@ struct Args {
     /// Only these scenes (repeatable, by folder name).
     #[arg(long = "pair")]
     pairs: Vec<String>,
+    /// Check frames of this generated sequence preset instead of Middlebury (repeatable).
+    #[arg(long = "generated")]
+    generated: Vec<Preset>,
+    /// Seed of the generated sequences.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Frames checked per generated sequence, evenly spaced over its 100.
+    #[arg(long, default_value_t = 5)]
+    frames: usize,
     /// Segment matchers to run the odometry with (repeatable; default: lbd and l1).
     #[arg(long = "matcher")]
     matchers: Vec<MatcherKind>,
@@ -84,11 +98,7 @@ fn run() -> anyhow::Result<String> {
     if !(args.inlier_px.is_finite() && args.inlier_px > 0.0) {
         anyhow::bail!("--inlier-px {}: must be > 0", args.inlier_px);
     }
-    let data = match &args.data {
-        Some(dir) => dir.clone(),
-        None => linetrack_test_data::middlebury_dir().map_err(anyhow::Error::msg)?,
-    };
-    let pairs = linetrack_datasets::select_middlebury(&data, &args.pairs)?;
+    let pairs = sources(&args)?;
     let config = match &args.config {
         Some(path) => OdometryConfig::from_file(path)
             .map_err(anyhow::Error::msg)
@@ -108,9 +118,7 @@ fn run() -> anyhow::Result<String> {
     let mut all_samples = Vec::new();
     for (done, pair) in pairs.iter().enumerate() {
         progress.step(pair.name.as_str());
-        let loaded = pair
-            .load()
-            .with_context(|| format!("scene {}", pair.name))?;
+        let loaded = (pair.load)().with_context(|| format!("scene {}", pair.name))?;
         for (m, &matcher) in matchers.iter().enumerate() {
             let found = check_pair(&loaded, &config, matcher, args.max_spread_px)
                 .with_context(|| format!("scene {} with {}", pair.name, matcher.name()))?;
@@ -144,7 +152,7 @@ fn run() -> anyhow::Result<String> {
         ));
     }
     let text = format!(
-        "{}\n{} scenes; {without_truth} sightings without ground truth (unknown or a depth edge) left out.\n",
+        "{}\n{} pairs; {without_truth} sightings without ground truth (unknown or a depth edge) left out.\n",
         markdown(&table),
         pairs.len()
     );
@@ -161,4 +169,43 @@ fn run() -> anyhow::Result<String> {
         std::fs::write(&path, lines).with_context(|| format!("writing {}", path.display()))?;
     }
     Ok(text)
+}
+
+/// One stereo pair to check: its name and how to load it.
+struct Source {
+    name: String,
+    load: Box<dyn Fn() -> anyhow::Result<LoadedPair>>,
+}
+
+/// The pairs `args` asks for: frames of the generated presets, or the Middlebury scenes.
+fn sources(args: &Args) -> anyhow::Result<Vec<Source>> {
+    const SEQUENCE_FRAMES: usize = 100;
+    if !args.generated.is_empty() {
+        if !(1..=SEQUENCE_FRAMES).contains(&args.frames) {
+            anyhow::bail!("--frames {}: must be 1 to {SEQUENCE_FRAMES}", args.frames);
+        }
+        let seed = args.seed;
+        let step = SEQUENCE_FRAMES / args.frames;
+        return Ok(args
+            .generated
+            .iter()
+            .flat_map(|&preset| {
+                (0..args.frames).map(move |k| Source {
+                    name: format!("{} seed {seed} frame {}", preset.name(), k * step),
+                    load: Box::new(move || rendered_pair(preset, seed, SEQUENCE_FRAMES, k * step)),
+                })
+            })
+            .collect());
+    }
+    let data = match &args.data {
+        Some(dir) => dir.clone(),
+        None => linetrack_test_data::middlebury_dir().map_err(anyhow::Error::msg)?,
+    };
+    Ok(linetrack_datasets::select_middlebury(&data, &args.pairs)?
+        .into_iter()
+        .map(|pair| Source {
+            name: pair.name.clone(),
+            load: Box::new(move || Ok(pair.load()?)),
+        })
+        .collect())
 }

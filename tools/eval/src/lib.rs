@@ -33,7 +33,9 @@ use tracking::{COMBINATIONS, TrackingResult, median};
     linetrack-eval --no-generated --real-frames 50   # the real sequences only, their first 50 frames
 
 Generated sequences are made on first use in <sequences>/<preset> and reused. The report is
-<output>/report.md; plots are PNG files beside it.\n\n", linetrack_progress::progress_help!("work"), "\n\n", linetrack_vision::images_help!())
+<output>/report.md; plots are PNG files beside it; odometry-runs.csv holds every Table II run
+(sequence, seed, configuration, lost frames, ATE, drift, step ratio), for comparing two
+--odometry-config files run by run.\n\n", linetrack_progress::progress_help!("work"), "\n\n", linetrack_vision::images_help!())
 )]
 pub struct Args {
     /// Small settings: three presets, 8 frames each (the EuRoC excerpt: 10 frames).
@@ -87,6 +89,10 @@ pub struct Args {
     /// configs/frontend.toml; default: the built-in defaults).
     #[arg(long)]
     pub config: Option<PathBuf>,
+    /// Odometry settings for Table II (TOML, the keys of configs/odometry.toml; default: the
+    /// built-in defaults). Each configuration's matcher and features are set over it.
+    #[arg(long)]
+    pub odometry_config: Option<PathBuf>,
     /// Simulated illumination changes for the starred rows: a new gain and bias every this
     /// many seconds (default: 2 s, or 0.15 s with --quick).
     #[arg(long)]
@@ -188,6 +194,7 @@ fn prepare(args: &Args, frames: usize) -> anyhow::Result<Vec<Entry>> {
             Preset::HdrSaturation,
             Preset::LightsSwitching,
             Preset::LeftRightMismatch,
+            Preset::Highway,
         ]
     };
     let seeds = args.seeds.unwrap_or(if args.quick { 1 } else { 3 }).max(1);
@@ -350,6 +357,13 @@ pub fn run(args: &Args) -> anyhow::Result<String> {
         Some(path) => linetrack_vision::FrontendConfig::from_file(path)?,
         None => linetrack_vision::FrontendConfig::default(),
     };
+    let odometry_base = match &args.odometry_config {
+        Some(path) => linetrack_odometry::OdometryConfig::from_file(path)
+            .map_err(anyhow::Error::msg)
+            .with_context(|| format!("--odometry-config {}", path.display()))?,
+        None => linetrack_odometry::OdometryConfig::default(),
+    };
+    let mut odometry_rows: Vec<odometry::RunRow> = Vec::new();
     let entries = prepare(args, frames)?;
     let jumps = IlluminationConfig {
         seed: 7,
@@ -507,8 +521,7 @@ pub fn run(args: &Args) -> anyhow::Result<String> {
             for (label, features, matcher) in odometry::CONFIGURATIONS {
                 let run = odometry::run(
                     &entry.sequence,
-                    features,
-                    matcher,
+                    (&odometry_base, features, matcher),
                     entry.frames,
                     illumination,
                 )?;
@@ -531,8 +544,7 @@ pub fn run(args: &Args) -> anyhow::Result<String> {
                     for sequence in &entry.more_seeds {
                         runs.push(odometry::run(
                             sequence,
-                            features,
-                            matcher,
+                            (&odometry_base, features, matcher),
                             entry.frames,
                             None,
                         )?);
@@ -541,6 +553,11 @@ pub fn run(args: &Args) -> anyhow::Result<String> {
                 }
                 cells.push(odometry::cell(&runs));
                 cells.push(odometry::step_ratio_cell(&runs));
+                odometry_rows.extend(
+                    runs.iter()
+                        .enumerate()
+                        .map(|(k, run)| odometry::RunRow::new(&row_name, k as u64 + 1, label, run)),
+                );
                 let run = &runs[0];
                 if trajectories.is_empty()
                     && let Some(truth) = &run.truth
@@ -660,6 +677,9 @@ pub fn run(args: &Args) -> anyhow::Result<String> {
     let report_path = args.output.join("report.md");
     std::fs::write(&report_path, report)
         .with_context(|| format!("cannot write {}", report_path.display()))?;
+    if !odometry_rows.is_empty() {
+        odometry::write_rows(&args.output.join("odometry-runs.csv"), &odometry_rows)?;
+    }
     Ok(format!(
         "wrote {} ({} sequences, {} plots) in {:.0} s",
         report_path.display(),

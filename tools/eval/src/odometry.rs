@@ -1,9 +1,10 @@
 //! Table II: the odometry per sequence and configuration, with and without the simulated
 //! illumination changes.
 
+use anyhow::Context;
 use linetrack_datasets::StereoSequence;
 use linetrack_odometry::{Features, Odometry, OdometryConfig, metrics};
-use linetrack_vision::{DetectorKind, MatcherKind, perturb};
+use linetrack_vision::{MatcherKind, perturb};
 use nalgebra::Isometry3;
 
 /// The odometry configurations compared (all with LSD).
@@ -113,19 +114,68 @@ pub fn step_ratio_cell(runs: &[OdometryRun]) -> String {
     }
 }
 
-/// Runs one configuration over the first `frames` frames.
+/// One Table II run in `odometry-runs.csv`.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct RunRow {
+    /// Row of Table II (a starred one: simulated illumination changes).
+    pub sequence: String,
+    /// Seed of a generated sequence (1 for a real one).
+    pub seed: u64,
+    /// Features and matcher.
+    pub configuration: String,
+    /// Frames lost.
+    pub lost: usize,
+    /// Absolute trajectory error, metres.
+    pub ate_m: Option<f64>,
+    /// End-point drift, per cent of the path.
+    pub drift_percent: Option<f64>,
+    /// Estimated over true path length.
+    pub step_ratio: Option<f64>,
+    /// Median per-step ratio.
+    pub step_ratio_median: Option<f64>,
+}
+
+impl RunRow {
+    /// The row of `run`.
+    pub fn new(sequence: &str, seed: u64, configuration: &str, run: &OdometryRun) -> Self {
+        let m = run.metrics.as_ref();
+        let ratio = m.and_then(|m| m.step_ratio);
+        Self {
+            sequence: sequence.to_string(),
+            seed,
+            configuration: configuration.to_string(),
+            lost: run.lost,
+            ate_m: m.and_then(|m| m.ate_m),
+            drift_percent: m.and_then(|m| m.drift_percent),
+            step_ratio: ratio.map(|r| r.overall),
+            step_ratio_median: ratio.map(|r| r.median),
+        }
+    }
+}
+
+/// Writes `rows` as CSV to `path`.
+pub fn write_rows(path: &std::path::Path, rows: &[RunRow]) -> anyhow::Result<()> {
+    let context = || format!("cannot write {}", path.display());
+    let mut writer = csv::Writer::from_path(path).with_context(context)?;
+    for row in rows {
+        writer.serialize(row).with_context(context)?;
+    }
+    writer.flush().with_context(context)?;
+    Ok(())
+}
+
+/// Runs one configuration (`base` with the given features and matcher) over the first
+/// `frames` frames.
 pub fn run(
     sequence: &StereoSequence,
-    features: Features,
-    matcher: MatcherKind,
+    (base, features, matcher): (&OdometryConfig, Features, MatcherKind),
     frames: usize,
     illumination: crate::tracking::Illumination<'_>,
 ) -> anyhow::Result<OdometryRun> {
     let config = OdometryConfig {
-        detector: DetectorKind::Lsd,
         matcher,
         features,
-        ..OdometryConfig::default()
+        ..base.clone()
     };
     let mut odometry = Odometry::new(config, sequence.rig)?;
     let start_ns = sequence.frames.first().map_or(0, |f| f.timestamp_ns);

@@ -387,6 +387,8 @@ impl PointTracking {
                 observations.points.push(PointObservation {
                     position: to_previous * landmark.world,
                     pixel,
+                    // Set once this frame's stereo matches are triangulated.
+                    right_x: None,
                     weight: landmark.observation_weight() * level_weight * search.noise_weight,
                 });
                 observations.point_pairs.push((m.query, m.train));
