@@ -65,29 +65,35 @@ fn dict_to_toml(dict: &Bound<'_, PyDict>, at: &str) -> PyResult<toml::Table> {
     Ok(table)
 }
 
-/// Deserialises `table` as `T`; errors say `what` and serde's message (which names an
-/// unknown field and lists the known ones).
-fn from_table<T: DeserializeOwned>(table: toml::Table, what: &str) -> PyResult<T> {
+/// Deserialises `table` as `T`; errors say `what` and serde's message (which names the
+/// field, or lists the known ones for an unknown field), `more` after an unknown field's.
+fn from_table<T: DeserializeOwned>(table: toml::Table, what: &str, more: &str) -> PyResult<T> {
     toml::Value::Table(table)
         .try_into()
-        .map_err(|e: toml::de::Error| PyValueError::new_err(format!("{what}: {e}")))
+        .map_err(|e: toml::de::Error| {
+            let message = e.to_string().trim_end().replace('\n', " ");
+            let more = if message.starts_with("unknown field") {
+                more
+            } else {
+                ""
+            };
+            PyValueError::new_err(format!("{what}: {message}{more}"))
+        })
 }
 
 /// The detector's settings from `detect_lines`' keyword arguments, checked.
 pub fn detector_settings(
-    max_segments: usize,
+    max_segments: Option<&Bound<'_, PyAny>>,
     settings: Option<&Bound<'_, PyDict>>,
 ) -> PyResult<(EdgeLinesOptions, LineOptions)> {
-    let all = match settings {
+    let mut all = match settings {
         Some(dict) => dict_to_toml(dict, "")?,
         None => toml::Table::new(),
     };
-    let mut lines = toml::Table::new();
-    lines.insert(
-        "max_segments".to_string(),
-        toml::Value::Integer(i64::try_from(max_segments).unwrap_or(i64::MAX)),
-    );
-    let mut edgelines = toml::Table::new();
+    if let Some(value) = max_segments.filter(|v| !v.is_none()) {
+        all.insert("max_segments".to_string(), to_toml(value, "max_segments")?);
+    }
+    let (mut lines, mut edgelines) = (toml::Table::new(), toml::Table::new());
     for (key, value) in all {
         if LINE_KEYS.contains(&key.as_str()) {
             lines.insert(key, value);
@@ -95,15 +101,14 @@ pub fn detector_settings(
             edgelines.insert(key, value);
         }
     }
-    let lines: LineOptions = from_table(lines, "detect_lines settings")?;
-    let edgelines: EdgeLinesOptions = from_table(
-        edgelines,
-        "detect_lines settings (or max_segments, min_length_px)",
-    )?;
+    let what = "detect_lines settings";
+    let lines: LineOptions = from_table(lines, what, "")?;
+    let more = ", or `max_segments`, `min_length_px`";
+    let edgelines: EdgeLinesOptions = from_table(edgelines, what, more)?;
     lines
         .validate()
         .and_then(|()| edgelines.validate())
-        .map_err(|e| PyValueError::new_err(format!("detect_lines settings: {e}")))?;
+        .map_err(|e| PyValueError::new_err(format!("{what}: {e}")))?;
     Ok((edgelines, lines))
 }
 
@@ -114,7 +119,7 @@ pub fn matcher_config(config: Option<&Bound<'_, PyAny>>) -> PyResult<MatcherConf
         return Ok(MatcherConfig::default());
     };
     let parsed = if let Ok(dict) = config.cast::<PyDict>() {
-        let parsed: MatcherConfig = from_table(dict_to_toml(dict, "")?, "config")?;
+        let parsed: MatcherConfig = from_table(dict_to_toml(dict, "")?, "config", "")?;
         parsed.validate().map(|()| parsed)
     } else if let Ok(path) = config.extract::<PathBuf>() {
         MatcherConfig::from_file(&path)

@@ -36,11 +36,14 @@ use pyo3::types::PyDict;
 /// Images under 8 pixels wide or high have none. Raises TypeError or ValueError naming the
 /// bad argument. Do not write the image from another thread during the call.
 #[pyfunction]
-#[pyo3(signature = (image, *, max_segments = 100, **settings))]
+#[pyo3(
+    signature = (image, *, max_segments = None, **settings),
+    text_signature = "(image, *, max_segments=100, **settings)"
+)]
 fn detect_lines<'py>(
     py: Python<'py>,
     image: &Bound<'py, PyAny>,
-    max_segments: usize,
+    max_segments: Option<&Bound<'py, PyAny>>,
     settings: Option<&Bound<'py, PyDict>>,
 ) -> PyResult<Bound<'py, PyArray2<f32>>> {
     let (options, keep) = config::detector_settings(max_segments, settings)?;

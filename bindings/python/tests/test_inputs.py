@@ -102,8 +102,15 @@ def test_settings_are_the_config_files_keys_and_are_checked():
         linetrack.detect_lines(IMAGE, min_length_px=float("nan"))
     with pytest.raises(ValueError, match="min_aligned_fraction"):
         linetrack.detect_lines(IMAGE, min_aligned_fraction="high")
-    with pytest.raises(OverflowError, match="max_segments"):
+    with pytest.raises(ValueError, match="integer `-1`, expected usize in `max_segments`"):
         linetrack.detect_lines(IMAGE, max_segments=-1)
+    with pytest.raises(ValueError, match="expected usize in `max_segments`"):
+        linetrack.detect_lines(IMAGE, max_segments=2**70)
+    with pytest.raises(ValueError, match="expected u16 in `gradient_threshold`"):
+        linetrack.detect_lines(IMAGE, gradient_threshold=70000)
+    with pytest.raises(ValueError, match="unknown field `max_segment`.*or `max_segments`"):
+        linetrack.detect_lines(IMAGE, max_segment=3)
+    assert len(linetrack.detect_lines(IMAGE, max_segments=None)) == len(SEGMENTS)
 
 
 def test_match_gives_index_pairs_and_costs():
@@ -168,7 +175,7 @@ def test_bad_configs_are_refused_naming_the_culprit(tmp_path):
         linetrack.match_stereo(IMAGE, IMAGE, SEGMENTS, SEGMENTS, config={"lambda": 0.1, "lambada": 1})
     with pytest.raises(ValueError, match="field `lambda` = -1"):
         linetrack.match_stereo(IMAGE, IMAGE, SEGMENTS, SEGMENTS, config={"lambda": -1.0})
-    with pytest.raises(ValueError, match="gates"):
+    with pytest.raises(ValueError, match="expected a boolean in `gates.enabled`"):
         linetrack.match_stereo(IMAGE, IMAGE, SEGMENTS, SEGMENTS, config={"gates": {"enabled": "yes"}})
     with pytest.raises(TypeError, match="config must be None, a dict or the path"):
         linetrack.match_stereo(IMAGE, IMAGE, SEGMENTS, SEGMENTS, config=3)

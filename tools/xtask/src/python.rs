@@ -75,7 +75,7 @@ pub fn suite(rest: &[String]) -> anyhow::Result<ExitCode> {
 
     let python = env_dir.join("bin/python3");
     let wheel = steps.run("wheel", || {
-        build_wheel(&env_dir, &python, &manifest, &wheels, &bindings_target)
+        build_wheel(&env_dir, &python, manifest, &wheels, &bindings_target)
     })?;
     let mut install = Command::new(&python);
     install.args([
