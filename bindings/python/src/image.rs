@@ -4,7 +4,8 @@
 //! files; columns not adjacent in memory, negative strides). Everything else is refused
 //! with a message naming the argument, its shape or its dtype.
 
-use numpy::{PyArrayDescrMethods, PyReadonlyArray2, PyUntypedArray, PyUntypedArrayMethods};
+use crate::arrays;
+use numpy::PyReadonlyArray2;
 use pyo3::exceptions::{PyTypeError, PyValueError};
 use pyo3::prelude::*;
 
@@ -58,60 +59,33 @@ impl Image<'_> {
     }
 }
 
-fn shape_text(shape: &[usize]) -> String {
-    match shape {
-        [n] => format!("({n},)"),
-        _ => format!(
-            "({})",
-            shape
-                .iter()
-                .map(usize::to_string)
-                .collect::<Vec<_>>()
-                .join(", ")
-        ),
-    }
-}
-
 /// Checks and reads the image argument `name`.
 pub fn from_array<'py>(name: &str, object: &Bound<'py, PyAny>) -> PyResult<Image<'py>> {
-    let array = object.cast::<PyUntypedArray>().map_err(|_| {
-        let type_name = object
-            .get_type()
-            .name()
-            .map_or_else(|_| "?".to_string(), |n| n.to_string());
-        PyTypeError::new_err(format!(
-            "{name} must be a numpy.ndarray (height, width) of uint8 or uint16, got {type_name}"
-        ))
-    })?;
-    let shape = array.shape().to_vec();
-    let dtype = array.dtype();
-    let dtype_name = dtype
-        .str()
-        .map_or_else(|_| "?".to_string(), |s| s.to_string());
+    let described = arrays::describe(name, object, "(height, width) of uint8 or uint16")?;
+    let shape = &described.shape;
     let (height, width) = match shape[..] {
         [height, width] => (height, width),
         [_, _, channels] => {
             return Err(PyValueError::new_err(format!(
                 "{name} has shape {}: {channels} channels, expected a grey image \
                  (height, width); convert colour to grey first",
-                shape_text(&shape)
+                arrays::shape_text(shape)
             )));
         }
         _ => {
             return Err(PyValueError::new_err(format!(
                 "{name} has shape {}: expected a 2-D grey image (height, width)",
-                shape_text(&shape)
+                arrays::shape_text(shape)
             )));
         }
     };
     if height == 0 || width == 0 {
         return Err(PyValueError::new_err(format!(
             "{name} has shape {}: an empty image",
-            shape_text(&shape)
+            arrays::shape_text(shape)
         )));
     }
-    let is = |kind: u8, size: usize| dtype.kind() == kind && dtype.itemsize() == size;
-    let pixels = if is(b'u', 1) {
+    let pixels = if described.is(b'u', 1) {
         let array = object.extract::<PyReadonlyArray2<'py, u8>>()?;
         let view = array.as_array();
         let strides = view.strides();
@@ -123,12 +97,13 @@ pub fn from_array<'py>(name: &str, object: &Bound<'py, PyAny>) -> PyResult<Image
             }
             _ => Pixels::Owned(view.iter().copied().collect()),
         }
-    } else if is(b'u', 2) {
+    } else if described.is(b'u', 2) {
         let array = object.extract::<PyReadonlyArray2<'py, u16>>()?;
         Pixels::Owned(array.as_array().iter().map(|&v| to_8_bits(v)).collect())
     } else {
         return Err(PyTypeError::new_err(format!(
-            "{name} has dtype {dtype_name}: expected uint8 or uint16"
+            "{name} has dtype {}: expected uint8 or uint16",
+            described.dtype
         )));
     };
     Ok(Image {

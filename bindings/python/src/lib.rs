@@ -5,10 +5,11 @@
 //! edgelines --matcher l1`): detection through `linetrack_frontend_core::EdgeLinesSegments`,
 //! the matcher's image step through `L1Matcher::describe`, matching through
 //! `L1Matcher::match_with_profiles`, settings through the same config types and checks.
-//! The arguments are checked here ([`image`], [`segments`], [`config`]); the work runs
+//! The arguments are checked here ([`arrays`], [`image`], [`segments`], [`config`]); the work runs
 //! with the GIL released.
 #![warn(missing_docs)]
 
+mod arrays;
 mod config;
 mod image;
 mod segments;

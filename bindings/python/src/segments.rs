@@ -2,40 +2,31 @@
 //! float64, any strides, into [`Segment`]s (refused when a coordinate is NaN or infinite,
 //! naming the row); segments back as `(N, 4)` float32.
 
+use crate::arrays;
 use linetrack_geometry::Segment;
 use numpy::ndarray::{Array2, ArrayView2};
-use numpy::{
-    IntoPyArray, PyArray2, PyArrayDescrMethods, PyReadonlyArray2, PyUntypedArray,
-    PyUntypedArrayMethods,
-};
+use numpy::{IntoPyArray, PyArray2, PyReadonlyArray2};
 use pyo3::exceptions::{PyTypeError, PyValueError};
 use pyo3::prelude::*;
 
 /// Reads the segment array argument `name`.
 pub fn from_array(name: &str, object: &Bound<'_, PyAny>) -> PyResult<Vec<Segment>> {
-    let array = object.cast::<PyUntypedArray>().map_err(|_| {
-        PyTypeError::new_err(format!(
-            "{name} must be a numpy.ndarray of shape (N, 4) (x0, y0, x1, y1 per row)"
-        ))
-    })?;
-    if array.shape().len() != 2 || array.shape()[1] != 4 {
+    let described = arrays::describe(name, object, "of shape (N, 4) (x0, y0, x1, y1 per row)")?;
+    if described.shape.len() != 2 || described.shape[1] != 4 {
         return Err(PyValueError::new_err(format!(
-            "{name} has shape {:?}: expected (N, 4), one segment x0, y0, x1, y1 per row",
-            array.shape()
+            "{name} has shape {}: expected (N, 4), one segment x0, y0, x1, y1 per row",
+            arrays::shape_text(&described.shape)
         )));
     }
-    let dtype = array.dtype();
-    let segments = match (dtype.kind(), dtype.itemsize()) {
-        (b'f', 4) => collect(object.extract::<PyReadonlyArray2<f32>>()?.as_array()),
-        (b'f', 8) => collect(object.extract::<PyReadonlyArray2<f64>>()?.as_array()),
-        _ => {
-            let dtype = dtype
-                .str()
-                .map_or_else(|_| "?".to_string(), |s| s.to_string());
-            return Err(PyTypeError::new_err(format!(
-                "{name} has dtype {dtype}: expected float32 or float64"
-            )));
-        }
+    let segments = if described.is(b'f', 4) {
+        collect(object.extract::<PyReadonlyArray2<f32>>()?.as_array())
+    } else if described.is(b'f', 8) {
+        collect(object.extract::<PyReadonlyArray2<f64>>()?.as_array())
+    } else {
+        return Err(PyTypeError::new_err(format!(
+            "{name} has dtype {}: expected float32 or float64",
+            described.dtype
+        )));
     };
     if let Some((row, s)) = segments.iter().enumerate().find(|(_, s)| !s.is_finite()) {
         return Err(PyValueError::new_err(format!(

@@ -36,6 +36,13 @@ def test_a_wrong_dtype_is_refused_naming_it(dtype):
         linetrack.detect_lines(IMAGE.astype(dtype))
 
 
+def test_a_foreign_byte_order_is_refused_naming_it():
+    with pytest.raises(TypeError, match="image has dtype >u2, not in this machine's byte order"):
+        linetrack.detect_lines(IMAGE.astype(">u2"))
+    with pytest.raises(TypeError, match="right_segments has dtype >f8, not in this machine's byte order"):
+        linetrack.match_stereo(IMAGE, IMAGE, SEGMENTS, SEGMENTS.astype(">f8"))
+
+
 @pytest.mark.parametrize("shape", [(0, 5), (5, 0), (0, 0)])
 def test_an_empty_image_is_refused(shape):
     with pytest.raises(ValueError, match=r"image has shape \(.*\): an empty image"):
@@ -143,8 +150,8 @@ def test_a_non_finite_segment_is_refused_naming_its_row(bad):
 
 
 @pytest.mark.parametrize("segments, error, message", [
-    (np.zeros((3, 3), np.float32), ValueError, r"left_segments has shape \[3, 3\]: expected \(N, 4\)"),
-    (np.zeros(4, np.float32), ValueError, r"left_segments has shape \[4\]"),
+    (np.zeros((3, 3), np.float32), ValueError, r"left_segments has shape \(3, 3\): expected \(N, 4\)"),
+    (np.zeros(4, np.float32), ValueError, r"left_segments has shape \(4,\)"),
     (np.zeros((3, 4), np.int32), TypeError, "left_segments has dtype int32: expected float32 or float64"),
     ([[0.0, 1.0, 2.0, 3.0]], TypeError, "left_segments must be a numpy.ndarray"),
 ])
