@@ -219,3 +219,17 @@ def test_threads_get_the_same_results_as_one_thread():
         t.join()
     for got, want in zip(results, expected):
         np.testing.assert_array_equal(got, want)
+
+
+def test_the_shipped_config_files_load_by_path():
+    from conftest import REPO
+
+    shifted = np.roll(IMAGE, -6, axis=1)
+    right = linetrack.detect_lines(shifted)
+    default = linetrack.match_stereo(IMAGE, shifted, SEGMENTS, right)
+    shipped = linetrack.match_stereo(IMAGE, shifted, SEGMENTS, right, config=REPO / "configs/l1-matcher.toml")
+    for a, b in zip(shipped, default):
+        np.testing.assert_array_equal(a, b)
+    paper = REPO / "configs/l1-matcher-paper.toml"
+    pairs, costs = linetrack.match_stereo(IMAGE, shifted, SEGMENTS, right, config=paper)
+    assert pairs.shape == (len(costs), 2)
