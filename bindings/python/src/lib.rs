@@ -23,6 +23,17 @@ use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
+/// How many detectors (each with its image-sized buffers) a thread keeps, one per recent
+/// setting: a benchmark alternating two settings, or a caller with a few, reuses them.
+const KEPT_DETECTORS: usize = 4;
+
+thread_local! {
+    /// The detectors this thread used last, oldest first: a call with the same settings
+    /// reuses one and allocates no image-sized buffer again.
+    static DETECTORS: std::cell::RefCell<Vec<EdgeLinesSegments>> =
+        const { std::cell::RefCell::new(Vec::new()) };
+}
+
 /// Line segments of a grey image by the edgelines detector.
 ///
 /// image: 2-D numpy array (height, width) of uint8, or uint16 (scaled to 8 bits,
@@ -54,7 +65,18 @@ fn detect_lines<'py>(
         .map_err(|e| PyValueError::new_err(format!("image: {e}")))?;
     let found = py.detach(|| {
         let mut found = Vec::new();
-        EdgeLinesSegments::new(&options, keep).detect(view, &mut found);
+        DETECTORS.with_borrow_mut(|kept| {
+            let params = options.params(keep);
+            let mut detector = match kept.iter().position(|d| *d.params() == params) {
+                Some(k) => kept.remove(k),
+                None => EdgeLinesSegments::new(&options, keep),
+            };
+            detector.detect(view, &mut found);
+            if kept.len() == KEPT_DETECTORS {
+                kept.remove(0);
+            }
+            kept.push(detector);
+        });
         found
     });
     Ok(segments::to_array(py, &found))

@@ -197,6 +197,19 @@ def test_bad_configs_are_refused_naming_the_culprit(tmp_path):
         linetrack.match_stereo(IMAGE, IMAGE, SEGMENTS, SEGMENTS, config=broken)
 
 
+def test_a_kept_detector_gives_what_a_new_one_gives():
+    # Each thread keeps its last few detectors (one per setting) with their buffers: results
+    # must not depend on what a detector saw before (another size, another image).
+    small = scene(60, 90)
+    first = [linetrack.detect_lines(IMAGE), linetrack.detect_lines(small, scan_interval=1)]
+    assert len(first[0]) and len(first[1])
+    for k in range(6):  # more settings than are kept: some detectors are made anew
+        linetrack.detect_lines(small, max_segments=k + 1)
+        linetrack.detect_lines(IMAGE[::2, ::2], scan_interval=1)
+        np.testing.assert_array_equal(linetrack.detect_lines(IMAGE), first[0])
+        np.testing.assert_array_equal(linetrack.detect_lines(small, scan_interval=1), first[1])
+
+
 def test_threads_get_the_same_results_as_one_thread():
     # The work runs with the GIL released: calls from several threads at once must not
     # interfere with each other.
