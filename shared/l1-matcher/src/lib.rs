@@ -178,6 +178,25 @@ impl L1Matcher {
         &self.config
     }
 
+    /// The image step of matching: replaces `out` with the row profiles of `segments` in
+    /// `image` that the photometric check compares, or empties it when the check is off or
+    /// there is no image to read. The OpenCV front end and the Python bindings both call
+    /// this, so they compare the same profiles.
+    pub fn describe(
+        &self,
+        image: Option<GrayView<'_>>,
+        segments: &[Segment],
+        out: &mut SegmentProfiles,
+    ) {
+        let photometric = self.config.photometric;
+        match image {
+            Some(view) if photometric.enabled => {
+                out.extract(view, segments, photometric.min_angle_from_horizontal_deg)
+            }
+            _ => out.clear(),
+        }
+    }
+
     /// Matches `first` against `second` by geometry alone, replacing the contents of
     /// `out` with the accepted matches in increasing query order.
     pub fn match_segments(

@@ -687,6 +687,33 @@ fn the_photometric_check_picks_the_edge_geometry_cannot_tell_apart() {
 }
 
 #[test]
+fn describe_extracts_the_profiles_only_when_the_check_is_on_and_an_image_is_given() {
+    let segments = [seg(80.0, 10.0, 80.0, 110.0), seg(160.0, 10.0, 160.0, 110.0)];
+    let pixels = banded(0.0, 1.0, 0.0);
+    let view = GrayView::new(&pixels, 200, 120, 200).unwrap();
+    let mut config = MatcherConfig::default();
+    config.photometric.min_angle_from_horizontal_deg = 20.0;
+    let on = L1Matcher::new(config.clone()).unwrap();
+    let mut out = SegmentProfiles::default();
+    on.describe(Some(view), &segments, &mut out);
+    assert_eq!(out.len(), 2);
+    assert!(out.has_profile(0) && out.has_profile(1));
+    assert_eq!(
+        (0..2)
+            .map(|i| out.offset_px(i, &profiles(&pixels, &segments), i))
+            .collect::<Vec<_>>(),
+        vec![Some(0.0), Some(0.0)],
+        "the same profiles as extracting them directly"
+    );
+    on.describe(None, &segments, &mut out);
+    assert!(out.is_empty(), "no image, no profiles");
+    config.photometric.enabled = false;
+    let off = L1Matcher::new(config).unwrap();
+    off.describe(Some(view), &segments, &mut out);
+    assert!(out.is_empty(), "check off, no profiles");
+}
+
+#[test]
 fn a_candidate_whose_content_sits_off_its_line_is_dropped() {
     // The right segment drawn 2 px left of the edge it belongs to: same geometry class,
     // but the image content across it is shifted by 2 px against the query's.

@@ -3,6 +3,7 @@
 //! `configs/frontend.toml` documents the same fields for users.
 
 use crate::{DetectorKind, MatcherKind, VisionError};
+use linetrack_frontend_core::{EdgeLinesOptions, LineOptions};
 use linetrack_l1_matcher::MatcherConfig;
 use serde::{Deserialize, Serialize};
 use std::path::Path;
@@ -46,25 +47,6 @@ impl Default for FrontendConfig {
             orb: OrbOptions::default(),
             appearance_gates: AppearanceGates::default(),
             l1: MatcherConfig::default(),
-        }
-    }
-}
-
-/// Selection of detected segments.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct LineOptions {
-    /// Keep at most this many segments per image, longest first (paper: 100).
-    pub max_segments: usize,
-    /// Drop segments shorter than this, pixels.
-    pub min_length_px: f64,
-}
-
-impl Default for LineOptions {
-    fn default() -> Self {
-        Self {
-            max_segments: 100,
-            min_length_px: 15.0,
         }
     }
 }
@@ -145,56 +127,6 @@ impl Default for FldOptions {
             canny_high: 50.0,
             canny_aperture: 3,
             merge: false,
-        }
-    }
-}
-
-/// Parameters of the `edgelines` detector (`linetrack-edge-lines`). Gradient thresholds
-/// are in units of a 3×3 Sobel `|gx| + |gy|` on the smoothed 8-bit image (at most 2040).
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct EdgeLinesOptions {
-    /// Pixels whose gradient is below this are not edges.
-    pub gradient_threshold: u16,
-    /// An anchor's gradient exceeds both neighbours across the edge by at least this.
-    pub anchor_threshold: u16,
-    /// Anchors are looked for on every this-th row and column (>= 1).
-    pub scan_interval: usize,
-    /// A pixel further than this from the fitted line is an outlier, pixels.
-    pub max_fit_error_px: f32,
-    /// A segment ends after more than this many outlier pixels in a row.
-    pub max_outlier_run: usize,
-    /// A segment is kept when at least this fraction of its pixels have a gradient across
-    /// it (within 22.5°) of one sign.
-    pub min_aligned_fraction: f32,
-}
-
-impl Default for EdgeLinesOptions {
-    fn default() -> Self {
-        let p = linetrack_edge_lines::Params::default();
-        Self {
-            gradient_threshold: p.gradient_threshold,
-            anchor_threshold: p.anchor_threshold,
-            scan_interval: p.scan_interval,
-            max_fit_error_px: p.max_fit_error_px,
-            max_outlier_run: p.max_outlier_run,
-            min_aligned_fraction: p.min_aligned_fraction,
-        }
-    }
-}
-
-impl EdgeLinesOptions {
-    /// The detector's parameters, keeping segments by `keep`.
-    pub fn params(&self, keep: LineOptions) -> linetrack_edge_lines::Params {
-        linetrack_edge_lines::Params {
-            gradient_threshold: self.gradient_threshold,
-            anchor_threshold: self.anchor_threshold,
-            scan_interval: self.scan_interval,
-            max_fit_error_px: self.max_fit_error_px,
-            max_outlier_run: self.max_outlier_run,
-            min_length_px: keep.min_length_px as f32,
-            max_segments: keep.max_segments,
-            min_aligned_fraction: self.min_aligned_fraction,
         }
     }
 }
@@ -311,13 +243,7 @@ impl FrontendConfig {
         let bad = |field: &str, value: String, expected: &str| {
             Err(format!("field `{field}` = {value}: {expected}"))
         };
-        if !(self.lines.min_length_px >= 0.0 && self.lines.min_length_px.is_finite()) {
-            return bad(
-                "lines.min_length_px",
-                self.lines.min_length_px.to_string(),
-                "a finite number >= 0",
-            );
-        }
+        self.lines.validate().map_err(|e| e.to_string())?;
         if !(self.lsd.scale > 0.0 && self.lsd.scale <= 1.0) {
             return bad("lsd.scale", self.lsd.scale.to_string(), "in (0, 1]");
         }
@@ -345,35 +271,7 @@ impl FrontendConfig {
                 ">= 0",
             );
         }
-        let e = &self.edgelines;
-        if e.gradient_threshold < 1 {
-            return bad(
-                "edgelines.gradient_threshold",
-                e.gradient_threshold.to_string(),
-                ">= 1",
-            );
-        }
-        if e.scan_interval < 1 {
-            return bad(
-                "edgelines.scan_interval",
-                e.scan_interval.to_string(),
-                ">= 1",
-            );
-        }
-        if !(e.max_fit_error_px > 0.0 && e.max_fit_error_px.is_finite()) {
-            return bad(
-                "edgelines.max_fit_error_px",
-                e.max_fit_error_px.to_string(),
-                "a finite number > 0",
-            );
-        }
-        if !(0.0..=1.0).contains(&e.min_aligned_fraction) {
-            return bad(
-                "edgelines.min_aligned_fraction",
-                e.min_aligned_fraction.to_string(),
-                "in [0, 1]",
-            );
-        }
+        self.edgelines.validate().map_err(|e| e.to_string())?;
         for (field, ratio) in [
             ("lbd.min_distance_ratio", self.lbd.min_distance_ratio),
             ("orb.min_distance_ratio", self.orb.min_distance_ratio),

@@ -4,7 +4,8 @@ use crate::{
     EdgeLinesOptions, FldOptions, FrontendConfig, GrayImage, LineOptions, LsdOptions, LsdRefine,
     OpenCvContext, VisionError,
 };
-use linetrack_edge_lines::{EdgeLineDetector, GrayView, LineSegment};
+use linetrack_edge_lines::GrayView;
+use linetrack_frontend_core::EdgeLinesSegments;
 use linetrack_geometry::Segment;
 use opencv::core::{MatTraitConstManual, Ptr, Vec4f, Vector};
 use opencv::imgproc::{self, LineSegmentDetector, LineSegmentDetectorTrait};
@@ -13,8 +14,9 @@ use serde::{Deserialize, Serialize};
 use std::str::FromStr;
 
 /// Images narrower or lower than this (pixels) have no segments worth detecting; the
-/// detectors return none instead of asking OpenCV (FLD asserts on tiny images).
-pub const MIN_IMAGE_SIDE_PX: i32 = 8;
+/// detectors return none instead of asking OpenCV (FLD asserts on tiny images). The rule
+/// of `linetrack-frontend-core`, which `edgelines` runs through.
+pub const MIN_IMAGE_SIDE_PX: i32 = linetrack_frontend_core::MIN_IMAGE_SIDE_PX as i32;
 
 /// A line segment detector.
 pub trait LineDetector: Send {
@@ -183,10 +185,10 @@ impl LineDetector for FldDetector {
     }
 }
 
-/// Our own detector (`linetrack-edge-lines`): no OpenCV call, the pixels read in place.
+/// Our own detector (`linetrack-edge-lines`): no OpenCV call, the pixels read in place,
+/// through `linetrack-frontend-core` (the Python bindings' code path too).
 pub struct EdgeLinesDetector {
-    detector: EdgeLineDetector,
-    segments: Vec<LineSegment>,
+    detector: EdgeLinesSegments,
     /// Rows copied out of a non-continuous image (a region of a larger one); unused for
     /// decoded and borrowed images, which are continuous.
     copy: Vec<u8>,
@@ -196,8 +198,7 @@ impl EdgeLinesDetector {
     /// The detector with `options`, keeping segments by `keep`.
     pub fn new(options: &EdgeLinesOptions, keep: LineOptions) -> Self {
         Self {
-            detector: EdgeLineDetector::new(options.params(keep)),
-            segments: Vec::new(),
+            detector: EdgeLinesSegments::new(options, keep),
             copy: Vec::new(),
         }
     }
@@ -210,11 +211,7 @@ impl LineDetector for EdgeLinesDetector {
 
     fn detect(&mut self, image: &GrayImage, out: &mut Vec<Segment>) -> Result<(), VisionError> {
         out.clear();
-        self.segments.clear();
-        if image.width() < MIN_IMAGE_SIDE_PX || image.height() < MIN_IMAGE_SIDE_PX {
-            return Ok(());
-        }
-        // Both sides are at least MIN_IMAGE_SIDE_PX > 0: the casts are exact.
+        // A GrayImage is never empty: the casts are exact.
         let (width, height) = (image.width() as usize, image.height() as usize);
         let pixels = match image.pixels() {
             Some(pixels) => pixels,
@@ -235,22 +232,7 @@ impl LineDetector for EdgeLinesDetector {
                 origin: image.origin().to_string(),
                 source,
             })?;
-        self.detector.detect(view, &mut self.segments);
-        let bounds = ((width - 1) as f64, (height - 1) as f64);
-        out.extend(
-            self.segments
-                .iter()
-                .map(|s| {
-                    Segment::from_coords(
-                        f64::from(s.start[0]),
-                        f64::from(s.start[1]),
-                        f64::from(s.end[0]),
-                        f64::from(s.end[1]),
-                    )
-                })
-                .filter_map(|s| s.clipped_to(bounds.0, bounds.1))
-                .filter(|s| s.is_finite()),
-        );
+        self.detector.detect(view, out);
         Ok(())
     }
 }

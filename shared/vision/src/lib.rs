@@ -31,8 +31,7 @@ mod pair;
 mod worker;
 
 pub use config::{
-    AppearanceGates, EdgeLinesOptions, FldOptions, FrontendConfig, LbdOptions, LineOptions,
-    LsdOptions, LsdRefine, OrbOptions,
+    AppearanceGates, FldOptions, FrontendConfig, LbdOptions, LsdOptions, LsdRefine, OrbOptions,
 };
 pub use detect::{
     DetectorKind, EdgeLinesDetector, FldDetector, LineDetector, LsdDetector, MIN_IMAGE_SIDE_PX,
@@ -44,6 +43,7 @@ pub use image::{
     stretch_contrast, stretch_contrast_into,
 };
 pub use lbd::LbdExtractor;
+pub use linetrack_frontend_core::{EdgeLinesOptions, LineOptions};
 pub use matchers::{
     L1SegmentMatcher, LbdSegmentMatcher, LineFeatures, MatcherKind, SegmentMatcher,
     create_segment_matcher,

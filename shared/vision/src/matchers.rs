@@ -228,26 +228,20 @@ impl SegmentMatcher for L1SegmentMatcher {
         image: &GrayImage,
         features: &mut LineFeatures,
     ) -> Result<(), VisionError> {
-        let photometric = self.matcher.config().photometric;
         let (width, height) = (image.width() as usize, image.height() as usize);
         let view = match image.pixels() {
-            Some(pixels) if photometric.enabled => GrayView::new(pixels, width, height, width)
-                .map_err(|e| VisionError::RawSize {
+            Some(pixels) => Some(GrayView::new(pixels, width, height, width).map_err(|e| {
+                VisionError::RawSize {
                     origin: image.origin().to_string(),
                     len: e.len,
                     width,
                     height,
-                })?,
-            _ => {
-                features.profiles.clear();
-                return Ok(());
-            }
+                }
+            })?),
+            None => None,
         };
-        features.profiles.extract(
-            view,
-            &features.segments,
-            photometric.min_angle_from_horizontal_deg,
-        );
+        self.matcher
+            .describe(view, &features.segments, &mut features.profiles);
         Ok(())
     }
 

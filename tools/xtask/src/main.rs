@@ -12,6 +12,9 @@
 //! - `cargo xtask test-ros2 [ARGS…]` — the ROS 2 output (cargo feature `ros2`): install the
 //!   DDS peer if missing ([`python_env`]), build `linetrack-ros2`, run its crate's tests and
 //!   the end-to-end test in which Cyclone DDS receives the poses.
+//! - `cargo xtask python [ARGS…]` — the Python package (`bindings/python`): its wheel built
+//!   into a virtual environment under the target folder, installed, its pytest suite run
+//!   (ARGS are pytest's) ([`python`]).
 //! - `cargo xtask feature-drift` — fails when an optional feature set would compile a
 //!   shared dependency with other features than the default build ([`feature_drift`]).
 //!
@@ -28,6 +31,7 @@ mod cross;
 mod deb;
 mod feature_drift;
 mod pose_diff;
+mod python;
 mod python_env;
 mod tiers;
 
@@ -55,6 +59,7 @@ const USAGE: &str = "usage: cargo xtask <demo|match-demo|test|setup> [ARGS…]
   test        every test of the default build (ARGS are passed to cargo nextest run / cargo test)
   test-features  the tests the optional features mcap (recording) and link (zenoh) add
   test-ros2   the ROS 2 output's tests (feature `ros2`) against a Cyclone DDS subscriber
+  python      build the Python package's wheel into a venv, install it, run its pytest suite
   feature-drift  fails when an optional feature set would recompile a shared dependency
   setup       install the system packages and the DDS peer of test-ros2
   cross       aarch64 release binaries, checked under qemu (try `cargo xtask cross --help`)
@@ -121,6 +126,7 @@ fn run() -> anyhow::Result<ExitCode> {
         }
         "test" => tiers::default_suite(&rest),
         "test-features" => tiers::feature_suite(&rest),
+        "python" => python::suite(&rest),
         "feature-drift" => feature_drift::run(&rest),
         "cross" => cross::run(&rest),
         "deb" => {

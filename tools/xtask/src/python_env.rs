@@ -2,7 +2,8 @@
 //! environment under the target folder, where the tests look for it: the MCAP checker
 //! (`target/mcap-check`, PyPI `mcap`) and the DDS peer of the ROS 2 output's test
 //! (`target/dds-peer`, Eclipse Cyclone DDS's Python binding, whose wheel carries the C
-//! library). Nothing is done when an environment already imports its modules.
+//! library); and the Python package's build and test environment (`target/python-env`).
+//! Nothing is done when an environment already imports its modules.
 
 use anyhow::{Context, bail};
 use std::path::{Path, PathBuf};
@@ -35,6 +36,21 @@ pub const DDS_PEER: PythonTool = PythonTool {
     folder: "dds-peer",
     packages: &["cyclonedds==11.0.1"],
     check: "import cyclonedds.domain",
+};
+
+/// The Python package's build and test environment (`cargo xtask python`): maturin, pytest,
+/// and what the tests and the README example import (numpy, Pillow, matplotlib).
+pub const PYTHON_PACKAGE: PythonTool = PythonTool {
+    name: "the Python package's build and test environment",
+    folder: "python-env",
+    packages: &[
+        "maturin==1.16.0",
+        "pytest==9.2.0",
+        "numpy==2.4.6",
+        "pillow==13.0.0",
+        "matplotlib==3.11.2",
+    ],
+    check: "import maturin, pytest, numpy, PIL, matplotlib",
 };
 
 /// The target folder (`CARGO_TARGET_DIR` when set).
