@@ -218,6 +218,12 @@ fn launch_with(
 /// (LSD, the LBD→ℓ1 policy, 10 Hz), the run folder `dir/run`. Returns both paths.
 pub fn write_config(dir: &Path, sequence: &Path, extra: &str) -> (PathBuf, PathBuf) {
     let run_dir = dir.join("run");
+    let config = write_config_for(dir, sequence, extra, &run_dir);
+    (config, run_dir)
+}
+
+/// [`write_config`] with the run folder `run_dir`; returns the config's path.
+pub fn write_config_for(dir: &Path, sequence: &Path, extra: &str, run_dir: &Path) -> PathBuf {
     let config = dir.join("pipeline.toml");
     // The tests check LSD's hot swap to FLD and LBD's fallback to l1: they pin the detector
     // and the matcher policy (the shipped defaults are edgelines and l1). The automatic
@@ -234,7 +240,7 @@ pub fn write_config(dir: &Path, sequence: &Path, extra: &str) -> (PathBuf, PathB
         run_dir.display().to_string()
     );
     std::fs::write(&config, text).unwrap_or_else(|e| panic!("{e}"));
-    (config, run_dir)
+    config
 }
 
 impl Run {

@@ -39,8 +39,8 @@ use linetrack_msgs::{
     Command, Control, MatcherMode, PoseRecord, StageKind, StatusKind, StatusReport, Topic,
     TracksHeader, now_ns,
 };
-use linetrack_pipeline_config::PipelineConfig;
-use linetrack_run_record::{Report, RunEnd};
+use linetrack_pipeline_config::{OnRecordError, PipelineConfig};
+use linetrack_run_record::{RecordError, Report, RunEnd};
 use linetrack_stage_runtime::{StageContext, detector_kind, detector_on_wire};
 use linetrack_vision::DetectorKind;
 use monitor::Monitor;
@@ -165,15 +165,15 @@ impl LiveStatus {
         self.state != RunEnd::Running
     }
 
-    /// Writes `status.json` in `run_dir` (a temporary file renamed over it: readers never
-    /// see half of it).
-    fn write(&self, run_dir: &Path) {
-        if let Ok(text) = serde_json::to_string_pretty(self) {
-            let tmp = run_dir.join("status.json.tmp");
-            if std::fs::write(&tmp, text).is_ok() {
-                let _ = std::fs::rename(&tmp, run_dir.join("status.json"));
-            }
-        }
+    /// Writes `status.json` in `run_dir` whole or not at all (readers never see half of it;
+    /// a failed write leaves no temporary file).
+    fn write(&self, run_dir: &Path) -> Result<(), RecordError> {
+        let path = run_dir.join("status.json");
+        let text = serde_json::to_string_pretty(self).map_err(|e| RecordError::Io {
+            path: path.clone(),
+            source: e.into(),
+        })?;
+        linetrack_run_record::files::write_whole(&path, text.as_bytes(), false)
     }
 }
 
@@ -288,8 +288,15 @@ pub fn run(
         )),
         other => other,
     };
-    // Whatever happened, the run's records are closed and say how it ended.
+    // Whatever happened, the run's records are closed and say how it ended; records that
+    // failed say so first (the pipeline may have run on: `output.on_record_error`).
+    let result_reason = monitor.records_failed().map(|records| match &result {
+        Err(e) if !format!("{e:#}").contains(&records) => format!("{e:#}; run records: {records}"),
+        Err(e) => format!("{e:#}"),
+        Ok(_) => format!("run records: {records}"),
+    });
     let (end, reason) = match &result {
+        _ if monitor.records_failed().is_some() => (RunEnd::RecordsFailed, result_reason),
         Ok(false) => (RunEnd::Completed, None),
         Ok(true) => (RunEnd::Interrupted, None),
         Err(e) => (RunEnd::Failed, Some(format!("{e:#}"))),
@@ -356,7 +363,13 @@ fn final_status(
         state,
         reason,
     }
-    .write(run_dir);
+    .write(run_dir)
+    .unwrap_or_else(|e| {
+        tracing::error!(
+            "the run's end is not in status.json: {}",
+            linetrack_run_record::full_message(&e)
+        );
+    });
 }
 
 /// Ids of thread stages start here (above any Linux pid), so that commands and status
@@ -709,8 +722,8 @@ impl<'m> Supervisor<'m> {
         }
     }
 
-    fn write_status(&self) {
-        LiveStatus {
+    fn write_status(&mut self) {
+        let written = LiveStatus {
             run_id: self.run_id.clone(),
             ipc_prefix: self.scope.prefix.clone(),
             ipc_root: Some(self.scope.root.clone()),
@@ -731,6 +744,9 @@ impl<'m> Supervisor<'m> {
             reason: None,
         }
         .write(&self.run_dir);
+        if let Err(e) = written {
+            self.monitor.file_failed(e);
+        }
     }
 
     fn all_ready(&self, stages: &[StageKind]) -> bool {
@@ -752,7 +768,11 @@ impl<'m> Supervisor<'m> {
                     "trace: {n} spans in {}",
                     self.run_dir.join("trace.json").display()
                 ),
-                Err(e) => tracing::warn!("trace not merged: {e}"),
+                Err(e) => tracing::warn!(
+                    "trace not merged: {} (the span files stay in {})",
+                    linetrack_run_record::full_message(&e),
+                    self.run_dir.join("spans").display()
+                ),
             }
         }
         result
@@ -818,8 +838,20 @@ impl<'m> Supervisor<'m> {
                     );
                 }
             }
+            if let Some(records) = self.monitor.records_failed()
+                && self.config.output.on_record_error == OnRecordError::Stop
+            {
+                bail!(
+                    "run records: {records}: the pipeline stops (output.on_record_error = \"stop\")"
+                );
+            }
             if self.monitor.complete() {
-                tracing::info!("every frame accounted for");
+                match self.monitor.records_failed() {
+                    None => tracing::info!("every frame accounted for"),
+                    Some(records) => tracing::warn!(
+                        "every frame has an outcome, but the records end early: {records}"
+                    ),
+                }
                 return Ok(false);
             }
             let now = self.clock.now();

@@ -172,14 +172,33 @@ impl Monitor {
         self
     }
 
-    /// Keeps the first write error (later records are still attempted).
+    /// Keeps the first write error and logs it, naming the file and the OS error (the
+    /// record writer stops at it: every record file ends at its last whole row).
     fn note(&mut self, result: Result<(), RecordError>) {
         if let Err(e) = result
             && self.write_error.is_none()
         {
-            tracing::error!("run records: {e}");
+            tracing::error!(
+                "run records: {}: the records end here (output.on_record_error = \"{}\")",
+                linetrack_run_record::full_message(&e),
+                self.config.output.on_record_error.name()
+            );
             self.write_error = Some(e);
         }
+    }
+
+    /// A file of the run folder other than the records (`status.json`) could not be
+    /// written: the records have failed too.
+    pub fn file_failed(&mut self, e: RecordError) {
+        self.writer.stop();
+        self.note(Err(e));
+    }
+
+    /// The first record that could not be written (the file and the OS error), if any.
+    pub fn records_failed(&self) -> Option<String> {
+        self.write_error
+            .as_ref()
+            .map(|e| linetrack_run_record::full_message(e))
     }
 
     /// Appends a frame's record and counts it.
@@ -575,8 +594,10 @@ impl Monitor {
                 None,
                 reason.clone().unwrap_or_default(),
             ),
-            RunEnd::Running | RunEnd::Completed => {}
+            RunEnd::Running | RunEnd::Completed | RunEnd::RecordsFailed => {}
         }
+        let closed = self.writer.close();
+        self.note(closed);
         let report = self.tally.report();
         let metrics = linetrack_run_record::trajectory_metrics(
             &self.run_dir.join("poses.tum"),
@@ -603,6 +624,7 @@ impl Monitor {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use linetrack_run_record::files::SpaceReserve;
     use linetrack_run_record::{read_events, read_frames};
 
     fn scratch(name: &str) -> PathBuf {
@@ -705,6 +727,51 @@ mod tests {
                     .any(|e| e.kind == "failed" && e.detail == "matcher died"),
             "{events:?}"
         );
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn a_file_that_cannot_be_written_ends_the_records_at_a_whole_row_and_the_run_says_so() {
+        let dir = scratch("monitor-records-failed");
+        let mut monitor =
+            Monitor::new(&PipelineConfig::default(), 0, &dir).unwrap_or_else(|e| panic!("{e}"));
+        assert!(dir.join(SpaceReserve::FILE).is_file(), "no space held");
+        for f in 0..3 {
+            pose_of(&mut monitor, f);
+        }
+        assert!(monitor.records_failed().is_none());
+        monitor.file_failed(RecordError::Io {
+            path: dir.join("status.json"),
+            source: std::io::Error::from_raw_os_error(28),
+        });
+        let failed = monitor.records_failed().unwrap_or_default();
+        assert!(
+            failed.contains("status.json") && failed.contains("No space left on device"),
+            "{failed}"
+        );
+        assert!(
+            !dir.join(SpaceReserve::FILE).exists(),
+            "the reserve is given up"
+        );
+        // Later frames are counted, not recorded.
+        for f in 3..5 {
+            pose_of(&mut monitor, f);
+        }
+        monitor.source_finished(4);
+        let finished = monitor.finish(RunEnd::RecordsFailed, Some(failed.clone()));
+        assert!(finished.is_err(), "the run's records failed");
+        let summary = Summary::read(&dir.join("summary.json")).unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(
+            (summary.end, summary.report.frames),
+            (RunEnd::RecordsFailed, 5)
+        );
+        let frames = read_frames(&dir.join("frames.csv")).unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(
+            frames.iter().map(|f| f.frame_id).collect::<Vec<_>>(),
+            [0, 1, 2]
+        );
+        let poses = std::fs::read_to_string(dir.join("poses.tum")).unwrap_or_default();
+        assert_eq!(poses.lines().count(), 4, "the header and 3 poses");
         let _ = std::fs::remove_dir_all(&dir);
     }
 

@@ -435,6 +435,32 @@ pub struct OutputConfig {
     pub run_dir: Option<PathBuf>,
     /// Write per-process span files and the merged Chrome/Perfetto trace.
     pub trace: bool,
+    /// What a record that cannot be written (a full disk, a file size limit) does to the
+    /// run: either way the records end at their last whole row, the error names the file
+    /// and the OS error, and the run ends `records-failed` (non-zero exit).
+    pub on_record_error: OnRecordError,
+}
+
+/// What a record that cannot be written does to the run (`output.on_record_error`).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum OnRecordError {
+    /// The pipeline stops at once (cleanly, like Ctrl-C): a run is for its records.
+    #[default]
+    Stop,
+    /// The pipeline runs on without records (its poses still go to the ROS 2 output and
+    /// the link): a robot that needs its odometry more than its log.
+    Continue,
+}
+
+impl OnRecordError {
+    /// The value as the config spells it.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Stop => "stop",
+            Self::Continue => "continue",
+        }
+    }
 }
 
 impl Default for OutputConfig {
@@ -443,6 +469,7 @@ impl Default for OutputConfig {
             runs_dir: PathBuf::from("out/runs"),
             run_dir: None,
             trace: true,
+            on_record_error: OnRecordError::Stop,
         }
     }
 }

@@ -10,6 +10,7 @@
 //!   ground-station link (`watch`).
 
 pub mod latency_plots;
+pub mod records_check;
 pub mod trace_picture;
 #[cfg(feature = "link")]
 pub mod watch;
@@ -19,7 +20,7 @@ use clap::{Parser, Subcommand};
 use linetrack_ipc::{Bus, Scope, Shutdown};
 use linetrack_msgs::{Command, Control, StageKind, Topic};
 use linetrack_pipeline_config::{MatcherPolicy, Pacing, PipelineConfig};
-use linetrack_run_record::{Report, read_events, read_frames};
+use linetrack_run_record::Report;
 use linetrack_scene_render::Preset;
 use linetrack_supervisor::{LiveStatus, Mode, RunOptions};
 use linetrack_vision::DetectorKind;
@@ -332,17 +333,21 @@ pub fn run(args: &RunArgs) -> anyhow::Result<PathBuf> {
 
 /// `linetrack report`: the text, after writing the latency pictures and the trace overview
 /// into the run folder.
+///
+/// A folder cut short (a full disk, a killed supervisor) is read up to its last whole row;
+/// the text then says which row was cut, which frames have no row and how the run ended
+/// ([`records_check`]).
 pub fn report(run_dir: &Path) -> anyhow::Result<String> {
-    let frames = read_frames(&run_dir.join("frames.csv"))
-        .with_context(|| format!("{} holds no finished run", run_dir.display()))?;
-    let events = read_events(&run_dir.join("events.csv"))?;
-    let report = Report::new(&frames, &events);
+    let records = records_check::RunRecords::read(run_dir)
+        .with_context(|| format!("{} holds no run records", run_dir.display()))?;
+    let (frames, events) = (&records.frames, &records.events);
+    let report = Report::new(frames, events);
     let budget = PipelineConfig::from_file(&run_dir.join("pipeline.toml"))
         .map(|c| c.budget)
         .ok();
-    let [distributions, timeline] =
-        latency_plots::write(run_dir, &frames, &events, budget.as_ref())?;
+    let [distributions, timeline] = latency_plots::write(run_dir, frames, events, budget.as_ref())?;
     let mut text = format!("run {}\n{}", run_dir.display(), report.to_text());
+    text.push_str(&records.gaps_text());
     for e in events.iter().filter(|e| e.kind != "stale-cleanup") {
         let at = e
             .frame_id
