@@ -325,6 +325,32 @@ impl Records {
     }
 }
 
+/// The other user of the two-user tests.
+pub const NOBODY: u32 = 65534;
+
+/// `program` as user `nobody`, with the environment of a fresh login (no `XDG_RUNTIME_DIR`,
+/// no `LINETRACK_IPC_*`), in `cwd`. Starting a process as another user needs root (CI runs
+/// the suite as root): the test fails saying so otherwise.
+pub fn as_nobody(program: &Path, cwd: &Path) -> Command {
+    use std::os::unix::fs::MetadataExt as _;
+    use std::os::unix::process::CommandExt as _;
+    let me = std::fs::metadata("/proc/self").map_or(u32::MAX, |m| m.uid());
+    assert_eq!(
+        me, 0,
+        "this test starts a second user's processes (user nobody, uid {NOBODY}): run it as root"
+    );
+    let mut command = Command::new(program);
+    command
+        .uid(NOBODY)
+        .gid(NOBODY)
+        .env_clear()
+        .env("PATH", "/usr/bin:/bin")
+        .env("HOME", cwd)
+        .current_dir(cwd)
+        .stdin(Stdio::null());
+    command
+}
+
 /// Sends `signal` (e.g. "KILL", "TERM") to `pid` with kill(1).
 pub fn signal(pid: u32, signal: &str) {
     let status = Command::new("kill")

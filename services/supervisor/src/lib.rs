@@ -203,16 +203,20 @@ fn prepare_run_dir(config: &PipelineConfig, run_dir: &Path) -> anyhow::Result<Pa
         "status.json",
     ] {
         let path = run_dir.join(stale);
-        if path.is_dir() {
-            std::fs::remove_dir_all(&path)
-                .with_context(|| format!("clearing {}", path.display()))?;
-        } else if path.exists() {
-            std::fs::remove_file(&path).with_context(|| format!("clearing {}", path.display()))?;
+        // A link is removed, never followed.
+        match std::fs::symlink_metadata(&path) {
+            Ok(meta) if meta.is_dir() => std::fs::remove_dir_all(&path),
+            Ok(_) => std::fs::remove_file(&path),
+            Err(_) => Ok(()),
         }
+        .with_context(|| format!("clearing {}", path.display()))?;
     }
     let config_path = run_dir.join("pipeline.toml");
-    std::fs::write(&config_path, toml::to_string(config)?)
-        .with_context(|| format!("writing {}", config_path.display()))?;
+    linetrack_run_record::files::write_whole(
+        &config_path,
+        toml::to_string(config)?.as_bytes(),
+        false,
+    )?;
     Ok(config_path)
 }
 

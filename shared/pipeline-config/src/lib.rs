@@ -427,8 +427,10 @@ impl Default for SupervisorConfig {
 #[serde(deny_unknown_fields, default)]
 pub struct OutputConfig {
     /// Each run gets a new folder here named by its UTC start time
-    /// (`2026-11-23T12-00-00`), and `latest` here is a symlink to the newest.
-    pub runs_dir: PathBuf,
+    /// (`2026-11-23T12-00-00`), and `latest` here is a symlink to the newest. Unset: the
+    /// user's state folder, [`OutputConfig::runs_dir`].
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub runs_dir: Option<PathBuf>,
     /// A fixed run folder instead (`linetrack run --run-dir`): frames.csv, events.csv,
     /// poses (TUM), summary.json, trace files. Locked while a run writes into it.
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -439,6 +441,35 @@ pub struct OutputConfig {
     /// run: either way the records end at their last whole row, the error names the file
     /// and the OS error, and the run ends `records-failed` (non-zero exit).
     pub on_record_error: OnRecordError,
+}
+
+impl OutputConfig {
+    /// The folder of dated run folders: `runs_dir` when set, else
+    /// `$XDG_STATE_HOME/linetrack/runs` (an absolute `XDG_STATE_HOME`), else
+    /// `$HOME/.local/state/linetrack/runs`: the user's own, never a relative path that may
+    /// sit in a shared folder.
+    pub fn runs_dir(&self) -> Result<PathBuf, String> {
+        if let Some(dir) = &self.runs_dir {
+            return Ok(dir.clone());
+        }
+        default_runs_dir()
+    }
+}
+
+/// `$XDG_STATE_HOME/linetrack/runs`, else `$HOME/.local/state/linetrack/runs` (the XDG base
+/// directory rules: a relative `XDG_STATE_HOME` is ignored).
+pub fn default_runs_dir() -> Result<PathBuf, String> {
+    let absolute = |var: &str| {
+        std::env::var_os(var)
+            .map(PathBuf::from)
+            .filter(|p| p.is_absolute())
+    };
+    absolute("XDG_STATE_HOME")
+        .or_else(|| absolute("HOME").map(|home| home.join(".local/state")))
+        .map(|state| state.join("linetrack/runs"))
+        .ok_or_else(|| {
+            "output.runs_dir is unset and neither XDG_STATE_HOME nor HOME is an absolute path: set output.runs_dir or --run-dir".to_string()
+        })
 }
 
 /// What a record that cannot be written does to the run (`output.on_record_error`).
@@ -466,7 +497,7 @@ impl OnRecordError {
 impl Default for OutputConfig {
     fn default() -> Self {
         Self {
-            runs_dir: PathBuf::from("out/runs"),
+            runs_dir: None,
             run_dir: None,
             trace: true,
             on_record_error: OnRecordError::Stop,
@@ -759,6 +790,17 @@ impl PipelineConfig {
             ("budget.pose_estimator_ms", b.pose_estimator_ms),
         ] {
             in_range(key, ms, BUDGET_MS)?;
+        }
+        for (key, path) in [
+            ("output.run_dir", &self.output.run_dir),
+            ("output.runs_dir", &self.output.runs_dir),
+            ("ipc.root", &self.ipc.root),
+        ] {
+            if path.as_ref().is_some_and(|p| p.as_os_str().is_empty()) {
+                return Err(format!(
+                    "{key} = \"\": an empty path would be the current folder; leave the key out for the default"
+                ));
+            }
         }
         let src = &self.source;
         if src.rate_hz != 0.0 {
@@ -1057,7 +1099,7 @@ mod tests {
         let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../packaging/etc/pipeline.toml");
         let packaged = PipelineConfig::from_file(&path).unwrap_or_else(|e| panic!("{e}"));
         let mut expected = PipelineConfig::default();
-        expected.output.runs_dir = PathBuf::from("/var/lib/linetrack/runs");
+        expected.output.runs_dir = Some(PathBuf::from("/var/lib/linetrack/runs"));
         expected.ipc.root = Some(PathBuf::from("/run/linetrack/iceoryx2"));
         assert_eq!(packaged, expected);
     }

@@ -42,9 +42,9 @@ const DEFAULT_FRAMES: usize = 100;
     linetrack run --single-process                  # same stages on threads (baseline)
     linetrack run --camera 'v4l2src ! videoconvert ! video/x-raw,format=GRAY8 ! appsink' \\
         --calibration camchain.yaml --duration 60   # a live side-by-side stereo camera
-    linetrack replay out/runs/latest/recording.mcap # a recorded run's frames through the pipeline again
+    linetrack replay ~/.local/state/linetrack/runs/latest/recording.mcap   # a recorded run again
     linetrack ctl swap-detector fld                 # while a run is going, from another shell
-    linetrack report out/runs/latest                # latency report + latency and trace pictures
+    linetrack report                                # the newest run: latency report and pictures
 
 A run folder holds frames.csv, events.csv, poses.tum (TUM), summary.json (how the run ended,
 the report, and with ground truth `metrics`: the names of linetrack-vo's metrics.json).
@@ -146,10 +146,11 @@ pub struct ReplayArgs {
 /// `linetrack ctl`.
 #[derive(Debug, clap::Args)]
 pub struct CtlArgs {
-    /// The running pipeline's run folder (default: the newest run; the service's:
-    /// /var/lib/linetrack/runs/latest).
-    #[arg(long, env = "LINETRACK_RUN_DIR", default_value = "out/runs/latest")]
-    pub run_dir: PathBuf,
+    /// The running pipeline's run folder (default: the newest run of the default runs
+    /// folder, `$XDG_STATE_HOME/linetrack/runs/latest` or
+    /// `~/.local/state/linetrack/runs/latest`; the service's: /var/lib/linetrack/runs/latest).
+    #[arg(long, env = "LINETRACK_RUN_DIR")]
+    pub run_dir: Option<PathBuf>,
     /// The command.
     #[command(subcommand)]
     pub action: CtlAction,
@@ -172,9 +173,21 @@ pub enum CtlAction {
 /// `linetrack report`.
 #[derive(Debug, clap::Args)]
 pub struct ReportArgs {
-    /// Run folder (default: the newest run; the service's: /var/lib/linetrack/runs/latest).
-    #[arg(env = "LINETRACK_RUN_DIR", default_value = "out/runs/latest")]
-    pub run_dir: PathBuf,
+    /// Run folder (default: the newest run of the default runs folder,
+    /// `$XDG_STATE_HOME/linetrack/runs/latest` or `~/.local/state/linetrack/runs/latest`;
+    /// the service's: /var/lib/linetrack/runs/latest).
+    #[arg(env = "LINETRACK_RUN_DIR")]
+    pub run_dir: Option<PathBuf>,
+}
+
+/// `run_dir`, or the newest run of the default runs folder.
+fn run_dir_or_latest(run_dir: Option<&Path>) -> anyhow::Result<PathBuf> {
+    match run_dir {
+        Some(dir) => Ok(dir.to_path_buf()),
+        None => linetrack_pipeline_config::default_runs_dir()
+            .map(|runs| runs.join("latest"))
+            .map_err(|e| anyhow::anyhow!("{e}")),
+    }
 }
 
 /// Runs a command.
@@ -195,7 +208,7 @@ pub fn main(cli: Cli) -> anyhow::Result<()> {
         }
         Cmd::Ctl(args) => ctl(&args),
         Cmd::Report(args) => {
-            print!("{}", report(&args.run_dir)?);
+            print!("{}", report(&run_dir_or_latest(args.run_dir.as_deref())?)?);
             Ok(())
         }
         #[cfg(feature = "link")]
@@ -392,9 +405,10 @@ pub fn live_status(run_dir: &Path) -> anyhow::Result<LiveStatus> {
 
 /// `linetrack ctl`.
 pub fn ctl(args: &CtlArgs) -> anyhow::Result<()> {
-    let status = live_status(&args.run_dir)?;
+    let run_dir = run_dir_or_latest(args.run_dir.as_deref())?;
+    let status = live_status(&run_dir)?;
     if status.finished() {
-        bail!("the run in {} has finished", args.run_dir.display());
+        bail!("the run in {} has finished", run_dir.display());
     }
     match &args.action {
         CtlAction::SwapDetector { detector, timeout } => {
@@ -426,7 +440,7 @@ pub fn ctl(args: &CtlArgs) -> anyhow::Result<()> {
             // Keep the request's publisher alive until the swap shows in the run's status.
             while Instant::now() < deadline {
                 std::thread::sleep(Duration::from_millis(100));
-                let now = live_status(&args.run_dir)?;
+                let now = live_status(&run_dir)?;
                 if now.detector == detector.name() {
                     println!("{} took over", detector.name());
                     return Ok(());
