@@ -31,6 +31,7 @@ pub mod monitor;
 pub mod optional;
 pub mod run_dir;
 pub mod stage_runner;
+pub mod stderr_tail;
 
 use anyhow::{Context, bail};
 use clock::{Backoff, Clock, Every, SystemClock, Timeout, Watchdog};
@@ -463,6 +464,8 @@ struct StageProcess {
     detector: Option<DetectorKind>,
     /// Expected to exit (handed over, finished, killed for hanging).
     retiring: bool,
+    /// A process's last lines on stderr (none for a thread).
+    stderr: Option<stderr_tail::StderrTail>,
 }
 
 struct Supervisor<'m> {
@@ -601,7 +604,7 @@ impl<'m> Supervisor<'m> {
         } else {
             0
         };
-        let (child, pid) = match &self.hub {
+        let (child, pid, stderr) = match &self.hub {
             None => self.spawn_process(stage, detector, standby, resume_pose, start_frame)?,
             Some(hub) => {
                 let pid = self.next_thread_id;
@@ -634,6 +637,7 @@ impl<'m> Supervisor<'m> {
                         stop,
                     },
                     pid,
+                    None,
                 )
             }
         };
@@ -652,6 +656,7 @@ impl<'m> Supervisor<'m> {
             standby,
             detector,
             retiring: false,
+            stderr,
         });
         self.write_status();
         Ok(())
@@ -676,7 +681,8 @@ impl<'m> Supervisor<'m> {
         command
     }
 
-    /// Starts `stage`'s binary as a child process.
+    /// Starts `stage`'s binary as a child process, its stderr followed
+    /// ([`stderr_tail`]).
     fn spawn_process(
         &self,
         stage: StageKind,
@@ -684,7 +690,7 @@ impl<'m> Supervisor<'m> {
         standby: bool,
         resume_pose: Option<String>,
         start_frame: u64,
-    ) -> anyhow::Result<(Launch, u32)> {
+    ) -> anyhow::Result<(Launch, u32, Option<stderr_tail::StderrTail>)> {
         let bin = self.bin_dir.join(format!("linetrack-{}", stage.name()));
         let mut command = self.child_command(&bin);
         command.arg("--run-dir").arg(&self.run_dir);
@@ -700,7 +706,8 @@ impl<'m> Supervisor<'m> {
         if start_frame > 0 {
             command.arg("--start-frame").arg(start_frame.to_string());
         }
-        let child = command.spawn().with_context(|| {
+        command.stderr(Stdio::piped());
+        let mut child = command.spawn().with_context(|| {
             if self.stage_runner.is_direct() {
                 format!("starting {}", bin.display())
             } else {
@@ -708,7 +715,14 @@ impl<'m> Supervisor<'m> {
             }
         })?;
         let pid = child.id();
-        Ok((Launch::Process(child), pid))
+        let stderr = match child.stderr.take() {
+            Some(pipe) => Some(
+                stderr_tail::StderrTail::follow(stage.name(), pipe)
+                    .with_context(|| format!("following the stderr of {stage} (pid {pid})"))?,
+            ),
+            None => None,
+        };
+        Ok((Launch::Process(child), pid, stderr))
     }
 
     /// Starts the optional processes that are due (at the start, or a restart), notes
@@ -1118,10 +1132,17 @@ impl<'m> Supervisor<'m> {
                 tracing::info!("{} (pid {}) exited: {status}", p.stage, p.pid);
                 continue;
             }
-            if !p.ready && !p.standby {
-                // A stage that cannot start will not start on a retry either.
+            let last_words = p
+                .stderr
+                .as_ref()
+                .map(|tail| stderr_tail::last_words(&tail.lines(STDERR_END_WAIT)))
+                .unwrap_or_default();
+            let restarting = self.restarts[stage_slot(p.stage)].count() > 0;
+            if !p.ready && !p.standby && !restarting {
+                // A stage that cannot start at all will not start on a retry either; one
+                // that ran before and dies while restarting is a crash like any other.
                 bail!(
-                    "{} (pid {}) exited before it was ready ({status}); its error is above",
+                    "{} (pid {}) exited before it was ready ({status}){last_words}",
                     p.stage,
                     p.pid
                 );
@@ -1133,9 +1154,10 @@ impl<'m> Supervisor<'m> {
                 p.stage.name(),
                 None,
                 format!(
-                    "pid {} {status} after {:.1} s",
+                    "pid {} {status} after {:.1} s{}{last_words}",
                     p.pid,
-                    now.saturating_sub(p.started).as_secs_f64()
+                    now.saturating_sub(p.started).as_secs_f64(),
+                    if p.ready { "" } else { ", before it was ready" }
                 ),
             );
             if p.standby {
@@ -1153,7 +1175,7 @@ impl<'m> Supervisor<'m> {
             }
             if let Err(given_up) = self.restarts[stage_slot(p.stage)].schedule(now) {
                 bail!(
-                    "{} died {} times (restart limit {}): giving up",
+                    "{} died {} times (restart limit {}): giving up; the last time {status}{last_words}",
                     p.stage,
                     given_up.deaths,
                     given_up.limit
@@ -1223,6 +1245,10 @@ impl<'m> Supervisor<'m> {
         self.write_status();
     }
 }
+
+/// How long a dead stage's last lines on stderr are awaited (its pipe ends as it exits;
+/// this only bounds a stage runner that keeps the pipe open).
+const STDERR_END_WAIT: Duration = Duration::from_millis(500);
 
 /// How often `status.json` is rewritten while the run goes.
 const STATUS_FILE_EVERY: Duration = Duration::from_millis(200);
