@@ -8,6 +8,7 @@
 
 mod ros2;
 
+pub mod file;
 use linetrack_msgs::StageKind;
 use linetrack_odometry::OdometryConfig;
 pub use linetrack_sched::{Policy, SchedSettings};
@@ -758,21 +759,19 @@ impl PipelineConfig {
     pub fn from_toml_str(text: &str, origin: &str) -> Result<Self, ConfigError> {
         let config: Self = toml::from_str(text).map_err(|e| ConfigError::Parse {
             origin: origin.to_string(),
-            message: e.to_string(),
+            message: file::parse_message(&e, text),
         })?;
         config.validate().map_err(|message| ConfigError::Invalid {
             origin: origin.to_string(),
-            message,
+            message: file::cut_quotes(&message),
         })?;
         Ok(config)
     }
 
-    /// Reads and validates a config file.
+    /// Reads and validates a config file: a regular file of at most
+    /// [`file::MAX_CONFIG_BYTES`] ([`file::read_bounded`]).
     pub fn from_file(path: &Path) -> Result<Self, ConfigError> {
-        let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Read {
-            path: path.to_path_buf(),
-            source,
-        })?;
+        let text = file::read_bounded(path)?;
         Self::from_toml_str(&text, &path.display().to_string())
     }
 
