@@ -186,6 +186,52 @@ fn kill_and_recover(stage: &str) {
         Default::default(),
         "the killed process's shared memory was not reclaimed"
     );
+    assert_losses_explained(&records);
+    // The last stage has no stage after it to see its losses: the supervisor names them,
+    // and how it died.
+    if stage == "pose-estimator"
+        && records
+            .frames
+            .iter()
+            .any(|f| f.outcome == "skipped" && f.dropped_by == stage)
+    {
+        assert!(
+            records.events_of("skipped").iter().any(|e| e
+                .detail
+                .contains(&format!("died with the pose estimator (pid {victim} crash"))),
+            "{:?}",
+            records.events
+        );
+    }
+}
+
+/// Every frame lost with a stage (`skipped`) lies in the range `frames A..B` of a `skipped`
+/// event of the stage that lost it, and none is `missing` (unexplained).
+fn assert_losses_explained(records: &Records) {
+    let ranges: Vec<(&str, std::ops::Range<u64>)> = records
+        .events_of("skipped")
+        .iter()
+        .filter_map(|e| {
+            let words = e.detail.strip_prefix("frames ")?;
+            let (from, rest) = words.split_once("..")?;
+            let to: String = rest.chars().take_while(char::is_ascii_digit).collect();
+            Some((e.stage.as_str(), from.parse().ok()?..to.parse().ok()?))
+        })
+        .collect();
+    for f in &records.frames {
+        assert_ne!(f.outcome, "missing", "frame {} unexplained", f.frame_id);
+        if f.outcome == "skipped" {
+            assert!(
+                ranges
+                    .iter()
+                    .any(|(stage, r)| *stage == f.dropped_by && r.contains(&f.frame_id)),
+                "frame {} skipped by {} without an event: {:?}",
+                f.frame_id,
+                f.dropped_by,
+                records.events
+            );
+        }
+    }
 }
 
 #[test]

@@ -1171,7 +1171,8 @@ impl<'m> Supervisor<'m> {
                 continue;
             }
             if p.stage == StageKind::PoseEstimator {
-                self.monitor.pose_estimator_died();
+                self.monitor
+                    .pose_estimator_died(format!("pid {} {kind}: {status}", p.pid));
             }
             if let Err(given_up) = self.restarts[stage_slot(p.stage)].schedule(now) {
                 bail!(

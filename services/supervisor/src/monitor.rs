@@ -91,8 +91,9 @@ pub struct Monitor {
     /// still turn up (an earlier frame arriving late is no loss).
     presumed_lost: BTreeMap<u64, String>,
     /// The pose estimator died: frames from this one up to the first its successor
-    /// publishes died with it (the last stage: no stage after it sees them skipped).
-    lost_with_pose_estimator: Option<u64>,
+    /// publishes died with it (the last stage: no stage after it sees them skipped), and
+    /// how it died.
+    lost_with_pose_estimator: Option<(u64, String)>,
     fallback: Option<FallbackController>,
     last_pose: Option<(u64, PoseRecord)>,
     /// The pose before `last_pose` (a restarted pose estimator predicts from the two).
@@ -239,13 +240,20 @@ impl Monitor {
             detection,
             matching,
         } = message;
-        if let Some(first) = self.lost_with_pose_estimator
-            && header.frame_id >= first
+        if let Some((first, cause)) = self
+            .lost_with_pose_estimator
+            .take_if(|(first, _)| header.frame_id >= *first)
+            && header.frame_id > first
         {
-            self.lost_with_pose_estimator = None;
-            if header.frame_id > first {
-                self.presume_lost(first, header.frame_id - first, "pose-estimator");
-            }
+            self.presume_lost_as(
+                first,
+                header.frame_id - first,
+                "pose-estimator",
+                format!(
+                    "frames {first}..{} died with the pose estimator ({cause}): its successor's first frame is {}",
+                    header.frame_id, header.frame_id
+                ),
+            );
         }
         let status = header.status.get().unwrap_or_else(|unknown| {
             tracing::warn!("frame {}: {unknown}: recorded as failed", header.frame_id);
@@ -418,16 +426,17 @@ impl Monitor {
     /// queue, or lost with an upstream stage that died): they are recorded as `skipped` by
     /// that stage unless they still arrive, and the run does not wait for them.
     pub fn presume_lost(&mut self, first: u64, count: u64, stage: &str) {
-        let ids = first..first.saturating_add(count);
-        self.event(
-            "skipped",
-            stage,
-            Some(first),
-            format!(
-                "frames {}..{} never arrived here: overwritten in its full queue, or lost with a stage that died",
-                ids.start, ids.end
-            ),
+        let detail = format!(
+            "frames {first}..{} never arrived here: overwritten in its full queue, or lost with a stage that died",
+            first.saturating_add(count)
         );
+        self.presume_lost_as(first, count, stage, detail);
+    }
+
+    /// [`Monitor::presume_lost`] with the event's words.
+    fn presume_lost_as(&mut self, first: u64, count: u64, stage: &str, detail: String) {
+        let ids = first..first.saturating_add(count);
+        self.event("skipped", stage, Some(first), detail);
         for id in ids.filter(|&id| !self.accounted.contains(id)) {
             self.presumed_lost.insert(id, stage.to_string());
         }
@@ -436,9 +445,16 @@ impl Monitor {
     /// The pose estimator died, after every pose it published was taken: the frames it had
     /// taken and not published died with it. Its successor's first pose says which (those
     /// from the first frame without an outcome up to it): they are recorded as `skipped`
-    /// unless they still arrive, and the run does not wait for them.
-    pub fn pose_estimator_died(&mut self) {
-        self.lost_with_pose_estimator = Some(self.accounted.below);
+    /// unless they still arrive, and the run does not wait for them; when the run ends
+    /// before the successor publishes any, at the end. Either way a `skipped` event names
+    /// the range and `cause` (how it died: the pid, crash or hang, the exit status).
+    pub fn pose_estimator_died(&mut self, cause: String) {
+        let first = match &self.lost_with_pose_estimator {
+            // Died again before its successor published: the range starts where it did.
+            Some((first, _)) => *first,
+            None => self.accounted.below,
+        };
+        self.lost_with_pose_estimator = Some((first, cause));
     }
 
     /// The mode the matcher should be in (re-sent to a restarted matcher).
@@ -560,6 +576,22 @@ impl Monitor {
             .source_last
             .or(self.published)
             .or(self.accounted.highest);
+        if let (Some(last), Some((first, cause))) = (last, self.lost_with_pose_estimator.take())
+            && let Some(count) = (first..=last)
+                .rev()
+                .find(|&f| !self.accounted.contains(f))
+                .map(|newest| newest + 1 - first)
+        {
+            self.presume_lost_as(
+                first,
+                count,
+                "pose-estimator",
+                format!(
+                    "frames {first}..{} died with the pose estimator ({cause}): the run ended before its successor published a frame after them",
+                    first + count
+                ),
+            );
+        }
         if let Some(last) = last {
             for f in self.first_frame..=last {
                 if self.accounted.insert(f) {
@@ -813,7 +845,7 @@ mod tests {
         }
         // Frames 2 and 3 were in the pose estimator when it died; its successor's first
         // frame is 4.
-        monitor.pose_estimator_died();
+        monitor.pose_estimator_died("pid 7 crash: signal: 9 (SIGKILL)".to_string());
         monitor.source_finished(5);
         assert!(!monitor.complete());
         pose_of(&mut monitor, 4);
@@ -842,6 +874,59 @@ mod tests {
                 (4, "pose"),
                 (5, "pose")
             ]
+        );
+        let events = read_events(&dir.join("events.csv")).unwrap_or_else(|e| panic!("{e}"));
+        let skipped: Vec<(&str, Option<u64>, &str)> = events
+            .iter()
+            .filter(|e| e.kind == "skipped")
+            .map(|e| (e.stage.as_str(), e.frame_id, e.detail.as_str()))
+            .collect();
+        assert_eq!(
+            skipped,
+            [(
+                "pose-estimator",
+                Some(2),
+                "frames 2..4 died with the pose estimator (pid 7 crash: signal: 9 (SIGKILL)): its successor's first frame is 4"
+            )]
+        );
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn frames_that_died_with_a_pose_estimator_whose_successor_never_published_carry_an_event() {
+        let dir = scratch("monitor-pose-estimator-died-last");
+        let mut monitor =
+            Monitor::new(&PipelineConfig::default(), 0, &dir).unwrap_or_else(|e| panic!("{e}"));
+        for f in [0, 1] {
+            pose_of(&mut monitor, f);
+        }
+        // Hung, killed, and its successor died too before publishing: one range, the last
+        // cause.
+        monitor.pose_estimator_died("pid 7 hang: signal: 9 (SIGKILL)".to_string());
+        monitor.pose_estimator_died("pid 8 crash: exit status: 1".to_string());
+        monitor.source_finished(4);
+        let report = monitor
+            .finish(RunEnd::Completed, None)
+            .unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(report.drops, [("skipped".to_string(), 3)]);
+        let events = read_events(&dir.join("events.csv")).unwrap_or_else(|e| panic!("{e}"));
+        let skipped: Vec<&str> = events
+            .iter()
+            .filter(|e| e.kind == "skipped" && e.stage == "pose-estimator")
+            .map(|e| e.detail.as_str())
+            .collect();
+        assert_eq!(
+            skipped,
+            [
+                "frames 2..5 died with the pose estimator (pid 8 crash: exit status: 1): the run ended before its successor published a frame after them"
+            ]
+        );
+        let frames = read_frames(&dir.join("frames.csv")).unwrap_or_else(|e| panic!("{e}"));
+        assert!(
+            frames[2..]
+                .iter()
+                .all(|f| f.outcome == "skipped" && f.dropped_by == "pose-estimator"),
+            "{frames:?}"
         );
         let _ = std::fs::remove_dir_all(&dir);
     }
