@@ -585,6 +585,7 @@ impl<'m> Supervisor<'m> {
             detector_policy: detector_policy::DetectorPolicy::new(
                 &config.detector_fallback,
                 config.budget.line_detector_ms,
+                config.budget.end_to_end_ms,
             ),
         })
     }

@@ -141,7 +141,11 @@ impl Monitor {
         run_dir: &Path,
     ) -> Result<Self, RecordError> {
         let fallback = (config.matcher.mode == MatcherPolicy::Auto).then(|| {
-            FallbackController::new(config.matcher.fallback.clone(), config.budget.matcher_ms)
+            FallbackController::new(
+                config.matcher.fallback.clone(),
+                config.budget.matcher_ms,
+                config.budget.end_to_end_ms,
+            )
         });
         Ok(Self {
             config: config.clone(),
@@ -322,6 +326,13 @@ impl Monitor {
         }
         self.presumed_lost.remove(&header.frame_id);
         self.record_frame(&record);
+        if status == FrameStatus::DroppedLate {
+            let switch = self
+                .fallback
+                .as_mut()
+                .and_then(|f| f.observe_dropped_late(header));
+            return self.matcher_switched(header.frame_id, switch);
+        }
         if status != FrameStatus::Ok {
             return None;
         }
@@ -340,6 +351,11 @@ impl Monitor {
             .fallback
             .as_mut()
             .and_then(|f| f.observe(message, pose));
+        self.matcher_switched(header.frame_id, switch)
+    }
+
+    /// Records a matcher mode switch, when there is one, and passes it on.
+    fn matcher_switched(&mut self, frame_id: u64, switch: Option<Switch>) -> Option<Switch> {
         if let Some(s) = &switch {
             let kind = if s.to == MatcherMode::L1 {
                 "fallback"
@@ -349,7 +365,7 @@ impl Monitor {
             self.event(
                 kind,
                 "matcher",
-                Some(header.frame_id),
+                Some(frame_id),
                 format!(
                     "{} -> {}: {}",
                     if s.to == MatcherMode::L1 { "lbd" } else { "l1" },

@@ -225,6 +225,11 @@ pub struct FallbackConfig {
     pub min_observations: u32,
     /// ... or when the matcher stage goes over its budget.
     pub over_budget: bool,
+    /// ... or when the frame misses `budget.end_to_end_ms` (processed late, or dropped late
+    /// by any stage): the pipeline's deadline, not only the matcher's own. With it, a probe
+    /// passes only when its frame's end to end is within `recover_budget_fraction` of that
+    /// budget too.
+    pub end_to_end: bool,
     /// Consecutive failing frames before switching to ℓ1.
     pub bad_frames: u32,
     /// In ℓ1 mode, the matcher also runs LBD on every n-th frame to see if it works again.
@@ -247,6 +252,7 @@ impl Default for FallbackConfig {
             min_inlier_ratio: 0.25,
             min_observations: 10,
             over_budget: true,
+            end_to_end: true,
             bad_frames: 3,
             probe_every: 5,
             recover_stereo_matches: 24,
@@ -275,6 +281,9 @@ pub struct DetectorFallbackConfig {
     pub recover_budget_fraction: f64,
     /// Frames between two swaps of this policy, at least.
     pub min_interval_frames: u64,
+    /// An LSD frame that misses `budget.end_to_end_ms` (processed late, or dropped late by
+    /// any stage) counts as over budget too: the pipeline's deadline, not only LSD's own.
+    pub end_to_end: bool,
 }
 
 impl Default for DetectorFallbackConfig {
@@ -286,6 +295,7 @@ impl Default for DetectorFallbackConfig {
             recover_frames: 40,
             recover_budget_fraction: 0.25,
             min_interval_frames: 200,
+            end_to_end: true,
         }
     }
 }
