@@ -278,6 +278,35 @@ fn a_killed_supervisor_takes_its_stages_with_it() {
     // What the supervisor recorded before it died is on disk.
     let records = Records::read(&run.run_dir, &run.prefix);
     assert!(records.frames.len() >= 5, "{} frames", records.frames.len());
+    // The report reads it and says the run was killed.
+    let report = std::process::Command::new(bin_dir().join("linetrack"))
+        .arg("report")
+        .arg(&run.run_dir)
+        .output()
+        .unwrap_or_else(|e| panic!("linetrack report: {e}"));
+    let text = String::from_utf8_lossy(&report.stdout);
+    assert!(report.status.success(), "{text}");
+    assert!(
+        text.contains(&format!(
+            "its supervisor (pid {}) is gone: the run was killed",
+            status.supervisor_pid
+        )),
+        "{text}"
+    );
+    // A next run into the folder says whose records it replaces.
+    let next = start(&dir, &base_sequence(FRAMES), &quick());
+    let (exit, out, records) = next.finish(RUN_TIMEOUT);
+    assert!(exit.success(), "{exit}\n{out}");
+    let replaced = records.events_of("earlier-run-replaced");
+    assert!(
+        replaced.len() == 1
+            && replaced[0].detail.contains(&format!(
+                "its supervisor (pid {}) gone: it was killed",
+                status.supervisor_pid
+            )),
+        "{:?}",
+        records.events
+    );
 }
 
 /// Stops `stage` (SIGSTOP) for a while shorter than the hang timeout, then resumes it.

@@ -79,6 +79,11 @@ fn a_crash_loop_before_ready_uses_every_restart_and_shows_the_stages_last_words(
         )) && reason.contains(&format!("{LAST_WORDS} (start {})", MAX_RESTARTS + 1)),
         "{reason}"
     );
+    // A failed run still prints its report, saying how it ended.
+    assert!(
+        out.contains("\nframes ") && out.contains("run ended failed: matcher died"),
+        "{out}"
+    );
     let started = std::fs::read_to_string(&starts).unwrap_or_default();
     assert_eq!(started.trim(), (MAX_RESTARTS + 1).to_string());
 }

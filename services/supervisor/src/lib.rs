@@ -191,9 +191,38 @@ pub struct StageEntry {
     pub standby: bool,
 }
 
+/// What an earlier run left in the run folder, when it left records: how it ended, or that
+/// its supervisor is gone while it still said running (killed).
+fn earlier_run(run_dir: &Path) -> Option<String> {
+    let status: LiveStatus =
+        serde_json::from_str(&std::fs::read_to_string(run_dir.join("status.json")).ok()?).ok()?;
+    let ended = match status.state {
+        RunEnd::Running => format!(
+            "still said running, its supervisor (pid {}) gone: it was killed",
+            status.supervisor_pid
+        ),
+        other => format!(
+            "ended {}",
+            serde_json::to_value(other)
+                .ok()
+                .and_then(|v| v.as_str().map(str::to_string))
+                .unwrap_or_default()
+        ),
+    };
+    Some(format!(
+        "the run folder held the records of run {} ({} frames; it {ended}): they are replaced",
+        status.run_id, status.frames
+    ))
+}
+
 /// Clears an earlier run's files from the (locked) run folder and writes the effective
-/// config into it; returns the config's path.
-fn prepare_run_dir(config: &PipelineConfig, run_dir: &Path) -> anyhow::Result<PathBuf> {
+/// config into it; returns the config's path and what the earlier run was, if one left
+/// records (said in a warning and an event, not replaced silently).
+fn prepare_run_dir(
+    config: &PipelineConfig,
+    run_dir: &Path,
+) -> anyhow::Result<(PathBuf, Option<String>)> {
+    let earlier = earlier_run(run_dir);
     for stale in [
         "spans",
         "trace.json",
@@ -218,7 +247,7 @@ fn prepare_run_dir(config: &PipelineConfig, run_dir: &Path) -> anyhow::Result<Pa
         toml::to_string(config)?.as_bytes(),
         false,
     )?;
-    Ok(config_path)
+    Ok((config_path, earlier))
 }
 
 /// Runs the pipeline on `config` until the sequence is done or `shutdown` is set.
@@ -259,10 +288,14 @@ pub fn run(
         },
         ..config.clone()
     };
-    let config_path = prepare_run_dir(config, &run_dir)?;
+    let (config_path, earlier) = prepare_run_dir(config, &run_dir)?;
     let run_id = new_run_id();
     let scope = Scope::new(&run_id).with_configured_root(config.ipc.root.as_deref());
     let mut monitor = Monitor::new(config, 0, &run_dir)?.with_ground_truth(ground_truth);
+    if let Some(earlier) = earlier {
+        tracing::warn!("{}: {earlier}", run_dir.display());
+        monitor.event("earlier-run-replaced", "supervisor", None, earlier);
+    }
     for refusal in refused {
         tracing::warn!("{refusal}");
         monitor.event(
@@ -309,14 +342,28 @@ pub fn run(
     let frames = monitor.accounted();
     let report = monitor.finish(end, reason.clone());
     final_status(config, &run_id, &scope, &run_dir, frames, end, reason);
-    let interrupted = result?;
-    let report = report.with_context(|| format!("records of {}", run_dir.display()))?;
+    let in_folder = |e: anyhow::Error| e.context(RunFolder(run_dir.clone()));
+    let interrupted = result.map_err(in_folder)?;
+    let report = report
+        .with_context(|| format!("records of {}", run_dir.display()))
+        .map_err(in_folder)?;
     Ok(RunOutcome {
         run_dir,
         run_id,
         report,
         interrupted,
     })
+}
+
+/// The folder of a run that failed once it had one: the context of [`run`]'s error (find it
+/// with `error.downcast_ref::<RunFolder>()`), so that the caller can still report it.
+#[derive(Debug, Clone)]
+pub struct RunFolder(pub PathBuf);
+
+impl std::fmt::Display for RunFolder {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "run {}", self.0.display())
+    }
 }
 
 /// Opens the sequence (refusing one no stage could open) and returns its ground truth.

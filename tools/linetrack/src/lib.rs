@@ -335,7 +335,19 @@ pub fn run(args: &RunArgs) -> anyhow::Result<PathBuf> {
         bin_dir: None,
         live_status: !args.quiet,
     };
-    let outcome = linetrack_supervisor::run(&config, &options, &Shutdown::on_signals()?)?;
+    let outcome = match linetrack_supervisor::run(&config, &options, &Shutdown::on_signals()?) {
+        Ok(outcome) => outcome,
+        Err(e) => {
+            // A run that failed once it had a folder still has a report: print it first.
+            if let Some(linetrack_supervisor::RunFolder(dir)) = e.downcast_ref() {
+                match report(dir) {
+                    Ok(text) => print!("\n{text}"),
+                    Err(unreadable) => eprintln!("no report of {}: {unreadable:#}", dir.display()),
+                }
+            }
+            return Err(e);
+        }
+    };
     println!();
     print!("{}", report(&outcome.run_dir)?);
     if outcome.interrupted {
