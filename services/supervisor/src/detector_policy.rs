@@ -142,7 +142,7 @@ impl DetectorPolicy {
 
 /// Whether the detector (stamp index `detector`) detected the frame: not a frame dropped
 /// before it or by it (its stamps then time the drop, not a detection).
-fn detected(header: &FrameHeader, detector: usize) -> bool {
+pub(crate) fn detected(header: &FrameHeader, detector: usize) -> bool {
     header.is_ok()
         || header
             .status_by

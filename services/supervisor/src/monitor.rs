@@ -304,7 +304,10 @@ impl Monitor {
             } else {
                 String::new()
             },
-            detector: if header.stamps[1].end_ns > 0 {
+            // Only a frame the detector detected names it: one it dropped carries no
+            // detection (its code would read as the first detector's).
+            detector: if header.stamps[1].end_ns > 0 && crate::detector_policy::detected(header, 1)
+            {
                 detection
                     .detector
                     .get()
@@ -820,6 +823,39 @@ mod tests {
         );
         let poses = std::fs::read_to_string(dir.join("poses.tum")).unwrap_or_default();
         assert_eq!(poses.lines().count(), 4, "the header and 3 poses");
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn only_a_detected_frame_names_its_detector() {
+        let dir = scratch("monitor-detector-label");
+        let mut monitor =
+            Monitor::new(&PipelineConfig::default(), 0, &dir).unwrap_or_else(|e| panic!("{e}"));
+        let stamped = |id: u64| {
+            let mut h = TracksHeader::from(FrameHeader::new(id, id * 50_000_000, 1));
+            h.frame.stamps[1].start_ns = 1_000_000;
+            h.frame.stamps[1].end_ns = 2_000_000;
+            h.detection.detector =
+                linetrack_stage_runtime::detector_on_wire(linetrack_vision::DetectorKind::Fld)
+                    .into();
+            h
+        };
+        // Dropped by the detector itself: it detected nothing, whatever its code says.
+        let mut behind = stamped(0);
+        behind.detection = Default::default();
+        behind
+            .frame
+            .mark(FrameStatus::DroppedBehind, StageKind::LineDetector);
+        monitor.on_pose(&behind, &PoseRecord::default());
+        // Detected by FLD, dropped by the matcher.
+        let mut late = stamped(1);
+        late.frame
+            .mark(FrameStatus::DroppedLate, StageKind::Matcher);
+        monitor.on_pose(&late, &PoseRecord::default());
+        let _ = monitor.finish(RunEnd::Completed, None);
+        let frames = read_frames(&dir.join("frames.csv")).unwrap_or_else(|e| panic!("{e}"));
+        let labels: Vec<&str> = frames.iter().map(|f| f.detector.as_str()).collect();
+        assert_eq!(labels, ["", "fld"]);
         let _ = std::fs::remove_dir_all(&dir);
     }
 
