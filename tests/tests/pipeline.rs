@@ -584,7 +584,7 @@ fn lsd_missing_a_budget_no_detector_meets_gives_way_to_fld_after_its_streak() {
     // it either, so it never swaps back.
     let config = format!(
         "{SUPERVISION}[budget]\ndrop_late = false\nline_detector_ms = 0.001\n\
-         [detector_fallback]\nenabled = true\nbad_frames = 3\nmin_interval_frames = 0\n"
+         [detector_fallback]\nenabled = true\nbad_frames = 3\nmin_interval_frames = 0\nend_to_end = false\n"
     );
     let (status, out, records) = start(&dir, &base_sequence(FRAMES), &config).finish(RUN_TIMEOUT);
     assert!(status.success(), "{status}\n{out}");
@@ -624,6 +624,39 @@ fn lsd_missing_a_budget_no_detector_meets_gives_way_to_fld_after_its_streak() {
 }
 
 #[test]
+fn both_policies_act_on_frames_that_miss_the_end_to_end_budget_alone() {
+    let dir = scratch("end-to-end-policies");
+    // Every frame misses a 1 µs end-to-end budget, whatever the machine's load, while LSD and
+    // the matcher stay within budgets of a minute and LBD finds its one stereo match: only
+    // the pipeline's deadline can move either policy.
+    let config = format!(
+        "{SUPERVISION}[budget]\ndrop_late = false\nend_to_end_ms = 0.001\nline_detector_ms = 60000.0\n\
+         matcher_ms = 60000.0\n[matcher.fallback]\nmin_stereo_matches = 1\nrecover_stereo_matches = 2\n\
+         min_inlier_ratio = 0.0\n[detector_fallback]\nenabled = true\nbad_frames = 3\n"
+    );
+    let (status, out, records) = start(&dir, &base_sequence(FRAMES), &config).finish(RUN_TIMEOUT);
+    assert!(status.success(), "{status}\n{out}");
+    assert_every_frame_accounted(&records);
+    let fallbacks = records.events_of("fallback");
+    assert!(
+        fallbacks
+            .first()
+            .is_some_and(|e| e.detail.starts_with("lbd -> l1: end to end ")
+                && e.detail.contains("> 0.0 ms with LBD taking")),
+        "{:?}",
+        records.events
+    );
+    let swaps = records.events_of("detector-fallback");
+    assert!(
+        swaps.first().is_some_and(|e| e
+            .detail
+            .starts_with("lsd -> fld: frames missed the 0.0 ms end-to-end budget while lsd ran")),
+        "{:?}",
+        records.events
+    );
+}
+
+#[test]
 fn matching_falls_back_to_l1_when_the_right_image_turns_unmatchable() {
     let dir = scratch("fallback");
     let sequence = sequence_copy(FRAMES, &dir);
@@ -640,8 +673,9 @@ fn matching_falls_back_to_l1_when_the_right_image_turns_unmatchable() {
     }
     // This scene gives LBD ~80 stereo matches a frame; a few dozen chance matches survive
     // the inversion, so the test sets its bar between the two.
-    // Only the matches decide here: a loaded test machine must not trigger the budget rule.
-    let thresholds = "[matcher.fallback]\nmin_stereo_matches = 45\nrecover_stereo_matches = 60\nover_budget = false\n";
+    // Only the matches decide here: a loaded test machine must not trigger the budget rules
+    // (the matcher's own, the end-to-end one).
+    let thresholds = "[matcher.fallback]\nmin_stereo_matches = 45\nrecover_stereo_matches = 60\nover_budget = false\nend_to_end = false\n";
     let (status, out, records) =
         start(&dir, &sequence, &format!("{}{thresholds}", quick())).finish(RUN_TIMEOUT);
     assert!(status.success(), "{status}\n{out}");

@@ -448,7 +448,7 @@ pub struct OutputConfig {
     pub run_dir: Option<PathBuf>,
     /// Write per-process span files and the merged Chrome/Perfetto trace.
     pub trace: bool,
-    /// What a record that cannot be written (a full disk, a file size limit) does to the
+    /// What a record that cannot be written (a full disk, a quota, an I/O error) does to the
     /// run: either way the records end at their last whole row, the error names the file
     /// and the OS error, and the run ends `records-failed` (non-zero exit).
     pub on_record_error: OnRecordError,

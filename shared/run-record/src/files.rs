@@ -1,8 +1,8 @@
 //! How a run's files are written so that a crash or a full disk leaves them valid.
 //!
-//! - A record file ([`RowFile`]: `frames.csv`, `events.csv`, `poses.tum`) takes a whole row
-//!   in one write to the kernel. A row the file system refuses in part (no space, a file
-//!   size limit) is cut back off at once, so the file always ends at its last whole row,
+//! - A record file (`RowFile`: `frames.csv`, `events.csv`, `poses.tum`) takes a whole row
+//!   in one write to the kernel. A row the file system refuses in part (no space, a quota)
+//!   is cut back off at once, so the file always ends at its last whole row,
 //!   and the error names the file and the OS error.
 //! - A small file (`summary.json`, `status.json`) is written whole or not at all
 //!   ([`write_whole`]: a temporary file renamed over it, removed when the write fails).

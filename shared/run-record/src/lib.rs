@@ -6,6 +6,11 @@
 //! [`Report`] turns them into percentiles, deadline misses, drops and counts. With ground
 //! truth, [`trajectory_metrics`] scores the run's `poses.tum` with the metrics (and names)
 //! `linetrack-vo` writes, for [`Summary::metrics`].
+//!
+//! The files are written so that a crash or a full disk leaves them valid ([`files`]: a
+//! whole row per write, cut back when the disk refuses part of it; small files whole or not
+//! at all), and read back up to a cut last row ([`read_frames_to_cut`]), with the frames a
+//! cut run did not record ([`unrecorded`]).
 
 use hdrhistogram::Histogram;
 use linetrack_msgs::StageKind;
