@@ -88,6 +88,7 @@ impl RunRecords {
                 }
             );
         }
+        let incomplete = !out.is_empty();
         match (&self.summary, &self.status) {
             (Some(summary), _) if summary.end == RunEnd::Completed && out.is_empty() => {}
             (Some(summary), _) => {
@@ -101,7 +102,8 @@ impl RunRecords {
                         .map(|r| format!(": {r}"))
                         .unwrap_or_default()
                 );
-                if summary.end == RunEnd::RecordsFailed || !out.is_empty() {
+                // The run's own count, when the records do not add up to it.
+                if summary.end == RunEnd::RecordsFailed || incomplete {
                     let r = &summary.report;
                     let _ = writeln!(
                         out,
