@@ -250,6 +250,51 @@ fn a_killed_pose_estimator_is_restarted_and_resumes_its_trajectory() {
 }
 
 #[test]
+fn a_hung_pose_estimator_is_replaced_and_the_frames_lost_with_it_carry_an_event() {
+    let dir = scratch("hang-pose-estimator");
+    let mut run = start(&dir, &base_sequence(FRAMES), &quick());
+    let status = run.wait_for("5 frames", RUN_TIMEOUT, |s| s.frames >= 5);
+    let victim = status
+        .stages
+        .iter()
+        .find(|s| s.stage == "pose-estimator")
+        .unwrap_or_else(|| panic!("no pose estimator in {:?}", status.stages))
+        .pid;
+    // Stopped for good: the supervisor finds the silence (hang_timeout_ms 2000), kills it
+    // and starts another.
+    signal(victim, "STOP");
+    let (exit, out, records) = run.finish(RUN_TIMEOUT);
+    assert!(exit.success(), "{exit}\n{out}");
+    assert_every_frame_accounted(&records);
+    assert!(
+        records
+            .events_of("hang")
+            .iter()
+            .any(|e| e.stage == "pose-estimator" && e.detail.contains(&format!("pid {victim} "))),
+        "{:?}",
+        records.events
+    );
+    assert_losses_explained(&records);
+    let lost = records
+        .frames
+        .iter()
+        .filter(|f| f.outcome == "skipped" && f.dropped_by == "pose-estimator")
+        .count();
+    assert!(
+        lost > 0,
+        "a 2 s hang at 10 Hz lost no frame: {:?}",
+        records.events
+    );
+    assert!(
+        records.events_of("skipped").iter().any(|e| e
+            .detail
+            .contains(&format!("died with the pose estimator (pid {victim} hang"))),
+        "{:?}",
+        records.events
+    );
+}
+
+#[test]
 fn a_killed_frame_source_is_restarted_from_the_next_frame() {
     kill_and_recover("frame-source");
 }
