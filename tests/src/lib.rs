@@ -218,6 +218,12 @@ fn launch_with(
 /// (LSD, the LBD→ℓ1 policy, 10 Hz), the run folder `dir/run`. Returns both paths.
 pub fn write_config(dir: &Path, sequence: &Path, extra: &str) -> (PathBuf, PathBuf) {
     let run_dir = dir.join("run");
+    let config = write_config_for(dir, sequence, extra, &run_dir);
+    (config, run_dir)
+}
+
+/// [`write_config`] with the run folder `run_dir`; returns the config's path.
+pub fn write_config_for(dir: &Path, sequence: &Path, extra: &str, run_dir: &Path) -> PathBuf {
     let config = dir.join("pipeline.toml");
     // The tests check LSD's hot swap to FLD and LBD's fallback to l1: they pin the detector
     // and the matcher policy (the shipped defaults are edgelines and l1). The automatic
@@ -234,7 +240,7 @@ pub fn write_config(dir: &Path, sequence: &Path, extra: &str) -> (PathBuf, PathB
         run_dir.display().to_string()
     );
     std::fs::write(&config, text).unwrap_or_else(|e| panic!("{e}"));
-    (config, run_dir)
+    config
 }
 
 impl Run {
@@ -317,6 +323,32 @@ impl Records {
     pub fn events_of(&self, kind: &str) -> Vec<&EventRecord> {
         self.events.iter().filter(|e| e.kind == kind).collect()
     }
+}
+
+/// The other user of the two-user tests.
+pub const NOBODY: u32 = 65534;
+
+/// `program` as user `nobody`, with the environment of a fresh login (no `XDG_RUNTIME_DIR`,
+/// no `LINETRACK_IPC_*`), in `cwd`. Starting a process as another user needs root (CI runs
+/// the suite as root): the test fails saying so otherwise.
+pub fn as_nobody(program: &Path, cwd: &Path) -> Command {
+    use std::os::unix::fs::MetadataExt as _;
+    use std::os::unix::process::CommandExt as _;
+    let me = std::fs::metadata("/proc/self").map_or(u32::MAX, |m| m.uid());
+    assert_eq!(
+        me, 0,
+        "this test starts a second user's processes (user nobody, uid {NOBODY}): run it as root"
+    );
+    let mut command = Command::new(program);
+    command
+        .uid(NOBODY)
+        .gid(NOBODY)
+        .env_clear()
+        .env("PATH", "/usr/bin:/bin")
+        .env("HOME", cwd)
+        .current_dir(cwd)
+        .stdin(Stdio::null());
+    command
 }
 
 /// Sends `signal` (e.g. "KILL", "TERM") to `pid` with kill(1).

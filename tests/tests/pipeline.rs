@@ -186,6 +186,52 @@ fn kill_and_recover(stage: &str) {
         Default::default(),
         "the killed process's shared memory was not reclaimed"
     );
+    assert_losses_explained(&records);
+    // The last stage has no stage after it to see its losses: the supervisor names them,
+    // and how it died.
+    if stage == "pose-estimator"
+        && records
+            .frames
+            .iter()
+            .any(|f| f.outcome == "skipped" && f.dropped_by == stage)
+    {
+        assert!(
+            records.events_of("skipped").iter().any(|e| e
+                .detail
+                .contains(&format!("died with the pose estimator (pid {victim} crash"))),
+            "{:?}",
+            records.events
+        );
+    }
+}
+
+/// Every frame lost with a stage (`skipped`) lies in the range `frames A..B` of a `skipped`
+/// event of the stage that lost it, and none is `missing` (unexplained).
+fn assert_losses_explained(records: &Records) {
+    let ranges: Vec<(&str, std::ops::Range<u64>)> = records
+        .events_of("skipped")
+        .iter()
+        .filter_map(|e| {
+            let words = e.detail.strip_prefix("frames ")?;
+            let (from, rest) = words.split_once("..")?;
+            let to: String = rest.chars().take_while(char::is_ascii_digit).collect();
+            Some((e.stage.as_str(), from.parse().ok()?..to.parse().ok()?))
+        })
+        .collect();
+    for f in &records.frames {
+        assert_ne!(f.outcome, "missing", "frame {} unexplained", f.frame_id);
+        if f.outcome == "skipped" {
+            assert!(
+                ranges
+                    .iter()
+                    .any(|(stage, r)| *stage == f.dropped_by && r.contains(&f.frame_id)),
+                "frame {} skipped by {} without an event: {:?}",
+                f.frame_id,
+                f.dropped_by,
+                records.events
+            );
+        }
+    }
 }
 
 #[test]
@@ -201,6 +247,51 @@ fn a_killed_matcher_is_restarted_and_the_run_completes() {
 #[test]
 fn a_killed_pose_estimator_is_restarted_and_resumes_its_trajectory() {
     kill_and_recover("pose-estimator");
+}
+
+#[test]
+fn a_hung_pose_estimator_is_replaced_and_the_frames_lost_with_it_carry_an_event() {
+    let dir = scratch("hang-pose-estimator");
+    let mut run = start(&dir, &base_sequence(FRAMES), &quick());
+    let status = run.wait_for("5 frames", RUN_TIMEOUT, |s| s.frames >= 5);
+    let victim = status
+        .stages
+        .iter()
+        .find(|s| s.stage == "pose-estimator")
+        .unwrap_or_else(|| panic!("no pose estimator in {:?}", status.stages))
+        .pid;
+    // Stopped for good: the supervisor finds the silence (hang_timeout_ms 2000), kills it
+    // and starts another.
+    signal(victim, "STOP");
+    let (exit, out, records) = run.finish(RUN_TIMEOUT);
+    assert!(exit.success(), "{exit}\n{out}");
+    assert_every_frame_accounted(&records);
+    assert!(
+        records
+            .events_of("hang")
+            .iter()
+            .any(|e| e.stage == "pose-estimator" && e.detail.contains(&format!("pid {victim} "))),
+        "{:?}",
+        records.events
+    );
+    assert_losses_explained(&records);
+    let lost = records
+        .frames
+        .iter()
+        .filter(|f| f.outcome == "skipped" && f.dropped_by == "pose-estimator")
+        .count();
+    assert!(
+        lost > 0,
+        "a 2 s hang at 10 Hz lost no frame: {:?}",
+        records.events
+    );
+    assert!(
+        records.events_of("skipped").iter().any(|e| e
+            .detail
+            .contains(&format!("died with the pose estimator (pid {victim} hang"))),
+        "{:?}",
+        records.events
+    );
 }
 
 #[test]
@@ -232,6 +323,35 @@ fn a_killed_supervisor_takes_its_stages_with_it() {
     // What the supervisor recorded before it died is on disk.
     let records = Records::read(&run.run_dir, &run.prefix);
     assert!(records.frames.len() >= 5, "{} frames", records.frames.len());
+    // The report reads it and says the run was killed.
+    let report = std::process::Command::new(bin_dir().join("linetrack"))
+        .arg("report")
+        .arg(&run.run_dir)
+        .output()
+        .unwrap_or_else(|e| panic!("linetrack report: {e}"));
+    let text = String::from_utf8_lossy(&report.stdout);
+    assert!(report.status.success(), "{text}");
+    assert!(
+        text.contains(&format!(
+            "its supervisor (pid {}) is gone: the run was killed",
+            status.supervisor_pid
+        )),
+        "{text}"
+    );
+    // A next run into the folder says whose records it replaces.
+    let next = start(&dir, &base_sequence(FRAMES), &quick());
+    let (exit, out, records) = next.finish(RUN_TIMEOUT);
+    assert!(exit.success(), "{exit}\n{out}");
+    let replaced = records.events_of("earlier-run-replaced");
+    assert!(
+        replaced.len() == 1
+            && replaced[0].detail.contains(&format!(
+                "its supervisor (pid {}) gone: it was killed",
+                status.supervisor_pid
+            )),
+        "{:?}",
+        records.events
+    );
 }
 
 /// Stops `stage` (SIGSTOP) for a while shorter than the hang timeout, then resumes it.
@@ -509,7 +629,7 @@ fn lsd_missing_a_budget_no_detector_meets_gives_way_to_fld_after_its_streak() {
     // it either, so it never swaps back.
     let config = format!(
         "{SUPERVISION}[budget]\ndrop_late = false\nline_detector_ms = 0.001\n\
-         [detector_fallback]\nenabled = true\nbad_frames = 3\nmin_interval_frames = 0\n"
+         [detector_fallback]\nenabled = true\nbad_frames = 3\nmin_interval_frames = 0\nend_to_end = false\n"
     );
     let (status, out, records) = start(&dir, &base_sequence(FRAMES), &config).finish(RUN_TIMEOUT);
     assert!(status.success(), "{status}\n{out}");
@@ -549,6 +669,39 @@ fn lsd_missing_a_budget_no_detector_meets_gives_way_to_fld_after_its_streak() {
 }
 
 #[test]
+fn both_policies_act_on_frames_that_miss_the_end_to_end_budget_alone() {
+    let dir = scratch("end-to-end-policies");
+    // Every frame misses a 1 µs end-to-end budget, whatever the machine's load, while LSD and
+    // the matcher stay within budgets of a minute and LBD finds its one stereo match: only
+    // the pipeline's deadline can move either policy.
+    let config = format!(
+        "{SUPERVISION}[budget]\ndrop_late = false\nend_to_end_ms = 0.001\nline_detector_ms = 60000.0\n\
+         matcher_ms = 60000.0\n[matcher.fallback]\nmin_stereo_matches = 1\nrecover_stereo_matches = 2\n\
+         min_inlier_ratio = 0.0\n[detector_fallback]\nenabled = true\nbad_frames = 3\n"
+    );
+    let (status, out, records) = start(&dir, &base_sequence(FRAMES), &config).finish(RUN_TIMEOUT);
+    assert!(status.success(), "{status}\n{out}");
+    assert_every_frame_accounted(&records);
+    let fallbacks = records.events_of("fallback");
+    assert!(
+        fallbacks
+            .first()
+            .is_some_and(|e| e.detail.starts_with("lbd -> l1: end to end ")
+                && e.detail.contains("> 0.0 ms with LBD taking")),
+        "{:?}",
+        records.events
+    );
+    let swaps = records.events_of("detector-fallback");
+    assert!(
+        swaps.first().is_some_and(|e| e
+            .detail
+            .starts_with("lsd -> fld: frames missed the 0.0 ms end-to-end budget while lsd ran")),
+        "{:?}",
+        records.events
+    );
+}
+
+#[test]
 fn matching_falls_back_to_l1_when_the_right_image_turns_unmatchable() {
     let dir = scratch("fallback");
     let sequence = sequence_copy(FRAMES, &dir);
@@ -565,8 +718,9 @@ fn matching_falls_back_to_l1_when_the_right_image_turns_unmatchable() {
     }
     // This scene gives LBD ~80 stereo matches a frame; a few dozen chance matches survive
     // the inversion, so the test sets its bar between the two.
-    // Only the matches decide here: a loaded test machine must not trigger the budget rule.
-    let thresholds = "[matcher.fallback]\nmin_stereo_matches = 45\nrecover_stereo_matches = 60\nover_budget = false\n";
+    // Only the matches decide here: a loaded test machine must not trigger the budget rules
+    // (the matcher's own, the end-to-end one).
+    let thresholds = "[matcher.fallback]\nmin_stereo_matches = 45\nrecover_stereo_matches = 60\nover_budget = false\nend_to_end = false\n";
     let (status, out, records) =
         start(&dir, &sequence, &format!("{}{thresholds}", quick())).finish(RUN_TIMEOUT);
     assert!(status.success(), "{status}\n{out}");

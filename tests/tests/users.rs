@@ -8,38 +8,16 @@
 
 use linetrack_e2e::*;
 use std::os::unix::fs::{MetadataExt, PermissionsExt};
-use std::os::unix::process::CommandExt;
 use std::path::{Path, PathBuf};
-use std::process::{Command, Stdio};
+use std::process::Stdio;
 use std::time::Duration;
 
 const FRAMES: usize = 40;
 /// Their run: it only has to run beside ours and complete, not as long as ours.
 const THEIR_FRAMES: usize = 20;
 const RUN_TIMEOUT: Duration = Duration::from_secs(120);
-/// The other user.
-const NOBODY: u32 = 65534;
 /// Every frame processed however late (the drop policy has its own tests).
 const CONFIG: &str = "[supervisor]\nrestart_backoff_ms = 100\nhang_timeout_ms = 2000\ndrain_timeout_ms = 4000\nstatus_every_ms = 0\n[budget]\ndrop_late = false\n";
-/// `program` as user `nobody`, with the environment of a fresh login (no `XDG_RUNTIME_DIR`,
-/// no `LINETRACK_IPC_*`), in `cwd`.
-fn as_nobody(program: &Path, cwd: &Path) -> Command {
-    let me = std::fs::metadata("/proc/self").map_or(u32::MAX, |m| m.uid());
-    assert_eq!(
-        me, 0,
-        "this test starts a second user's processes (user nobody, uid {NOBODY}): run it as root"
-    );
-    let mut command = Command::new(program);
-    command
-        .uid(NOBODY)
-        .gid(NOBODY)
-        .env_clear()
-        .env("PATH", "/usr/bin:/bin")
-        .env("HOME", cwd)
-        .current_dir(cwd)
-        .stdin(Stdio::null());
-    command
-}
 
 /// Whether user `nobody` can append 16 bytes to `file` (`sh`'s `>>`: creating it if it
 /// does not exist).

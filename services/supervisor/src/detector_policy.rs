@@ -35,6 +35,7 @@ pub struct DetectorSwitch {
 pub struct DetectorPolicy {
     config: DetectorFallbackConfig,
     budget_ms: f64,
+    end_to_end_budget_ms: f64,
     /// Fallen back: the faster detector.
     streaks: Hysteresis,
 }
@@ -42,10 +43,15 @@ pub struct DetectorPolicy {
 impl DetectorPolicy {
     /// The policy of `config` against a detector budget of `budget_ms`; `None` when it is
     /// switched off.
-    pub fn new(config: &DetectorFallbackConfig, budget_ms: f64) -> Option<Self> {
+    pub fn new(
+        config: &DetectorFallbackConfig,
+        budget_ms: f64,
+        end_to_end_budget_ms: f64,
+    ) -> Option<Self> {
         config.enabled.then(|| Self {
             config: config.clone(),
             budget_ms,
+            end_to_end_budget_ms,
             streaks: Hysteresis::new(
                 config.bad_frames,
                 config.recover_frames,
@@ -69,30 +75,50 @@ impl DetectorPolicy {
             self.streaks.reset();
         }
         let index = StageKind::LineDetector.stamp_index()?;
-        if header.stamps[index].end_ns == 0
-            || !detected(header, index)
-            || detector_kind(message.detection.detector.get().ok()?) != running
-        {
+        let detected_here = header.stamps[index].end_ns != 0
+            && detected(header, index)
+            && message
+                .detection
+                .detector
+                .get()
+                .is_ok_and(|d| detector_kind(d) == running);
+        let c = &self.config;
+        // The pipeline's deadline: a frame LSD ran for (or that was dropped late while it
+        // ran) and that missed the end-to-end budget.
+        let late = (c.end_to_end && running == SLOW)
+            .then(|| crate::fallback::end_to_end_miss(header, self.end_to_end_budget_ms))
+            .flatten();
+        if !detected_here && late.is_none() {
             return None;
         }
         let ms = stage_ms(header, index);
         let kind = running;
         let budget = self.budget_ms;
-        let c = &self.config;
         if kind == SLOW {
-            let over = ms > budget;
+            let over = (detected_here && ms > budget) || late.is_some();
             return self
                 .streaks
                 .observe(header.frame_id, over)
                 .then(|| DetectorSwitch {
                     to: c.to,
                     event: "detector-fallback",
-                    reason: format!(
-                        "{} over its {budget:.1} ms budget on {} frames in a row (last {ms:.1} ms)",
-                        SLOW.name(),
-                        c.bad_frames
-                    ),
+                    reason: match &late {
+                        Some(miss) if !(ms > budget) => format!(
+                            "frames missed the {:.1} ms end-to-end budget while {} ran, {} in a row (last {miss})",
+                            self.end_to_end_budget_ms,
+                            SLOW.name(),
+                            c.bad_frames
+                        ),
+                        _ => format!(
+                            "{} over its {budget:.1} ms budget on {} frames in a row (last {ms:.1} ms)",
+                            SLOW.name(),
+                            c.bad_frames
+                        ),
+                    },
                 });
+        }
+        if !detected_here {
+            return None;
         }
         if kind != c.to || !self.streaks.fallen_back() {
             return None;
@@ -116,7 +142,7 @@ impl DetectorPolicy {
 
 /// Whether the detector (stamp index `detector`) detected the frame: not a frame dropped
 /// before it or by it (its stamps then time the drop, not a detection).
-fn detected(header: &FrameHeader, detector: usize) -> bool {
+pub(crate) fn detected(header: &FrameHeader, detector: usize) -> bool {
     header.is_ok()
         || header
             .status_by
@@ -153,8 +179,51 @@ mod tests {
                 ..DetectorFallbackConfig::default()
             },
             50.0,
+            100.0,
         )
         .unwrap_or_else(|| panic!("enabled by default"))
+    }
+
+    #[test]
+    fn lsd_within_its_budget_gives_way_when_frames_miss_the_end_to_end_budget() {
+        let mut p = policy(0);
+        let late = |id: u64| {
+            let mut h = frame(id, LSD, 30.0);
+            h.frame.capture_ns = 5_000_000_000 + id * 50_000_000;
+            h.frame.stamps[3].end_ns = h.frame.capture_ns + 150_000_000;
+            h
+        };
+        assert!(p.observe(&late(0), LSD).is_none());
+        // Dropped late by the detector itself: never detected, still a miss while LSD runs.
+        let mut dropped = TracksHeader::default();
+        dropped.frame.frame_id = 1;
+        dropped
+            .frame
+            .mark(FrameStatus::DroppedLate, StageKind::LineDetector);
+        assert!(p.observe(&dropped, LSD).is_none());
+        let switch = p
+            .observe(&late(2), LSD)
+            .unwrap_or_else(|| panic!("no swap on three end-to-end misses"));
+        assert_eq!(switch.to, DetectorKind::Fld);
+        assert_eq!(
+            switch.reason,
+            "frames missed the 100.0 ms end-to-end budget while lsd ran, 3 in a row (last end to end 150.0 ms > 100.0 ms)"
+        );
+        // With the end to end off, only LSD's own budget counts.
+        let mut own = DetectorPolicy::new(
+            &DetectorFallbackConfig {
+                bad_frames: 3,
+                end_to_end: false,
+                ..DetectorFallbackConfig::default()
+            },
+            50.0,
+            100.0,
+        )
+        .unwrap_or_else(|| panic!("enabled"));
+        for id in 0..10 {
+            assert!(own.observe(&late(id), LSD).is_none());
+            assert!(own.observe(&dropped, LSD).is_none());
+        }
     }
 
     /// Feeds `(detector, ms)` frames from `first` on, each while its detector runs; the
@@ -287,7 +356,8 @@ mod tests {
                     enabled: false,
                     ..DetectorFallbackConfig::default()
                 },
-                50.0
+                50.0,
+                100.0
             )
             .is_none()
         );

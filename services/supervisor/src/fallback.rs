@@ -3,8 +3,31 @@
 //! ([`crate::detector_policy`]) switch on.
 
 use crate::monitor::stage_ms;
-use linetrack_msgs::{FrameHeader, MatcherMode, PoseRecord, StageKind, TracksHeader};
+use linetrack_msgs::{FrameHeader, FrameStatus, MatcherMode, PoseRecord, StageKind, TracksHeader};
 use linetrack_pipeline_config::FallbackConfig;
+
+/// How `header`'s frame missed the end-to-end budget `budget_ms`, if it did: dropped late
+/// by a stage, or its pose published more than `budget_ms` after its capture. Both
+/// policies count such frames ([`FallbackController`], [`crate::detector_policy`]), so that
+/// the pipeline's deadline moves them, not only each stage's own budget.
+pub fn end_to_end_miss(header: &FrameHeader, budget_ms: f64) -> Option<String> {
+    match header.status.get().ok()? {
+        FrameStatus::DroppedLate => Some(format!(
+            "dropped late by {} (over the {budget_ms:.1} ms end-to-end budget)",
+            header
+                .status_by
+                .get()
+                .map_or("a stage", |stage| stage.name())
+        )),
+        FrameStatus::Ok => {
+            let end = header.stamps[StageKind::PoseEstimator.stamp_index()?].end_ns;
+            let ms = header.age_ms(end);
+            (header.capture_ns > 0 && end >= header.capture_ns && ms > budget_ms)
+                .then(|| format!("end to end {ms:.1} ms > {budget_ms:.1} ms"))
+        }
+        _ => None,
+    }
+}
 
 /// Two states, normal and fallen back, and the streaks that move between them: `trip`
 /// failing frames in a row in the normal state switch to the fallback, `recover` passing
@@ -102,17 +125,19 @@ pub struct Switch {
 pub struct FallbackController {
     config: FallbackConfig,
     matcher_budget_ms: f64,
+    end_to_end_budget_ms: f64,
     /// Fallen back: ℓ1.
     streaks: Hysteresis,
 }
 
 impl FallbackController {
     /// A controller starting in LBD mode.
-    pub fn new(config: FallbackConfig, matcher_budget_ms: f64) -> Self {
+    pub fn new(config: FallbackConfig, matcher_budget_ms: f64, end_to_end_budget_ms: f64) -> Self {
         let streaks = Hysteresis::new(config.bad_frames, config.recover_probes, 0);
         Self {
             config,
             matcher_budget_ms,
+            end_to_end_budget_ms,
             streaks,
         }
     }
@@ -143,7 +168,11 @@ impl FallbackController {
         }
         let ms = Self::matcher_ms(header);
         let bar = c.recover_budget_fraction * self.matcher_budget_ms;
-        (c.over_budget && !(ms <= bar)).then(|| format!("matcher {ms:.1} ms > {bar:.1} ms"))
+        if c.over_budget && !(ms <= bar) {
+            return Some(format!("matcher {ms:.1} ms > {bar:.1} ms"));
+        }
+        let bar = c.recover_budget_fraction * self.end_to_end_budget_ms;
+        c.end_to_end.then(|| end_to_end_miss(header, bar)).flatten()
     }
 
     /// Why an LBD frame failed, if it did.
@@ -172,7 +201,32 @@ impl FallbackController {
                 self.matcher_budget_ms
             ));
         }
+        if c.end_to_end
+            && let Some(miss) = end_to_end_miss(&header.frame, self.end_to_end_budget_ms)
+        {
+            return Some(format!("{miss} with LBD taking {ms:.1} ms"));
+        }
         None
+    }
+
+    /// Takes a frame some stage dropped late: in LBD mode (with `end_to_end`) a failure
+    /// like a late pose, in ℓ1 mode the end of a streak of passing probes. Returns a switch
+    /// when one is due.
+    pub fn observe_dropped_late(&mut self, header: &FrameHeader) -> Option<Switch> {
+        if !self.config.end_to_end {
+            return None;
+        }
+        let miss = end_to_end_miss(header, self.end_to_end_budget_ms)?;
+        match self.mode() {
+            MatcherMode::Lbd => self.streaks.observe(header.frame_id, true).then(|| Switch {
+                to: MatcherMode::L1,
+                reason: format!("{miss}, {} frames in a row", self.config.bad_frames),
+            }),
+            MatcherMode::L1 => {
+                self.streaks.observe(header.frame_id, false);
+                None
+            }
+        }
     }
 
     /// Takes one processed frame's results; returns a switch when one is due.
@@ -262,7 +316,76 @@ mod tests {
                 ..FallbackConfig::default()
             },
             50.0,
+            100.0,
         )
+    }
+
+    /// `h` captured at 1 s and its pose published `end_to_end_ms` later.
+    fn timed(mut h: TracksHeader, end_to_end_ms: u64) -> TracksHeader {
+        h.frame.capture_ns = 1_000_000_000;
+        h.frame.stamps[3].start_ns = h.frame.capture_ns;
+        h.frame.stamps[3].end_ns = h.frame.capture_ns + end_to_end_ms * 1_000_000;
+        h
+    }
+
+    #[test]
+    fn lbd_within_its_own_budget_falls_back_when_frames_miss_the_end_to_end_budget() {
+        let mut c = controller();
+        let late = |id: u64| {
+            let mut h = timed(frame(MatcherMode::Lbd, 40, -1, 30), 150);
+            h.frame.frame_id = id;
+            h
+        };
+        // Within the matcher's 50 ms, and in time: nothing.
+        assert!(
+            c.observe(
+                &timed(frame(MatcherMode::Lbd, 40, -1, 30), 90),
+                &pose(10, 10)
+            )
+            .is_none()
+        );
+        // Late poses and frames dropped late by the detector, mixed: one streak.
+        assert!(c.observe(&late(1), &pose(10, 10)).is_none());
+        let mut dropped = FrameHeader::new(2, 0, 1);
+        dropped.mark(FrameStatus::DroppedLate, StageKind::LineDetector);
+        assert!(c.observe_dropped_late(&dropped).is_none());
+        let switch = c
+            .observe(&late(3), &pose(10, 10))
+            .unwrap_or_else(|| panic!("no fallback on three end-to-end misses"));
+        assert_eq!(switch.to, MatcherMode::L1);
+        assert_eq!(
+            switch.reason,
+            "end to end 150.0 ms > 100.0 ms with LBD taking 30.0 ms, 3 frames in a row"
+        );
+        // Back only when probes find matches and their frames are within 0.8 of the
+        // end-to-end budget (80 ms), twice in a row.
+        let probe = |id: u64, e2e: u64| {
+            let mut h = timed(frame(MatcherMode::L1, 40, 40, 5), e2e);
+            h.frame.frame_id = id;
+            h
+        };
+        assert!(c.observe(&probe(4, 90), &pose(10, 10)).is_none());
+        assert!(c.observe(&probe(5, 50), &pose(10, 10)).is_none());
+        assert!(
+            c.observe(&probe(6, 90), &pose(10, 10)).is_none(),
+            "the streak broke"
+        );
+        assert!(c.observe(&probe(7, 50), &pose(10, 10)).is_none());
+        let back = c.observe(&probe(8, 50), &pose(10, 10));
+        assert_eq!(back.map(|s| s.to), Some(MatcherMode::Lbd));
+        // Switched off, the end to end is not the matcher's business.
+        let mut own = FallbackController::new(
+            FallbackConfig {
+                end_to_end: false,
+                ..controller().config
+            },
+            50.0,
+            100.0,
+        );
+        for id in 1..10 {
+            assert!(own.observe(&late(id), &pose(10, 10)).is_none());
+            assert!(own.observe_dropped_late(&dropped).is_none());
+        }
     }
 
     #[test]
@@ -446,6 +569,7 @@ mod tests {
                 ..controller().config
             },
             50.0,
+            100.0,
         );
         let mut switches = 0;
         for i in 0..200u64 {

@@ -31,6 +31,7 @@ pub mod monitor;
 pub mod optional;
 pub mod run_dir;
 pub mod stage_runner;
+pub mod stderr_tail;
 
 use anyhow::{Context, bail};
 use clock::{Backoff, Clock, Every, SystemClock, Timeout, Watchdog};
@@ -39,8 +40,8 @@ use linetrack_msgs::{
     Command, Control, MatcherMode, PoseRecord, StageKind, StatusKind, StatusReport, Topic,
     TracksHeader, now_ns,
 };
-use linetrack_pipeline_config::PipelineConfig;
-use linetrack_run_record::{Report, RunEnd};
+use linetrack_pipeline_config::{OnRecordError, PipelineConfig};
+use linetrack_run_record::{RecordError, Report, RunEnd};
 use linetrack_stage_runtime::{StageContext, detector_kind, detector_on_wire};
 use linetrack_vision::DetectorKind;
 use monitor::Monitor;
@@ -165,15 +166,15 @@ impl LiveStatus {
         self.state != RunEnd::Running
     }
 
-    /// Writes `status.json` in `run_dir` (a temporary file renamed over it: readers never
-    /// see half of it).
-    fn write(&self, run_dir: &Path) {
-        if let Ok(text) = serde_json::to_string_pretty(self) {
-            let tmp = run_dir.join("status.json.tmp");
-            if std::fs::write(&tmp, text).is_ok() {
-                let _ = std::fs::rename(&tmp, run_dir.join("status.json"));
-            }
-        }
+    /// Writes `status.json` in `run_dir` whole or not at all (readers never see half of it;
+    /// a failed write leaves no temporary file).
+    fn write(&self, run_dir: &Path) -> Result<(), RecordError> {
+        let path = run_dir.join("status.json");
+        let text = serde_json::to_string_pretty(self).map_err(|e| RecordError::Io {
+            path: path.clone(),
+            source: e.into(),
+        })?;
+        linetrack_run_record::files::write_whole(&path, text.as_bytes(), false)
     }
 }
 
@@ -190,9 +191,38 @@ pub struct StageEntry {
     pub standby: bool,
 }
 
+/// What an earlier run left in the run folder, when it left records: how it ended, or that
+/// its supervisor is gone while it still said running (killed).
+fn earlier_run(run_dir: &Path) -> Option<String> {
+    let status: LiveStatus =
+        serde_json::from_str(&std::fs::read_to_string(run_dir.join("status.json")).ok()?).ok()?;
+    let ended = match status.state {
+        RunEnd::Running => format!(
+            "still said running, its supervisor (pid {}) gone: it was killed",
+            status.supervisor_pid
+        ),
+        other => format!(
+            "ended {}",
+            serde_json::to_value(other)
+                .ok()
+                .and_then(|v| v.as_str().map(str::to_string))
+                .unwrap_or_default()
+        ),
+    };
+    Some(format!(
+        "the run folder held the records of run {} ({} frames; it {ended}): they are replaced",
+        status.run_id, status.frames
+    ))
+}
+
 /// Clears an earlier run's files from the (locked) run folder and writes the effective
-/// config into it; returns the config's path.
-fn prepare_run_dir(config: &PipelineConfig, run_dir: &Path) -> anyhow::Result<PathBuf> {
+/// config into it; returns the config's path and what the earlier run was, if one left
+/// records (said in a warning and an event, not replaced silently).
+fn prepare_run_dir(
+    config: &PipelineConfig,
+    run_dir: &Path,
+) -> anyhow::Result<(PathBuf, Option<String>)> {
+    let earlier = earlier_run(run_dir);
     for stale in [
         "spans",
         "trace.json",
@@ -203,17 +233,21 @@ fn prepare_run_dir(config: &PipelineConfig, run_dir: &Path) -> anyhow::Result<Pa
         "status.json",
     ] {
         let path = run_dir.join(stale);
-        if path.is_dir() {
-            std::fs::remove_dir_all(&path)
-                .with_context(|| format!("clearing {}", path.display()))?;
-        } else if path.exists() {
-            std::fs::remove_file(&path).with_context(|| format!("clearing {}", path.display()))?;
+        // A link is removed, never followed.
+        match std::fs::symlink_metadata(&path) {
+            Ok(meta) if meta.is_dir() => std::fs::remove_dir_all(&path),
+            Ok(_) => std::fs::remove_file(&path),
+            Err(_) => Ok(()),
         }
+        .with_context(|| format!("clearing {}", path.display()))?;
     }
     let config_path = run_dir.join("pipeline.toml");
-    std::fs::write(&config_path, toml::to_string(config)?)
-        .with_context(|| format!("writing {}", config_path.display()))?;
-    Ok(config_path)
+    linetrack_run_record::files::write_whole(
+        &config_path,
+        toml::to_string(config)?.as_bytes(),
+        false,
+    )?;
+    Ok((config_path, earlier))
 }
 
 /// Runs the pipeline on `config` until the sequence is done or `shutdown` is set.
@@ -254,10 +288,14 @@ pub fn run(
         },
         ..config.clone()
     };
-    let config_path = prepare_run_dir(config, &run_dir)?;
+    let (config_path, earlier) = prepare_run_dir(config, &run_dir)?;
     let run_id = new_run_id();
     let scope = Scope::new(&run_id).with_configured_root(config.ipc.root.as_deref());
     let mut monitor = Monitor::new(config, 0, &run_dir)?.with_ground_truth(ground_truth);
+    if let Some(earlier) = earlier {
+        tracing::warn!("{}: {earlier}", run_dir.display());
+        monitor.event("earlier-run-replaced", "supervisor", None, earlier);
+    }
     for refusal in refused {
         tracing::warn!("{refusal}");
         monitor.event(
@@ -288,8 +326,15 @@ pub fn run(
         )),
         other => other,
     };
-    // Whatever happened, the run's records are closed and say how it ended.
+    // Whatever happened, the run's records are closed and say how it ended; records that
+    // failed say so first (the pipeline may have run on: `output.on_record_error`).
+    let result_reason = monitor.records_failed().map(|records| match &result {
+        Err(e) if !format!("{e:#}").contains(&records) => format!("{e:#}; run records: {records}"),
+        Err(e) => format!("{e:#}"),
+        Ok(_) => format!("run records: {records}"),
+    });
     let (end, reason) = match &result {
+        _ if monitor.records_failed().is_some() => (RunEnd::RecordsFailed, result_reason),
         Ok(false) => (RunEnd::Completed, None),
         Ok(true) => (RunEnd::Interrupted, None),
         Err(e) => (RunEnd::Failed, Some(format!("{e:#}"))),
@@ -297,14 +342,28 @@ pub fn run(
     let frames = monitor.accounted();
     let report = monitor.finish(end, reason.clone());
     final_status(config, &run_id, &scope, &run_dir, frames, end, reason);
-    let interrupted = result?;
-    let report = report.with_context(|| format!("records of {}", run_dir.display()))?;
+    let in_folder = |e: anyhow::Error| e.context(RunFolder(run_dir.clone()));
+    let interrupted = result.map_err(in_folder)?;
+    let report = report
+        .with_context(|| format!("records of {}", run_dir.display()))
+        .map_err(in_folder)?;
     Ok(RunOutcome {
         run_dir,
         run_id,
         report,
         interrupted,
     })
+}
+
+/// The folder of a run that failed once it had one: the context of [`run`]'s error (find it
+/// with `error.downcast_ref::<RunFolder>()`), so that the caller can still report it.
+#[derive(Debug, Clone)]
+pub struct RunFolder(pub PathBuf);
+
+impl std::fmt::Display for RunFolder {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "run {}", self.0.display())
+    }
 }
 
 /// Opens the sequence (refusing one no stage could open) and returns its ground truth.
@@ -356,7 +415,13 @@ fn final_status(
         state,
         reason,
     }
-    .write(run_dir);
+    .write(run_dir)
+    .unwrap_or_else(|e| {
+        tracing::error!(
+            "the run's end is not in status.json: {}",
+            linetrack_run_record::full_message(&e)
+        );
+    });
 }
 
 /// Ids of thread stages start here (above any Linux pid), so that commands and status
@@ -446,6 +511,8 @@ struct StageProcess {
     detector: Option<DetectorKind>,
     /// Expected to exit (handed over, finished, killed for hanging).
     retiring: bool,
+    /// A process's last lines on stderr (none for a thread).
+    stderr: Option<stderr_tail::StderrTail>,
 }
 
 struct Supervisor<'m> {
@@ -565,6 +632,7 @@ impl<'m> Supervisor<'m> {
             detector_policy: detector_policy::DetectorPolicy::new(
                 &config.detector_fallback,
                 config.budget.line_detector_ms,
+                config.budget.end_to_end_ms,
             ),
         })
     }
@@ -584,7 +652,7 @@ impl<'m> Supervisor<'m> {
         } else {
             0
         };
-        let (child, pid) = match &self.hub {
+        let (child, pid, stderr) = match &self.hub {
             None => self.spawn_process(stage, detector, standby, resume_pose, start_frame)?,
             Some(hub) => {
                 let pid = self.next_thread_id;
@@ -617,6 +685,7 @@ impl<'m> Supervisor<'m> {
                         stop,
                     },
                     pid,
+                    None,
                 )
             }
         };
@@ -635,6 +704,7 @@ impl<'m> Supervisor<'m> {
             standby,
             detector,
             retiring: false,
+            stderr,
         });
         self.write_status();
         Ok(())
@@ -659,7 +729,8 @@ impl<'m> Supervisor<'m> {
         command
     }
 
-    /// Starts `stage`'s binary as a child process.
+    /// Starts `stage`'s binary as a child process, its stderr followed
+    /// ([`stderr_tail`]).
     fn spawn_process(
         &self,
         stage: StageKind,
@@ -667,7 +738,7 @@ impl<'m> Supervisor<'m> {
         standby: bool,
         resume_pose: Option<String>,
         start_frame: u64,
-    ) -> anyhow::Result<(Launch, u32)> {
+    ) -> anyhow::Result<(Launch, u32, Option<stderr_tail::StderrTail>)> {
         let bin = self.bin_dir.join(format!("linetrack-{}", stage.name()));
         let mut command = self.child_command(&bin);
         command.arg("--run-dir").arg(&self.run_dir);
@@ -683,7 +754,8 @@ impl<'m> Supervisor<'m> {
         if start_frame > 0 {
             command.arg("--start-frame").arg(start_frame.to_string());
         }
-        let child = command.spawn().with_context(|| {
+        command.stderr(Stdio::piped());
+        let mut child = command.spawn().with_context(|| {
             if self.stage_runner.is_direct() {
                 format!("starting {}", bin.display())
             } else {
@@ -691,7 +763,14 @@ impl<'m> Supervisor<'m> {
             }
         })?;
         let pid = child.id();
-        Ok((Launch::Process(child), pid))
+        let stderr = match child.stderr.take() {
+            Some(pipe) => Some(
+                stderr_tail::StderrTail::follow(stage.name(), pipe)
+                    .with_context(|| format!("following the stderr of {stage} (pid {pid})"))?,
+            ),
+            None => None,
+        };
+        Ok((Launch::Process(child), pid, stderr))
     }
 
     /// Starts the optional processes that are due (at the start, or a restart), notes
@@ -709,8 +788,8 @@ impl<'m> Supervisor<'m> {
         }
     }
 
-    fn write_status(&self) {
-        LiveStatus {
+    fn write_status(&mut self) {
+        let written = LiveStatus {
             run_id: self.run_id.clone(),
             ipc_prefix: self.scope.prefix.clone(),
             ipc_root: Some(self.scope.root.clone()),
@@ -731,6 +810,9 @@ impl<'m> Supervisor<'m> {
             reason: None,
         }
         .write(&self.run_dir);
+        if let Err(e) = written {
+            self.monitor.file_failed(e);
+        }
     }
 
     fn all_ready(&self, stages: &[StageKind]) -> bool {
@@ -752,7 +834,11 @@ impl<'m> Supervisor<'m> {
                     "trace: {n} spans in {}",
                     self.run_dir.join("trace.json").display()
                 ),
-                Err(e) => tracing::warn!("trace not merged: {e}"),
+                Err(e) => tracing::warn!(
+                    "trace not merged: {} (the span files stay in {})",
+                    linetrack_run_record::full_message(&e),
+                    self.run_dir.join("spans").display()
+                ),
             }
         }
         result
@@ -818,8 +904,20 @@ impl<'m> Supervisor<'m> {
                     );
                 }
             }
+            if let Some(records) = self.monitor.records_failed()
+                && self.config.output.on_record_error == OnRecordError::Stop
+            {
+                bail!(
+                    "run records: {records}: the pipeline stops (output.on_record_error = \"stop\")"
+                );
+            }
             if self.monitor.complete() {
-                tracing::info!("every frame accounted for");
+                match self.monitor.records_failed() {
+                    None => tracing::info!("every frame accounted for"),
+                    Some(records) => tracing::warn!(
+                        "every frame has an outcome, but the records end early: {records}"
+                    ),
+                }
                 return Ok(false);
             }
             let now = self.clock.now();
@@ -1082,10 +1180,17 @@ impl<'m> Supervisor<'m> {
                 tracing::info!("{} (pid {}) exited: {status}", p.stage, p.pid);
                 continue;
             }
-            if !p.ready && !p.standby {
-                // A stage that cannot start will not start on a retry either.
+            let last_words = p
+                .stderr
+                .as_ref()
+                .map(|tail| stderr_tail::last_words(&tail.lines(STDERR_END_WAIT)))
+                .unwrap_or_default();
+            let restarting = self.restarts[stage_slot(p.stage)].count() > 0;
+            if !p.ready && !p.standby && !restarting {
+                // A stage that cannot start at all will not start on a retry either; one
+                // that ran before and dies while restarting is a crash like any other.
                 bail!(
-                    "{} (pid {}) exited before it was ready ({status}); its error is above",
+                    "{} (pid {}) exited before it was ready ({status}){last_words}",
                     p.stage,
                     p.pid
                 );
@@ -1097,9 +1202,10 @@ impl<'m> Supervisor<'m> {
                 p.stage.name(),
                 None,
                 format!(
-                    "pid {} {status} after {:.1} s",
+                    "pid {} {status} after {:.1} s{}{last_words}",
                     p.pid,
-                    now.saturating_sub(p.started).as_secs_f64()
+                    now.saturating_sub(p.started).as_secs_f64(),
+                    if p.ready { "" } else { ", before it was ready" }
                 ),
             );
             if p.standby {
@@ -1113,11 +1219,12 @@ impl<'m> Supervisor<'m> {
                 continue;
             }
             if p.stage == StageKind::PoseEstimator {
-                self.monitor.pose_estimator_died();
+                self.monitor
+                    .pose_estimator_died(format!("pid {} {kind}: {status}", p.pid));
             }
             if let Err(given_up) = self.restarts[stage_slot(p.stage)].schedule(now) {
                 bail!(
-                    "{} died {} times (restart limit {}): giving up",
+                    "{} died {} times (restart limit {}): giving up; the last time {status}{last_words}",
                     p.stage,
                     given_up.deaths,
                     given_up.limit
@@ -1187,6 +1294,10 @@ impl<'m> Supervisor<'m> {
         self.write_status();
     }
 }
+
+/// How long a dead stage's last lines on stderr are awaited (its pipe ends as it exits;
+/// this only bounds a stage runner that keeps the pipe open).
+const STDERR_END_WAIT: Duration = Duration::from_millis(500);
 
 /// How often `status.json` is rewritten while the run goes.
 const STATUS_FILE_EVERY: Duration = Duration::from_millis(200);

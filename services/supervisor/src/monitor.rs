@@ -91,8 +91,9 @@ pub struct Monitor {
     /// still turn up (an earlier frame arriving late is no loss).
     presumed_lost: BTreeMap<u64, String>,
     /// The pose estimator died: frames from this one up to the first its successor
-    /// publishes died with it (the last stage: no stage after it sees them skipped).
-    lost_with_pose_estimator: Option<u64>,
+    /// publishes died with it (the last stage: no stage after it sees them skipped), and
+    /// how it died.
+    lost_with_pose_estimator: Option<(u64, String)>,
     fallback: Option<FallbackController>,
     last_pose: Option<(u64, PoseRecord)>,
     /// The pose before `last_pose` (a restarted pose estimator predicts from the two).
@@ -140,7 +141,11 @@ impl Monitor {
         run_dir: &Path,
     ) -> Result<Self, RecordError> {
         let fallback = (config.matcher.mode == MatcherPolicy::Auto).then(|| {
-            FallbackController::new(config.matcher.fallback.clone(), config.budget.matcher_ms)
+            FallbackController::new(
+                config.matcher.fallback.clone(),
+                config.budget.matcher_ms,
+                config.budget.end_to_end_ms,
+            )
         });
         Ok(Self {
             config: config.clone(),
@@ -172,14 +177,33 @@ impl Monitor {
         self
     }
 
-    /// Keeps the first write error (later records are still attempted).
+    /// Keeps the first write error and logs it, naming the file and the OS error (the
+    /// record writer stops at it: every record file ends at its last whole row).
     fn note(&mut self, result: Result<(), RecordError>) {
         if let Err(e) = result
             && self.write_error.is_none()
         {
-            tracing::error!("run records: {e}");
+            tracing::error!(
+                "run records: {}: the records end here (output.on_record_error = \"{}\")",
+                linetrack_run_record::full_message(&e),
+                self.config.output.on_record_error.name()
+            );
             self.write_error = Some(e);
         }
+    }
+
+    /// A file of the run folder other than the records (`status.json`) could not be
+    /// written: the records have failed too.
+    pub fn file_failed(&mut self, e: RecordError) {
+        self.writer.stop();
+        self.note(Err(e));
+    }
+
+    /// The first record that could not be written (the file and the OS error), if any.
+    pub fn records_failed(&self) -> Option<String> {
+        self.write_error
+            .as_ref()
+            .map(|e| linetrack_run_record::full_message(e))
     }
 
     /// Appends a frame's record and counts it.
@@ -220,13 +244,20 @@ impl Monitor {
             detection,
             matching,
         } = message;
-        if let Some(first) = self.lost_with_pose_estimator
-            && header.frame_id >= first
+        if let Some((first, cause)) = self
+            .lost_with_pose_estimator
+            .take_if(|(first, _)| header.frame_id >= *first)
+            && header.frame_id > first
         {
-            self.lost_with_pose_estimator = None;
-            if header.frame_id > first {
-                self.presume_lost(first, header.frame_id - first, "pose-estimator");
-            }
+            self.presume_lost_as(
+                first,
+                header.frame_id - first,
+                "pose-estimator",
+                format!(
+                    "frames {first}..{} died with the pose estimator ({cause}): its successor's first frame is {}",
+                    header.frame_id, header.frame_id
+                ),
+            );
         }
         let status = header.status.get().unwrap_or_else(|unknown| {
             tracing::warn!("frame {}: {unknown}: recorded as failed", header.frame_id);
@@ -273,7 +304,10 @@ impl Monitor {
             } else {
                 String::new()
             },
-            detector: if header.stamps[1].end_ns > 0 {
+            // Only a frame the detector detected names it: one it dropped carries no
+            // detection (its code would read as the first detector's).
+            detector: if header.stamps[1].end_ns > 0 && crate::detector_policy::detected(header, 1)
+            {
                 detection
                     .detector
                     .get()
@@ -295,6 +329,13 @@ impl Monitor {
         }
         self.presumed_lost.remove(&header.frame_id);
         self.record_frame(&record);
+        if status == FrameStatus::DroppedLate {
+            let switch = self
+                .fallback
+                .as_mut()
+                .and_then(|f| f.observe_dropped_late(header));
+            return self.matcher_switched(header.frame_id, switch);
+        }
         if status != FrameStatus::Ok {
             return None;
         }
@@ -313,6 +354,11 @@ impl Monitor {
             .fallback
             .as_mut()
             .and_then(|f| f.observe(message, pose));
+        self.matcher_switched(header.frame_id, switch)
+    }
+
+    /// Records a matcher mode switch, when there is one, and passes it on.
+    fn matcher_switched(&mut self, frame_id: u64, switch: Option<Switch>) -> Option<Switch> {
         if let Some(s) = &switch {
             let kind = if s.to == MatcherMode::L1 {
                 "fallback"
@@ -322,7 +368,7 @@ impl Monitor {
             self.event(
                 kind,
                 "matcher",
-                Some(header.frame_id),
+                Some(frame_id),
                 format!(
                     "{} -> {}: {}",
                     if s.to == MatcherMode::L1 { "lbd" } else { "l1" },
@@ -399,16 +445,17 @@ impl Monitor {
     /// queue, or lost with an upstream stage that died): they are recorded as `skipped` by
     /// that stage unless they still arrive, and the run does not wait for them.
     pub fn presume_lost(&mut self, first: u64, count: u64, stage: &str) {
-        let ids = first..first.saturating_add(count);
-        self.event(
-            "skipped",
-            stage,
-            Some(first),
-            format!(
-                "frames {}..{} never arrived here: overwritten in its full queue, or lost with a stage that died",
-                ids.start, ids.end
-            ),
+        let detail = format!(
+            "frames {first}..{} never arrived here: overwritten in its full queue, or lost with a stage that died",
+            first.saturating_add(count)
         );
+        self.presume_lost_as(first, count, stage, detail);
+    }
+
+    /// [`Monitor::presume_lost`] with the event's words.
+    fn presume_lost_as(&mut self, first: u64, count: u64, stage: &str, detail: String) {
+        let ids = first..first.saturating_add(count);
+        self.event("skipped", stage, Some(first), detail);
         for id in ids.filter(|&id| !self.accounted.contains(id)) {
             self.presumed_lost.insert(id, stage.to_string());
         }
@@ -417,9 +464,16 @@ impl Monitor {
     /// The pose estimator died, after every pose it published was taken: the frames it had
     /// taken and not published died with it. Its successor's first pose says which (those
     /// from the first frame without an outcome up to it): they are recorded as `skipped`
-    /// unless they still arrive, and the run does not wait for them.
-    pub fn pose_estimator_died(&mut self) {
-        self.lost_with_pose_estimator = Some(self.accounted.below);
+    /// unless they still arrive, and the run does not wait for them; when the run ends
+    /// before the successor publishes any, at the end. Either way a `skipped` event names
+    /// the range and `cause` (how it died: the pid, crash or hang, the exit status).
+    pub fn pose_estimator_died(&mut self, cause: String) {
+        let first = match &self.lost_with_pose_estimator {
+            // Died again before its successor published: the range starts where it did.
+            Some((first, _)) => *first,
+            None => self.accounted.below,
+        };
+        self.lost_with_pose_estimator = Some((first, cause));
     }
 
     /// The mode the matcher should be in (re-sent to a restarted matcher).
@@ -541,6 +595,22 @@ impl Monitor {
             .source_last
             .or(self.published)
             .or(self.accounted.highest);
+        if let (Some(last), Some((first, cause))) = (last, self.lost_with_pose_estimator.take())
+            && let Some(count) = (first..=last)
+                .rev()
+                .find(|&f| !self.accounted.contains(f))
+                .map(|newest| newest + 1 - first)
+        {
+            self.presume_lost_as(
+                first,
+                count,
+                "pose-estimator",
+                format!(
+                    "frames {first}..{} died with the pose estimator ({cause}): the run ended before its successor published a frame after them",
+                    first + count
+                ),
+            );
+        }
         if let Some(last) = last {
             for f in self.first_frame..=last {
                 if self.accounted.insert(f) {
@@ -575,8 +645,10 @@ impl Monitor {
                 None,
                 reason.clone().unwrap_or_default(),
             ),
-            RunEnd::Running | RunEnd::Completed => {}
+            RunEnd::Running | RunEnd::Completed | RunEnd::RecordsFailed => {}
         }
+        let closed = self.writer.close();
+        self.note(closed);
         let report = self.tally.report();
         let metrics = linetrack_run_record::trajectory_metrics(
             &self.run_dir.join("poses.tum"),
@@ -603,6 +675,7 @@ impl Monitor {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use linetrack_run_record::files::SpaceReserve;
     use linetrack_run_record::{read_events, read_frames};
 
     fn scratch(name: &str) -> PathBuf {
@@ -709,6 +782,84 @@ mod tests {
     }
 
     #[test]
+    fn a_file_that_cannot_be_written_ends_the_records_at_a_whole_row_and_the_run_says_so() {
+        let dir = scratch("monitor-records-failed");
+        let mut monitor =
+            Monitor::new(&PipelineConfig::default(), 0, &dir).unwrap_or_else(|e| panic!("{e}"));
+        assert!(dir.join(SpaceReserve::FILE).is_file(), "no space held");
+        for f in 0..3 {
+            pose_of(&mut monitor, f);
+        }
+        assert!(monitor.records_failed().is_none());
+        monitor.file_failed(RecordError::Io {
+            path: dir.join("status.json"),
+            source: std::io::Error::from_raw_os_error(28),
+        });
+        let failed = monitor.records_failed().unwrap_or_default();
+        assert!(
+            failed.contains("status.json") && failed.contains("No space left on device"),
+            "{failed}"
+        );
+        assert!(
+            !dir.join(SpaceReserve::FILE).exists(),
+            "the reserve is given up"
+        );
+        // Later frames are counted, not recorded.
+        for f in 3..5 {
+            pose_of(&mut monitor, f);
+        }
+        monitor.source_finished(4);
+        let finished = monitor.finish(RunEnd::RecordsFailed, Some(failed.clone()));
+        assert!(finished.is_err(), "the run's records failed");
+        let summary = Summary::read(&dir.join("summary.json")).unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(
+            (summary.end, summary.report.frames),
+            (RunEnd::RecordsFailed, 5)
+        );
+        let frames = read_frames(&dir.join("frames.csv")).unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(
+            frames.iter().map(|f| f.frame_id).collect::<Vec<_>>(),
+            [0, 1, 2]
+        );
+        let poses = std::fs::read_to_string(dir.join("poses.tum")).unwrap_or_default();
+        assert_eq!(poses.lines().count(), 4, "the header and 3 poses");
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn only_a_detected_frame_names_its_detector() {
+        let dir = scratch("monitor-detector-label");
+        let mut monitor =
+            Monitor::new(&PipelineConfig::default(), 0, &dir).unwrap_or_else(|e| panic!("{e}"));
+        let stamped = |id: u64| {
+            let mut h = TracksHeader::from(FrameHeader::new(id, id * 50_000_000, 1));
+            h.frame.stamps[1].start_ns = 1_000_000;
+            h.frame.stamps[1].end_ns = 2_000_000;
+            h.detection.detector =
+                linetrack_stage_runtime::detector_on_wire(linetrack_vision::DetectorKind::Fld)
+                    .into();
+            h
+        };
+        // Dropped by the detector itself: it detected nothing, whatever its code says.
+        let mut behind = stamped(0);
+        behind.detection = Default::default();
+        behind
+            .frame
+            .mark(FrameStatus::DroppedBehind, StageKind::LineDetector);
+        monitor.on_pose(&behind, &PoseRecord::default());
+        // Detected by FLD, dropped by the matcher.
+        let mut late = stamped(1);
+        late.frame
+            .mark(FrameStatus::DroppedLate, StageKind::Matcher);
+        monitor.on_pose(&late, &PoseRecord::default());
+        let _ = monitor.finish(RunEnd::Completed, None);
+        let frames = read_frames(&dir.join("frames.csv")).unwrap_or_else(|e| panic!("{e}"));
+        let labels: Vec<&str> = frames.iter().map(|f| f.detector.as_str()).collect();
+        assert_eq!(labels, ["", "fld"]);
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
     fn frames_skipped_on_a_stage_input_are_drops_unless_they_still_arrive() {
         let dir = scratch("monitor-skipped");
         let mut monitor =
@@ -746,7 +897,7 @@ mod tests {
         }
         // Frames 2 and 3 were in the pose estimator when it died; its successor's first
         // frame is 4.
-        monitor.pose_estimator_died();
+        monitor.pose_estimator_died("pid 7 crash: signal: 9 (SIGKILL)".to_string());
         monitor.source_finished(5);
         assert!(!monitor.complete());
         pose_of(&mut monitor, 4);
@@ -775,6 +926,59 @@ mod tests {
                 (4, "pose"),
                 (5, "pose")
             ]
+        );
+        let events = read_events(&dir.join("events.csv")).unwrap_or_else(|e| panic!("{e}"));
+        let skipped: Vec<(&str, Option<u64>, &str)> = events
+            .iter()
+            .filter(|e| e.kind == "skipped")
+            .map(|e| (e.stage.as_str(), e.frame_id, e.detail.as_str()))
+            .collect();
+        assert_eq!(
+            skipped,
+            [(
+                "pose-estimator",
+                Some(2),
+                "frames 2..4 died with the pose estimator (pid 7 crash: signal: 9 (SIGKILL)): its successor's first frame is 4"
+            )]
+        );
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn frames_that_died_with_a_pose_estimator_whose_successor_never_published_carry_an_event() {
+        let dir = scratch("monitor-pose-estimator-died-last");
+        let mut monitor =
+            Monitor::new(&PipelineConfig::default(), 0, &dir).unwrap_or_else(|e| panic!("{e}"));
+        for f in [0, 1] {
+            pose_of(&mut monitor, f);
+        }
+        // Hung, killed, and its successor died too before publishing: one range, the last
+        // cause.
+        monitor.pose_estimator_died("pid 7 hang: signal: 9 (SIGKILL)".to_string());
+        monitor.pose_estimator_died("pid 8 crash: exit status: 1".to_string());
+        monitor.source_finished(4);
+        let report = monitor
+            .finish(RunEnd::Completed, None)
+            .unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(report.drops, [("skipped".to_string(), 3)]);
+        let events = read_events(&dir.join("events.csv")).unwrap_or_else(|e| panic!("{e}"));
+        let skipped: Vec<&str> = events
+            .iter()
+            .filter(|e| e.kind == "skipped" && e.stage == "pose-estimator")
+            .map(|e| e.detail.as_str())
+            .collect();
+        assert_eq!(
+            skipped,
+            [
+                "frames 2..5 died with the pose estimator (pid 8 crash: exit status: 1): the run ended before its successor published a frame after them"
+            ]
+        );
+        let frames = read_frames(&dir.join("frames.csv")).unwrap_or_else(|e| panic!("{e}"));
+        assert!(
+            frames[2..]
+                .iter()
+                .all(|f| f.outcome == "skipped" && f.dropped_by == "pose-estimator"),
+            "{frames:?}"
         );
         let _ = std::fs::remove_dir_all(&dir);
     }

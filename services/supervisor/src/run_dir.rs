@@ -1,9 +1,17 @@
 //! The run folder: which one a run writes into, and a lock so that two runs never share one.
 //!
-//! By default every run gets a new folder under `output.runs_dir`, named by its UTC start
-//! time (`2026-11-23T12-00-00`, `-2` appended when two runs start in one second), and
-//! `latest` beside it becomes a symlink to it, so `linetrack report` and `linetrack ctl`
-//! find the newest run. `output.run_dir` (`--run-dir`) names a fixed folder instead.
+//! By default every run gets a new folder under `output.runs_dir` (unset: the user's state
+//! folder, `$XDG_STATE_HOME/linetrack/runs` or `~/.local/state/linetrack/runs`), named by
+//! its UTC start time (`2026-11-23T12-00-00`, `-2` appended when two runs start in one
+//! second), and `latest` beside it becomes a symlink to it, so `linetrack report` and
+//! `linetrack ctl` find the newest run. `output.run_dir` (`--run-dir`) names a fixed folder
+//! instead.
+//!
+//! Both are reached through [`linetrack_private_dir`]: made owner-only when missing,
+//! refused (naming the path) when another user owns them or a folder above them, could
+//! write into them, or planted a link on the way; the path used from then on has no link
+//! left in it. Every file the run writes there is created owner-only and never through a
+//! link ([`linetrack_run_record::files`]).
 //!
 //! The run holds an exclusive lock on `run.lock` in its folder (`flock`, through
 //! `File::try_lock`) for as long as it runs: a second run into the same folder is refused,
@@ -12,8 +20,11 @@
 
 use anyhow::{Context, bail};
 use linetrack_pipeline_config::OutputConfig;
+use linetrack_private_dir::{Create, DIR_MODE, private_dir};
+use linetrack_run_record::files::FILE_MODE;
 use std::fs::{File, OpenOptions, TryLockError};
 use std::io::{Read as _, Write as _};
+use std::os::unix::fs::{DirBuilderExt as _, OpenOptionsExt as _};
 use std::path::{Path, PathBuf};
 use std::time::SystemTime;
 
@@ -28,13 +39,13 @@ const MAX_SAME_SECOND: u32 = 1000;
 /// dated folder under `output.runs_dir`, with `latest` pointed at it.
 pub fn resolve(output: &OutputConfig, now: SystemTime) -> anyhow::Result<PathBuf> {
     if let Some(dir) = &output.run_dir {
-        std::fs::create_dir_all(dir)
-            .with_context(|| format!("creating run folder {}", dir.display()))?;
-        return Ok(dir.clone());
+        return private_dir(dir, Create::Missing).context("run folder (output.run_dir)");
     }
-    let runs = &output.runs_dir;
-    std::fs::create_dir_all(runs)
-        .with_context(|| format!("creating output.runs_dir {}", runs.display()))?;
+    let runs = output
+        .runs_dir()
+        .map_err(|e| anyhow::anyhow!("{e}"))
+        .and_then(|runs| private_dir(&runs, Create::Missing).context("output.runs_dir"))?;
+    let runs = &runs;
     let stamp = humantime::format_rfc3339_seconds(now)
         .to_string()
         .trim_end_matches('Z')
@@ -46,8 +57,10 @@ pub fn resolve(output: &OutputConfig, now: SystemTime) -> anyhow::Result<PathBuf
             format!("{stamp}-{n}")
         };
         let dir = runs.join(&name);
-        match std::fs::create_dir(&dir) {
+        // mkdir never follows a link at the new name; the folder is then checked like any.
+        match std::fs::DirBuilder::new().mode(DIR_MODE).create(&dir) {
             Ok(()) => {
+                let dir = private_dir(&dir, Create::No).context("run folder")?;
                 point_latest(runs, &name)?;
                 return Ok(dir);
             }
@@ -99,6 +112,8 @@ pub fn lock(run_dir: &Path) -> anyhow::Result<File> {
         .write(true)
         .create(true)
         .truncate(false)
+        .mode(FILE_MODE)
+        .custom_flags(libc::O_NOFOLLOW | libc::O_CLOEXEC)
         .open(&path)
         .with_context(|| format!("opening {}", path.display()))?;
     match file.try_lock() {
@@ -159,7 +174,7 @@ mod tests {
         std::fs::create_dir_all(runs.join("latest")).unwrap_or_else(|e| panic!("{e}"));
         std::fs::write(runs.join("latest/frames.csv"), "old").unwrap_or_else(|e| panic!("{e}"));
         let output = OutputConfig {
-            runs_dir: runs.clone(),
+            runs_dir: Some(runs.clone()),
             ..OutputConfig::default()
         };
         let t = SystemTime::UNIX_EPOCH + Duration::from_secs(1_795_435_200);

@@ -245,39 +245,19 @@ fn lock_down_files(dir: &Path, prefix: &str, me: u32) -> Result<usize, String> {
     Ok(tightened)
 }
 
-/// Makes sure `dir` is a folder only this user can enter: created (mode 0700, parents
-/// too) when missing; refused when it is a link, another user's, or open to others.
+/// Makes sure `dir` is a folder only this user can change, reached through folders and
+/// links no other user can change ([`linetrack_private_dir`]): created (mode 0700, parents
+/// too) when missing; refused, naming the path, when it or a folder or link above it is
+/// another user's, or writable by others.
 fn private_dir(dir: &Path) -> Result<(), String> {
-    use std::os::unix::fs::DirBuilderExt;
-    if std::fs::symlink_metadata(dir).is_err() {
-        std::fs::DirBuilder::new()
-            .recursive(true)
-            .mode(0o700)
-            .create(dir)
-            .map_err(|e| format!("creating {}: {e}", dir.display()))?;
-    }
-    let meta = std::fs::symlink_metadata(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
-    let me = rustix::process::getuid().as_raw();
-    if !meta.is_dir() {
-        return Err(format!("{} is not a folder", dir.display()));
-    }
-    if meta.uid() != me {
-        return Err(format!(
-            "{} belongs to user {}, not to this user ({me}); set {} to a folder of yours",
-            dir.display(),
-            meta.uid(),
-            Scope::ROOT_VAR
-        ));
-    }
-    if meta.mode() & 0o022 != 0 {
-        return Err(format!(
-            "{} can be written by other users (mode {:o}); make it 0700 or set {}",
-            dir.display(),
-            meta.mode() & 0o777,
-            Scope::ROOT_VAR
-        ));
-    }
-    Ok(())
+    linetrack_private_dir::private_dir(dir, linetrack_private_dir::Create::Missing)
+        .map(|_| ())
+        .map_err(|e| {
+            let cause = std::error::Error::source(&e)
+                .map(|source| format!(": {source}"))
+                .unwrap_or_default();
+            format!("{e}{cause} (set {} to a folder of yours)", Scope::ROOT_VAR)
+        })
 }
 
 /// iceoryx2 resources left in a scope: nodes (alive or dead) and services.
@@ -972,7 +952,31 @@ mod tests {
         .err()
         .map(|e| e.to_string())
         .unwrap_or_default();
-        assert!(err.contains("not a folder"), "{err}");
+        // This user's own link is followed; the folder it leads to is judged.
+        assert!(
+            err.contains(&dir.display().to_string()) && err.contains("other users"),
+            "{err}"
+        );
+        // Another user's folder above the root (a `/tmp/linetrack-<uid>` someone else made).
+        if rustix::process::geteuid().as_raw() == 0 {
+            let theirs = linetrack_test_data::scratch_dir("ipc", "theirsroot")
+                .unwrap_or_else(|e| panic!("{e}"));
+            std::os::unix::fs::chown(&theirs, Some(65534), Some(65534))
+                .unwrap_or_else(|e| panic!("{e}"));
+            let err = Scope {
+                root: theirs.join("iceoryx2"),
+                ..unique_scope("theirsroot")
+            }
+            .config()
+            .err()
+            .map(|e| e.to_string())
+            .unwrap_or_default();
+            assert!(
+                err.contains(&theirs.display().to_string()) && err.contains("user 65534"),
+                "{err}"
+            );
+            assert!(!theirs.join("iceoryx2").exists());
+        }
     }
 
     fn unique_scope(tag: &str) -> Scope {

@@ -8,6 +8,7 @@
 
 mod ros2;
 
+pub mod file;
 use linetrack_msgs::StageKind;
 use linetrack_odometry::OdometryConfig;
 pub use linetrack_sched::{Policy, SchedSettings};
@@ -224,6 +225,11 @@ pub struct FallbackConfig {
     pub min_observations: u32,
     /// ... or when the matcher stage goes over its budget.
     pub over_budget: bool,
+    /// ... or when the frame misses `budget.end_to_end_ms` (processed late, or dropped late
+    /// by any stage): the pipeline's deadline, not only the matcher's own. With it, a probe
+    /// passes only when its frame's end to end is within `recover_budget_fraction` of that
+    /// budget too.
+    pub end_to_end: bool,
     /// Consecutive failing frames before switching to ℓ1.
     pub bad_frames: u32,
     /// In ℓ1 mode, the matcher also runs LBD on every n-th frame to see if it works again.
@@ -246,6 +252,7 @@ impl Default for FallbackConfig {
             min_inlier_ratio: 0.25,
             min_observations: 10,
             over_budget: true,
+            end_to_end: true,
             bad_frames: 3,
             probe_every: 5,
             recover_stereo_matches: 24,
@@ -274,6 +281,9 @@ pub struct DetectorFallbackConfig {
     pub recover_budget_fraction: f64,
     /// Frames between two swaps of this policy, at least.
     pub min_interval_frames: u64,
+    /// An LSD frame that misses `budget.end_to_end_ms` (processed late, or dropped late by
+    /// any stage) counts as over budget too: the pipeline's deadline, not only LSD's own.
+    pub end_to_end: bool,
 }
 
 impl Default for DetectorFallbackConfig {
@@ -285,6 +295,7 @@ impl Default for DetectorFallbackConfig {
             recover_frames: 40,
             recover_budget_fraction: 0.25,
             min_interval_frames: 200,
+            end_to_end: true,
         }
     }
 }
@@ -427,22 +438,80 @@ impl Default for SupervisorConfig {
 #[serde(deny_unknown_fields, default)]
 pub struct OutputConfig {
     /// Each run gets a new folder here named by its UTC start time
-    /// (`2026-11-23T12-00-00`), and `latest` here is a symlink to the newest.
-    pub runs_dir: PathBuf,
+    /// (`2026-11-23T12-00-00`), and `latest` here is a symlink to the newest. Unset: the
+    /// user's state folder, [`OutputConfig::runs_dir`].
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub runs_dir: Option<PathBuf>,
     /// A fixed run folder instead (`linetrack run --run-dir`): frames.csv, events.csv,
     /// poses (TUM), summary.json, trace files. Locked while a run writes into it.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub run_dir: Option<PathBuf>,
     /// Write per-process span files and the merged Chrome/Perfetto trace.
     pub trace: bool,
+    /// What a record that cannot be written (a full disk, a quota, an I/O error) does to the
+    /// run: either way the records end at their last whole row, the error names the file
+    /// and the OS error, and the run ends `records-failed` (non-zero exit).
+    pub on_record_error: OnRecordError,
+}
+
+impl OutputConfig {
+    /// The folder of dated run folders: `runs_dir` when set, else
+    /// `$XDG_STATE_HOME/linetrack/runs` (an absolute `XDG_STATE_HOME`), else
+    /// `$HOME/.local/state/linetrack/runs`: the user's own, never a relative path that may
+    /// sit in a shared folder.
+    pub fn runs_dir(&self) -> Result<PathBuf, String> {
+        if let Some(dir) = &self.runs_dir {
+            return Ok(dir.clone());
+        }
+        default_runs_dir()
+    }
+}
+
+/// `$XDG_STATE_HOME/linetrack/runs`, else `$HOME/.local/state/linetrack/runs` (the XDG base
+/// directory rules: a relative `XDG_STATE_HOME` is ignored).
+pub fn default_runs_dir() -> Result<PathBuf, String> {
+    let absolute = |var: &str| {
+        std::env::var_os(var)
+            .map(PathBuf::from)
+            .filter(|p| p.is_absolute())
+    };
+    absolute("XDG_STATE_HOME")
+        .or_else(|| absolute("HOME").map(|home| home.join(".local/state")))
+        .map(|state| state.join("linetrack/runs"))
+        .ok_or_else(|| {
+            "output.runs_dir is unset and neither XDG_STATE_HOME nor HOME is an absolute path: set output.runs_dir or --run-dir".to_string()
+        })
+}
+
+/// What a record that cannot be written does to the run (`output.on_record_error`).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum OnRecordError {
+    /// The pipeline stops at once (cleanly, like Ctrl-C): a run is for its records.
+    #[default]
+    Stop,
+    /// The pipeline runs on without records (its poses still go to the ROS 2 output and
+    /// the link): a robot that needs its odometry more than its log.
+    Continue,
+}
+
+impl OnRecordError {
+    /// The value as the config spells it.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Stop => "stop",
+            Self::Continue => "continue",
+        }
+    }
 }
 
 impl Default for OutputConfig {
     fn default() -> Self {
         Self {
-            runs_dir: PathBuf::from("out/runs"),
+            runs_dir: None,
             run_dir: None,
             trace: true,
+            on_record_error: OnRecordError::Stop,
         }
     }
 }
@@ -700,21 +769,19 @@ impl PipelineConfig {
     pub fn from_toml_str(text: &str, origin: &str) -> Result<Self, ConfigError> {
         let config: Self = toml::from_str(text).map_err(|e| ConfigError::Parse {
             origin: origin.to_string(),
-            message: e.to_string(),
+            message: file::parse_message(&e, text),
         })?;
         config.validate().map_err(|message| ConfigError::Invalid {
             origin: origin.to_string(),
-            message,
+            message: file::cut_quotes(&message),
         })?;
         Ok(config)
     }
 
-    /// Reads and validates a config file.
+    /// Reads and validates a config file: a regular file of at most
+    /// [`file::MAX_CONFIG_BYTES`] ([`file::read_bounded`]).
     pub fn from_file(path: &Path) -> Result<Self, ConfigError> {
-        let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Read {
-            path: path.to_path_buf(),
-            source,
-        })?;
+        let text = file::read_bounded(path)?;
         Self::from_toml_str(&text, &path.display().to_string())
     }
 
@@ -732,6 +799,17 @@ impl PipelineConfig {
             ("budget.pose_estimator_ms", b.pose_estimator_ms),
         ] {
             in_range(key, ms, BUDGET_MS)?;
+        }
+        for (key, path) in [
+            ("output.run_dir", &self.output.run_dir),
+            ("output.runs_dir", &self.output.runs_dir),
+            ("ipc.root", &self.ipc.root),
+        ] {
+            if path.as_ref().is_some_and(|p| p.as_os_str().is_empty()) {
+                return Err(format!(
+                    "{key} = \"\": an empty path would be the current folder; leave the key out for the default"
+                ));
+            }
         }
         let src = &self.source;
         if src.rate_hz != 0.0 {
@@ -1030,7 +1108,7 @@ mod tests {
         let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../packaging/etc/pipeline.toml");
         let packaged = PipelineConfig::from_file(&path).unwrap_or_else(|e| panic!("{e}"));
         let mut expected = PipelineConfig::default();
-        expected.output.runs_dir = PathBuf::from("/var/lib/linetrack/runs");
+        expected.output.runs_dir = Some(PathBuf::from("/var/lib/linetrack/runs"));
         expected.ipc.root = Some(PathBuf::from("/run/linetrack/iceoryx2"));
         assert_eq!(packaged, expected);
     }

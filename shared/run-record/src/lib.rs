@@ -6,6 +6,11 @@
 //! [`Report`] turns them into percentiles, deadline misses, drops and counts. With ground
 //! truth, [`trajectory_metrics`] scores the run's `poses.tum` with the metrics (and names)
 //! `linetrack-vo` writes, for [`Summary::metrics`].
+//!
+//! The files are written so that a crash or a full disk leaves them valid ([`files`]: a
+//! whole row per write, cut back when the disk refuses part of it; small files whole or not
+//! at all), and read back up to a cut last row ([`read_frames_to_cut`]), with the frames a
+//! cut run did not record ([`unrecorded`]).
 
 use hdrhistogram::Histogram;
 use linetrack_msgs::StageKind;
@@ -15,6 +20,10 @@ use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
+
+pub mod files;
+
+use files::{RowFile, SpaceReserve};
 
 /// Record errors.
 #[derive(Debug, thiserror::Error)]
@@ -212,116 +221,102 @@ impl FrameRow {
     }
 }
 
-/// A CSV record file written a row at a time, each row handed to the kernel as soon as it
-/// is added (the writer is flushed after every row).
-struct CsvAppender {
-    path: PathBuf,
-    csv: csv::Writer<std::fs::File>,
-}
-
-impl CsvAppender {
-    /// Creates (or empties) `path` and writes `header` (comma-separated column names).
-    fn create(path: PathBuf, header: &str) -> Result<Self, RecordError> {
-        let file = std::fs::File::create(&path).map_err(|source| RecordError::Io {
-            path: path.clone(),
-            source,
-        })?;
-        let mut appender = Self {
-            csv: csv::WriterBuilder::new()
-                .has_headers(false)
-                .from_writer(file),
-            path,
-        };
-        let written = appender.csv.write_record(header.split(','));
-        appender.flushed(written)?;
-        Ok(appender)
-    }
-
-    /// Appends `row`; once this returns, the row survives the process being killed.
-    fn row(&mut self, row: &impl Serialize) -> Result<(), RecordError> {
-        let written = self.csv.serialize(row);
-        self.flushed(written)
-    }
-
-    fn flushed(&mut self, written: csv::Result<()>) -> Result<(), RecordError> {
-        let io = |source| RecordError::Io {
-            path: self.path.clone(),
-            source,
-        };
-        written.map_err(|e| io(e.into()))?;
-        self.csv.flush().map_err(io)
-    }
+/// `row` as one CSV line (fields quoted where they need it).
+fn csv_line(row: &impl Serialize) -> Result<Vec<u8>, csv::Error> {
+    let mut csv = csv::WriterBuilder::new()
+        .has_headers(false)
+        .from_writer(Vec::with_capacity(256));
+    csv.serialize(row)?;
+    csv.into_inner().map_err(|e| e.into_error().into())
 }
 
 const POSES_HEADER: &str =
     "# timestamp tx ty tz qx qy qz qw (left camera in the first frame's world)";
 
-/// One line of a text record file (`poses.tum`), written through to the kernel as soon as
-/// it is added.
-struct Appender {
-    path: PathBuf,
-    file: std::fs::File,
-}
-
-impl Appender {
-    /// Creates (or empties) `path` and writes `header`.
-    fn create(path: PathBuf, header: &str) -> Result<Self, RecordError> {
-        let file = std::fs::File::create(&path).map_err(|source| RecordError::Io {
-            path: path.clone(),
-            source,
-        })?;
-        let mut appender = Self { path, file };
-        appender.line(header)?;
-        Ok(appender)
-    }
-
-    /// Appends `text` and a newline in one unbuffered write: once this returns, the line
-    /// survives the process being killed.
-    fn line(&mut self, text: &str) -> Result<(), RecordError> {
-        use std::io::Write as _;
-        let mut line = String::with_capacity(text.len() + 1);
-        line.push_str(text);
-        line.push('\n');
-        self.file
-            .write_all(line.as_bytes())
-            .map_err(|source| RecordError::Io {
-                path: self.path.clone(),
-                source,
-            })
-    }
-}
-
 /// Appends a run's records as they happen: `frames.csv` (a row per frame as its outcome
 /// is known, so not necessarily in frame order), `events.csv` and `poses.tum`. Every row
-/// goes to the kernel when it is added, so the records of a run whose supervisor is killed
-/// are complete up to that moment.
+/// goes to the kernel whole when it is added ([`files`]), so the records of a run whose
+/// supervisor is killed are complete up to that moment.
+///
+/// The first row that cannot be written (a full disk, ...) is an error naming the file and
+/// the OS error; the writer then stops (every file ends at its last whole row, later rows
+/// are not attempted) and gives up its [`SpaceReserve`], so that `summary.json` and
+/// `status.json` can still say how the run ended.
 pub struct RecordWriter {
-    frames: CsvAppender,
-    events: CsvAppender,
-    poses: Appender,
+    frames: RowFile,
+    events: RowFile,
+    poses: RowFile,
+    reserve: SpaceReserve,
+    stopped: bool,
 }
 
 impl RecordWriter {
-    /// Creates the three files in `run_dir` (emptying earlier ones) with their headers.
+    /// Holds [`SpaceReserve::BYTES`] in `run_dir`, then creates the three files there
+    /// (emptying earlier ones) with their headers.
     pub fn create(run_dir: &Path) -> Result<Self, RecordError> {
+        let reserve = SpaceReserve::hold(run_dir, SpaceReserve::BYTES)?;
+        let line = |text: &str| format!("{text}\n").into_bytes();
         Ok(Self {
-            frames: CsvAppender::create(run_dir.join("frames.csv"), FRAME_HEADER)?,
-            events: CsvAppender::create(run_dir.join("events.csv"), EVENT_HEADER)?,
-            poses: Appender::create(run_dir.join("poses.tum"), POSES_HEADER)?,
+            frames: RowFile::create(run_dir.join("frames.csv"), &line(FRAME_HEADER))?,
+            events: RowFile::create(run_dir.join("events.csv"), &line(EVENT_HEADER))?,
+            poses: RowFile::create(run_dir.join("poses.tum"), &line(POSES_HEADER))?,
+            reserve,
+            stopped: false,
         })
+    }
+
+    /// Whether a row could not be written (no more are).
+    pub fn stopped(&self) -> bool {
+        self.stopped
+    }
+
+    /// Stops the writer as a failed row would (another file of the run folder could not be
+    /// written): no more rows, the reserve given up.
+    pub fn stop(&mut self) {
+        self.stopped = true;
+        self.reserve.release();
+    }
+
+    /// Appends `row` to one of the files unless the writer has stopped; the first failure
+    /// stops it and gives up the reserve.
+    fn append(
+        file: &mut RowFile,
+        reserve: &mut SpaceReserve,
+        stopped: &mut bool,
+        row: Result<Vec<u8>, csv::Error>,
+    ) -> Result<(), RecordError> {
+        if *stopped {
+            return Ok(());
+        }
+        let written = match row {
+            Ok(row) => file.append(&row),
+            // Serialising a record into memory cannot fail; were it to, it is no disk error.
+            Err(e) => Err(RecordError::Parse {
+                path: file.path().to_path_buf(),
+                line: 0,
+                message: format!("a row could not be formed: {e}"),
+            }),
+        };
+        if written.is_err() {
+            *stopped = true;
+            reserve.release();
+        }
+        written
     }
 
     /// Appends a frame's row to `frames.csv`.
     pub fn frame(&mut self, frame: &FrameRecord) -> Result<(), RecordError> {
-        self.frames.row(&FrameRow::from(frame))
+        let row = csv_line(&FrameRow::from(frame));
+        Self::append(&mut self.frames, &mut self.reserve, &mut self.stopped, row)
     }
 
     /// Appends an event's row to `events.csv`.
     pub fn event(&mut self, event: &EventRecord) -> Result<(), RecordError> {
-        self.events.row(&EventRecord {
+        let row = csv_line(&EventRecord {
             time_s: three_decimals(event.time_s),
             ..event.clone()
-        })
+        });
+        Self::append(&mut self.events, &mut self.reserve, &mut self.stopped, row)
     }
 
     /// Appends a pose (TUM: seconds, position, quaternion x y z w) to `poses.tum`.
@@ -333,20 +328,73 @@ impl RecordWriter {
     ) -> Result<(), RecordError> {
         let [tx, ty, tz] = translation;
         let [qx, qy, qz, qw] = rotation_xyzw;
-        self.poses.line(&format!(
-            "{:.9} {tx:.6} {ty:.6} {tz:.6} {qx:.6} {qy:.6} {qz:.6} {qw:.6}",
+        let line = format!(
+            "{:.9} {tx:.6} {ty:.6} {tz:.6} {qx:.6} {qy:.6} {qz:.6} {qw:.6}\n",
             sequence_ns as f64 * 1e-9
-        ))
+        );
+        Self::append(
+            &mut self.poses,
+            &mut self.reserve,
+            &mut self.stopped,
+            Ok(line.into_bytes()),
+        )
+    }
+
+    /// The end of the run: syncs the files to the disk and gives up the reserve (the
+    /// summary is written next).
+    pub fn close(&mut self) -> Result<(), RecordError> {
+        self.reserve.release();
+        for file in [&self.frames, &self.events, &self.poses] {
+            file.sync()?;
+        }
+        Ok(())
     }
 }
 
-/// The rows of the CSV record file `path` whose header must be `header`, in file order;
-/// errors name the file, the line and the column.
+/// The last row of a record file, cut (by a crash, a full disk, a power cut) and left out.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CutRow {
+    /// The file.
+    pub path: PathBuf,
+    /// The row's 1-based line.
+    pub line: usize,
+    /// What is wrong with it.
+    pub message: String,
+}
+
+impl std::fmt::Display for CutRow {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "{}:{}: the last row is cut ({}); read up to the row before it",
+            self.path.display(),
+            self.line,
+            self.message
+        )
+    }
+}
+
+/// The whole rows of a record file, and its cut last row if it has one.
+pub type ReadToCut<T> = (Vec<T>, Option<CutRow>);
+
+/// How the readers take a file's last row.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum LastRow {
+    /// Like every other: a bad one is an error.
+    Strict,
+    /// A last row without its end of line, or one that does not parse, is a cut row: left
+    /// out and reported ([`CutRow`]); a bad row before it is still an error.
+    MayBeCut,
+}
+
+/// The rows of the CSV record file `path` whose header must be `header`, in file order
+/// with their lines; errors name the file, the line and the column.
 fn read_rows<T: serde::de::DeserializeOwned>(
     path: &Path,
     header: &str,
-) -> Result<Vec<(usize, T)>, RecordError> {
-    let file = std::fs::File::open(path).map_err(|source| RecordError::Io {
+    last: LastRow,
+) -> Result<ReadToCut<(usize, T)>, RecordError> {
+    let bytes = std::fs::read(path).map_err(|source| RecordError::Io {
         path: path.to_path_buf(),
         source,
     })?;
@@ -355,70 +403,164 @@ fn read_rows<T: serde::de::DeserializeOwned>(
         line: usize::try_from(line).unwrap_or(usize::MAX),
         message,
     };
-    let io = |e: csv::Error| RecordError::Io {
-        path: path.to_path_buf(),
-        source: e.into(),
-    };
-    let mut reader = csv::ReaderBuilder::new().from_reader(file);
+    let line_of = |at: usize| bytes[..at].iter().filter(|&&b| b == b'\n').count() + 1;
+    // A whole row ends with its end of line: bytes after the last one are a cut row.
+    let mut cut = None;
+    let mut body = &bytes[..];
+    if !bytes.is_empty() && !bytes.ends_with(b"\n") {
+        let whole = bytes.iter().rposition(|&b| b == b'\n').map_or(0, |i| i + 1);
+        let message = format!("{} bytes without an end of line", bytes.len() - whole);
+        if last == LastRow::Strict {
+            return Err(parse(line_of(whole) as u64, message));
+        }
+        body = &bytes[..whole];
+        cut = Some(CutRow {
+            path: path.to_path_buf(),
+            line: line_of(whole),
+            message,
+        });
+    }
+    let mut reader = csv::ReaderBuilder::new().from_reader(body);
     let columns = match reader.headers() {
         Ok(found) if found.iter().eq(header.split(',')) => found.clone(),
-        Err(e) if matches!(e.kind(), csv::ErrorKind::Io(_)) => return Err(io(e)),
         _ => return Err(parse(1, format!("expected the header {header:?}"))),
     };
     let mut rows = Vec::new();
     let mut record = csv::StringRecord::new();
     loop {
-        match reader.read_record(&mut record) {
-            Ok(true) => {}
+        let (line, row) = match reader.read_record(&mut record) {
             Ok(false) => break,
-            Err(e) if matches!(e.kind(), csv::ErrorKind::Io(_)) => return Err(io(e)),
+            Ok(true) => {
+                let line = record.position().map_or(0, csv::Position::line);
+                let row = record.deserialize::<T>(Some(&columns)).map_err(|e| {
+                    let message = match e.kind() {
+                        csv::ErrorKind::Deserialize { err, .. } => {
+                            let column = err
+                                .field()
+                                .and_then(|k| columns.get(usize::try_from(k).ok()?))
+                                .unwrap_or("?");
+                            format!("{column}: {}", err.kind())
+                        }
+                        _ => e.to_string(),
+                    };
+                    (line, message)
+                });
+                (line, row)
+            }
             Err(e) => {
                 let line = e.position().map_or(0, csv::Position::line);
-                return Err(parse(line, e.to_string()));
+                (line, Err((line, e.to_string())))
+            }
+        };
+        match row {
+            Ok(row) => rows.push((usize::try_from(line).unwrap_or(usize::MAX), row)),
+            Err((line, message)) => {
+                // Only the last row may be cut: nothing whole may follow it.
+                let more = !matches!(reader.read_record(&mut record), Ok(false));
+                if last == LastRow::Strict || more || cut.is_some() {
+                    return Err(parse(line, message));
+                }
+                cut = Some(CutRow {
+                    path: path.to_path_buf(),
+                    line: usize::try_from(line).unwrap_or(usize::MAX),
+                    message,
+                });
+                break;
             }
         }
-        let line = record.position().map_or(0, csv::Position::line);
-        let row = record.deserialize::<T>(Some(&columns)).map_err(|e| {
-            let message = match e.kind() {
-                csv::ErrorKind::Deserialize { err, .. } => {
-                    let column = err
-                        .field()
-                        .and_then(|k| columns.get(usize::try_from(k).ok()?))
-                        .unwrap_or("?");
-                    format!("{column}: {}", err.kind())
-                }
-                _ => e.to_string(),
-            };
-            parse(line, message)
-        })?;
-        rows.push((usize::try_from(line).unwrap_or(usize::MAX), row));
     }
-    Ok(rows)
+    Ok((rows, cut))
 }
 
-/// Reads `frames.csv`, in frame order.
-pub fn read_frames(path: &Path) -> Result<Vec<FrameRecord>, RecordError> {
-    let mut frames = read_rows::<FrameRow>(path, FRAME_HEADER)?
-        .into_iter()
-        .map(|(line, row)| {
-            row.into_record().map_err(|message| RecordError::Parse {
-                path: path.to_path_buf(),
-                line,
-                message,
-            })
-        })
-        .collect::<Result<Vec<_>, _>>()?;
+/// The rows of `frames.csv` as records, in frame order.
+fn frames_of(path: &Path, last: LastRow) -> Result<ReadToCut<FrameRecord>, RecordError> {
+    let (rows, mut cut) = read_rows::<FrameRow>(path, FRAME_HEADER, last)?;
+    let count = rows.len();
+    let mut frames = Vec::with_capacity(count);
+    for (k, (line, row)) in rows.into_iter().enumerate() {
+        match row.into_record() {
+            Ok(frame) => frames.push(frame),
+            Err(message) if last == LastRow::MayBeCut && cut.is_none() && k + 1 == count => {
+                cut = Some(CutRow {
+                    path: path.to_path_buf(),
+                    line,
+                    message,
+                });
+            }
+            Err(message) => {
+                return Err(RecordError::Parse {
+                    path: path.to_path_buf(),
+                    line,
+                    message,
+                });
+            }
+        }
+    }
     // Rows are appended as frames complete: a frame lost to a stage crash comes last.
     frames.sort_by_key(|f| f.frame_id);
-    Ok(frames)
+    Ok((frames, cut))
 }
 
-/// Reads `events.csv`.
+/// Reads `frames.csv`, in frame order; any bad row is an error.
+pub fn read_frames(path: &Path) -> Result<Vec<FrameRecord>, RecordError> {
+    Ok(frames_of(path, LastRow::Strict)?.0)
+}
+
+/// Reads `frames.csv` of a run that may have been cut short (a crash, a full disk), in
+/// frame order: a cut last row is left out and returned, a bad row before it is an error.
+pub fn read_frames_to_cut(path: &Path) -> Result<ReadToCut<FrameRecord>, RecordError> {
+    frames_of(path, LastRow::MayBeCut)
+}
+
+/// Reads `events.csv`; any bad row is an error.
 pub fn read_events(path: &Path) -> Result<Vec<EventRecord>, RecordError> {
-    Ok(read_rows::<EventRecord>(path, EVENT_HEADER)?
-        .into_iter()
-        .map(|(_, event)| event)
-        .collect())
+    Ok(read_events_to_cut_as(path, LastRow::Strict)?.0)
+}
+
+/// Reads `events.csv` of a run that may have been cut short (as [`read_frames_to_cut`]).
+pub fn read_events_to_cut(path: &Path) -> Result<ReadToCut<EventRecord>, RecordError> {
+    read_events_to_cut_as(path, LastRow::MayBeCut)
+}
+
+fn read_events_to_cut_as(
+    path: &Path,
+    last: LastRow,
+) -> Result<ReadToCut<EventRecord>, RecordError> {
+    let (rows, cut) = read_rows::<EventRecord>(path, EVENT_HEADER, last)?;
+    Ok((rows.into_iter().map(|(_, event)| event).collect(), cut))
+}
+
+/// The frame ids from 0 below `expected` that `frames` (in frame order) has no row for,
+/// as ranges: what a cut run did not record.
+pub fn unrecorded(frames: &[FrameRecord], expected: u64) -> Vec<std::ops::Range<u64>> {
+    let mut gaps = Vec::new();
+    let mut next = 0u64;
+    for id in frames
+        .iter()
+        .map(|f| f.frame_id)
+        .filter(|&id| id < expected)
+    {
+        if id > next {
+            gaps.push(next..id);
+        }
+        next = next.max(id + 1);
+    }
+    if next < expected {
+        gaps.push(next..expected);
+    }
+    gaps
+}
+
+/// `e` and the errors under it, joined by ": " (the OS error of a [`RecordError::Io`]).
+pub fn full_message(e: &(dyn std::error::Error + 'static)) -> String {
+    let mut text = e.to_string();
+    let mut source = e.source();
+    while let Some(inner) = source {
+        text.push_str(": ");
+        text.push_str(&inner.to_string());
+        source = inner.source();
+    }
+    text
 }
 
 /// Percentiles of a latency, milliseconds.
@@ -718,6 +860,10 @@ pub enum RunEnd {
     Interrupted,
     /// Abandoned: a stage would not start, died past the restart limit, ... (see `reason`).
     Failed,
+    /// A record could not be written (a full disk, ...): the records end at their last
+    /// whole row; `reason` names the file and the OS error (`output.on_record_error` says
+    /// whether the pipeline stopped there or ran on).
+    RecordsFailed,
 }
 
 /// `summary.json`: how the run ended and its report.
@@ -751,16 +897,13 @@ pub fn trajectory_metrics(
 }
 
 impl Summary {
-    /// Writes `path` whole or not at all (a temporary file renamed over it).
+    /// Writes `path` whole or not at all ([`files::write_whole`], synced to the disk).
     pub fn write(&self, path: &Path) -> Result<(), RecordError> {
-        let io = |source| RecordError::Io {
+        let text = serde_json::to_string_pretty(self).map_err(|e| RecordError::Io {
             path: path.to_path_buf(),
-            source,
-        };
-        let text = serde_json::to_string_pretty(self).map_err(|e| io(e.into()))?;
-        let tmp = path.with_extension("json.tmp");
-        std::fs::write(&tmp, text).map_err(io)?;
-        std::fs::rename(&tmp, path).map_err(io)
+            source: e.into(),
+        })?;
+        files::write_whole(path, text.as_bytes(), true)
     }
 
     /// Reads `summary.json`.
@@ -950,6 +1093,75 @@ mod tests {
             .map(|e| e.to_string())
             .unwrap_or_default();
         assert!(err.contains("bad.csv:1: expected the header"), "{err}");
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn a_cut_record_file_is_read_up_to_its_last_whole_row_and_says_what_is_missing() {
+        let dir = std::env::temp_dir().join(format!("linetrack-run-cut-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap_or_else(|e| panic!("{e}"));
+        let path = dir.join("frames.csv");
+        {
+            let mut writer = RecordWriter::create(&dir).unwrap_or_else(|e| panic!("{e}"));
+            for id in [0, 1, 2, 4] {
+                writer
+                    .frame(&frame(id, "pose", 40.0))
+                    .unwrap_or_else(|e| panic!("{e}"));
+            }
+        }
+        let whole = std::fs::read(&path).unwrap_or_default();
+        // Cut inside the row of frame 4 (as a full disk at a block boundary cut it), and
+        // cut inside a quoted field whose line break happens to end the file.
+        let last_row = whole[..whole.len() - 1]
+            .iter()
+            .rposition(|&b| b == b'\n')
+            .map_or(0, |i| i + 1);
+        let mut quoted = whole[..last_row].to_vec();
+        quoted.extend_from_slice(b"4,stage-error,\"line-detector\n");
+        for (name, bytes, line) in [
+            ("torn", whole[..whole.len() - 7].to_vec(), 5),
+            ("no-newline", whole[..whole.len() - 1].to_vec(), 5),
+            ("quoted", quoted, 5),
+        ] {
+            std::fs::write(&path, &bytes).unwrap_or_else(|e| panic!("{e}"));
+            let (frames, cut) = read_frames_to_cut(&path).unwrap_or_else(|e| panic!("{name}: {e}"));
+            assert_eq!(
+                frames.iter().map(|f| f.frame_id).collect::<Vec<_>>(),
+                [0, 1, 2],
+                "{name}"
+            );
+            let cut = cut.unwrap_or_else(|| panic!("{name}: the cut row is not reported"));
+            assert_eq!(cut.line, line, "{name}: {cut}");
+            assert!(cut.to_string().contains("frames.csv:5"), "{cut}");
+            assert!(
+                read_frames(&path).is_err(),
+                "{name}: strict reading refuses it"
+            );
+            assert_eq!(
+                unrecorded(&frames, 6),
+                vec![std::ops::Range { start: 3, end: 6 }],
+                "{name}"
+            );
+        }
+        // A bad row with whole rows after it is damage, not a cut.
+        let mut damaged = whole[..last_row].to_vec();
+        damaged.splice(last_row - 3..last_row - 3, b"x".iter().copied());
+        damaged.extend_from_slice(&whole[last_row..]);
+        std::fs::write(&path, &damaged).unwrap_or_else(|e| panic!("{e}"));
+        let err = read_frames_to_cut(&path)
+            .err()
+            .map(|e| e.to_string())
+            .unwrap_or_default();
+        assert!(err.contains("frames.csv:4"), "{err}");
+        // The whole file: nothing cut, nothing missing but frame 3.
+        std::fs::write(&path, &whole).unwrap_or_else(|e| panic!("{e}"));
+        let (frames, cut) = read_frames_to_cut(&path).unwrap_or_else(|e| panic!("{e}"));
+        assert!(cut.is_none());
+        assert_eq!(
+            unrecorded(&frames, 5),
+            vec![std::ops::Range { start: 3, end: 4 }]
+        );
+        assert_eq!(unrecorded(&frames, 3), []);
         let _ = std::fs::remove_dir_all(&dir);
     }
 

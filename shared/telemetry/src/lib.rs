@@ -402,18 +402,28 @@ pub fn chrome_trace_events(events: &[SpanEvent]) -> Vec<serde_json::Value> {
 }
 
 /// Writes `events` as a Chrome trace (JSON object format, [`chrome_trace_events`]) to
-/// `path`; returns the number of span events written.
+/// `path`, whole or not at all: into `<path>.tmp`, renamed over `path` once complete, so a
+/// write cut short (a full disk) leaves no invalid JSON (the span files it was made from
+/// stay). Returns the number of span events written.
 pub fn write_chrome_trace(events: &[SpanEvent], path: &Path) -> Result<usize, TelemetryError> {
     let json =
         serde_json::json!({"traceEvents": chrome_trace_events(events), "displayTimeUnit": "ms"});
-    let io_error = |source| TelemetryError::Io {
-        path: path.to_path_buf(),
-        source,
-    };
-    let file = File::create(path).map_err(io_error)?;
-    let mut out = BufWriter::new(file);
-    serde_json::to_writer(&mut out, &json).map_err(|e| io_error(e.into()))?;
-    out.flush().map_err(io_error)?;
+    let mut tmp = path.as_os_str().to_owned();
+    tmp.push(".tmp");
+    let tmp = PathBuf::from(tmp);
+    let written = File::create(&tmp).and_then(|file| {
+        let mut out = BufWriter::new(file);
+        serde_json::to_writer(&mut out, &json)?;
+        out.into_inner().map_err(|e| e.into_error())?.sync_data()?;
+        std::fs::rename(&tmp, path)
+    });
+    written.map_err(|source| {
+        let _ = std::fs::remove_file(&tmp);
+        TelemetryError::Io {
+            path: path.to_path_buf(),
+            source,
+        }
+    })?;
     Ok(events.len())
 }
 

@@ -10,6 +10,7 @@
 //!   ground-station link (`watch`).
 
 pub mod latency_plots;
+pub mod records_check;
 pub mod trace_picture;
 #[cfg(feature = "link")]
 pub mod watch;
@@ -19,7 +20,7 @@ use clap::{Parser, Subcommand};
 use linetrack_ipc::{Bus, Scope, Shutdown};
 use linetrack_msgs::{Command, Control, StageKind, Topic};
 use linetrack_pipeline_config::{MatcherPolicy, Pacing, PipelineConfig};
-use linetrack_run_record::{Report, read_events, read_frames};
+use linetrack_run_record::Report;
 use linetrack_scene_render::Preset;
 use linetrack_supervisor::{LiveStatus, Mode, RunOptions};
 use linetrack_vision::DetectorKind;
@@ -41,9 +42,9 @@ const DEFAULT_FRAMES: usize = 100;
     linetrack run --single-process                  # same stages on threads (baseline)
     linetrack run --camera 'v4l2src ! videoconvert ! video/x-raw,format=GRAY8 ! appsink' \\
         --calibration camchain.yaml --duration 60   # a live side-by-side stereo camera
-    linetrack replay out/runs/latest/recording.mcap # a recorded run's frames through the pipeline again
+    linetrack replay ~/.local/state/linetrack/runs/latest/recording.mcap   # a recorded run again
     linetrack ctl swap-detector fld                 # while a run is going, from another shell
-    linetrack report out/runs/latest                # latency report + latency and trace pictures
+    linetrack report                                # the newest run: latency report and pictures
 
 A run folder holds frames.csv, events.csv, poses.tum (TUM), summary.json (how the run ended,
 the report, and with ground truth `metrics`: the names of linetrack-vo's metrics.json).
@@ -145,10 +146,11 @@ pub struct ReplayArgs {
 /// `linetrack ctl`.
 #[derive(Debug, clap::Args)]
 pub struct CtlArgs {
-    /// The running pipeline's run folder (default: the newest run; the service's:
-    /// /var/lib/linetrack/runs/latest).
-    #[arg(long, env = "LINETRACK_RUN_DIR", default_value = "out/runs/latest")]
-    pub run_dir: PathBuf,
+    /// The running pipeline's run folder (default: the newest run of the default runs
+    /// folder, `$XDG_STATE_HOME/linetrack/runs/latest` or
+    /// `~/.local/state/linetrack/runs/latest`; the service's: /var/lib/linetrack/runs/latest).
+    #[arg(long, env = "LINETRACK_RUN_DIR")]
+    pub run_dir: Option<PathBuf>,
     /// The command.
     #[command(subcommand)]
     pub action: CtlAction,
@@ -171,9 +173,21 @@ pub enum CtlAction {
 /// `linetrack report`.
 #[derive(Debug, clap::Args)]
 pub struct ReportArgs {
-    /// Run folder (default: the newest run; the service's: /var/lib/linetrack/runs/latest).
-    #[arg(env = "LINETRACK_RUN_DIR", default_value = "out/runs/latest")]
-    pub run_dir: PathBuf,
+    /// Run folder (default: the newest run of the default runs folder,
+    /// `$XDG_STATE_HOME/linetrack/runs/latest` or `~/.local/state/linetrack/runs/latest`;
+    /// the service's: /var/lib/linetrack/runs/latest).
+    #[arg(env = "LINETRACK_RUN_DIR")]
+    pub run_dir: Option<PathBuf>,
+}
+
+/// `run_dir`, or the newest run of the default runs folder.
+fn run_dir_or_latest(run_dir: Option<&Path>) -> anyhow::Result<PathBuf> {
+    match run_dir {
+        Some(dir) => Ok(dir.to_path_buf()),
+        None => linetrack_pipeline_config::default_runs_dir()
+            .map(|runs| runs.join("latest"))
+            .map_err(|e| anyhow::anyhow!("{e}")),
+    }
 }
 
 /// Runs a command.
@@ -194,7 +208,7 @@ pub fn main(cli: Cli) -> anyhow::Result<()> {
         }
         Cmd::Ctl(args) => ctl(&args),
         Cmd::Report(args) => {
-            print!("{}", report(&args.run_dir)?);
+            print!("{}", report(&run_dir_or_latest(args.run_dir.as_deref())?)?);
             Ok(())
         }
         #[cfg(feature = "link")]
@@ -321,7 +335,19 @@ pub fn run(args: &RunArgs) -> anyhow::Result<PathBuf> {
         bin_dir: None,
         live_status: !args.quiet,
     };
-    let outcome = linetrack_supervisor::run(&config, &options, &Shutdown::on_signals()?)?;
+    let outcome = match linetrack_supervisor::run(&config, &options, &Shutdown::on_signals()?) {
+        Ok(outcome) => outcome,
+        Err(e) => {
+            // A run that failed once it had a folder still has a report: print it first.
+            if let Some(linetrack_supervisor::RunFolder(dir)) = e.downcast_ref() {
+                match report(dir) {
+                    Ok(text) => print!("\n{text}"),
+                    Err(unreadable) => eprintln!("no report of {}: {unreadable:#}", dir.display()),
+                }
+            }
+            return Err(e);
+        }
+    };
     println!();
     print!("{}", report(&outcome.run_dir)?);
     if outcome.interrupted {
@@ -332,17 +358,21 @@ pub fn run(args: &RunArgs) -> anyhow::Result<PathBuf> {
 
 /// `linetrack report`: the text, after writing the latency pictures and the trace overview
 /// into the run folder.
+///
+/// A folder cut short (a full disk, a killed supervisor) is read up to its last whole row;
+/// the text then says which row was cut, which frames have no row and how the run ended
+/// ([`records_check`]).
 pub fn report(run_dir: &Path) -> anyhow::Result<String> {
-    let frames = read_frames(&run_dir.join("frames.csv"))
-        .with_context(|| format!("{} holds no finished run", run_dir.display()))?;
-    let events = read_events(&run_dir.join("events.csv"))?;
-    let report = Report::new(&frames, &events);
+    let records = records_check::RunRecords::read(run_dir)
+        .with_context(|| format!("{} holds no run records", run_dir.display()))?;
+    let (frames, events) = (&records.frames, &records.events);
+    let report = Report::new(frames, events);
     let budget = PipelineConfig::from_file(&run_dir.join("pipeline.toml"))
         .map(|c| c.budget)
         .ok();
-    let [distributions, timeline] =
-        latency_plots::write(run_dir, &frames, &events, budget.as_ref())?;
+    let [distributions, timeline] = latency_plots::write(run_dir, frames, events, budget.as_ref())?;
     let mut text = format!("run {}\n{}", run_dir.display(), report.to_text());
+    text.push_str(&records.gaps_text());
     for e in events.iter().filter(|e| e.kind != "stale-cleanup") {
         let at = e
             .frame_id
@@ -387,9 +417,10 @@ pub fn live_status(run_dir: &Path) -> anyhow::Result<LiveStatus> {
 
 /// `linetrack ctl`.
 pub fn ctl(args: &CtlArgs) -> anyhow::Result<()> {
-    let status = live_status(&args.run_dir)?;
+    let run_dir = run_dir_or_latest(args.run_dir.as_deref())?;
+    let status = live_status(&run_dir)?;
     if status.finished() {
-        bail!("the run in {} has finished", args.run_dir.display());
+        bail!("the run in {} has finished", run_dir.display());
     }
     match &args.action {
         CtlAction::SwapDetector { detector, timeout } => {
@@ -421,7 +452,7 @@ pub fn ctl(args: &CtlArgs) -> anyhow::Result<()> {
             // Keep the request's publisher alive until the swap shows in the run's status.
             while Instant::now() < deadline {
                 std::thread::sleep(Duration::from_millis(100));
-                let now = live_status(&args.run_dir)?;
+                let now = live_status(&run_dir)?;
                 if now.detector == detector.name() {
                     println!("{} took over", detector.name());
                     return Ok(());
