@@ -13,7 +13,7 @@
 //! is no predicted position (the odometry gives LBD predicted positions once it has a
 //! motion).
 
-use crate::line_truth;
+use crate::line_truth::{self, Verdict};
 use crate::tracking::{Illumination, left_depth, load_frame};
 use anyhow::Context;
 use linetrack_datasets::StereoSequence;
@@ -38,8 +38,11 @@ pub struct Tally {
     pub matches: usize,
     /// Matches with a ground truth for their previous segment.
     pub judged: usize,
-    /// Judged matches on the same physical line.
+    /// Judged matches on the same physical segment.
     pub correct: usize,
+    /// Judged matches on the same straight line but not overlapping the segment (wrong,
+    /// yet a line residual would not tell).
+    pub disjoint: usize,
 }
 
 impl Tally {
@@ -180,10 +183,12 @@ impl Benchmark {
                         else {
                             continue;
                         };
-                        if let Some(correct) = line_truth::judge(&rig, samples, motion, seen) {
-                            tally.judged += 1;
-                            tally.correct += usize::from(correct);
-                        }
+                        let Some(verdict) = line_truth::judge(&rig, samples, motion, seen) else {
+                            continue;
+                        };
+                        tally.judged += 1;
+                        tally.correct += usize::from(verdict == Verdict::Correct);
+                        tally.disjoint += usize::from(verdict == Verdict::Disjoint);
                     }
                 }
             }
@@ -214,6 +219,8 @@ pub struct Row {
     pub judged: usize,
     /// Correct matches.
     pub correct: usize,
+    /// Wrong matches on the right line, disjoint from the segment.
+    pub disjoint: usize,
     /// Correct over judged.
     pub precision: Option<f64>,
 }
@@ -232,6 +239,7 @@ impl Row {
                 matches: tally.matches,
                 judged: tally.judged,
                 correct: tally.correct,
+                disjoint: tally.disjoint,
                 precision: tally.precision(),
             })
             .collect()
@@ -241,8 +249,8 @@ impl Row {
 /// The report's table: a line per sequence and illumination, both matchers side by side.
 pub fn markdown(results: &[(String, bool, Outcome)]) -> String {
     let mut table = String::from(
-        "| sequence | gain jumps | pairs | LBD matches | judged | correct | precision | ℓ1 matches | judged | correct | precision |\n\
-         |---|---|---|---|---|---|---|---|---|---|---|\n",
+        "| sequence | gain jumps | pairs | LBD matches | judged | correct | disjoint | precision | ℓ1 matches | judged | correct | disjoint | precision |\n\
+         |---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
     );
     for (sequence, jumps, outcome) in results {
         let cells: Vec<String> = outcome
@@ -250,7 +258,10 @@ pub fn markdown(results: &[(String, bool, Outcome)]) -> String {
             .iter()
             .map(|t| {
                 let precision = t.precision().map_or("–".to_string(), |p| format!("{p:.3}"));
-                format!("{} | {} | {} | {precision}", t.matches, t.judged, t.correct)
+                format!(
+                    "{} | {} | {} | {} | {precision}",
+                    t.matches, t.judged, t.correct, t.disjoint
+                )
             })
             .collect();
         let _ = writeln!(

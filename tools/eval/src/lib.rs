@@ -340,7 +340,8 @@ fn f2f_section(results: &[(String, bool, f2f_lines::Outcome)], period_s: f64) ->
          judged), or triangulated from the stereo partner both matchers agree on (real sequences; segments within the \
          odometry's angle of horizontal are not triangulated). It is correct when that segment, moved by the \
          ground-truth motion and projected into the current frame, lies within {} px of the matched segment's line \
-         (median over points along it) and overlaps it. Gain jumps: a gain α ~ U(0.5, 2.5) and bias β ~ U(0, 20) every \
+         (median over points along it) and overlaps it; *disjoint*: wrong, on that line but not overlapping it (another \
+         part of the same straight edge, which a line residual does not tell apart). Gain jumps: a gain α ~ U(0.5, 2.5) and bias β ~ U(0, 20) every \
          {period_s} s on both images (the starred rows' changes). Per sequence: `f2f-lines.csv`.\n\n{}",
         line_truth::MAX_ERROR_PX,
         f2f_lines::markdown(results)
@@ -537,7 +538,8 @@ pub fn run(args: &Args) -> anyhow::Result<String> {
 
         if let Some(benchmark) = &mut f2f_benchmark {
             progress.step(format!("frame-to-frame lines {}", entry.name));
-            for (jumps, illumination) in [(false, None), (true, Some(&simulated as _))] {
+            let with_jumps: tracking::Illumination<'_> = Some(&simulated);
+            for (jumps, illumination) in [(false, None), (true, with_jumps)] {
                 let outcome =
                     benchmark.run(&entry.dir, &entry.sequence, entry.frames, illumination)?;
                 progress.inc(entry.frames as u64);

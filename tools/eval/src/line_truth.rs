@@ -29,6 +29,18 @@ const STEREO_SAMPLES: usize = 9;
 /// Points closer than this to the current camera's plane are not projected, metres.
 const MIN_DEPTH_M: f64 = 0.05;
 
+/// What [`judge`] says of a match.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Verdict {
+    /// The same physical segment: on its projected line and overlapping it.
+    Correct,
+    /// On the projected line but not overlapping it: another part of the same straight
+    /// edge (a dashed lane marking's next dash, another fragment of a long edge).
+    Disjoint,
+    /// Off the projected line: another edge.
+    Off,
+}
+
 /// The left camera ray through `pixel` at depth `z`.
 fn back_project(rig: &StereoRig, pixel: Point, z: f64) -> Point3<f64> {
     Point3::new(
@@ -91,15 +103,15 @@ pub fn samples_from_stereo(
 
 /// Whether `matched` (a segment of frame k) is where the previous segment whose 3-D
 /// `samples` (previous left camera frame) are given lies after the true motion
-/// `current_from_previous`: the samples' median distance to its line at most
-/// [`MAX_ERROR_PX`] and their extent along it overlapping it. `None` when it cannot be
+/// `current_from_previous`: correct when the samples' median distance to its line is at
+/// most [`MAX_ERROR_PX`] and their extent along it overlaps it. `None` when it cannot be
 /// judged (a degenerate segment, or too few samples in front of the camera).
 pub fn judge(
     rig: &StereoRig,
     samples: &[Point3<f64>],
     current_from_previous: &Isometry3<f64>,
     matched: &Segment,
-) -> Option<bool> {
+) -> Option<Verdict> {
     let d = matched.end - matched.start;
     let length = d.norm();
     if !(length > 0.0 && length.is_finite()) {
@@ -129,7 +141,13 @@ pub fn judge(
         (lo.min(t), hi.max(t))
     });
     let overlap = high.min(length) - low.max(0.0);
-    Some(median <= MAX_ERROR_PX && overlap > 0.0)
+    Some(if median > MAX_ERROR_PX {
+        Verdict::Off
+    } else if overlap > 0.0 {
+        Verdict::Correct
+    } else {
+        Verdict::Disjoint
+    })
 }
 
 #[cfg(test)]
@@ -186,7 +204,7 @@ mod tests {
         );
         assert_eq!(
             judge(&rig, &samples, &current_from_previous, &truth),
-            Some(true)
+            Some(Verdict::Correct)
         );
         // A detector's fragment of it (its middle third), and 1.5 px off: still correct.
         let fragment = Segment::new(
@@ -195,7 +213,7 @@ mod tests {
         );
         assert_eq!(
             judge(&rig, &samples, &current_from_previous, &fragment),
-            Some(true)
+            Some(Verdict::Correct)
         );
         assert_eq!(
             judge(
@@ -204,7 +222,7 @@ mod tests {
                 &current_from_previous,
                 &shifted(&truth, 1.5)
             ),
-            Some(true)
+            Some(Verdict::Correct)
         );
         // A parallel edge 3 px away: wrong.
         assert_eq!(
@@ -214,7 +232,7 @@ mod tests {
                 &current_from_previous,
                 &shifted(&truth, 3.0)
             ),
-            Some(false)
+            Some(Verdict::Off)
         );
         // The same line beyond the segment's end: on the line, but not the same segment.
         let beyond = Segment::new(
@@ -223,12 +241,12 @@ mod tests {
         );
         assert_eq!(
             judge(&rig, &samples, &current_from_previous, &beyond),
-            Some(false)
+            Some(Verdict::Disjoint)
         );
         // Judged against the previous position (no motion), the true match is wrong.
         assert_eq!(
             judge(&rig, &samples, &Isometry3::identity(), &truth),
-            Some(false)
+            Some(Verdict::Off)
         );
         // A degenerate match, or too few samples in front of the camera: not judged.
         let point = Segment::new(truth.start, truth.start);
