@@ -2,10 +2,12 @@
 //! illumination preset) and the real EuRoC excerpt, and writes a Markdown report with PNG
 //! plots: Table I (tracking: matches per frame and inlier ratio), Table II (odometry: RPE,
 //! ATE, drift and step ratio, with and without simulated illumination changes), Table III
-//! (cost per frame),
+//! (cost per frame), frame-to-frame line tracking judged against ground truth (`f2f_lines`),
 //! and stereo matching scored on the real Middlebury pairs (`linetrack-stereo-bench`).
 #![warn(missing_docs)]
 
+mod f2f_lines;
+mod line_truth;
 mod odometry;
 mod tracking;
 
@@ -35,7 +37,8 @@ use tracking::{COMBINATIONS, TrackingResult, median};
 Generated sequences are made on first use in <sequences>/<preset> and reused. The report is
 <output>/report.md; plots are PNG files beside it; odometry-runs.csv holds every Table II run
 (sequence, seed, configuration, lost frames, ATE, drift, step ratio), for comparing two
---odometry-config files run by run.\n\n", linetrack_progress::progress_help!("work"), "\n\n", linetrack_vision::images_help!())
+--odometry-config files run by run; f2f-lines.csv holds the frame-to-frame line benchmark
+(matches judged against ground truth) per sequence, gain jumps or not, and matcher.\n\n", linetrack_progress::progress_help!("work"), "\n\n", linetrack_vision::images_help!())
 )]
 pub struct Args {
     /// Small settings: three presets, 8 frames each (the EuRoC excerpt: 10 frames).
@@ -85,6 +88,10 @@ pub struct Args {
     /// Leave the odometry (Table II) out: tracking, cost and the Middlebury section only.
     #[arg(long)]
     pub no_odometry: bool,
+    /// Leave the frame-to-frame line benchmark against ground truth out (every sequence
+    /// with and without the simulated gain jumps, both matchers).
+    #[arg(long)]
+    pub no_f2f_lines: bool,
     /// Front-end configuration for Table I and the Middlebury section (TOML, see
     /// configs/frontend.toml; default: the built-in defaults).
     #[arg(long)]
@@ -323,9 +330,28 @@ fn middlebury_section(
     ))
 }
 
+/// The section of the frame-to-frame line benchmark (`f2f_lines`), its table from `results`.
+fn f2f_section(results: &[(String, bool, f2f_lines::Outcome)], period_s: f64) -> String {
+    format!(
+        "\n## Frame-to-frame line tracking against ground truth\n\nLSD segments of the left images of consecutive \
+         frames (stretched as the odometry does), matched frame to frame by each matcher as the odometry matches them, \
+         from where they were (no predicted positions). A match is judged when its previous segment has a 3-D position: \
+         from the exact depth map (generated sequences; depths beyond 13.1 m are not stored, so far segments are not \
+         judged), or triangulated from the stereo partner both matchers agree on (real sequences; segments within the \
+         odometry's angle of horizontal are not triangulated). It is correct when that segment, moved by the \
+         ground-truth motion and projected into the current frame, lies within {} px of the matched segment's line \
+         (median over points along it) and overlaps it; *disjoint*: wrong, on that line but not overlapping it (another \
+         part of the same straight edge, which a line residual does not tell apart). Gain jumps: a gain α ~ U(0.5, 2.5) and bias β ~ U(0, 20) every \
+         {period_s} s on both images (the starred rows' changes). Per sequence: `f2f-lines.csv`.\n\n{}",
+        line_truth::MAX_ERROR_PX,
+        f2f_lines::markdown(results)
+    )
+}
+
 /// The work of Tables I and II in frames (one frame through one configuration), for the
-/// progress: every detector × matcher over each sequence, then every odometry
-/// configuration over each sequence, its starred variant and its further seeds.
+/// progress: every detector × matcher over each sequence, the frame-to-frame line
+/// benchmark with and without gain jumps, then every odometry configuration over each
+/// sequence, its starred variant and its further seeds.
 fn work_units(args: &Args, entries: &[Entry]) -> u64 {
     entries
         .iter()
@@ -338,7 +364,8 @@ fn work_units(args: &Args, entries: &[Entry]) -> u64 {
                     1 + entry.more_seeds.len() + usize::from(entry.perturb);
                 odometry::CONFIGURATIONS.len() * runs_per_configuration
             };
-            ((tracking + odometry) * entry.frames) as u64
+            let f2f_lines = if args.no_f2f_lines { 0 } else { 2 };
+            ((tracking + odometry + f2f_lines) * entry.frames) as u64
         })
         .sum()
 }
@@ -396,6 +423,12 @@ pub fn run(args: &Args) -> anyhow::Result<String> {
     );
     let mut plots = Vec::new();
     let mut baselines = String::new();
+    let mut f2f_benchmark = if args.no_f2f_lines {
+        None
+    } else {
+        Some(f2f_lines::Benchmark::new(&odometry_base)?)
+    };
+    let (mut f2f_results, mut f2f_rows) = (Vec::new(), Vec::new());
     let progress = Progress::new("eval frames", work_units(args, &entries), args.quiet);
     for entry in &entries {
         progress.step(format!("tracking {}", entry.name));
@@ -501,6 +534,18 @@ pub fn run(args: &Args) -> anyhow::Result<String> {
                 false,
             )?;
             plots.push(path);
+        }
+
+        if let Some(benchmark) = &mut f2f_benchmark {
+            progress.step(format!("frame-to-frame lines {}", entry.name));
+            let with_jumps: tracking::Illumination<'_> = Some(&simulated);
+            for (jumps, illumination) in [(false, None), (true, with_jumps)] {
+                let outcome =
+                    benchmark.run(&entry.dir, &entry.sequence, entry.frames, illumination)?;
+                progress.inc(entry.frames as u64);
+                f2f_rows.extend(f2f_lines::Row::of(&entry.name, jumps, &outcome));
+                f2f_results.push((entry.name.clone(), jumps, outcome));
+            }
         }
 
         if args.no_odometry {
@@ -672,11 +717,19 @@ pub fn run(args: &Args) -> anyhow::Result<String> {
          line (median over five points along it). The real excerpt has no depth maps: its inlier ratio is not judged (–).",
         plot_list.join("\n")
     );
+    let f2f_section = if args.no_f2f_lines {
+        String::new()
+    } else {
+        f2f_section(&f2f_results, period)
+    };
     let stereo_section = middlebury_section(args, &frontend)?;
-    let report = format!("{report}{stereo_section}");
+    let report = format!("{report}{f2f_section}{stereo_section}");
     let report_path = args.output.join("report.md");
     std::fs::write(&report_path, report)
         .with_context(|| format!("cannot write {}", report_path.display()))?;
+    if !f2f_rows.is_empty() {
+        odometry::write_rows(&args.output.join("f2f-lines.csv"), &f2f_rows)?;
+    }
     if !odometry_rows.is_empty() {
         odometry::write_rows(&args.output.join("odometry-runs.csv"), &odometry_rows)?;
     }

@@ -4,7 +4,7 @@
 use anyhow::Context;
 use linetrack_datasets::StereoSequence;
 use linetrack_odometry::{Features, Odometry, OdometryConfig, metrics};
-use linetrack_vision::{MatcherKind, perturb};
+use linetrack_vision::MatcherKind;
 use nalgebra::Isometry3;
 
 /// The odometry configurations compared (all with LSD).
@@ -153,8 +153,8 @@ impl RunRow {
     }
 }
 
-/// Writes `rows` as CSV to `path`.
-pub fn write_rows(path: &std::path::Path, rows: &[RunRow]) -> anyhow::Result<()> {
+/// Writes `rows` (of this table or another) as CSV to `path`.
+pub fn write_rows<T: serde::Serialize>(path: &std::path::Path, rows: &[T]) -> anyhow::Result<()> {
     let context = || format!("cannot write {}", path.display());
     let mut writer = csv::Writer::from_path(path).with_context(context)?;
     for row in rows {
@@ -178,22 +178,11 @@ pub fn run(
         ..base.clone()
     };
     let mut odometry = Odometry::new(config, sequence.rig)?;
-    let start_ns = sequence.frames.first().map_or(0, |f| f.timestamp_ns);
     let mut run = OdometryRun::default();
     let mut truth = Vec::new();
     for k in 0..frames.min(sequence.frames.len()) {
-        let frame = sequence.load_frame(k).map_err(|e| anyhow::anyhow!("{e}"))?;
-        let (left, right) = match illumination {
-            Some(at) => {
-                let (gain, bias) = at((frame.timestamp_ns - start_ns) as f64 * 1e-9);
-                (
-                    perturb(&frame.left, gain, bias)?,
-                    perturb(&frame.right, gain, bias)?,
-                )
-            }
-            None => (frame.left, frame.right),
-        };
-        let result = odometry.track(&left, &right)?;
+        let frame = crate::tracking::load_frame(sequence, k, illumination)?;
+        let result = odometry.track(&frame.left, &frame.right)?;
         run.lost += usize::from(result.lost);
         run.estimate.push(result.pose);
         truth.push(frame.pose);

@@ -12,11 +12,11 @@
 //! with fewer than three samples is not judged. Sequences without depth maps (the real
 //! EuRoC excerpt) report counts only.
 
-use linetrack_datasets::StereoSequence;
 use linetrack_datasets::depth::{DepthMap, read_depth_png};
+use linetrack_datasets::{StereoFrame, StereoSequence};
 use linetrack_geometry::{MatchCase, Point, Segment, StereoRig};
 use linetrack_vision::{
-    DetectorKind, FeatureMatch, FrontendConfig, GrayImage, LinePairMatcher, MatcherKind, perturb,
+    DetectorKind, FeatureMatch, FrontendConfig, LinePairMatcher, MatcherKind, perturb,
 };
 use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion};
 use std::path::Path;
@@ -80,8 +80,25 @@ pub fn median(values: &[f64]) -> f64 {
     v.get(v.len() / 2).copied().unwrap_or(f64::NAN)
 }
 
+/// Frame `k` of `sequence`, both images perturbed by `illumination(t)` when given (`t`:
+/// seconds since the first frame).
+pub fn load_frame(
+    sequence: &StereoSequence,
+    k: usize,
+    illumination: Illumination<'_>,
+) -> anyhow::Result<StereoFrame> {
+    let mut frame = sequence.load_frame(k).map_err(|e| anyhow::anyhow!("{e}"))?;
+    if let Some(at) = illumination {
+        let start_ns = sequence.frames.first().map_or(0, |f| f.timestamp_ns);
+        let (gain, bias) = at(frame.timestamp_ns.saturating_sub(start_ns) as f64 * 1e-9);
+        frame.left = perturb(&frame.left, gain, bias)?;
+        frame.right = perturb(&frame.right, gain, bias)?;
+    }
+    Ok(frame)
+}
+
 /// The depth map of the left image of a frame, if the dataset has one.
-fn left_depth(dataset: &Path, timestamp_ns: u64) -> Option<DepthMap> {
+pub fn left_depth(dataset: &Path, timestamp_ns: u64) -> Option<DepthMap> {
     let path = dataset.join(format!("mav0/depth0/data/{timestamp_ns}.png"));
     path.is_file().then(|| read_depth_png(&path).ok()).flatten()
 }
@@ -167,20 +184,6 @@ pub fn evaluate(
     );
     let mut result = TrackingResult::default();
     let n = frames.min(sequence.frames.len());
-    let start_ns = sequence.frames.first().map_or(0, |f| f.timestamp_ns);
-    let load = |k: usize| -> anyhow::Result<(GrayImage, GrayImage)> {
-        let f = sequence.load_frame(k).map_err(|e| anyhow::anyhow!("{e}"))?;
-        match illumination {
-            Some(at) => {
-                let (gain, bias) = at((f.timestamp_ns - start_ns) as f64 * 1e-9);
-                Ok((
-                    perturb(&f.left, gain, bias)?,
-                    perturb(&f.right, gain, bias)?,
-                ))
-            }
-            None => Ok((f.left, f.right)),
-        }
-    };
     // Each frame is detected and described once, in its stereo run; the frame-to-frame
     // pass matches the left features of consecutive stereo runs.
     let mut previous: Option<(
@@ -191,7 +194,7 @@ pub fn evaluate(
     let mut f2f_matches = Vec::new();
     for k in 0..n {
         let entry = &sequence.frames[k];
-        let (left, right) = load(k)?;
+        let StereoFrame { left, right, .. } = load_frame(sequence, k, illumination)?;
         let depth = left_depth(dataset, entry.timestamp_ns);
         let stereo = pair.run(MatchCase::Stereo, &left, &right)?;
         let mut counts = FrameCount::default();

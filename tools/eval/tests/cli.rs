@@ -1,6 +1,6 @@
 //! Runs `linetrack-eval --quick` as CI does and checks the report: three tables with a row
-//! for every sequence and case, plots that exist, and inlier ratios that say the front end
-//! works on easy generated data. The real sequences have a test of their own, without the
+//! for every sequence and case, the frame-to-frame line benchmark's counts, plots that
+//! exist, and inlier ratios that say the front end works on easy generated data. The real sequences have a test of their own, without the
 //! generated ones.
 //!
 //! Both tests run 3 frames of every sequence (generated and real): two frame-to-frame steps
@@ -89,6 +89,52 @@ fn table2_row(report: &str, sequence: &str) -> Vec<String> {
         .collect()
 }
 
+/// The counts of the frame-to-frame line benchmark's row for `sequence` with or without
+/// gain jumps: frame pairs, then matches, judged, correct, disjoint for LBD and for ℓ1.
+fn f2f_counts(report: &str, sequence: &str, jumps: bool) -> [usize; 9] {
+    let section = report
+        .split("## Frame-to-frame line tracking against ground truth")
+        .nth(1)
+        .unwrap_or_else(|| panic!("no frame-to-frame line section"));
+    let prefix = format!("| {sequence} | {} |", if jumps { "yes" } else { "no" });
+    let row = section
+        .lines()
+        .find(|l| l.starts_with(&prefix))
+        .unwrap_or_else(|| panic!("no row {prefix}"));
+    let cells: Vec<&str> = row
+        .split('|')
+        .map(str::trim)
+        .filter(|c| !c.is_empty())
+        .collect();
+    assert_eq!(cells.len(), 13, "{row}");
+    let count = |k: usize| cells[k].parse::<usize>().unwrap();
+    [2, 3, 4, 5, 6, 8, 9, 10, 11].map(count)
+}
+
+/// The frame-to-frame line rows of `sequence` were measured: with and without gain jumps,
+/// each matcher with matches, judged ones and correct ones among them, and one CSV row per
+/// matcher and variant.
+fn assert_f2f_rows(report: &str, csv: &str, sequence: &str) {
+    for jumps in [false, true] {
+        let [pairs, counts @ ..] = f2f_counts(report, sequence, jumps);
+        assert_eq!(pairs, 2, "3 frames: 2 pairs");
+        for tally in counts.chunks(4) {
+            let (matches, judged, correct, disjoint) = (tally[0], tally[1], tally[2], tally[3]);
+            assert!(
+                matches >= judged && judged >= correct + disjoint && correct > 0,
+                "{sequence} jumps {jumps}: {counts:?}"
+            );
+        }
+    }
+    assert_eq!(
+        csv.lines()
+            .filter(|l| l.starts_with(&format!("{sequence},")))
+            .count(),
+        4,
+        "{csv}"
+    );
+}
+
 /// The overall ratio a step-ratio cell starts with.
 fn overall_step_ratio(cell: &str) -> f64 {
     cell.split(" / ")
@@ -141,6 +187,10 @@ fn quick_report_has_every_table_row_and_plot() {
         report.contains("| normal* |"),
         "the simulated illumination row"
     );
+    let csv = std::fs::read_to_string(dir.join("report/f2f-lines.csv")).unwrap();
+    for sequence in ["normal", "hdr-flicker", "left-right-mismatch"] {
+        assert_f2f_rows(&report, &csv, sequence);
+    }
     assert_eq!(
         report
             .lines()
@@ -196,6 +246,9 @@ fn real_data_quick_report_includes_the_euroc_excerpt() {
     for ratio in [&kitti[1], &kitti[3]] {
         assert!((overall_step_ratio(ratio) - 1.0).abs() < 0.1, "{kitti:?}");
     }
+    // Frame-to-frame lines on the drive, judged against stereo triangulation and the poses.
+    let csv = std::fs::read_to_string(dir.join("report/f2f-lines.csv")).unwrap();
+    assert_f2f_rows(&report, &csv, "KITTI raw 2011_09_26_drive_0001_sync");
     let euroc = table2_row(&report, "EuRoC V1_01_easy_micro");
     assert!(
         euroc.iter().skip(1).step_by(2).all(|c| c == "–"),
