@@ -400,8 +400,10 @@ impl MotionTracker {
             &mut stats,
         );
         self.triangulate_points(images, &points_l, &mut lists.fresh, &limits, &mut stats);
-        self.observe_right_columns(&mut lists.observations, &lists.fresh);
-        observe_right_lines(&mut lists.observations, &lists.fresh, &lines);
+        if self.config.motion.stereo_reprojection {
+            self.observe_right_columns(&mut lists.observations, &lists.fresh);
+            observe_right_lines(&mut lists.observations, &lists.fresh, &lines);
+        }
         let verdict = self.estimate(&lists.observations, &mut stats);
         Ok(self.conclude(verdict, previous, points_l, lists, stats))
     }
