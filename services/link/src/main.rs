@@ -61,6 +61,6 @@ fn forward(
 #[cfg(not(feature = "zenoh"))]
 fn forward(_: &PipelineConfig, _: &Bus, _: &Shutdown, _: &StageArgs) -> anyhow::Result<()> {
     anyhow::bail!(
-        "this linetrack-link was built without zenoh: build with `--features linetrack/link` (README, \"Ground-station link\")"
+        "this linetrack-link was built without zenoh: build with `--features linetrack/link` (docs/link.md, \"Ground-station link\")"
     )
 }

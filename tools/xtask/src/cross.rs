@@ -116,7 +116,7 @@ const RUN_CONFIG: &str = "configs/emulation.toml";
 const MAX_PIPELINE_FRAMES: usize = 11;
 
 /// How far the aarch64 poses may lie from the native ones (the same commands, the same
-/// frames). Measured on the EuRoC excerpt (README, "Cross-building for aarch64"): the
+/// frames). Measured on the EuRoC excerpt (docs/development.md, "Cross-building for aarch64"): the
 /// pipeline's poses (`poses.tum`, written to 1 µm and 1e-6 per quaternion component) were
 /// equal, `linetrack-vo`'s (to 1 nm) differed by at most 3.3e-9 m and 2.0e-7° over 30
 /// frames (7.8e-9 m, 2.3e-7° over all 95): floating point's last bits (likely GCC's fused
