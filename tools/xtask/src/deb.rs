@@ -322,6 +322,22 @@ fn check(deb: &Path, root: &Path) -> anyhow::Result<()> {
             format!("in the tree: {present}, in DEBIAN/conffiles: {listed}")
         });
     }
+    // The README's book: every page of docs/ beside it, so its links resolve.
+    let pages = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../docs");
+    let mut names: Vec<std::ffi::OsString> = std::fs::read_dir(&pages)
+        .with_context(|| format!("listing {}", pages.display()))?
+        .filter_map(|entry| entry.ok().map(|e| e.file_name()))
+        .filter(|name| Path::new(name).extension().is_some_and(|e| e == "md"))
+        .collect();
+    names.sort();
+    for name in &names {
+        let installed = Path::new("usr/share/doc/linetrack/docs").join(name);
+        checks.check(
+            &format!("/{}", installed.display()),
+            root.join(&installed).is_file(),
+            || "missing".to_string(),
+        );
+    }
     let unit = root.join(UNIT);
     let unit_text = std::fs::read_to_string(&unit).unwrap_or_default();
     checks.check(&format!("/{UNIT}"), !unit_text.is_empty(), || {
