@@ -76,8 +76,15 @@ fn snapshot(dir: &Path) -> Vec<(PathBuf, String, u32, u32)> {
 fn folders_and_links_another_user_prepared_are_refused_naming_them_and_nothing_changes() {
     let dir = scratch("planted");
     let sequence = base_sequence(FRAMES);
+    // Their world lies outside the build folder, which may sit in a private home where user
+    // nobody cannot enter (CI's work tree does): a folder of root's everyone may enter.
+    let world = std::env::temp_dir().join(format!("linetrack-e2e-planted-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&world);
+    std::fs::create_dir(&world).unwrap_or_else(|e| panic!("{}: {e}", world.display()));
+    std::fs::set_permissions(&world, std::fs::Permissions::from_mode(0o755))
+        .unwrap_or_else(|e| panic!("{e}"));
     // Root's files the other user aims at, and a shared sticky folder like /tmp.
-    let victims = dir.join("victims");
+    let victims = world.join("victims");
     std::fs::create_dir(&victims).unwrap_or_else(|e| panic!("{e}"));
     for name in PLANTED {
         let victim = victims.join(name);
@@ -85,20 +92,20 @@ fn folders_and_links_another_user_prepared_are_refused_naming_them_and_nothing_c
         std::fs::set_permissions(&victim, std::fs::Permissions::from_mode(0o600))
             .unwrap_or_else(|e| panic!("{e}"));
     }
-    let shared = dir.join("shared");
+    let shared = world.join("shared");
     std::fs::create_dir(&shared).unwrap_or_else(|e| panic!("{e}"));
     std::fs::set_permissions(&shared, std::fs::Permissions::from_mode(0o1777))
         .unwrap_or_else(|e| panic!("{e}"));
     // Their run folder: mode 777, links to root's files (and dangling ones).
     let theirs = shared.join("run");
     as_nobody_sh(
-        &dir,
+        &world,
         r#"mkdir -m 777 "$1" && for f in run.lock pipeline.toml status.json.tmp summary.json.tmp frames.csv latency.png; do ln -s "$2/$f" "$1/$f"; done && ln -s "$2/created-by-root" "$1/events.csv""#,
         &[&theirs, &victims],
     );
     // A link where our runs folder would be (the planted /tmp/out), to root's folder.
     let out_link = shared.join("out");
-    as_nobody_sh(&dir, r#"ln -s "$2" "$1""#, &[&out_link, &victims]);
+    as_nobody_sh(&world, r#"ln -s "$2" "$1""#, &[&out_link, &victims]);
     let watched = || [snapshot(&victims), snapshot(&shared)];
     let before = watched();
 
@@ -146,7 +153,7 @@ fn folders_and_links_another_user_prepared_are_refused_naming_them_and_nothing_c
     // The shared-memory root's parent made by them (`/tmp/linetrack-<uid>` squatted).
     let squatted = PathBuf::from(format!("/tmp/lte2e{}-squat", std::process::id()));
     let _ = std::fs::remove_dir_all(&squatted);
-    as_nobody_sh(&dir, r#"mkdir -m 755 "$1""#, &[&squatted]);
+    as_nobody_sh(&world, r#"mkdir -m 755 "$1""#, &[&squatted]);
     let run_dir = dir.join("ours");
     let config = dir.join("pipeline.toml");
     std::fs::write(
@@ -170,4 +177,5 @@ fn folders_and_links_another_user_prepared_are_refused_naming_them_and_nothing_c
     // Our own run folder, made by the refused run, is ours and owner-only.
     let meta = std::fs::metadata(&run_dir).unwrap_or_else(|e| panic!("{e}"));
     assert_eq!((meta.uid(), meta.mode() & 0o777), (0, 0o700));
+    let _ = std::fs::remove_dir_all(&world);
 }
