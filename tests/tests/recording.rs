@@ -15,10 +15,10 @@ use std::time::Duration;
 const RUN_TIMEOUT: Duration = Duration::from_secs(240);
 
 /// Runs whose poses are compared: nothing may depend on time (as `configs/emulation.toml`):
-/// every frame processed however late, the matcher switched on match counts only, and at
+/// every frame processed however late, the matcher switched on match counts only (not on
+/// its latency nor on the frame's end to end, nor the detector on it), and at
 /// fastest pacing at most 11 frames (what a stage holds), so both runs process every frame.
-const DETERMINISTIC: &str =
-    "[budget]\ndrop_late = false\n[matcher.fallback]\nover_budget = false\n[record]\nmcap = true\n";
+const DETERMINISTIC: &str = "[budget]\ndrop_late = false\n[matcher.fallback]\nover_budget = false\nend_to_end = false\n[detector_fallback]\nend_to_end = false\n[record]\nmcap = true\n";
 const COMPARED_FRAMES: usize = 10;
 
 /// The recorder's binary, built with the `mcap` feature.
