@@ -374,19 +374,24 @@ fn right_line_jacobian_matches_finite_differences() {
     );
 }
 
-/// A car-like forward step of 1 m seen by points 20–80 m away (KITTI's rig) whose previous
-/// depths are right for 70 % of them and 40 % too long for the rest (wrong stereo partners
-/// at too small a disparity), each seen now in the left image and, with its current stereo
-/// partner, in the right one; 0.2 px of noise on every pixel.
-fn forward_step_with_wrong_depths(seed: u64) -> (Isometry3<f64>, Vec<PointObservation>) {
-    let rig = StereoRig {
+/// Roughly KITTI's grey rig.
+fn kitti_rig() -> StereoRig {
+    StereoRig {
         focal_px: 718.0,
         cx_px: 607.0,
         cy_px: 185.0,
         baseline_m: 0.54,
         width_px: 1241,
         height_px: 376,
-    };
+    }
+}
+
+/// A car-like forward step of 1 m seen by points 20–80 m away (KITTI's rig) whose previous
+/// depths are right for 70 % of them and 40 % too long for the rest (wrong stereo partners
+/// at too small a disparity), each seen now in the left image and, with its current stereo
+/// partner, in the right one; 0.2 px of noise on every pixel.
+fn forward_step_with_wrong_depths(seed: u64) -> (Isometry3<f64>, Vec<PointObservation>) {
+    let rig = kitti_rig();
     let truth = pose(0.0, 0.01, 0.0, 0.0, 0.0, -1.0);
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let mut points = Vec::new();
@@ -421,14 +426,7 @@ fn forward_step_with_wrong_depths(seed: u64) -> (Isometry3<f64>, Vec<PointObserv
 
 #[test]
 fn reprojecting_into_the_right_image_rejects_points_whose_depth_disagrees() {
-    let rig = StereoRig {
-        focal_px: 718.0,
-        cx_px: 607.0,
-        cy_px: 185.0,
-        baseline_m: 0.54,
-        width_px: 1241,
-        height_px: 376,
-    };
+    let rig = kitti_rig();
     for seed in 0..5 {
         let (truth, points) = forward_step_with_wrong_depths(seed);
         let step_ratio = |stereo_reprojection: bool| {
