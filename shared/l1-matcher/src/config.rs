@@ -29,6 +29,9 @@ pub struct MatcherConfig {
     pub photometric: Photometric,
     /// Disparity consistency of stereo matches with their neighbours (not in the paper).
     pub consistency: Consistency,
+    /// Frame to frame, for queries placed where the camera's predicted motion puts them
+    /// ([`crate::L1Matcher::match_predicted`]; not in the paper).
+    pub predicted: PredictedSettings,
 }
 
 impl Default for MatcherConfig {
@@ -43,6 +46,31 @@ impl Default for MatcherConfig {
             outlier_filter: OutlierFilter::default(),
             photometric: Photometric::default(),
             consistency: Consistency::default(),
+            predicted: PredictedSettings::default(),
+        }
+    }
+}
+
+/// What differs frame to frame for a query segment that was moved to where the camera's
+/// predicted motion puts it. Only the motion's error is left between such a query and its
+/// true partner: a small displacement, of no common direction (the flow-direction filter
+/// assumes a coherent flow, which a forward motion's radial flow is not, and a prediction's
+/// residual is not either).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct PredictedSettings {
+    /// The displacement gate ([`Gates::max_displacement_px`]) for predicted queries,
+    /// pixels.
+    pub max_displacement_px: f64,
+    /// Whether the flow-direction outlier filter also runs on predicted queries' matches.
+    pub flow_filter: bool,
+}
+
+impl Default for PredictedSettings {
+    fn default() -> Self {
+        Self {
+            max_displacement_px: 15.0,
+            flow_filter: false,
         }
     }
 }
@@ -386,7 +414,7 @@ impl MatcherConfig {
         let f = &self.outlier_filter;
         let p = &self.photometric;
         let c = &self.consistency;
-        let checks: [(&'static str, f64, bool, &'static str); 28] = [
+        let checks: [(&'static str, f64, bool, &'static str); 29] = [
             (
                 "lambda",
                 self.lambda,
@@ -475,6 +503,12 @@ impl MatcherConfig {
                 "gates.max_displacement_px",
                 g.max_displacement_px,
                 g.max_displacement_px >= 0.0,
+                "a number >= 0 (inf for no gate)",
+            ),
+            (
+                "predicted.max_displacement_px",
+                self.predicted.max_displacement_px,
+                self.predicted.max_displacement_px >= 0.0,
                 "a number >= 0 (inf for no gate)",
             ),
             (

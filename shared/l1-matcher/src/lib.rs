@@ -29,8 +29,8 @@ mod outliers;
 mod profiles;
 
 pub use config::{
-    ConfigError, Consistency, Gates, MatcherConfig, OutlierFilter, Photometric, SecondBest,
-    StereoSettings, TermWeights,
+    ConfigError, Consistency, Gates, MatcherConfig, OutlierFilter, Photometric, PredictedSettings,
+    SecondBest, StereoSettings, TermWeights,
 };
 pub use linetrack_geometry::{MatchCase, Segment};
 pub use profiles::{GrayView, PROFILE_LEN, ROW_STEP, SegmentProfiles, Similarity, ViewError};
@@ -97,6 +97,8 @@ pub struct L1Matcher {
     config: MatcherConfig,
     limits: Limits,
     gate_limits: GateLimits,
+    /// The gates of queries placed where the predicted motion puts them.
+    predicted_limits: GateLimits,
     table: CandidateTable,
     admitted: Vec<usize>,
     solver: Homotopy<ROWS>,
@@ -107,6 +109,8 @@ pub struct L1Matcher {
     weights: Vec<f64>,
     owner: Vec<Option<usize>>,
     tentative: Vec<Match>,
+    /// The tentative matches of predicted queries while the others are filtered.
+    set_aside: Vec<Match>,
     filter: outliers::FlowFilter,
     consistency: consistency::DisparityCheck,
 }
@@ -157,6 +161,10 @@ impl L1Matcher {
         Ok(Self {
             limits: Limits::new(&config),
             gate_limits: GateLimits::new(&config.gates),
+            predicted_limits: GateLimits::new(&Gates {
+                max_displacement_px: config.predicted.max_displacement_px,
+                ..config.gates
+            }),
             table: CandidateTable::default(),
             admitted: Vec::new(),
             filter: outliers::FlowFilter::new(config.outlier_filter),
@@ -170,6 +178,7 @@ impl L1Matcher {
             weights: Vec::new(),
             owner: Vec::new(),
             tentative: Vec::new(),
+            set_aside: Vec::new(),
         })
     }
 
@@ -221,7 +230,37 @@ impl L1Matcher {
         profiles: Option<(&SegmentProfiles, &SegmentProfiles)>,
         out: &mut Vec<Match>,
     ) -> MatchStats {
+        self.run(case, first, second, profiles, &[], out)
+    }
+
+    /// Frame to frame, with the first frame's segments where the camera's predicted motion
+    /// puts them in the second frame: `predicted[i]` says whether `first[i]` was moved so
+    /// (missing entries: no). A predicted query is gated by
+    /// [`PredictedSettings::max_displacement_px`] around its predicted place and its match
+    /// is left out of the flow-direction filter (unless
+    /// [`PredictedSettings::flow_filter`]); the others are matched as by
+    /// [`L1Matcher::match_segments`]. Both kinds compete for the same candidates.
+    pub fn match_predicted(
+        &mut self,
+        first: &[Segment],
+        predicted: &[bool],
+        second: &[Segment],
+        out: &mut Vec<Match>,
+    ) -> MatchStats {
+        self.run(MatchCase::FrameToFrame, first, second, None, predicted, out)
+    }
+
+    fn run(
+        &mut self,
+        case: MatchCase,
+        first: &[Segment],
+        second: &[Segment],
+        profiles: Option<(&SegmentProfiles, &SegmentProfiles)>,
+        predicted: &[bool],
+        out: &mut Vec<Match>,
+    ) -> MatchStats {
         out.clear();
+        let is_predicted = |i: usize| predicted.get(i).copied().unwrap_or(false);
         let profiles = profiles.filter(|(a, b)| {
             self.config.photometric.enabled
                 && case == MatchCase::Stereo
@@ -256,8 +295,13 @@ impl L1Matcher {
             self.candidates.clear();
             self.columns.clear();
             self.admitted.clear();
+            let gate_limits = if is_predicted(i) {
+                &self.predicted_limits
+            } else {
+                &self.gate_limits
+            };
             self.table
-                .admit(case, &self.gate_limits, query, &mut self.admitted);
+                .admit(case, gate_limits, query, &mut self.admitted);
             let query_rows = profiles.is_some_and(|(a, _)| a.has_profile(i));
             let query_columns = profiles.is_some_and(|(a, _)| a.has_column_profile(i));
             for &j in &self.admitted {
@@ -314,8 +358,11 @@ impl L1Matcher {
                 }
                 Ok(Some(m)) => {
                     let m = Match { query: i, ..m };
+                    // A predicted query's claim outranks a plain one's (its partner was
+                    // found where the motion puts it); within a kind, the lower error wins.
+                    let rank = |m: &Match| (!is_predicted(m.query), m.error);
                     match self.owner[m.train] {
-                        Some(k) if self.tentative[k].error <= m.error => stats.conflicts += 1,
+                        Some(k) if rank(&self.tentative[k]) <= rank(&m) => stats.conflicts += 1,
                         Some(k) => {
                             stats.conflicts += 1;
                             self.tentative[k] = m;
@@ -340,9 +387,20 @@ impl L1Matcher {
                     .retain(&mut self.tentative, &self.first, &self.second);
         }
         if case == MatchCase::FrameToFrame || self.config.stereo.flow_filter {
+            // Predicted queries' matches sit out the filter unless it is asked for.
+            self.set_aside.clear();
+            if !self.config.predicted.flow_filter {
+                self.set_aside
+                    .extend(self.tentative.iter().filter(|m| is_predicted(m.query)));
+                self.tentative.retain(|m| !is_predicted(m.query));
+            }
             stats.outliers =
                 self.filter
                     .retain(case, &mut self.tentative, &self.first, &self.second);
+            if !self.set_aside.is_empty() {
+                self.tentative.append(&mut self.set_aside);
+                self.tentative.sort_unstable_by_key(|m| m.query);
+            }
         }
         out.extend_from_slice(&self.tentative);
         stats.matches = out.len();

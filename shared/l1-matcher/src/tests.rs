@@ -135,6 +135,87 @@ fn each_candidate_goes_to_the_query_with_the_lower_error() {
     assert_eq!(stats.conflicts, 1);
 }
 
+/// `run` for segments of which those flagged in `predicted` were placed by a motion.
+fn run_predicted(
+    config: MatcherConfig,
+    first: &[Segment],
+    predicted: &[bool],
+    second: &[Segment],
+) -> (Vec<Match>, MatchStats) {
+    let mut matcher = L1Matcher::new(config).unwrap();
+    let mut out = Vec::new();
+    let stats = matcher.match_predicted(first, predicted, second, &mut out);
+    (out, stats)
+}
+
+#[test]
+fn predicted_queries_sit_out_the_flow_filter() {
+    // Eight segments flow 10 px to the right, three 10 px up: a flow of two directions,
+    // as a forward motion's radial flow is. Where they were, the filter drops the three
+    // as outliers; placed by a motion, they are kept.
+    let mut first = Vec::new();
+    let mut second = Vec::new();
+    for k in 0..11 {
+        let x = 100.0 + 60.0 * f64::from(k);
+        first.push(seg(x, 100.0, x, 200.0));
+        second.push(if k < 8 {
+            seg(x + 10.0, 100.0, x + 10.0, 200.0)
+        } else {
+            seg(x, 90.0, x, 190.0)
+        });
+    }
+    let config = MatcherConfig::default();
+    let (plain, stats) = run(config.clone(), MatchCase::FrameToFrame, &first, &second);
+    assert_eq!(stats.outliers, 3, "{stats:?}");
+    assert_eq!(plain.len(), 8);
+    let (predicted, stats) = run_predicted(config.clone(), &first, &[true; 11], &second);
+    assert_eq!(stats.outliers, 0, "{stats:?}");
+    assert_eq!(
+        pairs(&predicted),
+        (0..11).map(|k| (k, k)).collect::<Vec<_>>()
+    );
+    // Unless asked for.
+    let mut filtered = config;
+    filtered.predicted.flow_filter = true;
+    let (_, stats) = run_predicted(filtered, &first, &[true; 11], &second);
+    assert_eq!(stats.outliers, 3, "{stats:?}");
+}
+
+#[test]
+fn predicted_queries_have_their_own_displacement_gate() {
+    // The partner lies 25 px off the query's line: within the plain gate (40 px), beyond
+    // a predicted query's (15 px).
+    let first = [seg(100.0, 100.0, 100.0, 200.0)];
+    let second = [seg(125.0, 100.0, 125.0, 200.0)];
+    let config = MatcherConfig::default();
+    let (plain, _) = run_predicted(config.clone(), &first, &[false], &second);
+    assert_eq!(pairs(&plain), vec![(0, 0)]);
+    let (predicted, stats) = run_predicted(config.clone(), &first, &[true], &second);
+    assert!(predicted.is_empty());
+    assert_eq!(stats.unsupported, 1);
+    let mut wide = config;
+    wide.predicted.max_displacement_px = 30.0;
+    let (predicted, _) = run_predicted(wide, &first, &[true], &second);
+    assert_eq!(pairs(&predicted), vec![(0, 0)]);
+}
+
+#[test]
+fn a_predicted_query_outranks_a_plain_one_for_a_candidate() {
+    // Query 1 fits the candidate better (the same length), but query 0 was placed there
+    // by the motion.
+    let first = [
+        seg(100.0, 100.0, 100.0, 200.0),
+        seg(104.0, 100.0, 104.0, 190.0),
+    ];
+    let second = [seg(102.0, 100.0, 102.0, 190.0)];
+    let config = MatcherConfig::default();
+    let (plain, _) = run_predicted(config.clone(), &first, &[false, false], &second);
+    assert_eq!(pairs(&plain), vec![(1, 0)]);
+    let (predicted, stats) = run_predicted(config, &first, &[true, false], &second);
+    assert_eq!(pairs(&predicted), vec![(0, 0)]);
+    assert_eq!(stats.conflicts, 1);
+}
+
 #[test]
 fn near_horizontal_gate_skips_flat_queries() {
     let left = [
@@ -606,6 +687,10 @@ fn bad_configs_name_the_culprit() {
             "photometric.min_correlation",
         ),
         ("[photometric]\nweight = inf", "photometric.weight"),
+        (
+            "[predicted]\nmax_displacement_px = -1.0",
+            "predicted.max_displacement_px",
+        ),
         (
             "[photometric]\nmax_offset_px = 0.0",
             "photometric.max_offset_px",

@@ -20,6 +20,8 @@ pub struct Odometry {
     previous_lines: Option<LineFeatures>,
     /// Where the last motion moves the previous frame's segments (kept between frames).
     predicted: Vec<Segment>,
+    /// Which of `predicted` were moved by the motion (the others have no landmark).
+    moved: Vec<bool>,
     tracker: MotionTracker,
 }
 
@@ -31,6 +33,7 @@ impl Odometry {
             matcher: create_segment_matcher(config.matcher, &config.frontend)?,
             previous_lines: None,
             predicted: Vec::new(),
+            moved: Vec::new(),
             tracker: MotionTracker::new(config, rig)?,
         })
     }
@@ -76,17 +79,20 @@ impl Odometry {
         let mut tracked = Vec::new();
         if let Some(previous) = &mut self.previous_lines {
             // Matched where the last motion puts them, when it is known.
-            let predicted = &mut self.predicted;
-            let moved = self.tracker.config().predicted_matching
+            let (predicted, moved) = (&mut self.predicted, &mut self.moved);
+            let predicting = self.tracker.config().predicted_matching
                 && self.matcher.matches_predicted_positions()
-                && self.tracker.predict_segments(&previous.segments, predicted);
-            if moved {
+                && self
+                    .tracker
+                    .predict_segments(&previous.segments, predicted, moved);
+            if predicting {
                 std::mem::swap(&mut previous.segments, predicted);
-            }
-            self.matcher
-                .match_lines(MatchCase::FrameToFrame, previous, &lines_l, &mut tracked);
-            if moved {
+                self.matcher
+                    .match_predicted(previous, moved, &lines_l, &mut tracked);
                 std::mem::swap(&mut previous.segments, predicted);
+            } else {
+                self.matcher
+                    .match_lines(MatchCase::FrameToFrame, previous, &lines_l, &mut tracked);
             }
         }
         stats.frame_to_frame_ms = since(started);

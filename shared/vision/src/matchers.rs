@@ -58,6 +58,20 @@ pub trait SegmentMatcher: Send {
         second: &LineFeatures,
         out: &mut Vec<FeatureMatch>,
     );
+
+    /// Frame to frame, `first`'s segments placed where the camera's motion predicts them:
+    /// `predicted[i]` says whether segment `i` was moved so (the others are where they were
+    /// seen). By default the same as [`SegmentMatcher::match_lines`].
+    fn match_predicted(
+        &mut self,
+        first: &LineFeatures,
+        predicted: &[bool],
+        second: &LineFeatures,
+        out: &mut Vec<FeatureMatch>,
+    ) {
+        let _ = predicted;
+        self.match_lines(MatchCase::FrameToFrame, first, second, out);
+    }
 }
 
 /// The segment matchers that can be chosen by name.
@@ -245,6 +259,12 @@ impl SegmentMatcher for L1SegmentMatcher {
         Ok(())
     }
 
+    /// Its gates and flow filter are then re-centred on the prediction
+    /// ([`L1Matcher::match_predicted`]).
+    fn matches_predicted_positions(&self) -> bool {
+        true
+    }
+
     fn match_lines(
         &mut self,
         case: MatchCase,
@@ -259,6 +279,29 @@ impl SegmentMatcher for L1SegmentMatcher {
             Some((&first.profiles, &second.profiles)),
             &mut self.scratch,
         );
+        self.hand_over(out);
+    }
+
+    fn match_predicted(
+        &mut self,
+        first: &LineFeatures,
+        predicted: &[bool],
+        second: &LineFeatures,
+        out: &mut Vec<FeatureMatch>,
+    ) {
+        self.matcher.match_predicted(
+            &first.segments,
+            predicted,
+            &second.segments,
+            &mut self.scratch,
+        );
+        self.hand_over(out);
+    }
+}
+
+impl L1SegmentMatcher {
+    /// Replaces `out` with the last call's matches.
+    fn hand_over(&self, out: &mut Vec<FeatureMatch>) {
         out.clear();
         out.extend(self.scratch.iter().map(|m| FeatureMatch {
             query: m.query,

@@ -8,10 +8,11 @@
 //! where the sequence has one, otherwise triangulated from its stereo partner (found by
 //! both matchers alike, triangulated with the odometry's limits) — moved by the true
 //! motion between the two frames and projected into frame k. Segments without such
-//! samples, and frames without a ground-truth pose, are not judged. The segments are given
-//! to the matchers where they were in frame k − 1: without the odometry's estimate there
-//! is no predicted position (the odometry gives LBD predicted positions once it has a
-//! motion).
+//! samples, and frames without a ground-truth pose, are not judged. Each pair is matched
+//! twice ([`Positions`]): the segments of frame k − 1 where they were, and where a
+//! constant-velocity prediction puts them — the previous true step (k − 2 → k − 1) applied
+//! to their 3-D samples, as the odometry predicts with its last estimated step — through
+//! `SegmentMatcher::match_predicted` (segments without samples stay where they were).
 
 use crate::line_truth::{self, Verdict};
 use crate::tracking::{Illumination, left_depth, load_frame};
@@ -30,6 +31,28 @@ use std::path::Path;
 
 /// The matchers compared, in the table's order.
 pub const MATCHERS: [MatcherKind; 2] = [MatcherKind::Lbd, MatcherKind::L1];
+
+/// Where the previous frame's segments are given to the matchers.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Positions {
+    /// Where they were seen.
+    AsSeen,
+    /// Where the previous true step, repeated, moves them (as seen on the first pair).
+    Predicted,
+}
+
+impl Positions {
+    /// Both, in the table's order.
+    pub const ALL: [Positions; 2] = [Positions::AsSeen, Positions::Predicted];
+
+    /// The name in the table and the CSV.
+    pub fn name(self) -> &'static str {
+        match self {
+            Positions::AsSeen => "as seen",
+            Positions::Predicted => "predicted",
+        }
+    }
+}
 
 /// Counts of one matcher over a sequence.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
@@ -58,8 +81,8 @@ impl Tally {
 pub struct Outcome {
     /// Consecutive frame pairs judged (both poses known).
     pub pairs: usize,
-    /// Per matcher.
-    pub tallies: [Tally; 2],
+    /// Per [`Positions`], per matcher.
+    pub tallies: [[Tally; 2]; 2],
 }
 
 /// A frame as the next one is judged against: its left segments described by both
@@ -68,6 +91,36 @@ struct Reference {
     features: LineFeatures,
     samples: Vec<Option<Vec<Point3<f64>>>>,
     pose: Option<Isometry3<f64>>,
+    /// The true step that led to this frame (`p_this = step · p_before`), if known.
+    step: Option<Isometry3<f64>>,
+}
+
+impl Reference {
+    /// The features with each segment that has 3-D samples moved by the frame's own step
+    /// (constant velocity) and projected, and which were moved; `None` without a step.
+    fn predicted(&self, rig: &linetrack_geometry::StereoRig) -> Option<(LineFeatures, Vec<bool>)> {
+        let step = self.step?;
+        let mut features = self.features.clone();
+        let mut moved = vec![false; features.segments.len()];
+        for ((segment, samples), moved) in features
+            .segments
+            .iter_mut()
+            .zip(&self.samples)
+            .zip(&mut moved)
+        {
+            let Some([first, last]) = samples
+                .as_ref()
+                .and_then(|s| Some([*s.first()?, *s.last()?]))
+            else {
+                continue;
+            };
+            if let [Some(a), Some(b)] = [first, last].map(|x| rig.project_left(&(step * x))) {
+                *segment = linetrack_geometry::Segment::new(a, b);
+                *moved = true;
+            }
+        }
+        Some((features, moved))
+    }
 }
 
 /// The benchmark's detector, matchers and buffers, built from an odometry configuration.
@@ -165,30 +218,40 @@ impl Benchmark {
                     .collect(),
                 None => self.stereo_samples(&rig, &features, &frame.right)?,
             };
+            let mut step = None;
             if let Some(before) = previous.take() {
                 let motion = before.pose.zip(frame.pose).map(|(a, b)| b.inverse() * a);
+                step = motion;
                 outcome.pairs += usize::from(motion.is_some());
-                for (matcher, tally) in self.matchers.iter_mut().zip(&mut outcome.tallies) {
-                    matcher.match_lines(
-                        MatchCase::FrameToFrame,
-                        &before.features,
-                        &features,
-                        &mut matches,
-                    );
-                    tally.matches += matches.len();
-                    let Some(motion) = &motion else { continue };
-                    for m in &matches {
-                        let (Some(Some(samples)), Some(seen)) =
-                            (before.samples.get(m.query), features.segments.get(m.train))
-                        else {
-                            continue;
-                        };
-                        let Some(verdict) = line_truth::judge(&rig, samples, motion, seen) else {
-                            continue;
-                        };
-                        tally.judged += 1;
-                        tally.correct += usize::from(verdict == Verdict::Correct);
-                        tally.disjoint += usize::from(verdict == Verdict::Disjoint);
+                let predicted = before.predicted(&rig);
+                for (positions, tallies) in Positions::ALL.into_iter().zip(&mut outcome.tallies) {
+                    for (matcher, tally) in self.matchers.iter_mut().zip(tallies) {
+                        match (positions, &predicted) {
+                            (Positions::Predicted, Some((moved_features, moved))) => matcher
+                                .match_predicted(moved_features, moved, &features, &mut matches),
+                            _ => matcher.match_lines(
+                                MatchCase::FrameToFrame,
+                                &before.features,
+                                &features,
+                                &mut matches,
+                            ),
+                        }
+                        tally.matches += matches.len();
+                        let Some(motion) = &motion else { continue };
+                        for m in &matches {
+                            let (Some(Some(samples)), Some(seen)) =
+                                (before.samples.get(m.query), features.segments.get(m.train))
+                            else {
+                                continue;
+                            };
+                            let Some(verdict) = line_truth::judge(&rig, samples, motion, seen)
+                            else {
+                                continue;
+                            };
+                            tally.judged += 1;
+                            tally.correct += usize::from(verdict == Verdict::Correct);
+                            tally.disjoint += usize::from(verdict == Verdict::Disjoint);
+                        }
                     }
                 }
             }
@@ -196,6 +259,7 @@ impl Benchmark {
                 features,
                 samples,
                 pose: frame.pose,
+                step,
             });
         }
         Ok(outcome)
@@ -209,6 +273,8 @@ pub struct Row {
     pub sequence: String,
     /// Whether the paper's gain jumps were applied.
     pub gain_jumps: bool,
+    /// Where the previous segments were given ([`Positions::name`]).
+    pub positions: &'static str,
     /// Matcher.
     pub matcher: &'static str,
     /// Frame pairs with a ground-truth motion.
@@ -228,12 +294,16 @@ pub struct Row {
 impl Row {
     /// The rows of one sequence's outcome, one per matcher.
     pub fn of(sequence: &str, gain_jumps: bool, outcome: &Outcome) -> Vec<Self> {
-        MATCHERS
+        Positions::ALL
             .iter()
             .zip(&outcome.tallies)
-            .map(|(kind, tally)| Self {
+            .flat_map(|(positions, tallies)| {
+                MATCHERS.iter().zip(tallies).map(move |t| (positions, t))
+            })
+            .map(|(positions, (kind, tally))| Self {
                 sequence: sequence.to_string(),
                 gain_jumps,
+                positions: positions.name(),
                 matcher: kind.name(),
                 frame_pairs: outcome.pairs,
                 matches: tally.matches,
@@ -249,28 +319,30 @@ impl Row {
 /// The report's table: a line per sequence and illumination, both matchers side by side.
 pub fn markdown(results: &[(String, bool, Outcome)]) -> String {
     let mut table = String::from(
-        "| sequence | gain jumps | pairs | LBD matches | judged | correct | disjoint | precision | ℓ1 matches | judged | correct | disjoint | precision |\n\
-         |---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
+        "| sequence | gain jumps | positions | pairs | LBD matches | judged | correct | disjoint | precision | ℓ1 matches | judged | correct | disjoint | precision |\n\
+         |---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
     );
     for (sequence, jumps, outcome) in results {
-        let cells: Vec<String> = outcome
-            .tallies
-            .iter()
-            .map(|t| {
-                let precision = t.precision().map_or("–".to_string(), |p| format!("{p:.3}"));
-                format!(
-                    "{} | {} | {} | {} | {precision}",
-                    t.matches, t.judged, t.correct, t.disjoint
-                )
-            })
-            .collect();
-        let _ = writeln!(
-            table,
-            "| {sequence} | {} | {} | {} |",
-            if *jumps { "yes" } else { "no" },
-            outcome.pairs,
-            cells.join(" | ")
-        );
+        for (positions, tallies) in Positions::ALL.iter().zip(&outcome.tallies) {
+            let cells: Vec<String> = tallies
+                .iter()
+                .map(|t| {
+                    let precision = t.precision().map_or("–".to_string(), |p| format!("{p:.3}"));
+                    format!(
+                        "{} | {} | {} | {} | {precision}",
+                        t.matches, t.judged, t.correct, t.disjoint
+                    )
+                })
+                .collect();
+            let _ = writeln!(
+                table,
+                "| {sequence} | {} | {} | {} | {} |",
+                if *jumps { "yes" } else { "no" },
+                positions.name(),
+                outcome.pairs,
+                cells.join(" | ")
+            );
+        }
     }
     table
 }

@@ -334,8 +334,9 @@ fn middlebury_section(
 fn f2f_section(results: &[(String, bool, f2f_lines::Outcome)], period_s: f64) -> String {
     format!(
         "\n## Frame-to-frame line tracking against ground truth\n\nLSD segments of the left images of consecutive \
-         frames (stretched as the odometry does), matched frame to frame by each matcher as the odometry matches them, \
-         from where they were (no predicted positions). A match is judged when its previous segment has a 3-D position: \
+         frames (stretched as the odometry does), matched frame to frame by each matcher as the odometry matches them: \
+         *as seen*, from where they were; *predicted*, from where the previous true step, repeated, puts those with a \
+         3-D position (constant velocity, as the odometry predicts with its last estimate; the first pair as seen). A match is judged when its previous segment has a 3-D position: \
          from the exact depth map (generated sequences; depths beyond 13.1 m are not stored, so far segments are not \
          judged), or triangulated from the stereo partner both matchers agree on (real sequences; segments within the \
          odometry's angle of horizontal are not triangulated). It is correct when that segment, moved by the \

@@ -90,13 +90,17 @@ fn table2_row(report: &str, sequence: &str) -> Vec<String> {
 }
 
 /// The counts of the frame-to-frame line benchmark's row for `sequence` with or without
-/// gain jumps: frame pairs, then matches, judged, correct, disjoint for LBD and for ℓ1.
-fn f2f_counts(report: &str, sequence: &str, jumps: bool) -> [usize; 9] {
+/// gain jumps, the segments as seen or predicted: frame pairs, then matches, judged,
+/// correct, disjoint for LBD and for ℓ1.
+fn f2f_counts(report: &str, sequence: &str, jumps: bool, positions: &str) -> [usize; 9] {
     let section = report
         .split("## Frame-to-frame line tracking against ground truth")
         .nth(1)
         .unwrap_or_else(|| panic!("no frame-to-frame line section"));
-    let prefix = format!("| {sequence} | {} |", if jumps { "yes" } else { "no" });
+    let prefix = format!(
+        "| {sequence} | {} | {positions} |",
+        if jumps { "yes" } else { "no" }
+    );
     let row = section
         .lines()
         .find(|l| l.starts_with(&prefix))
@@ -106,17 +110,20 @@ fn f2f_counts(report: &str, sequence: &str, jumps: bool) -> [usize; 9] {
         .map(str::trim)
         .filter(|c| !c.is_empty())
         .collect();
-    assert_eq!(cells.len(), 13, "{row}");
+    assert_eq!(cells.len(), 14, "{row}");
     let count = |k: usize| cells[k].parse::<usize>().unwrap();
-    [2, 3, 4, 5, 6, 8, 9, 10, 11].map(count)
+    [3, 4, 5, 6, 7, 9, 10, 11, 12].map(count)
 }
 
 /// The frame-to-frame line rows of `sequence` were measured: with and without gain jumps,
-/// each matcher with matches, judged ones and correct ones among them, and one CSV row per
-/// matcher and variant.
+/// as seen and predicted, each matcher with matches, judged ones and correct ones among
+/// them, and one CSV row per matcher and variant.
 fn assert_f2f_rows(report: &str, csv: &str, sequence: &str) {
-    for jumps in [false, true] {
-        let [pairs, counts @ ..] = f2f_counts(report, sequence, jumps);
+    for (jumps, positions) in [false, true]
+        .into_iter()
+        .flat_map(|j| ["as seen", "predicted"].map(|p| (j, p)))
+    {
+        let [pairs, counts @ ..] = f2f_counts(report, sequence, jumps, positions);
         assert_eq!(pairs, 2, "3 frames: 2 pairs");
         for tally in counts.chunks(4) {
             let (matches, judged, correct, disjoint) = (tally[0], tally[1], tally[2], tally[3]);
@@ -130,7 +137,7 @@ fn assert_f2f_rows(report: &str, csv: &str, sequence: &str) {
         csv.lines()
             .filter(|l| l.starts_with(&format!("{sequence},")))
             .count(),
-        4,
+        8,
         "{csv}"
     );
 }

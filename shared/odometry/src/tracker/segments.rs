@@ -21,17 +21,23 @@ use std::time::Instant;
 impl MotionTracker {
     /// Where the last frame's left segments (`previous`, as given to the last update) should
     /// lie in the next frame: each one that stands for a landmark is lifted onto the
-    /// landmark's 3-D line, moved by the last motion and projected; the others stay where
-    /// they were. Returns false, leaving `out` empty, before a motion is known or without a
-    /// last frame (nothing to predict with).
-    pub fn predict_segments(&self, previous: &[Segment], out: &mut Vec<Segment>) -> bool {
+    /// landmark's 3-D line, moved by the last motion and projected (and flagged in
+    /// `moved`); the others stay where they were. Returns false, leaving `out` and `moved`
+    /// empty, before a motion is known or without a last frame (nothing to predict with).
+    pub fn predict_segments(
+        &self,
+        previous: &[Segment],
+        out: &mut Vec<Segment>,
+        moved: &mut Vec<bool>,
+    ) -> bool {
         out.clear();
+        moved.clear();
         let Some(reference) = self.reference.as_ref().filter(|_| self.motion_known) else {
             return false;
         };
         let to_previous = reference.pose.inverse();
-        out.extend(previous.iter().enumerate().map(|(k, seen)| {
-            reference
+        for (k, seen) in previous.iter().enumerate() {
+            let predicted = reference
                 .line_landmarks
                 .get(k)
                 .and_then(Option::as_ref)
@@ -41,9 +47,10 @@ impl MotionTracker {
                     let [a, b] = [lift(&seen.start)?, lift(&seen.end)?]
                         .map(|x| self.rig.project_left(&(self.last_motion * x)));
                     Some(Segment::new(a?, b?))
-                })
-                .unwrap_or(*seen)
-        }));
+                });
+            out.push(predicted.unwrap_or(*seen));
+            moved.push(predicted.is_some());
+        }
         true
     }
 
@@ -281,10 +288,10 @@ mod tests {
             line_landmarks: vec![Some(sighted(&pose, &local, 1.0)), None],
         });
         let previous = [seen, elsewhere];
-        let mut out = Vec::new();
+        let (mut out, mut moved) = (Vec::new(), Vec::new());
         // No motion measured yet: nothing to predict with.
-        assert!(!tracker.predict_segments(&previous, &mut out));
-        assert!(out.is_empty());
+        assert!(!tracker.predict_segments(&previous, &mut out, &mut moved));
+        assert!(out.is_empty() && moved.is_empty());
 
         let motion = Isometry3::from_parts(
             nalgebra::Translation3::new(0.05, 0.0, -0.1),
@@ -292,7 +299,8 @@ mod tests {
         );
         tracker.last_motion = motion;
         tracker.motion_known = true;
-        assert!(tracker.predict_segments(&previous, &mut out));
+        assert!(tracker.predict_segments(&previous, &mut out, &mut moved));
+        assert_eq!(moved, [true, false]);
         let expected = [at(0.25), at(0.75)].map(|x| project(motion * x));
         assert!((out[0].start - expected[0]).norm() < 1e-9, "{:?}", out[0]);
         assert!((out[0].end - expected[1]).norm() < 1e-9, "{:?}", out[0]);
