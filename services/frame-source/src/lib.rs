@@ -5,6 +5,7 @@
 //! With `[camera]` set, it reads a live stereo camera instead ([`camera`]).
 
 pub mod camera;
+mod gain_jumps;
 #[cfg(feature = "mcap")]
 mod replay;
 
@@ -128,6 +129,9 @@ fn publish(ctx: &StageContext, mut ports: Ports, shutdown: &Shutdown) -> anyhow:
     );
     // The rig goes first: the pose estimator needs it before the first frame's tracks.
     ports.rig.publish(&(), &[&[rig_record(&sequence.rig)]])?;
+    let origin_ns = sequence.frames.first().map_or(0, |f| f.timestamp_ns);
+    let mut gain_jumps =
+        gain_jumps::GainJumps::new(source.gain_jumps_s, source.gain_jumps_seed, origin_ns);
     let reader_nice = source.reader_nice;
     let stream = sequence.into_stream_with(start, 4, move || read_in_background(reader_nice));
     ports.reporter.report(StatusKind::Ready, start as u64, 0);
@@ -157,6 +161,10 @@ fn publish(ctx: &StageContext, mut ports: Ports, shutdown: &Shutdown) -> anyhow:
                 header.height = h;
                 let (Some(left), Some(right)) = (frame.left.pixels(), frame.right.pixels()) else {
                     anyhow::bail!("frame {index}: images are not continuous in memory");
+                };
+                let [left, right] = match &mut gain_jumps {
+                    Some(jumps) => jumps.apply(timestamp_ns, [left, right]),
+                    None => [left, right],
                 };
                 stamp_end(&mut header, StageKind::FrameSource, ctx.clock.now_ns());
                 ports.frames.publish(&header, &[left, right])?;

@@ -76,6 +76,12 @@ pub struct SourceConfig {
     /// are published instead of `sequence`'s; empty: the sequence.
     #[serde(skip_serializing_if = "is_empty_path")]
     pub replay: PathBuf,
+    /// The paper's illumination protocol on a data set's images: a new gain α ~ U(0.5, 2.5)
+    /// and bias β ~ U(0, 20) on both images every this many seconds of the sequence's
+    /// time, as `linetrack-vo --gain-jumps` applies them (0 = off).
+    pub gain_jumps_s: f64,
+    /// The seed of those draws (`linetrack-vo --seed`).
+    pub gain_jumps_seed: u64,
 }
 
 fn is_empty_path(path: &Path) -> bool {
@@ -142,6 +148,8 @@ impl Default for SourceConfig {
             max_frames: 0,
             reader_nice: 10,
             replay: PathBuf::new(),
+            gain_jumps_s: 0.0,
+            gain_jumps_seed: 0,
         }
     }
 }
@@ -818,6 +826,10 @@ impl PipelineConfig {
         }
         in_range("source.max_frames", src.max_frames, 0..=MAX_FRAMES)?;
         in_range("source.reader_nice", src.reader_nice, linetrack_sched::NICE)?;
+        if src.gain_jumps_s != 0.0 {
+            in_range("source.gain_jumps_s", src.gain_jumps_s, 0.001..=3600.0)
+                .map_err(|e| format!("{e} (or 0 = off)"))?;
+        }
         let rec = &self.record;
         in_range(
             "record.every_nth_image",
@@ -1169,6 +1181,8 @@ mod tests {
             ("[source]\nrate_hz = 1e-300\n", "source.rate_hz"),
             ("[source]\nrate_hz = nan\n", "source.rate_hz"),
             ("[source]\nreader_nice = 20\n", "source.reader_nice"),
+            ("[source]\ngain_jumps_s = -0.5\n", "source.gain_jumps_s"),
+            ("[source]\ngain_jumps_s = nan\n", "source.gain_jumps_s"),
             ("[camera]\nfps = 5000.0\n", "camera.fps"),
             ("[camera]\nlate_ms = nan\n", "camera.late_ms"),
             ("[camera]\nduration_s = -1.0\n", "camera.duration_s"),

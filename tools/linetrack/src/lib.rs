@@ -107,6 +107,14 @@ pub struct RunArgs {
     /// Stop after this many frames.
     #[arg(long)]
     pub frames: Option<usize>,
+    /// The paper's illumination protocol on the sequence's images: a new gain U(0.5, 2.5)
+    /// and bias U(0, 20) every this many seconds, as `linetrack-vo --gain-jumps` (default:
+    /// the config's source.gain_jumps_s; 0 = off).
+    #[arg(long, value_name = "SECONDS", conflicts_with = "camera")]
+    pub gain_jumps: Option<f64>,
+    /// The seed of the gain jumps' draws (`linetrack-vo --seed`).
+    #[arg(long, value_name = "N")]
+    pub gain_jumps_seed: Option<u64>,
     /// realtime (the sequence's rate) or fastest.
     #[arg(long)]
     pub pacing: Option<String>,
@@ -239,6 +247,12 @@ pub fn effective_config(args: &RunArgs) -> anyhow::Result<PipelineConfig> {
     }
     if let Some(duration) = args.duration {
         config.camera.duration_s = duration;
+    }
+    if let Some(period) = args.gain_jumps {
+        config.source.gain_jumps_s = period;
+    }
+    if let Some(seed) = args.gain_jumps_seed {
+        config.source.gain_jumps_seed = seed;
     }
     // The overrides are checked like the file (`camera.duration_s` range, a camera
     // without a calibration, ...).
