@@ -16,6 +16,9 @@
 //!   included: profiles of both images + matching;
 //! - `orb/extract`: 600 ORB points of one image (the stereo front end's), `orb/match/stereo`;
 //! - `orb/extract/odometry`: 1500 ORB points of one image (the odometry's);
+//! - `fast-brief/extract/odometry`: the same 1500 points, same levels and scale, from our
+//!   own extractor (`[orb] extractor = "fast-brief"`), to compare with the case above;
+//!   `fast-brief/extract/odometry/levels-{1,2,4}`: with shallower pyramids;
 //! - `orb/match/frame-to-frame/odometry`: the odometry's frame-to-frame point search (1500
 //!   points an image, a 30 px window);
 //! - `orb/refine-track`: the sub-pixel refinement of frame 0's frame-to-frame point matches;
@@ -32,8 +35,9 @@ use criterion::{Criterion, criterion_group, criterion_main};
 use linetrack_geometry::MatchCase;
 use linetrack_vision::{
     AppearanceGates, DetectorKind, FrontendConfig, GrayImage, HammingMatcher, LineFeatures,
-    MatcherKind, OrbExtractor, OrbOptions, PointFeatures, PointMatcher, create_detector,
-    create_segment_matcher, points_may_match, refine_stereo_column, refine_track,
+    MatcherKind, OrbExtractor, OrbOptions, PointExtractor, PointExtractorKind, PointFeatures,
+    PointMatcher, create_detector, create_segment_matcher, points_may_match, refine_stereo_column,
+    refine_track,
 };
 use opencv::core::{Vec4f, Vector};
 use opencv::ximgproc::{self, EdgeDrawingTrait};
@@ -211,6 +215,22 @@ fn bench_frontend(c: &mut Criterion) {
     group.bench_function("orb/extract/odometry", |b| {
         b.iter(|| odometry_extractor.extract(black_box(&left), &mut o_first))
     });
+    for levels in [odometry_orb.levels, 1, 2, 4] {
+        let ours = OrbOptions {
+            extractor: PointExtractorKind::FastBrief,
+            levels,
+            ..odometry_orb
+        };
+        let mut extractor = PointExtractor::new(&ours).expect("fast-brief");
+        let mut points = PointFeatures::default();
+        let name = match levels == odometry_orb.levels {
+            true => "fast-brief/extract/odometry".to_string(),
+            false => format!("fast-brief/extract/odometry/levels-{levels}"),
+        };
+        group.bench_function(name, |b| {
+            b.iter(|| extractor.extract(black_box(&left), &mut points))
+        });
+    }
     odometry_extractor
         .extract(&left, &mut o_first)
         .expect("orb");

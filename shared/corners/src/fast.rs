@@ -1,0 +1,193 @@
+//! FAST-9 on whole rows: each of the 16 circle positions is compared with every centre of a
+//! row in one pass, setting one bit of a 16-bit mask per centre ("brighter by more than the
+//! threshold", and "darker"), a loop the compiler vectorises; a mask with 9 contiguous bits
+//! (around the circle) marks a corner, which is then scored.
+
+use crate::select::Candidate;
+use crate::{BORDER_PX, ImageView};
+
+/// The circle of radius 3 (Bresenham), clockwise from the top, `(dx, dy)`.
+pub(crate) const CIRCLE: [(isize, isize); 16] = [
+    (0, -3),
+    (1, -3),
+    (2, -2),
+    (3, -1),
+    (3, 0),
+    (3, 1),
+    (2, 2),
+    (1, 3),
+    (0, 3),
+    (-1, 3),
+    (-2, 2),
+    (-3, 1),
+    (-3, 0),
+    (-3, -1),
+    (-2, -2),
+    (-1, -3),
+];
+
+/// Contiguous circle pixels a corner needs.
+const ARC: usize = 9;
+
+/// One row's work space, kept between rows and images.
+#[derive(Default)]
+pub(crate) struct RowBuffers {
+    /// Per centre of the row: whether it passed the compass test.
+    maybe: Vec<u8>,
+}
+
+/// Finds the FAST-9 corners of `image` at least [`BORDER_PX`] from its borders: replaces
+/// `candidates` with them and `scores` with the image's score map (0 where no corner).
+///
+/// Each row is first screened with the 8 even positions of the circle (an arc of 9 holds 4
+/// contiguous ones), in one vectorised pass; the few centres that pass are tested on the
+/// whole circle.
+pub(crate) fn detect(
+    image: ImageView<'_>,
+    threshold: u8,
+    rows: &mut RowBuffers,
+    scores: &mut Vec<u8>,
+    candidates: &mut Vec<Candidate>,
+) {
+    let (width, height) = (image.width(), image.height());
+    candidates.clear();
+    scores.clear();
+    scores.resize(width * height, 0);
+    if width <= 2 * BORDER_PX || height <= 2 * BORDER_PX {
+        return;
+    }
+    let inner = width - 2 * BORDER_PX;
+    rows.maybe.resize(inner, 0);
+    let maybe = &mut rows.maybe[..inner];
+    for y in BORDER_PX..height - BORDER_PX {
+        let span = |dx: isize, dy: isize| {
+            let start = BORDER_PX.wrapping_add_signed(dx);
+            &image.row(y.wrapping_add_signed(dy))[start..start + inner]
+        };
+        let centre = span(0, 0);
+        // The even circle positions 0, 2, …, 14.
+        let even: [&[u8]; 8] = std::array::from_fn(|k| {
+            let (dx, dy) = CIRCLE[2 * k];
+            span(dx, dy)
+        });
+        // Blocks of 16 centres in fixed-size arrays, which the compiler vectorises; the
+        // row's tail in a last, partial block.
+        for start in (0..inner).step_by(LANES) {
+            let end = (start + LANES).min(inner);
+            let lane = |row: &[u8]| -> [u8; LANES] {
+                match <[u8; LANES]>::try_from(&row[start..start + LANES.min(row.len() - start)]) {
+                    Ok(whole) => whole,
+                    Err(_) => {
+                        let mut part = [0; LANES];
+                        part[..end - start].copy_from_slice(&row[start..end]);
+                        part
+                    }
+                }
+            };
+            let block: [[u8; LANES]; 9] = std::array::from_fn(|k| match k {
+                0 => lane(centre),
+                _ => lane(even[k - 1]),
+            });
+            let flags = compass_block(&block, threshold);
+            maybe[start..end].copy_from_slice(&flags[..end - start]);
+        }
+        // Most centres fail: skip them eight at a time.
+        for (chunk_index, chunk) in maybe.chunks(8).enumerate() {
+            let mut bytes = [0; 8];
+            bytes[..chunk.len()].copy_from_slice(chunk);
+            if u64::from_ne_bytes(bytes) == 0 {
+                continue;
+            }
+            for (k, _) in chunk.iter().enumerate().filter(|(_, m)| **m != 0) {
+                let x = BORDER_PX + chunk_index * 8 + k;
+                if let Some(score) = corner_score(image, x, y, threshold) {
+                    scores[y * width + x] = score;
+                    candidates.push(Candidate {
+                        x: x as u32,
+                        y: y as u32,
+                        score,
+                    });
+                }
+            }
+        }
+    }
+}
+
+/// Centres a block of the screening pass holds.
+const LANES: usize = 16;
+
+/// The screening of one block: `block[0]` the centres, `block[1 + k]` circle position 2k;
+/// per centre 1 when 4 contiguous even positions are all brighter than the centre by more
+/// than `threshold`, or all darker, else 0.
+#[inline(always)]
+fn compass_block(block: &[[u8; LANES]; 9], threshold: u8) -> [u8; LANES] {
+    let mut out = [0; LANES];
+    for (i, o) in out.iter_mut().enumerate() {
+        let c = block[0][i];
+        let (high, low) = (c.saturating_add(threshold), c.saturating_sub(threshold));
+        let around: [u8; 8] = std::array::from_fn(|k| block[1 + k][i]);
+        let bright = four_in_a_row(around.map(|p| u8::from(p > high)));
+        let dark = four_in_a_row(around.map(|p| u8::from(p < low)));
+        *o = bright | dark;
+    }
+    out
+}
+
+/// 1 when 4 contiguous of the 8 even circle positions (around the circle) are 1, as every
+/// arc of 9 positions has; else 0. Plain byte arithmetic, so the row loop vectorises.
+#[inline(always)]
+fn four_in_a_row([e0, e1, e2, e3, e4, e5, e6, e7]: [u8; 8]) -> u8 {
+    let (a, b, c, d) = (e0 & e1, e2 & e3, e4 & e5, e6 & e7);
+    let (ab, bc, cd, da) = (e1 & e2, e3 & e4, e5 & e6, e7 & e0);
+    // Runs starting at an even position (pairs of pairs), then at an odd one.
+    (a & b) | (b & c) | (c & d) | (d & a) | (ab & bc) | (bc & cd) | (cd & da) | (da & ab)
+}
+
+/// Whether `mask` has [`ARC`] contiguous set bits, around the circle.
+fn has_arc(mask: u16) -> bool {
+    let twice = u32::from(mask) | (u32::from(mask) << 16);
+    let mut run = twice & (twice >> 1);
+    run &= run >> 2;
+    run &= run >> 4;
+    run &= twice >> 8;
+    run & 0xFFFF != 0
+}
+
+/// Whether `(x, y)` is a FAST-9 corner at `threshold`, and if so its score: the largest
+/// threshold at which it still is one, i.e. the best, over the arcs of 9, of the smallest
+/// difference along the arc (brighter or darker) less one.
+pub(crate) fn corner_score(image: ImageView<'_>, x: usize, y: usize, threshold: u8) -> Option<u8> {
+    let centre = i16::from(image.row(y)[x]);
+    let around: [i16; 16] = std::array::from_fn(|k| {
+        let (dx, dy) = CIRCLE[k];
+        i16::from(image.row(y.wrapping_add_signed(dy))[x.wrapping_add_signed(dx)]) - centre
+    });
+    let t = i16::from(threshold);
+    let (mut brighter, mut darker) = (0u16, 0u16);
+    for (k, &d) in around.iter().enumerate() {
+        brighter |= u16::from(d > t) << k;
+        darker |= u16::from(d < -t) << k;
+    }
+    let best = match (has_arc(brighter), has_arc(darker)) {
+        (false, false) => return None,
+        (true, false) => best_arc_minimum(around),
+        (false, true) => best_arc_minimum(around.map(|d| -d)),
+        (true, true) => best_arc_minimum(around).max(best_arc_minimum(around.map(|d| -d))),
+    };
+    Some((best - 1).clamp(1, 255) as u8)
+}
+
+/// The largest, over the 16 arcs of [`ARC`] positions, of the arc's smallest value.
+fn best_arc_minimum(values: [i16; 16]) -> i16 {
+    // Minima over runs of 2, 4, 8 and then 9 positions, by doubling (lane k: the run
+    // starting at position k, around the circle).
+    let rotate =
+        |a: [i16; 16], by: usize| -> [i16; 16] { std::array::from_fn(|k| a[(k + by) % 16]) };
+    let lanewise_min =
+        |a: [i16; 16], b: [i16; 16]| -> [i16; 16] { std::array::from_fn(|k| a[k].min(b[k])) };
+    let two = lanewise_min(values, rotate(values, 1));
+    let four = lanewise_min(two, rotate(two, 2));
+    let eight = lanewise_min(four, rotate(four, 4));
+    let nine = lanewise_min(eight, rotate(values, ARC - 1));
+    nine.into_iter().fold(i16::MIN, i16::max)
+}
