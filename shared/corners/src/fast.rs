@@ -71,24 +71,21 @@ pub(crate) fn detect(
             span(dx, dy)
         });
         // Blocks of 16 centres in fixed-size arrays, which the compiler vectorises; the
-        // row's tail in a last, partial block.
+        // row's tail in a last, partial block (zero-padded: its flags past the row unused).
         for start in (0..inner).step_by(LANES) {
-            let end = (start + LANES).min(inner);
-            let lane = |row: &[u8]| -> [u8; LANES] {
-                match <[u8; LANES]>::try_from(&row[start..start + LANES.min(row.len() - start)]) {
-                    Ok(whole) => whole,
-                    Err(_) => {
-                        let mut part = [0; LANES];
-                        part[..end - start].copy_from_slice(&row[start..end]);
-                        part
-                    }
-                }
-            };
-            let block: [[u8; LANES]; 9] = std::array::from_fn(|k| match k {
-                0 => lane(centre),
-                _ => lane(even[k - 1]),
-            });
+            let block = [
+                lane(centre, start),
+                lane(even[0], start),
+                lane(even[1], start),
+                lane(even[2], start),
+                lane(even[3], start),
+                lane(even[4], start),
+                lane(even[5], start),
+                lane(even[6], start),
+                lane(even[7], start),
+            ];
             let flags = compass_block(&block, threshold);
+            let end = (start + LANES).min(inner);
             maybe[start..end].copy_from_slice(&flags[..end - start]);
         }
         // Most centres fail: skip them eight at a time.
@@ -115,6 +112,20 @@ pub(crate) fn detect(
 
 /// Centres a block of the screening pass holds.
 const LANES: usize = 16;
+
+/// `row[start..start + LANES]`, zero-padded past the row's end.
+#[inline(always)]
+fn lane(row: &[u8], start: usize) -> [u8; LANES] {
+    let mut out = [0; LANES];
+    match row.get(start..start + LANES) {
+        Some(whole) => out.copy_from_slice(whole),
+        None => {
+            let rest = &row[start.min(row.len())..];
+            out[..rest.len()].copy_from_slice(rest);
+        }
+    }
+    out
+}
 
 /// The screening of one block: `block[0]` the centres, `block[1 + k]` circle position 2k;
 /// per centre 1 when 4 contiguous even positions are all brighter than the centre by more

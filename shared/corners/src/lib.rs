@@ -13,7 +13,7 @@
 //!    16-bit masks (loops the compiler vectorises); the score of a corner is the largest
 //!    threshold at which it still is one.
 //! 3. **Selection** ([`select`]): 3×3 non-maximum suppression of the score; then each
-//!    level's share of `max_corners` (shares proportional to the levels' areas, as OpenCV's
+//!    level's share of `max_corners` (shares proportional to the levels' widths, as OpenCV's
 //!    ORB) is taken best first from a grid of `cell_px` cells, at most an even share per
 //!    cell on the first pass, then the best of the rest, so textured corners of the image
 //!    do not take every point.

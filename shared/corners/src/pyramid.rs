@@ -1,5 +1,5 @@
 //! The image pyramid (bilinear, pixel centres aligned, each level from the one before as
-//! OpenCV's ORB does) and the smoothing the descriptor reads (a 7-tap binomial, σ ≈ 1.2,
+//! OpenCV's ORB does) and the smoothing the descriptor reads (a 7-tap Gaussian, σ = 2 cut at ±3, as ORB,
 //! in both directions). Vertical passes run over whole rows in 16-bit integers, which the
 //! compiler vectorises; the resampling's horizontal pass reads a precomputed table.
 
@@ -93,6 +93,7 @@ impl Pyramid {
     }
 
     /// Width × height of level `level`.
+    #[cfg(test)]
     pub(crate) fn area(&self, level: usize) -> usize {
         self.sizes[level].0 * self.sizes[level].1
     }
@@ -148,8 +149,9 @@ pub(crate) struct Smoother {
     column_sums: Vec<u16>,
 }
 
-/// Binomial weights of the 7-tap kernel (sum 64).
-const TAPS: [u16; 7] = [1, 6, 15, 20, 15, 6, 1];
+/// Weights of the 7-tap kernel (sum 64): a Gaussian of σ = 2 cut at ±3, as ORB smooths
+/// before its comparisons.
+const TAPS: [u16; 7] = [4, 9, 12, 14, 12, 9, 4];
 /// log2 of the kernel's sum.
 const TAP_BITS: u32 = 6;
 
@@ -203,7 +205,10 @@ fn smooth_row(sums: &[u16], out: &mut [u8]) {
     let inner = width - 6;
     let [a, b, c, d, e, f, g]: [&[u16]; 7] = std::array::from_fn(|k| &sums[k..k + inner]);
     for (i, o) in out[3..3 + inner].iter_mut().enumerate() {
-        let s = (a[i] + g[i]) + 6 * (b[i] + f[i]) + 15 * (c[i] + e[i]) + 20 * d[i];
+        let s = TAPS[0] * (a[i] + g[i])
+            + TAPS[1] * (b[i] + f[i])
+            + TAPS[2] * (c[i] + e[i])
+            + TAPS[3] * d[i];
         *o = ((s + (1 << (TAP_BITS - 1))) >> TAP_BITS) as u8;
     }
     for x in (0..3).chain(width - 3..width) {

@@ -15,12 +15,14 @@ pub(crate) struct Candidate {
     pub(crate) score: u8,
 }
 
-/// Each level's share of `wanted` corners, proportional to its area (the last level takes
-/// what rounding leaves).
+/// Each level's share of `wanted` corners, proportional to its width (a geometric series
+/// of ratio 1 / scale factor, as OpenCV's ORB divides its points: coarse levels get more
+/// than their area would give them); the last level takes what rounding leaves.
 pub(crate) fn level_shares(pyramid: &Pyramid, count: usize, wanted: usize) -> [usize; MAX_LEVELS] {
     let mut shares = [0; MAX_LEVELS];
-    let total: usize = (0..count).map(|level| pyramid.area(level)).sum();
-    if total == 0 {
+    let weight = |level: usize| 1.0 / f64::from(pyramid.scale(level));
+    let total: f64 = (0..count).map(weight).sum();
+    if count == 0 {
         return shares;
     }
     let mut given = 0;
@@ -28,7 +30,7 @@ pub(crate) fn level_shares(pyramid: &Pyramid, count: usize, wanted: usize) -> [u
         *share = if level + 1 == count {
             wanted - given
         } else {
-            let exact = wanted as f64 * pyramid.area(level) as f64 / total as f64;
+            let exact = wanted as f64 * weight(level) / total;
             (exact.round() as usize).min(wanted - given)
         };
         given += *share;

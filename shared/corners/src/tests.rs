@@ -212,7 +212,7 @@ fn descriptors_survive_a_brightness_shift_and_a_quarter_turn() {
         .collect();
     let mean_other = others.iter().sum::<u32>() as f64 / others.len() as f64;
     assert!(
-        mean_same < 40.0 && mean_other > 90.0,
+        mean_same < 40.0 && mean_other > 70.0,
         "mean distance {mean_same:.1} to itself turned, {mean_other:.1} to another"
     );
 }
