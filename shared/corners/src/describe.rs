@@ -1,7 +1,7 @@
 //! Orientation by intensity centroid and the steered binary descriptor, with its sampling
 //! pattern: 256 pixel pairs drawn once, from a fixed seed, by our own generator.
 
-use crate::{DESCRIPTOR_BYTES, ImageView};
+use crate::{BORDER_PX, DESCRIPTOR_BYTES, ImageView};
 use std::f64::consts::TAU;
 
 /// Radius of the disc the orientation's centroid is taken over, pixels.
@@ -12,16 +12,6 @@ const PATTERN_RADIUS: f64 = 13.0;
 /// Standard deviation of the pattern's points about the corner, pixels: a fifth of the
 /// 31-pixel patch (BRIEF's isotropic Gaussian sampling, G II).
 const PATTERN_SIGMA: f64 = 31.0 / 5.0;
-/// Each column's offset from the centre, −R..=R: the weights of the first moment.
-const COLUMN_WEIGHTS: [i32; 2 * ORIENTATION_RADIUS as usize + 1] = {
-    let mut weights = [0; 2 * ORIENTATION_RADIUS as usize + 1];
-    let mut k = 0;
-    while k < weights.len() {
-        weights[k] = k as i32 - ORIENTATION_RADIUS;
-        k += 1;
-    }
-    weights
-};
 /// The two points of a pair are at least this far apart, pixels.
 const MIN_PAIR_DISTANCE: f64 = 2.0;
 /// Orientations the pattern is precomputed for (steps of 11.25°).
@@ -35,9 +25,25 @@ const PATTERN_SEED: u64 = 0x6c69_6e65_7472_6163;
 /// the pairs' points as `(dx, dy)`, first and second point of pair k at 2k and 2k + 1.
 pub(crate) struct Pattern {
     rotated: Vec<[(i8, i8); 2 * PAIRS]>,
-    /// Half-width of each row of the orientation disc, rows −R..=R.
-    disc: [i32; 2 * ORIENTATION_RADIUS as usize + 1],
+    /// The rotated points as offsets from the corner in an image of rows `stride` bytes
+    /// apart ([`Pattern::prepare`]), shifted by `reach` so that none is negative.
+    offsets: Vec<[u32; 2 * PAIRS]>,
+    stride: usize,
+    reach: usize,
+    /// Per row of the orientation disc (−R..=R), per column of the 32 from −R: 1 inside
+    /// the disc, else 0 (the last column is always out).
+    inside: [[u16; WINDOW]; DISC_ROWS],
+    /// The same, times the column's offset from the centre, right of it (left of it: 0);
+    /// 16-bit sums cannot overflow (Σ 1..=15 × 255 < 2¹⁶), so the row loops vectorise.
+    right: [[u16; WINDOW]; DISC_ROWS],
+    /// The same left of the centre, times minus the offset.
+    left: [[u16; WINDOW]; DISC_ROWS],
 }
+
+/// Rows of the orientation disc.
+const DISC_ROWS: usize = 2 * ORIENTATION_RADIUS as usize + 1;
+/// Columns read per row of the disc: 2R + 1, and one more to make a round 32.
+const WINDOW: usize = 32;
 
 impl Pattern {
     /// The pattern (the same on every call and every build).
@@ -54,16 +60,53 @@ impl Pattern {
             })
             .collect();
         let r = f64::from(ORIENTATION_RADIUS);
-        let disc = std::array::from_fn(|k| {
+        let inside: [[u16; WINDOW]; DISC_ROWS] = std::array::from_fn(|k| {
             let dy = k as f64 - r;
-            (r * r - dy * dy).sqrt().round() as i32
+            let half = (r * r - dy * dy).sqrt().round() as i32;
+            std::array::from_fn(|c| u16::from((c as i32 - ORIENTATION_RADIUS).abs() <= half))
         });
-        Self { rotated, disc }
+        let weighted = |sign: i32| {
+            inside.map(|row| {
+                let mut out = row;
+                for (c, w) in out.iter_mut().enumerate() {
+                    *w *= (sign * (c as i32 - ORIENTATION_RADIUS)).max(0) as u16;
+                }
+                out
+            })
+        };
+        let (right, left) = (weighted(1), weighted(-1));
+        Self {
+            rotated,
+            offsets: Vec::new(),
+            stride: 0,
+            reach: 0,
+            inside,
+            right,
+            left,
+        }
+    }
+
+    /// Readies [`Pattern::describe`] for images of rows `stride` bytes apart.
+    pub(crate) fn prepare(&mut self, stride: usize) {
+        if stride == self.stride && !self.offsets.is_empty() {
+            return;
+        }
+        let reach = BORDER_PX * stride + BORDER_PX;
+        self.offsets.clear();
+        self.offsets.extend(self.rotated.iter().map(|points| {
+            points.map(|(dx, dy)| {
+                let offset = isize::from(dy) * stride as isize + isize::from(dx);
+                (reach as isize + offset) as u32
+            })
+        }));
+        self.stride = stride;
+        self.reach = reach;
     }
 
     /// The descriptor of the corner at `(x, y)` of `smooth` oriented at `angle_rad`: bit
     /// `j` of byte `i` is set when pair `8i + j`'s first point is darker than its second.
-    /// The corner is at least `BORDER_PX` from the borders.
+    /// The corner is at least `BORDER_PX` from the borders; [`Pattern::prepare`] was called
+    /// with `smooth`'s stride.
     pub(crate) fn describe(
         &self,
         smooth: ImageView<'_>,
@@ -71,16 +114,15 @@ impl Pattern {
         y: usize,
         angle_rad: f32,
     ) -> [u8; DESCRIPTOR_BYTES] {
-        let pairs = &self.rotated[angle_step(angle_rad)];
-        let stride = smooth.stride() as isize;
-        let centre = y * smooth.stride() + x;
-        let at = |(dx, dy): (i8, i8)| {
-            smooth.pixels[centre.wrapping_add_signed(isize::from(dy) * stride + isize::from(dx))]
-        };
+        let offsets = &self.offsets[angle_step(angle_rad)];
+        // Everything the pattern can reach, the corner `reach` bytes in.
+        let start = y * smooth.stride() + x - self.reach;
+        let window = &smooth.pixels[start..start + 2 * self.reach + 1];
         let mut out = [0; DESCRIPTOR_BYTES];
-        for (byte, pairs) in out.iter_mut().zip(pairs.chunks_exact(16)) {
+        for (byte, pairs) in out.iter_mut().zip(offsets.chunks_exact(16)) {
             for (bit, pair) in pairs.chunks_exact(2).enumerate() {
-                *byte |= u8::from(at(pair[0]) < at(pair[1])) << bit;
+                let (first, second) = (window[pair[0] as usize], window[pair[1] as usize]);
+                *byte |= u8::from(first < second) << bit;
             }
         }
         out
@@ -90,17 +132,23 @@ impl Pattern {
     /// in `image`, radians, image axes. The point is at least `BORDER_PX` from the borders.
     pub(crate) fn orientation(&self, image: ImageView<'_>, x: usize, y: usize) -> f32 {
         let (mut m10, mut m01) = (0i64, 0i64);
-        for (k, &half) in self.disc.iter().enumerate() {
+        for k in 0..DISC_ROWS {
             let dy = k as i32 - ORIENTATION_RADIUS;
             let row = image.row(y.wrapping_add_signed(dy as isize));
-            let span = &row[x - half as usize..=x + half as usize];
-            let weights = &COLUMN_WEIGHTS[(ORIENTATION_RADIUS - half) as usize..][..span.len()];
-            let (mut sum, mut moment) = (0i32, 0i32);
-            for (&p, &w) in span.iter().zip(weights) {
-                sum += i32::from(p);
-                moment += w * i32::from(p);
+            let start = x - ORIENTATION_RADIUS as usize;
+            let mut window = [0u16; WINDOW];
+            for (w, &p) in window.iter_mut().zip(&row[start..start + WINDOW]) {
+                *w = u16::from(p);
             }
-            m10 += i64::from(moment);
+            let dot = |weights: &[u16; WINDOW]| -> u16 {
+                let mut lanes = [0u16; WINDOW];
+                for ((l, &w), &p) in lanes.iter_mut().zip(weights).zip(&window) {
+                    *l = w * p;
+                }
+                lanes.iter().fold(0u16, |a, &b| a + b)
+            };
+            let sum = dot(&self.inside[k]);
+            m10 += i64::from(dot(&self.right[k])) - i64::from(dot(&self.left[k]));
             m01 += i64::from(dy) * i64::from(sum);
         }
         (m01 as f64).atan2(m10 as f64) as f32
@@ -110,7 +158,7 @@ impl Pattern {
 #[cfg(test)]
 impl PartialEq for Pattern {
     fn eq(&self, other: &Self) -> bool {
-        self.rotated == other.rotated && self.disc == other.disc
+        self.rotated == other.rotated && self.inside == other.inside && self.right == other.right
     }
 }
 

@@ -168,10 +168,15 @@ fn has_arc(mask: u16) -> bool {
 /// threshold at which it still is one, i.e. the best, over the arcs of 9, of the smallest
 /// difference along the arc (brighter or darker) less one.
 pub(crate) fn corner_score(image: ImageView<'_>, x: usize, y: usize, threshold: u8) -> Option<u8> {
-    let centre = i16::from(image.row(y)[x]);
+    let stride = image.stride();
+    let reach = 3 * stride + 3;
+    let start = (y * stride + x).checked_sub(reach)?;
+    let window = image.pixels.get(start..start + 2 * reach + 1)?;
+    let centre = i16::from(window[reach]);
     let around: [i16; 16] = std::array::from_fn(|k| {
         let (dx, dy) = CIRCLE[k];
-        i16::from(image.row(y.wrapping_add_signed(dy))[x.wrapping_add_signed(dx)]) - centre
+        let at = (reach as isize + dy * stride as isize + dx) as usize;
+        i16::from(window[at]) - centre
     });
     let t = i16::from(threshold);
     let (mut brighter, mut darker) = (0u16, 0u16);

@@ -339,6 +339,7 @@ impl CornerExtractor {
                 continue;
             }
             let smooth = self.smoother.smooth(plane);
+            self.pattern.prepare(smooth.stride());
             let scale = self.pyramid.scale(level);
             for candidate in &self.candidates[..kept] {
                 let (x, y) = (candidate.x as usize, candidate.y as usize);
