@@ -29,13 +29,6 @@ pub(crate) const CIRCLE: [(isize, isize); 16] = [
 /// Contiguous circle pixels a corner needs.
 const ARC: usize = 9;
 
-/// One row's work space, kept between rows and images.
-#[derive(Default)]
-pub(crate) struct RowBuffers {
-    /// Per centre of the row: whether it passed the compass test.
-    maybe: Vec<u8>,
-}
-
 /// Finds the FAST-9 corners of `image` at least [`BORDER_PX`] from its borders: replaces
 /// `candidates` with them and `scores` with the image's score map (0 where no corner).
 ///
@@ -45,7 +38,6 @@ pub(crate) struct RowBuffers {
 pub(crate) fn detect(
     image: ImageView<'_>,
     threshold: u8,
-    rows: &mut RowBuffers,
     scores: &mut Vec<u8>,
     candidates: &mut Vec<Candidate>,
 ) {
@@ -57,8 +49,6 @@ pub(crate) fn detect(
         return;
     }
     let inner = width - 2 * BORDER_PX;
-    rows.maybe.resize(inner, 0);
-    let maybe = &mut rows.maybe[..inner];
     for y in BORDER_PX..height - BORDER_PX {
         let span = |dx: isize, dy: isize| {
             let start = BORDER_PX.wrapping_add_signed(dx);
@@ -71,7 +61,8 @@ pub(crate) fn detect(
             span(dx, dy)
         });
         // Blocks of 16 centres in fixed-size arrays, which the compiler vectorises; the
-        // row's tail in a last, partial block (zero-padded: its flags past the row unused).
+        // row's tail in a last, partial block (zero-padded, its flags past the row dropped);
+        // the few centres that pass are tested on the whole circle.
         for start in (0..inner).step_by(LANES) {
             let block = [
                 lane(centre, start),
@@ -85,18 +76,17 @@ pub(crate) fn detect(
                 lane(even[7], start),
             ];
             let flags = compass_block(&block, threshold);
-            let end = (start + LANES).min(inner);
-            maybe[start..end].copy_from_slice(&flags[..end - start]);
-        }
-        // Most centres fail: skip them eight at a time.
-        for (chunk_index, chunk) in maybe.chunks(8).enumerate() {
-            let mut bytes = [0; 8];
-            bytes[..chunk.len()].copy_from_slice(chunk);
-            if u64::from_ne_bytes(bytes) == 0 {
-                continue;
+            // One bit per centre that passed, past the row's end cleared.
+            let mut passed = flags
+                .iter()
+                .enumerate()
+                .fold(0u32, |bits, (i, &f)| bits | (u32::from(f) << i));
+            if inner - start < LANES {
+                passed &= (1 << (inner - start)) - 1;
             }
-            for (k, _) in chunk.iter().enumerate().filter(|(_, m)| **m != 0) {
-                let x = BORDER_PX + chunk_index * 8 + k;
+            while passed != 0 {
+                let x = BORDER_PX + start + passed.trailing_zeros() as usize;
+                passed &= passed - 1;
                 if let Some(score) = corner_score(image, x, y, threshold) {
                     scores[y * width + x] = score;
                     candidates.push(Candidate {

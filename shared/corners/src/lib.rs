@@ -285,7 +285,6 @@ pub struct CornerExtractor {
     pattern: Pattern,
     pyramid: Pyramid,
     smoother: Smoother,
-    fast: fast::RowBuffers,
     scores: Vec<u8>,
     candidates: Vec<Candidate>,
     grid: select::Grid,
@@ -300,7 +299,6 @@ impl CornerExtractor {
             pattern: Pattern::new(),
             pyramid: Pyramid::default(),
             smoother: Smoother::default(),
-            fast: fast::RowBuffers::default(),
             scores: Vec::new(),
             candidates: Vec::new(),
             grid: select::Grid::default(),
@@ -326,7 +324,6 @@ impl CornerExtractor {
             fast::detect(
                 plane,
                 params.fast_threshold,
-                &mut self.fast,
                 &mut self.scores,
                 &mut self.candidates,
             );

@@ -166,14 +166,15 @@ impl Smoother {
             let rows: [&[u8]; 7] =
                 std::array::from_fn(|k| image.row((y + k).saturating_sub(3).min(last_row)));
             let sums = &mut self.column_sums[..width];
-            sums.fill(0);
-            for (row, tap) in rows.iter().zip(TAPS) {
-                for (sum, &p) in sums.iter_mut().zip(*row) {
-                    *sum += u16::from(p) * tap;
-                }
-            }
-            for sum in sums.iter_mut() {
-                *sum = (*sum + (1 << (TAP_BITS - 1))) >> TAP_BITS;
+            // One pass over the seven rows (equal lengths, known to the compiler).
+            let [a, b, c, d, e, f, g] = rows.map(|row| &row[..width]);
+            for (x, sum) in sums.iter_mut().enumerate() {
+                let pair = |p: &[u8], q: &[u8]| u16::from(p[x]) + u16::from(q[x]);
+                let s = TAPS[0] * pair(a, g)
+                    + TAPS[1] * pair(b, f)
+                    + TAPS[2] * pair(c, e)
+                    + TAPS[3] * u16::from(d[x]);
+                *sum = (s + (1 << (TAP_BITS - 1))) >> TAP_BITS;
             }
             smooth_row(sums, out);
         }
