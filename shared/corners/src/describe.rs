@@ -145,7 +145,7 @@ impl Pattern {
                 for ((l, &w), &p) in lanes.iter_mut().zip(weights).zip(&window) {
                     *l = w * p;
                 }
-                lanes.iter().fold(0u16, |a, &b| a + b)
+                lanes.iter().sum::<u16>()
             };
             let sum = dot(&self.inside[k]);
             m10 += i64::from(dot(&self.right[k])) - i64::from(dot(&self.left[k]));

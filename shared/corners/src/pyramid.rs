@@ -91,12 +91,6 @@ impl Pyramid {
     pub(crate) fn scale(&self, level: usize) -> f32 {
         self.scales[level]
     }
-
-    /// Width × height of level `level`.
-    #[cfg(test)]
-    pub(crate) fn area(&self, level: usize) -> usize {
-        self.sizes[level].0 * self.sizes[level].1
-    }
 }
 
 /// Bilinear resampling of `source` into `out` (`width` × `height`, packed), pixel

@@ -1,6 +1,6 @@
-//! Our own corners (`[orb] extractor = "fast-brief"`) through the front end's point path:
-//! chosen by name, matched by the same Hamming matcher at the true disparity, and run on
-//! the side worker like OpenCV's ORB.
+//! The point extractors through the front end's point path: ours (`[orb] extractor =
+//! "fast-brief"`) chosen by name, both matched by the same Hamming matcher at the true
+//! disparity, ours run on the side worker like OpenCV's ORB.
 
 #![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failure here is a test failure
 
@@ -61,10 +61,19 @@ fn the_extractor_is_chosen_by_name_and_checked() {
 }
 
 #[test]
-fn our_points_match_at_the_true_disparity_with_the_same_matcher() {
+fn both_extractors_points_match_at_the_true_disparity_with_the_same_matcher() {
+    for extractor in PointExtractorKind::ALL {
+        let options = OrbOptions {
+            extractor,
+            ..OrbOptions::default()
+        };
+        points_match_at_the_true_disparity(&options);
+    }
+}
+
+fn points_match_at_the_true_disparity(options: &OrbOptions) {
     let (left, right) = (card(0), card(9));
-    let options = fast_brief();
-    let mut extractor = PointExtractor::new(&options).unwrap();
+    let mut extractor = PointExtractor::new(options).unwrap();
     let (mut a, mut b) = (PointFeatures::default(), PointFeatures::default());
     extractor.extract(&left, &mut a).unwrap();
     extractor.extract(&right, &mut b).unwrap();
@@ -80,7 +89,12 @@ fn our_points_match_at_the_true_disparity_with_the_same_matcher() {
         options.min_distance_ratio,
         &mut out,
     );
-    assert!(out.len() >= 20, "{} matches", out.len());
+    assert!(
+        out.len() >= 20,
+        "{}: {} matches",
+        options.extractor.name(),
+        out.len()
+    );
     // Corners of level l sit on that level's pixels, 1.2^l full-resolution pixels apart:
     // within a pixel plus that.
     let exact = out
@@ -94,7 +108,8 @@ fn our_points_match_at_the_true_disparity_with_the_same_matcher() {
         .count();
     assert!(
         exact as f64 >= 0.9 * out.len() as f64,
-        "{exact} of {}",
+        "{}: {exact} of {}",
+        options.extractor.name(),
         out.len()
     );
 }
