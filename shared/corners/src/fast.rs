@@ -29,7 +29,8 @@ pub(crate) const CIRCLE: [(isize, isize); 16] = [
 /// Contiguous circle pixels a corner needs.
 const ARC: usize = 9;
 
-/// Finds the FAST-9 corners of `image` at least [`BORDER_PX`] from its borders: replaces
+/// Finds the FAST-9 corners of `image` at least `edge_px` (and [`BORDER_PX`]) from its
+/// borders: replaces
 /// `candidates` with them and `scores` with the image's score map (0 where no corner).
 ///
 /// Each row is first screened with the 8 even positions of the circle (an arc of 9 holds 4
@@ -38,6 +39,7 @@ const ARC: usize = 9;
 pub(crate) fn detect(
     image: ImageView<'_>,
     threshold: u8,
+    edge_px: usize,
     scores: &mut Vec<u8>,
     candidates: &mut Vec<Candidate>,
 ) {
@@ -45,13 +47,14 @@ pub(crate) fn detect(
     candidates.clear();
     scores.clear();
     scores.resize(width * height, 0);
-    if width <= 2 * BORDER_PX || height <= 2 * BORDER_PX {
+    let edge = edge_px.max(BORDER_PX);
+    if width <= 2 * edge || height <= 2 * edge {
         return;
     }
-    let inner = width - 2 * BORDER_PX;
-    for y in BORDER_PX..height - BORDER_PX {
+    let inner = width - 2 * edge;
+    for y in edge..height - edge {
         let span = |dx: isize, dy: isize| {
-            let start = BORDER_PX.wrapping_add_signed(dx);
+            let start = edge.wrapping_add_signed(dx);
             &image.row(y.wrapping_add_signed(dy))[start..start + inner]
         };
         let centre = span(0, 0);
@@ -85,7 +88,7 @@ pub(crate) fn detect(
                 passed &= (1 << (inner - start)) - 1;
             }
             while passed != 0 {
-                let x = BORDER_PX + start + passed.trailing_zeros() as usize;
+                let x = edge + start + passed.trailing_zeros() as usize;
                 passed &= passed - 1;
                 if let Some(score) = corner_score(image, x, y, threshold) {
                     scores[y * width + x] = score;

@@ -10,9 +10,6 @@ const WEIGHT_BITS: u32 = 8;
 /// The weight of a whole pixel.
 const WEIGHT_ONE: u16 = 1 << WEIGHT_BITS;
 
-/// The smallest level worth building: room for one corner inside the border.
-const MIN_LEVEL_SIDE_PX: usize = 2 * BORDER_PX + 1;
-
 /// Levels 1.. of the pyramid (level 0 is the caller's image) and the resampling buffers.
 #[derive(Default)]
 pub(crate) struct Pyramid {
@@ -33,6 +30,8 @@ impl Pyramid {
     /// there are (0 when even `image` is too small).
     pub(crate) fn build(&mut self, image: ImageView<'_>, params: &Params) -> usize {
         let (width, height) = (image.width(), image.height());
+        // The smallest level worth building: room for one corner inside the border.
+        let min_side = 2 * params.edge_px.max(BORDER_PX) + 1;
         let mut count = 0;
         for level in 0..params.levels {
             let scale = params.scale_factor.powi(level as i32);
@@ -40,7 +39,7 @@ impl Pyramid {
                 (width as f32 / scale).round() as usize,
                 (height as f32 / scale).round() as usize,
             );
-            if size.0 < MIN_LEVEL_SIDE_PX || size.1 < MIN_LEVEL_SIDE_PX {
+            if size.0 < min_side || size.1 < min_side {
                 break;
             }
             self.sizes[level] = if level == 0 { (width, height) } else { size };

@@ -82,7 +82,8 @@ pub(crate) struct Grid {
 impl Grid {
     /// Moves the (at most) `wanted` corners kept to the front of `candidates` (sorted best
     /// first) and returns how many: first, best first, at most an even share of `wanted` per
-    /// occupied `cell_px` cell; then the best of the others.
+    /// occupied `cell_px` cell; then the best of the others (no grid when `cell_px` is 0:
+    /// the best).
     pub(crate) fn select(
         &mut self,
         image: ImageView<'_>,
@@ -90,8 +91,8 @@ impl Grid {
         wanted: usize,
         candidates: &mut [Candidate],
     ) -> usize {
-        if candidates.len() <= wanted {
-            return candidates.len();
+        if candidates.len() <= wanted || cell_px == 0 {
+            return candidates.len().min(wanted);
         }
         let columns = image.width().div_ceil(cell_px);
         let cells = columns * image.height().div_ceil(cell_px);

@@ -234,6 +234,7 @@ fn corners_are_kept_to_the_count_spread_over_the_image_and_inside_the_border() {
             max_corners: 200,
             levels,
             fast_threshold: 5,
+            cell_px: 32,
             ..Params::default()
         };
         let out = extract(params, &pixels, width, height);
@@ -328,10 +329,6 @@ fn degenerate_images_give_no_corners_and_bad_buffers_errors() {
         },
         Params {
             fast_threshold: 0,
-            ..params
-        },
-        Params {
-            cell_px: 0,
             ..params
         },
     ] {

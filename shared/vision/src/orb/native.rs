@@ -7,8 +7,8 @@ use crate::{GrayImage, OrbOptions, PointExtractorKind, PointFeatures, VisionErro
 use linetrack_corners::{CornerExtractor, Corners, CornersError, ImageView, Params};
 use linetrack_geometry::Point;
 
-/// The `linetrack-corners` parameters for `options` (the point count, levels, scale factor
-/// and FAST threshold; cells of the crate's default size).
+/// The `linetrack-corners` parameters for `options` (the point count, levels, scale factor,
+/// FAST threshold, border and grid).
 pub(crate) fn fast_brief_params(options: &OrbOptions) -> Result<Params, CornersError> {
     let out_of_range = |name, value: i32, reason| CornersError::Param {
         name,
@@ -24,6 +24,9 @@ pub(crate) fn fast_brief_params(options: &OrbOptions) -> Result<Params, CornersE
         fast_threshold: u8::try_from(options.fast_threshold).map_err(|_| {
             out_of_range("fast_threshold", options.fast_threshold, "must be 1 to 255")
         })?,
+        edge_px: usize::try_from(options.edge_threshold)
+            .map_err(|_| out_of_range("edge_threshold", options.edge_threshold, "must be ≥ 0"))?,
+        cell_px: options.grid_cell_px,
         ..Params::default()
     };
     params.validate()?;
