@@ -27,7 +27,6 @@ pub(crate) fn fast_brief_params(options: &OrbOptions) -> Result<Params, CornersE
         edge_px: usize::try_from(options.edge_threshold)
             .map_err(|_| out_of_range("edge_threshold", options.edge_threshold, "must be ≥ 0"))?,
         cell_px: options.grid_cell_px,
-        ..Params::default()
     };
     params.validate()?;
     Ok(params)
