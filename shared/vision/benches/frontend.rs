@@ -18,7 +18,8 @@
 //! - `orb/extract/odometry`: 1500 ORB points of one image (the odometry's);
 //! - `fast-brief/extract/odometry`: the same 1500 points, same levels and scale, from our
 //!   own extractor (`[orb] extractor = "fast-brief"`), to compare with the case above;
-//!   `fast-brief/extract/odometry/levels-{1,2,4}`: with shallower pyramids;
+//!   `{orb,fast-brief}/extract/odometry/4x1.44` and `/1x`: both with 4 levels of 1.44 (about
+//!   the same span of scales) and with one level;
 //! - `orb/match/frame-to-frame/odometry`: the odometry's frame-to-frame point search (1500
 //!   points an image, a 30 px window);
 //! - `orb/refine-track`: the sub-pixel refinement of frame 0's frame-to-frame point matches;
@@ -215,21 +216,29 @@ fn bench_frontend(c: &mut Criterion) {
     group.bench_function("orb/extract/odometry", |b| {
         b.iter(|| odometry_extractor.extract(black_box(&left), &mut o_first))
     });
-    for levels in [odometry_orb.levels, 1, 2, 4] {
-        let ours = OrbOptions {
-            extractor: PointExtractorKind::FastBrief,
-            levels,
-            ..odometry_orb
-        };
-        let mut extractor = PointExtractor::new(&ours).expect("fast-brief");
-        let mut points = PointFeatures::default();
-        let name = match levels == odometry_orb.levels {
-            true => "fast-brief/extract/odometry".to_string(),
-            false => format!("fast-brief/extract/odometry/levels-{levels}"),
-        };
-        group.bench_function(name, |b| {
-            b.iter(|| extractor.extract(black_box(&left), &mut points))
-        });
+    // Both extractors at the odometry's settings (8 levels of 1.2), then at a shallower
+    // pyramid spanning about the same scales (4 levels of 1.44) and at one level.
+    for (levels, scale_factor, suffix) in [(8, 1.2, ""), (4, 1.44, "/4x1.44"), (1, 1.2, "/1x")] {
+        for extractor in PointExtractorKind::ALL {
+            let options = OrbOptions {
+                extractor,
+                levels,
+                scale_factor,
+                ..odometry_orb
+            };
+            if extractor == PointExtractorKind::OrbOpenCv && suffix.is_empty() {
+                continue; // `orb/extract/odometry` above
+            }
+            let mut points_extractor = PointExtractor::new(&options).expect("extractor");
+            let mut points = PointFeatures::default();
+            let name = match extractor {
+                PointExtractorKind::OrbOpenCv => format!("orb/extract/odometry{suffix}"),
+                PointExtractorKind::FastBrief => format!("fast-brief/extract/odometry{suffix}"),
+            };
+            group.bench_function(name, |b| {
+                b.iter(|| points_extractor.extract(black_box(&left), &mut points))
+            });
+        }
     }
     odometry_extractor
         .extract(&left, &mut o_first)
