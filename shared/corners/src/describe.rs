@@ -1,7 +1,7 @@
 //! Orientation by intensity centroid and the steered binary descriptor, with its sampling
 //! pattern: 256 pixel pairs drawn once, from a fixed seed, by our own generator.
 
-use crate::{BORDER_PX, DESCRIPTOR_BYTES, ImageView};
+use crate::{BORDER_PX, DESCRIPTOR_BYTES, GrayView};
 use std::f64::consts::TAU;
 
 /// Radius of the disc the orientation's centroid is taken over, pixels.
@@ -27,7 +27,7 @@ pub(crate) struct Pattern {
     rotated: Vec<[(i8, i8); 2 * PAIRS]>,
     /// The rotated points as offsets from the corner in an image of rows `stride` bytes
     /// apart ([`Pattern::prepare`]), shifted by `reach` so that none is negative.
-    offsets: Vec<[u32; 2 * PAIRS]>,
+    offsets: Vec<[usize; 2 * PAIRS]>,
     stride: usize,
     reach: usize,
     /// Per row of the orientation disc (−R..=R), per column of the 32 from −R: 1 inside
@@ -96,7 +96,7 @@ impl Pattern {
         self.offsets.extend(self.rotated.iter().map(|points| {
             points.map(|(dx, dy)| {
                 let offset = isize::from(dy) * stride as isize + isize::from(dx);
-                (reach as isize + offset) as u32
+                (reach as isize + offset) as usize
             })
         }));
         self.stride = stride;
@@ -109,7 +109,7 @@ impl Pattern {
     /// with `smooth`'s stride.
     pub(crate) fn describe(
         &self,
-        smooth: ImageView<'_>,
+        smooth: GrayView<'_>,
         x: usize,
         y: usize,
         angle_rad: f32,
@@ -117,11 +117,11 @@ impl Pattern {
         let offsets = &self.offsets[angle_step(angle_rad)];
         // Everything the pattern can reach, the corner `reach` bytes in.
         let start = y * smooth.stride() + x - self.reach;
-        let window = &smooth.pixels[start..start + 2 * self.reach + 1];
+        let window = &smooth.pixels()[start..start + 2 * self.reach + 1];
         let mut out = [0; DESCRIPTOR_BYTES];
         for (byte, pairs) in out.iter_mut().zip(offsets.chunks_exact(16)) {
             for (bit, pair) in pairs.chunks_exact(2).enumerate() {
-                let (first, second) = (window[pair[0] as usize], window[pair[1] as usize]);
+                let (first, second) = (window[pair[0]], window[pair[1]]);
                 *byte |= u8::from(first < second) << bit;
             }
         }
@@ -130,7 +130,7 @@ impl Pattern {
 
     /// Direction from `(x, y)` to the intensity centroid of the disc of radius 15 around it
     /// in `image`, radians, image axes. The point is at least `BORDER_PX` from the borders.
-    pub(crate) fn orientation(&self, image: ImageView<'_>, x: usize, y: usize) -> f32 {
+    pub(crate) fn orientation(&self, image: GrayView<'_>, x: usize, y: usize) -> f32 {
         let (mut m10, mut m01) = (0i64, 0i64);
         for k in 0..DISC_ROWS {
             let dy = k as i32 - ORIENTATION_RADIUS;

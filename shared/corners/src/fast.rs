@@ -4,7 +4,7 @@
 //! (around the circle) marks a corner, which is then scored.
 
 use crate::select::Candidate;
-use crate::{BORDER_PX, ImageView};
+use crate::{BORDER_PX, GrayView};
 
 /// The circle of radius 3 (Bresenham), clockwise from the top, `(dx, dy)`.
 pub(crate) const CIRCLE: [(isize, isize); 16] = [
@@ -37,7 +37,7 @@ const ARC: usize = 9;
 /// contiguous ones), in one vectorised pass; the few centres that pass are tested on the
 /// whole circle.
 pub(crate) fn detect(
-    image: ImageView<'_>,
+    image: GrayView<'_>,
     threshold: u8,
     edge_px: usize,
     scores: &mut Vec<u8>,
@@ -160,11 +160,11 @@ fn has_arc(mask: u16) -> bool {
 /// Whether `(x, y)` is a FAST-9 corner at `threshold`, and if so its score: the largest
 /// threshold at which it still is one, i.e. the best, over the arcs of 9, of the smallest
 /// difference along the arc (brighter or darker) less one.
-pub(crate) fn corner_score(image: ImageView<'_>, x: usize, y: usize, threshold: u8) -> Option<u8> {
+pub(crate) fn corner_score(image: GrayView<'_>, x: usize, y: usize, threshold: u8) -> Option<u8> {
     let stride = image.stride();
     let reach = 3 * stride + 3;
     let start = (y * stride + x).checked_sub(reach)?;
-    let window = image.pixels.get(start..start + 2 * reach + 1)?;
+    let window = image.pixels().get(start..start + 2 * reach + 1)?;
     let centre = i16::from(window[reach]);
     let around: [i16; 16] = std::array::from_fn(|k| {
         let (dx, dy) = CIRCLE[k];

@@ -42,6 +42,7 @@ mod select;
 mod tests;
 
 use describe::Pattern;
+pub use linetrack_edge_lines::{EdgeLinesError, GrayView};
 use pyramid::{Pyramid, Smoother};
 use select::Candidate;
 use thiserror::Error;
@@ -56,37 +57,10 @@ pub const BORDER_PX: usize = 16;
 /// Most pyramid levels an extractor builds.
 pub const MAX_LEVELS: usize = 16;
 
-/// Largest image the extractor takes, pixels (its pixel offsets are 32-bit).
-pub const MAX_PIXELS: usize = i32::MAX as usize;
-
-/// Errors in describing an image, or the extractor's parameters.
+/// The extractor's errors: parameters out of range. (Describing an image goes through
+/// [`GrayView::new`], whose errors are [`EdgeLinesError`]s.)
 #[derive(Debug, Clone, Error, PartialEq)]
 pub enum CornersError {
-    /// The pixel slice does not hold `height` rows of `stride` bytes (the last row `width`).
-    #[error(
-        "{len} bytes cannot hold a {width}×{height} image with rows {stride} bytes apart \
-         (need a stride ≥ width and (height − 1) × stride + width bytes)"
-    )]
-    Size {
-        /// Bytes given.
-        len: usize,
-        /// Width, pixels.
-        width: usize,
-        /// Height, pixels.
-        height: usize,
-        /// Bytes from one row to the next.
-        stride: usize,
-    },
-    /// More pixels, or a larger stride, than [`MAX_PIXELS`] allows.
-    #[error("a {width}×{height} image (stride {stride}) is too large (at most {MAX_PIXELS} bytes)")]
-    TooLarge {
-        /// Width, pixels.
-        width: usize,
-        /// Height, pixels.
-        height: usize,
-        /// Bytes from one row to the next.
-        stride: usize,
-    },
     /// A parameter out of its range.
     #[error("corner parameter {name} = {value}: {reason}")]
     Param {
@@ -97,85 +71,6 @@ pub enum CornersError {
         /// What it must be.
         reason: &'static str,
     },
-}
-
-/// An 8-bit grayscale image read in place: `height` rows of `width` pixels, rows `stride`
-/// bytes apart.
-#[derive(Debug, Clone, Copy)]
-pub struct ImageView<'a> {
-    pixels: &'a [u8],
-    width: usize,
-    height: usize,
-    stride: usize,
-}
-
-impl<'a> ImageView<'a> {
-    /// A view of `pixels`, checked to hold the image (an empty image, 0 wide or high, is
-    /// allowed and has no corners).
-    pub fn new(
-        pixels: &'a [u8],
-        width: usize,
-        height: usize,
-        stride: usize,
-    ) -> Result<Self, CornersError> {
-        let size_error = || CornersError::Size {
-            len: pixels.len(),
-            width,
-            height,
-            stride,
-        };
-        let bytes = height.checked_mul(stride).ok_or(CornersError::TooLarge {
-            width,
-            height,
-            stride,
-        })?;
-        if bytes > MAX_PIXELS {
-            return Err(CornersError::TooLarge {
-                width,
-                height,
-                stride,
-            });
-        }
-        let needed = if height == 0 {
-            0
-        } else {
-            bytes - stride + width
-        };
-        if stride < width || pixels.len() < needed {
-            return Err(size_error());
-        }
-        Ok(Self {
-            pixels,
-            width,
-            height,
-            stride,
-        })
-    }
-
-    /// A view of tightly packed rows (`stride = width`).
-    pub fn packed(pixels: &'a [u8], width: usize, height: usize) -> Result<Self, CornersError> {
-        Self::new(pixels, width, height, width)
-    }
-
-    /// Width, pixels.
-    pub fn width(&self) -> usize {
-        self.width
-    }
-
-    /// Height, pixels.
-    pub fn height(&self) -> usize {
-        self.height
-    }
-
-    /// Bytes from one row to the next.
-    pub fn stride(&self) -> usize {
-        self.stride
-    }
-
-    /// Row `y` (its `width` pixels). `y < height`.
-    fn row(&self, y: usize) -> &'a [u8] {
-        &self.pixels[y * self.stride..y * self.stride + self.width]
-    }
 }
 
 /// The extractor's parameters.
@@ -317,7 +212,7 @@ impl CornerExtractor {
     }
 
     /// Replaces `out` with the corners of `image` and their descriptors.
-    pub fn extract(&mut self, image: ImageView<'_>, out: &mut Corners) {
+    pub fn extract(&mut self, image: GrayView<'_>, out: &mut Corners) {
         out.clear();
         let params = self.params;
         let count = self.pyramid.build(image, &params);
@@ -326,7 +221,9 @@ impl CornerExtractor {
         for (level, share) in shares.into_iter().enumerate().take(count) {
             // A level's shortfall passes to the next one.
             wanted += share;
-            let plane = self.pyramid.plane(level, image);
+            let Some(plane) = self.pyramid.plane(level, image) else {
+                break;
+            };
             fast::detect(
                 plane,
                 params.fast_threshold,
@@ -342,7 +239,9 @@ impl CornerExtractor {
             if kept == 0 {
                 continue;
             }
-            let smooth = self.smoother.smooth(plane);
+            let Some(smooth) = self.smoother.smooth(plane) else {
+                continue;
+            };
             self.pattern.prepare(smooth.stride());
             let scale = self.pyramid.scale(level);
             for candidate in &self.candidates[..kept] {

@@ -3,7 +3,7 @@
 //! in both directions). Vertical passes run over whole rows in 16-bit integers, which the
 //! compiler vectorises; the resampling's horizontal pass reads a precomputed table.
 
-use crate::{BORDER_PX, ImageView, MAX_LEVELS, Params};
+use crate::{BORDER_PX, GrayView, MAX_LEVELS, Params};
 
 /// Fractional bits of the bilinear weights.
 const WEIGHT_BITS: u32 = 8;
@@ -28,7 +28,7 @@ pub(crate) struct Pyramid {
 impl Pyramid {
     /// Builds the levels of `image` that are large enough to hold a corner; returns how many
     /// there are (0 when even `image` is too small).
-    pub(crate) fn build(&mut self, image: ImageView<'_>, params: &Params) -> usize {
+    pub(crate) fn build(&mut self, image: GrayView<'_>, params: &Params) -> usize {
         let (width, height) = (image.width(), image.height());
         // The smallest level worth building: room for one corner inside the border.
         let min_side = 2 * params.edge_px.max(BORDER_PX) + 1;
@@ -55,16 +55,14 @@ impl Pyramid {
             let pixels = &mut rest[0];
             pixels.resize(width * height, 0);
             let source = match level {
-                1 => image,
+                1 => Ok(image),
                 _ => {
                     let (w, h) = self.sizes[level - 1];
-                    ImageView {
-                        pixels: &done[level - 2],
-                        width: w,
-                        height: h,
-                        stride: w,
-                    }
+                    GrayView::packed(&done[level - 2], w, h)
                 }
+            };
+            let Ok(source) = source else {
+                return level; // cannot happen: the buffer was sized for it
             };
             let buffers = (&mut self.columns, &mut self.blend);
             resample(source, pixels, width, buffers);
@@ -72,18 +70,14 @@ impl Pyramid {
         count
     }
 
-    /// Level `level`'s pixels (`image` itself at level 0). `level` < the count `build` gave.
-    pub(crate) fn plane<'a>(&'a self, level: usize, image: ImageView<'a>) -> ImageView<'a> {
+    /// Level `level`'s pixels (`image` itself at level 0). `level` < the count `build` gave
+    /// (`None` otherwise).
+    pub(crate) fn plane<'a>(&'a self, level: usize, image: GrayView<'a>) -> Option<GrayView<'a>> {
         if level == 0 {
-            return image;
+            return Some(image);
         }
         let (width, height) = self.sizes[level];
-        ImageView {
-            pixels: &self.levels[level - 1],
-            width,
-            height,
-            stride: width,
-        }
+        GrayView::packed(self.levels.get(level - 1)?, width, height).ok()
     }
 
     /// Full-resolution pixels per pixel of level `level`.
@@ -95,7 +89,7 @@ impl Pyramid {
 /// Bilinear resampling of `source` into `out` (`width` × `height`, packed), pixel
 /// centres aligned: destination pixel `d` samples source position `(d + ½)·s − ½`.
 fn resample(
-    source: ImageView<'_>,
+    source: GrayView<'_>,
     out: &mut [u8],
     width: usize,
     (columns, blend): (&mut Vec<(u32, u16)>, &mut Vec<u16>),
@@ -149,8 +143,9 @@ const TAPS: [u16; 7] = [4, 9, 12, 14, 12, 9, 4];
 const TAP_BITS: u32 = 6;
 
 impl Smoother {
-    /// `image` smoothed in both directions (edges clamped), packed.
-    pub(crate) fn smooth<'a>(&'a mut self, image: ImageView<'_>) -> ImageView<'a> {
+    /// `image` smoothed in both directions (edges clamped), packed (`None` never: the
+    /// buffer is sized for it).
+    pub(crate) fn smooth<'a>(&'a mut self, image: GrayView<'_>) -> Option<GrayView<'a>> {
         let (width, height) = (image.width(), image.height());
         self.pixels.resize(width * height, 0);
         self.column_sums.resize(width, 0);
@@ -171,12 +166,7 @@ impl Smoother {
             }
             smooth_row(sums, out);
         }
-        ImageView {
-            pixels: &self.pixels,
-            width,
-            height,
-            stride: width,
-        }
+        GrayView::packed(&self.pixels, width, height).ok()
     }
 }
 

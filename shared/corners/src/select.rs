@@ -2,7 +2,7 @@
 //! share of the wanted count, and a grid that spreads a level's share over the image.
 
 use crate::pyramid::Pyramid;
-use crate::{ImageView, MAX_LEVELS};
+use crate::{GrayView, MAX_LEVELS};
 
 /// A corner of one level before it is described, level pixels.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -41,7 +41,7 @@ pub(crate) fn level_shares(pyramid: &Pyramid, count: usize, wanted: usize) -> [u
 /// Keeps the candidates whose score is a strict maximum of their 3×3 neighbourhood in
 /// `scores` (ties go to the first in raster order), best first (then in raster order).
 pub(crate) fn suppress_and_sort(
-    image: ImageView<'_>,
+    image: GrayView<'_>,
     scores: &[u8],
     candidates: &mut Vec<Candidate>,
 ) {
@@ -86,7 +86,7 @@ impl Grid {
     /// the best).
     pub(crate) fn select(
         &mut self,
-        image: ImageView<'_>,
+        image: GrayView<'_>,
         cell_px: usize,
         wanted: usize,
         candidates: &mut [Candidate],

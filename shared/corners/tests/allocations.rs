@@ -1,7 +1,7 @@
 //! A warm extractor allocates nothing: this test binary counts every heap allocation with
 //! its own global allocator (so it holds this one test only).
 
-use linetrack_corners::{CornerExtractor, Corners, ImageView, Params};
+use linetrack_corners::{CornerExtractor, Corners, GrayView, Params};
 use linetrack_test_data::CountingAllocator;
 
 #[global_allocator]
@@ -11,7 +11,7 @@ static ALLOCATOR: CountingAllocator = CountingAllocator::new(0);
 fn a_warm_extractor_does_not_allocate() {
     let (w, h) = (752, 480);
     let pixels = linetrack_test_data::test_card(w, h);
-    let view = ImageView::packed(&pixels, w, h).unwrap();
+    let view = GrayView::packed(&pixels, w, h).unwrap();
     let params = Params {
         max_corners: 1500,
         fast_threshold: 10,

@@ -140,15 +140,23 @@ pub enum VisionError {
         #[source]
         source: linetrack_edge_lines::EdgeLinesError,
     },
-    /// The image's pixels could not be handed to the `fast-brief` point extractor, or its
-    /// settings are out of range.
+    /// The `fast-brief` point extractor's settings are out of range.
     #[error("{origin}: fast-brief points")]
     Corners {
-        /// The image's origin, or the settings.
+        /// The settings.
         origin: String,
         /// Why.
         #[source]
         source: linetrack_corners::CornersError,
+    },
+    /// The image's pixels could not be handed to the `fast-brief` point extractor.
+    #[error("{origin}: fast-brief points")]
+    PointImage {
+        /// The image's origin.
+        origin: String,
+        /// Why.
+        #[source]
+        source: linetrack_edge_lines::EdgeLinesError,
     },
     /// A gain or bias that is not a finite, usable number.
     #[error("photometric perturbation: {0}")]

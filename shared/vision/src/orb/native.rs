@@ -4,7 +4,7 @@
 
 use super::OrbExtractor;
 use crate::{GrayImage, OrbOptions, PointExtractorKind, PointFeatures, VisionError};
-use linetrack_corners::{CornerExtractor, Corners, CornersError, ImageView, Params};
+use linetrack_corners::{CornerExtractor, Corners, CornersError, GrayView, Params};
 use linetrack_geometry::Point;
 
 /// The `linetrack-corners` parameters for `options` (the point count, levels, scale factor,
@@ -69,7 +69,7 @@ impl FastBriefExtractor {
         let (width, height) = (image.width() as usize, image.height() as usize);
         let pixels = image.packed_pixels(&mut self.copy)?;
         let view =
-            ImageView::packed(pixels, width, height).map_err(|source| VisionError::Corners {
+            GrayView::packed(pixels, width, height).map_err(|source| VisionError::PointImage {
                 origin: image.origin().to_string(),
                 source,
             })?;
