@@ -5,19 +5,19 @@
 //! The method is ORB's (Rublee et al. 2011: FAST corners, intensity-centroid orientation, a
 //! steered BRIEF descriptor); the code, and the descriptor's sampling pattern, are ours:
 //!
-//! 1. **Pyramid** ([`pyramid`]): `levels` images, each `scale_factor` smaller than the one
+//! 1. **Pyramid** (`pyramid.rs`): `levels` images, each `scale_factor` smaller than the one
 //!    before (bilinear, pixel centres aligned); level 0 is the caller's image itself.
-//! 2. **FAST-9** ([`fast`]): a pixel is a corner when 9 contiguous pixels of the 16 on the
+//! 2. **FAST-9** (`fast.rs`): a pixel is a corner when 9 contiguous pixels of the 16 on the
 //!    circle of radius 3 around it are all brighter than it by more than `fast_threshold`,
 //!    or all darker. Whole rows are tested at once, one circle position per pass, into
 //!    16-bit masks (loops the compiler vectorises); the score of a corner is the largest
 //!    threshold at which it still is one.
-//! 3. **Selection** ([`select`]): 3×3 non-maximum suppression of the score; then each
+//! 3. **Selection** (`select.rs`): 3×3 non-maximum suppression of the score; then each
 //!    level's share of `max_corners` (shares proportional to the levels' widths, as OpenCV's
 //!    ORB) is taken best first; optionally (`cell_px`) from a grid, at most an even share
 //!    per cell on the first pass, then the best of the rest, so textured corners of the
 //!    image do not take every point (off by default: measured, it cost the odometry).
-//! 4. **Orientation and descriptor** ([`describe`]): the angle from the patch's centre to
+//! 4. **Orientation and descriptor** (`describe.rs`): the angle from the patch's centre to
 //!    its intensity centroid (radius 15), quantised to 32 steps; 256 intensity comparisons
 //!    of pixel pairs of the smoothed level image, the pairs rotated by that angle. The pairs
 //!    are drawn once from a fixed-seed generator (isotropic Gaussian, BRIEF's G II), so every
@@ -28,8 +28,9 @@
 //! Positions are in full-resolution pixels (pixel centres at integers); a corner found at
 //! level `l` sits on that level's pixel grid, `scale_factor^l` pixels apart. Corners stay
 //! `edge_px`, and at least [`BORDER_PX`], level pixels from the border so their patch is whole. Nothing panics on
-//! any image: empty, tiny, blank, noise (tested); a slice that cannot hold the image it
-//! is said to hold is an error.
+//! any image: empty, tiny, blank, noise (tested). Images come as the tree's 8-bit view,
+//! [`GrayView`] (from `linetrack-edge-lines`), whose constructor refuses a slice that cannot
+//! hold the image it is said to hold.
 
 #![warn(missing_docs)]
 
