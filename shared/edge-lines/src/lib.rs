@@ -137,8 +137,18 @@ impl<'a> GrayView<'a> {
         self.height
     }
 
-    /// Row `y` (its `width` pixels). `y < height`.
-    fn row(&self, y: usize) -> &'a [u8] {
+    /// Bytes from one row to the next.
+    pub fn stride(&self) -> usize {
+        self.stride
+    }
+
+    /// The pixels: `height` rows `stride` bytes apart (the last one `width` long at least).
+    pub fn pixels(&self) -> &'a [u8] {
+        self.pixels
+    }
+
+    /// Row `y` (its `width` pixels). Panics unless `y < height`.
+    pub fn row(&self, y: usize) -> &'a [u8] {
         &self.pixels[y * self.stride..y * self.stride + self.width]
     }
 }

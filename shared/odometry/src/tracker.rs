@@ -22,7 +22,7 @@ use linetrack_stereo_vo::{
     estimate_motion_near,
 };
 use linetrack_vision::{
-    FeatureMatch, GrayImage, OrbExtractor, OrbWorker, PointFeatures, PointMatcher,
+    FeatureMatch, GrayImage, OrbWorker, PointExtractor, PointFeatures, PointMatcher,
 };
 use nalgebra::{Isometry3, Point3};
 use points::{PointTracking, PointWorkMs, search_radius_px};
@@ -216,7 +216,7 @@ pub struct MotionTracker {
     rig: StereoRig,
     /// One ORB extractor per image: the two run at the same time, the right one on a
     /// thread of its own.
-    orb_left: OrbExtractor,
+    orb_left: PointExtractor,
     orb_right: OrbWorker,
     /// Stereo matching of the points.
     point_matcher: PointMatcher,
@@ -246,7 +246,7 @@ impl MotionTracker {
     /// A tracker starting at the identity pose.
     pub fn new(config: OdometryConfig, rig: StereoRig) -> Result<Self, OdometryError> {
         Ok(Self {
-            orb_left: OrbExtractor::new(&config.frontend.orb)?,
+            orb_left: PointExtractor::new(&config.frontend.orb)?,
             orb_right: OrbWorker::new(&config.frontend.orb)?,
             point_matcher: PointMatcher::new(),
             tracking: PointTracking::default(),

@@ -16,6 +16,10 @@
 //!   included: profiles of both images + matching;
 //! - `orb/extract`: 600 ORB points of one image (the stereo front end's), `orb/match/stereo`;
 //! - `orb/extract/odometry`: 1500 ORB points of one image (the odometry's);
+//! - `fast-brief/extract/odometry`: the same 1500 points, same levels and scale, from our
+//!   own extractor (`[orb] extractor = "fast-brief"`), to compare with the case above;
+//!   `{orb,fast-brief}/extract/odometry/4x1.44` and `/1x`: both with 4 levels of 1.44 (about
+//!   the same span of scales) and with one level;
 //! - `orb/match/frame-to-frame/odometry`: the odometry's frame-to-frame point search (1500
 //!   points an image, a 30 px window);
 //! - `orb/refine-track`: the sub-pixel refinement of frame 0's frame-to-frame point matches;
@@ -32,8 +36,9 @@ use criterion::{Criterion, criterion_group, criterion_main};
 use linetrack_geometry::MatchCase;
 use linetrack_vision::{
     AppearanceGates, DetectorKind, FrontendConfig, GrayImage, HammingMatcher, LineFeatures,
-    MatcherKind, OrbExtractor, OrbOptions, PointFeatures, PointMatcher, create_detector,
-    create_segment_matcher, points_may_match, refine_stereo_column, refine_track,
+    MatcherKind, OrbExtractor, OrbOptions, PointExtractor, PointExtractorKind, PointFeatures,
+    PointMatcher, create_detector, create_segment_matcher, points_may_match, refine_stereo_column,
+    refine_track,
 };
 use opencv::core::{Vec4f, Vector};
 use opencv::ximgproc::{self, EdgeDrawingTrait};
@@ -211,6 +216,30 @@ fn bench_frontend(c: &mut Criterion) {
     group.bench_function("orb/extract/odometry", |b| {
         b.iter(|| odometry_extractor.extract(black_box(&left), &mut o_first))
     });
+    // Both extractors at the odometry's settings (8 levels of 1.2), then at a shallower
+    // pyramid spanning about the same scales (4 levels of 1.44) and at one level.
+    for (levels, scale_factor, suffix) in [(8, 1.2, ""), (4, 1.44, "/4x1.44"), (1, 1.2, "/1x")] {
+        for extractor in PointExtractorKind::ALL {
+            let options = OrbOptions {
+                extractor,
+                levels,
+                scale_factor,
+                ..odometry_orb
+            };
+            if extractor == PointExtractorKind::OrbOpenCv && suffix.is_empty() {
+                continue; // `orb/extract/odometry` above
+            }
+            let mut points_extractor = PointExtractor::new(&options).expect("extractor");
+            let mut points = PointFeatures::default();
+            let name = match extractor {
+                PointExtractorKind::OrbOpenCv => format!("orb/extract/odometry{suffix}"),
+                PointExtractorKind::FastBrief => format!("fast-brief/extract/odometry{suffix}"),
+            };
+            group.bench_function(name, |b| {
+                b.iter(|| points_extractor.extract(black_box(&left), &mut points))
+            });
+        }
+    }
     odometry_extractor
         .extract(&left, &mut o_first)
         .expect("orb");

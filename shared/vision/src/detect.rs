@@ -7,7 +7,7 @@ use crate::{
 use linetrack_edge_lines::GrayView;
 use linetrack_frontend_core::EdgeLinesSegments;
 use linetrack_geometry::Segment;
-use opencv::core::{MatTraitConstManual, Ptr, Vec4f, Vector};
+use opencv::core::{Ptr, Vec4f, Vector};
 use opencv::imgproc::{self, LineSegmentDetector, LineSegmentDetectorTrait};
 use opencv::ximgproc::{self, FastLineDetector, FastLineDetectorTrait};
 use serde::{Deserialize, Serialize};
@@ -213,20 +213,7 @@ impl LineDetector for EdgeLinesDetector {
         out.clear();
         // A GrayImage is never empty: the casts are exact.
         let (width, height) = (image.width() as usize, image.height() as usize);
-        let pixels = match image.pixels() {
-            Some(pixels) => pixels,
-            None => {
-                self.copy.clear();
-                for row in 0..image.height() {
-                    let row = image
-                        .mat()
-                        .at_row::<u8>(row)
-                        .context("reading a row of a non-continuous image")?;
-                    self.copy.extend_from_slice(row);
-                }
-                &self.copy
-            }
-        };
+        let pixels = image.packed_pixels(&mut self.copy)?;
         let view =
             GrayView::packed(pixels, width, height).map_err(|source| VisionError::EdgeLines {
                 origin: image.origin().to_string(),

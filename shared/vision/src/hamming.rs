@@ -34,7 +34,6 @@ impl BinaryDescriptors {
     }
 
     /// Sets row `row` (of the size [`BinaryDescriptors::reset`] made) to `bytes`.
-    #[cfg(test)]
     pub(crate) fn set_row(&mut self, row: usize, bytes: &[u8]) {
         self.bytes[row * self.row_bytes..(row + 1) * self.row_bytes].copy_from_slice(bytes);
         self.present[row] = true;

@@ -236,6 +236,23 @@ impl GrayImage {
         self.mat.data_bytes().ok()
     }
 
+    /// The pixels, row-major and packed: the image's own when the matrix is continuous,
+    /// else a copy made in `copy` (its buffer reused).
+    pub fn packed_pixels<'a>(&'a self, copy: &'a mut Vec<u8>) -> Result<&'a [u8], VisionError> {
+        if let Some(pixels) = self.pixels() {
+            return Ok(pixels);
+        }
+        copy.clear();
+        for row in 0..self.height() {
+            let row = self
+                .mat
+                .at_row::<u8>(row)
+                .context("reading a row of a non-continuous image")?;
+            copy.extend_from_slice(row);
+        }
+        Ok(copy)
+    }
+
     /// Errs unless `other` has the same size, naming both images.
     pub fn ensure_same_size(&self, other: &GrayImage) -> Result<(), VisionError> {
         if (self.width(), self.height()) == (other.width(), other.height()) {

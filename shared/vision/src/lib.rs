@@ -8,6 +8,10 @@
 //!   ([`DetectorKind`]); all keep the N longest segments above a length.
 //! - [`SegmentMatcher`]: the appearance baseline LBD (line_descriptor descriptors, mutual
 //!   best + ratio test) and the geometric ℓ1 matcher behind one trait ([`MatcherKind`]).
+//! - [`PointExtractor`]: the points' extractor chosen by name ([`PointExtractorKind`]):
+//!   OpenCV's ORB ([`OrbExtractor`]) or our own oriented FAST corners with a steered binary
+//!   descriptor ([`FastBriefExtractor`], `linetrack-corners`, no OpenCV); the same 32-byte
+//!   descriptors either way.
 //! - [`OrbExtractor`] and [`PointMatcher`]: ORB points matched mutual-best with a
 //!   second-best distance ratio ([`HammingMatcher`]), stereo and frame to frame, among the
 //!   candidates a grid over the second image's points gives; [`OrbWorker`] finds one
@@ -32,6 +36,7 @@ mod worker;
 
 pub use config::{
     AppearanceGates, FldOptions, FrontendConfig, LbdOptions, LsdOptions, LsdRefine, OrbOptions,
+    PointExtractorKind,
 };
 pub use detect::{
     DetectorKind, EdgeLinesDetector, FldDetector, LineDetector, LsdDetector, MIN_IMAGE_SIDE_PX,
@@ -49,8 +54,8 @@ pub use matchers::{
     create_segment_matcher,
 };
 pub use orb::{
-    MIN_TRACK_CORRELATION, OrbExtractor, OrbWorker, PointFeatures, PointMatcher, points_may_match,
-    refine_stereo_column, refine_track,
+    FastBriefExtractor, MIN_TRACK_CORRELATION, OrbExtractor, OrbWorker, PointExtractor,
+    PointFeatures, PointMatcher, points_may_match, refine_stereo_column, refine_track,
 };
 pub use pair::{LinePairMatcher, PairResult, PairTimings};
 pub use worker::{SideWorker, copy_image_into};
@@ -129,6 +134,24 @@ pub enum VisionError {
     /// The image's pixels could not be handed to the `edgelines` detector.
     #[error("{origin}: edgelines detection")]
     EdgeLines {
+        /// The image's origin.
+        origin: String,
+        /// Why.
+        #[source]
+        source: linetrack_edge_lines::EdgeLinesError,
+    },
+    /// The `fast-brief` point extractor's settings are out of range.
+    #[error("{origin}: fast-brief points")]
+    Corners {
+        /// The settings.
+        origin: String,
+        /// Why.
+        #[source]
+        source: linetrack_corners::CornersError,
+    },
+    /// The image's pixels could not be handed to the `fast-brief` point extractor.
+    #[error("{origin}: fast-brief points")]
+    PointImage {
         /// The image's origin.
         origin: String,
         /// Why.

@@ -1,4 +1,4 @@
-//! ORB points (OpenCV features2d): extraction, the side worker that extracts the right
+//! ORB points (OpenCV features2d, or our own in [`native`]): extraction, the side worker that extracts the right
 //! image and matches the stereo pair beside the caller, and (in the submodules) matching
 //! by descriptor and sub-pixel refinement.
 
@@ -12,9 +12,12 @@ use opencv::core::{KeyPoint, KeyPointTraitConst, Mat, MatTraitConst, Ptr, Vector
 use opencv::features2d::{Feature2DTrait, ORB, ORB_ScoreType};
 
 mod matching;
+mod native;
 mod refine;
 
 pub use matching::{PointMatcher, points_may_match};
+pub(crate) use native::fast_brief_params;
+pub use native::{FastBriefExtractor, PointExtractor};
 pub use refine::{MIN_TRACK_CORRELATION, refine_stereo_column, refine_track};
 
 /// Points of one image with their descriptors (row k for `points[k]`).
@@ -104,7 +107,7 @@ impl OrbExtractor {
     }
 }
 
-/// An [`OrbExtractor`] on a thread of its own ([`SideWorker`]): one image's points are found
+/// A [`PointExtractor`] on a thread of its own ([`SideWorker`]): one image's points are found
 /// there while the caller works on another, and two images' points can be matched there
 /// too. The inputs are copied into the worker's buffers (reused from frame to frame) and
 /// the results come back in buffers that are swapped, not reallocated.
@@ -115,7 +118,7 @@ pub struct OrbWorker {
 /// What travels to the worker and back.
 struct OrbJob {
     task: OrbTask,
-    extractor: OrbExtractor,
+    extractor: PointExtractor,
     image: Option<GrayImage>,
     points: PointFeatures,
     stereo: StereoJob,
@@ -150,7 +153,7 @@ impl OrbWorker {
     pub fn new(options: &OrbOptions) -> Result<Self, VisionError> {
         let job = OrbJob {
             task: OrbTask::Extract,
-            extractor: OrbExtractor::new(options)?,
+            extractor: PointExtractor::new(options)?,
             image: None,
             points: PointFeatures::default(),
             stereo: StereoJob::default(),

@@ -203,41 +203,6 @@ fn stereo_matches_on_a_shifted_test_card_have_the_true_disparity() {
     }
 }
 
-#[test]
-fn orb_points_match_at_the_true_disparity() {
-    let (left, right) = (card(0), card(9));
-    let options = OrbOptions::default();
-    let mut orb = OrbExtractor::new(&options).unwrap();
-    let (mut a, mut b) = (PointFeatures::default(), PointFeatures::default());
-    orb.extract(&left, &mut a).unwrap();
-    orb.extract(&right, &mut b).unwrap();
-    assert!(a.points.len() > 50 && a.descriptors.count_present() == a.points.len());
-    let mut out = Vec::new();
-    PointMatcher::new().match_points(
-        MatchCase::Stereo,
-        &a,
-        &b,
-        &AppearanceGates::default(),
-        options.min_distance_ratio,
-        &mut out,
-    );
-    assert!(out.len() >= 20, "{} matches", out.len());
-    // Keypoints found on coarser pyramid levels are quantised to that level's pixels
-    // (1.2³ ≈ 1.7 px at level 3), hence the tolerance.
-    let exact = out
-        .iter()
-        .filter(|m| {
-            let (p, q) = (a.points[m.query], b.points[m.train]);
-            ((p.x - q.x) - 9.0).abs() <= 2.5 && (p.y - q.y).abs() <= 2.5
-        })
-        .count();
-    assert!(
-        exact as f64 >= 0.9 * out.len() as f64,
-        "{exact} of {}",
-        out.len()
-    );
-}
-
 // ---------------------------------------------------------------- real images
 
 /// EuRoC excerpt frame `index`, left and right, loaded.

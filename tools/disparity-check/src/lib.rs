@@ -14,6 +14,13 @@
 //! renderer's exact depth at each pixel centre: no quantisation and no convention to
 //! interpret, so a bias found on both is the odometry's, and one found only on Middlebury
 //! is the ground truth's.
+//!
+//! [`repeatability`] scores point extractors instead (OpenCV's ORB against our own
+//! corners): how many left points come back in the right image where the truth puts them.
+
+mod repeat;
+
+pub use repeat::{RepeatCounts, RepeatRow, repeat_markdown, repeatability};
 
 use linetrack_datasets::{DisparityMap, LoadedPair};
 use linetrack_geometry::StereoRig;

@@ -4,10 +4,13 @@
 use anyhow::Context;
 use clap::Parser;
 use linetrack_datasets::LoadedPair;
-use linetrack_disparity_check::{Row, check_pair, markdown, rendered_pair, rows};
+use linetrack_disparity_check::{
+    RepeatCounts, RepeatRow, Row, check_pair, markdown, rendered_pair, repeat_markdown,
+    repeatability, rows,
+};
 use linetrack_odometry::{OdometryConfig, SightingKind};
 use linetrack_scene_render::Preset;
-use linetrack_vision::MatcherKind;
+use linetrack_vision::{MatcherKind, OrbOptions, PointExtractorKind};
 use std::path::PathBuf;
 use std::process::ExitCode;
 
@@ -22,6 +25,7 @@ use std::process::ExitCode;
     linetrack-disparity-check --matcher l1 --pair Cones
     linetrack-disparity-check --config configs/odometry.toml
     linetrack-disparity-check --generated highway --generated normal --seed 2   # exact truth
+    linetrack-disparity-check --repeatability --levels 1 --levels 8   # point extractors
 
 The error is the odometry's disparity minus the ground truth under the left pixel
 (bilinear between pixel centres). A sighting off by more than --inlier-px is a wrong match:
@@ -30,6 +34,13 @@ read too long there, by about |mean| / d. With --generated, the pairs are frames
 sequences (rendered in memory, 100 frames long, --frames of them evenly spaced) and the truth
 is the renderer's exact depth at each pixel centre. Sightings over a depth edge (the four pixels around differ by
 more than --max-spread-px) or over unknown ground truth are left out and counted.
+
+With --repeatability, no odometry runs: both point extractors (orb-opencv, fast-brief), with
+the config's [frontend.orb] settings and each --levels, find points in both images, and a
+left point with ground truth counts as repeated when a right point lies within --radius-px
+of its true position (x − d, y); the table gives the fraction and the mean distance of the
+repeated ones (repeatability.md and .json). Our extractor keeps, image by image, as many
+points as OpenCV's found there (more points would make a chance neighbour likelier).
 
 OUTPUT: <output>/disparity-check.md (the table), disparity-check.json (the rows) and, with
 --samples, samples.jsonl (every sighting: scene, matcher, kind, disparities, error).
@@ -69,6 +80,17 @@ struct Args {
     /// left out of the bias), pixels.
     #[arg(long, default_value_t = 2.0)]
     inlier_px: f64,
+    /// Score the point extractors' repeatability instead of the odometry's disparities.
+    #[arg(long)]
+    repeatability: bool,
+    /// Repeatability: a left point is repeated when a right point lies this close to its
+    /// true position, pixels.
+    #[arg(long, default_value_t = 1.5)]
+    radius_px: f64,
+    /// Repeatability: pyramid levels to run both extractors with (repeatable; default: the
+    /// config's).
+    #[arg(long = "levels")]
+    levels: Vec<i32>,
     /// Also write every sighting with its error (samples.jsonl).
     #[arg(long)]
     samples: bool,
@@ -105,6 +127,9 @@ fn run() -> anyhow::Result<String> {
             .with_context(|| format!("--config {}", path.display()))?,
         None => OdometryConfig::default(),
     };
+    if args.repeatability {
+        return run_repeatability(&args, &pairs, &config.frontend.orb);
+    }
     let matchers = if args.matchers.is_empty() {
         vec![MatcherKind::Lbd, MatcherKind::L1]
     } else {
@@ -168,6 +193,77 @@ fn run() -> anyhow::Result<String> {
         let lines: String = all_samples.iter().map(|v| format!("{v}\n")).collect();
         std::fs::write(&path, lines).with_context(|| format!("writing {}", path.display()))?;
     }
+    Ok(text)
+}
+
+/// The repeatability table of both point extractors at each of `args.levels` over `pairs`.
+fn run_repeatability(args: &Args, pairs: &[Source], orb: &OrbOptions) -> anyhow::Result<String> {
+    if !(args.radius_px.is_finite() && args.radius_px > 0.0) {
+        anyhow::bail!("--radius-px {}: must be > 0", args.radius_px);
+    }
+    let levels = match args.levels.is_empty() {
+        true => vec![orb.levels],
+        false => args.levels.clone(),
+    };
+    let variants: Vec<OrbOptions> = levels
+        .iter()
+        .flat_map(|&levels| {
+            PointExtractorKind::ALL.map(|extractor| OrbOptions {
+                extractor,
+                levels,
+                ..*orb
+            })
+        })
+        .collect();
+    let mut totals = vec![RepeatCounts::default(); variants.len()];
+    let progress = linetrack_progress::Progress::new("pairs", pairs.len() as u64, args.quiet);
+    for (done, pair) in pairs.iter().enumerate() {
+        progress.step(pair.name.as_str());
+        let loaded = (pair.load)().with_context(|| format!("scene {}", pair.name))?;
+        // OpenCV's first at each depth; ours then held to its counts.
+        let mut found = None;
+        for (options, total) in variants.iter().zip(&mut totals) {
+            let counts = match options.extractor {
+                PointExtractorKind::OrbOpenCv => None,
+                PointExtractorKind::FastBrief => found,
+            };
+            let (counts, points) =
+                repeatability(&loaded, options, counts, args.radius_px, args.max_spread_px)
+                    .with_context(|| {
+                        format!("scene {} with {}", pair.name, options.extractor.name())
+                    })?;
+            if options.extractor == PointExtractorKind::OrbOpenCv {
+                found = Some(points);
+            }
+            total.add(&counts);
+        }
+        progress.set(done as u64 + 1);
+    }
+    progress.finish();
+    let rows: Vec<RepeatRow> = variants
+        .iter()
+        .zip(&totals)
+        .map(|(options, counts)| RepeatRow {
+            extractor: options.extractor.name().to_string(),
+            levels: options.levels,
+            counts: *counts,
+            repeatability: counts.repeatability(),
+            mean_distance_px: counts.mean_distance_px(),
+        })
+        .collect();
+    let text = format!(
+        "{}\n{} pairs, {} points an image.\n",
+        repeat_markdown(&rows, args.radius_px),
+        pairs.len(),
+        orb.features
+    );
+    std::fs::create_dir_all(&args.output)
+        .with_context(|| format!("creating {}", args.output.display()))?;
+    let md = args.output.join("repeatability.md");
+    std::fs::write(&md, &text).with_context(|| format!("writing {}", md.display()))?;
+    let json = args.output.join("repeatability.json");
+    std::fs::write(&json, serde_json::to_string_pretty(&rows)?)
+        .with_context(|| format!("writing {}", json.display()))?;
     Ok(text)
 }
 

@@ -1,0 +1,237 @@
+//! Orientation by intensity centroid and the steered binary descriptor, with its sampling
+//! pattern: 256 pixel pairs drawn once, from a fixed seed, by our own generator.
+
+use crate::{BORDER_PX, DESCRIPTOR_BYTES, GrayView};
+use std::f64::consts::TAU;
+
+/// Radius of the disc the orientation's centroid is taken over, pixels.
+const ORIENTATION_RADIUS: i32 = 15;
+/// The pattern's points lie within this radius (so rotated and rounded, within
+/// `BORDER_PX − 2` of the corner), pixels.
+const PATTERN_RADIUS: f64 = 13.0;
+/// Standard deviation of the pattern's points about the corner, pixels: a fifth of the
+/// 31-pixel patch (BRIEF's isotropic Gaussian sampling, G II).
+const PATTERN_SIGMA: f64 = 31.0 / 5.0;
+/// The two points of a pair are at least this far apart, pixels.
+const MIN_PAIR_DISTANCE: f64 = 2.0;
+/// Orientations the pattern is precomputed for (steps of 11.25°).
+pub(crate) const ANGLE_STEPS: usize = 32;
+/// Comparisons in a descriptor.
+const PAIRS: usize = DESCRIPTOR_BYTES * 8;
+/// The pattern generator's seed (any fixed value: it names the pattern).
+const PATTERN_SEED: u64 = 0x6c69_6e65_7472_6163;
+
+/// The sampling pattern, rotated to each of [`ANGLE_STEPS`] orientations: per orientation,
+/// the pairs' points as `(dx, dy)`, first and second point of pair k at 2k and 2k + 1.
+pub(crate) struct Pattern {
+    rotated: Vec<[(i8, i8); 2 * PAIRS]>,
+    /// The rotated points as offsets from the corner in an image of rows `stride` bytes
+    /// apart ([`Pattern::prepare`]), shifted by `reach` so that none is negative.
+    offsets: Vec<[usize; 2 * PAIRS]>,
+    stride: usize,
+    reach: usize,
+    /// Per row of the orientation disc (−R..=R), per column of the 32 from −R: 1 inside
+    /// the disc, else 0 (the last column is always out).
+    inside: [[u16; WINDOW]; DISC_ROWS],
+    /// The same, times the column's offset from the centre, right of it (left of it: 0);
+    /// 16-bit sums cannot overflow (Σ 1..=15 × 255 < 2¹⁶), so the row loops vectorise.
+    right: [[u16; WINDOW]; DISC_ROWS],
+    /// The same left of the centre, times minus the offset.
+    left: [[u16; WINDOW]; DISC_ROWS],
+}
+
+/// Rows of the orientation disc.
+const DISC_ROWS: usize = 2 * ORIENTATION_RADIUS as usize + 1;
+/// Columns read per row of the disc: 2R + 1, and one more to make a round 32.
+const WINDOW: usize = 32;
+
+impl Pattern {
+    /// The pattern (the same on every call and every build).
+    pub(crate) fn new() -> Self {
+        let points = pattern_points();
+        let rotated = (0..ANGLE_STEPS)
+            .map(|step| {
+                let (sin, cos) = (step as f64 * TAU / ANGLE_STEPS as f64).sin_cos();
+                points.map(|(x, y)| {
+                    let rx = (cos * x - sin * y).round() as i8;
+                    let ry = (sin * x + cos * y).round() as i8;
+                    (rx, ry)
+                })
+            })
+            .collect();
+        let r = f64::from(ORIENTATION_RADIUS);
+        let inside: [[u16; WINDOW]; DISC_ROWS] = std::array::from_fn(|k| {
+            let dy = k as f64 - r;
+            let half = (r * r - dy * dy).sqrt().round() as i32;
+            std::array::from_fn(|c| u16::from((c as i32 - ORIENTATION_RADIUS).abs() <= half))
+        });
+        let weighted = |sign: i32| {
+            inside.map(|row| {
+                let mut out = row;
+                for (c, w) in out.iter_mut().enumerate() {
+                    *w *= (sign * (c as i32 - ORIENTATION_RADIUS)).max(0) as u16;
+                }
+                out
+            })
+        };
+        let (right, left) = (weighted(1), weighted(-1));
+        Self {
+            rotated,
+            offsets: Vec::new(),
+            stride: 0,
+            reach: 0,
+            inside,
+            right,
+            left,
+        }
+    }
+
+    /// Readies [`Pattern::describe`] for images of rows `stride` bytes apart.
+    pub(crate) fn prepare(&mut self, stride: usize) {
+        if stride == self.stride && !self.offsets.is_empty() {
+            return;
+        }
+        let reach = BORDER_PX * stride + BORDER_PX;
+        self.offsets.clear();
+        self.offsets.extend(self.rotated.iter().map(|points| {
+            points.map(|(dx, dy)| {
+                let offset = isize::from(dy) * stride as isize + isize::from(dx);
+                (reach as isize + offset) as usize
+            })
+        }));
+        self.stride = stride;
+        self.reach = reach;
+    }
+
+    /// The descriptor of the corner at `(x, y)` of `smooth` oriented at `angle_rad`: bit
+    /// `j` of byte `i` is set when pair `8i + j`'s first point is darker than its second.
+    /// The corner is at least `BORDER_PX` from the borders; [`Pattern::prepare`] was called
+    /// with `smooth`'s stride.
+    pub(crate) fn describe(
+        &self,
+        smooth: GrayView<'_>,
+        x: usize,
+        y: usize,
+        angle_rad: f32,
+    ) -> [u8; DESCRIPTOR_BYTES] {
+        let offsets = &self.offsets[angle_step(angle_rad)];
+        // Everything the pattern can reach, the corner `reach` bytes in.
+        let start = y * smooth.stride() + x - self.reach;
+        let window = &smooth.pixels()[start..start + 2 * self.reach + 1];
+        let mut out = [0; DESCRIPTOR_BYTES];
+        for (byte, pairs) in out.iter_mut().zip(offsets.chunks_exact(16)) {
+            for (bit, pair) in pairs.chunks_exact(2).enumerate() {
+                let (first, second) = (window[pair[0]], window[pair[1]]);
+                *byte |= u8::from(first < second) << bit;
+            }
+        }
+        out
+    }
+
+    /// Direction from `(x, y)` to the intensity centroid of the disc of radius 15 around it
+    /// in `image`, radians, image axes. The point is at least `BORDER_PX` from the borders.
+    pub(crate) fn orientation(&self, image: GrayView<'_>, x: usize, y: usize) -> f32 {
+        let (mut m10, mut m01) = (0i64, 0i64);
+        for k in 0..DISC_ROWS {
+            let dy = k as i32 - ORIENTATION_RADIUS;
+            let row = image.row(y.wrapping_add_signed(dy as isize));
+            let start = x - ORIENTATION_RADIUS as usize;
+            let mut window = [0u16; WINDOW];
+            for (w, &p) in window.iter_mut().zip(&row[start..start + WINDOW]) {
+                *w = u16::from(p);
+            }
+            let dot = |weights: &[u16; WINDOW]| -> u16 {
+                let mut lanes = [0u16; WINDOW];
+                for ((l, &w), &p) in lanes.iter_mut().zip(weights).zip(&window) {
+                    *l = w * p;
+                }
+                lanes.iter().sum::<u16>()
+            };
+            let sum = dot(&self.inside[k]);
+            m10 += i64::from(dot(&self.right[k])) - i64::from(dot(&self.left[k]));
+            m01 += i64::from(dy) * i64::from(sum);
+        }
+        (m01 as f64).atan2(m10 as f64) as f32
+    }
+}
+
+#[cfg(test)]
+impl PartialEq for Pattern {
+    fn eq(&self, other: &Self) -> bool {
+        self.rotated == other.rotated && self.inside == other.inside && self.right == other.right
+    }
+}
+
+#[cfg(test)]
+impl Pattern {
+    /// The largest |dx| or |dy| of any rotated point, pixels.
+    pub(crate) fn max_offset(&self) -> i32 {
+        self.rotated
+            .iter()
+            .flatten()
+            .map(|&(dx, dy)| i32::from(dx.unsigned_abs().max(dy.unsigned_abs())))
+            .max()
+            .unwrap_or(0)
+    }
+}
+
+/// The nearest of the [`ANGLE_STEPS`] orientations to `angle_rad`.
+fn angle_step(angle_rad: f32) -> usize {
+    let steps = ANGLE_STEPS as f64;
+    let step = (f64::from(angle_rad) / TAU * steps).round() as i64;
+    step.rem_euclid(ANGLE_STEPS as i64) as usize
+}
+
+/// The pattern's 2 × 256 points, unrotated: pairs of points from an isotropic Gaussian about
+/// the corner (σ [`PATTERN_SIGMA`]), inside [`PATTERN_RADIUS`], the two at least
+/// [`MIN_PAIR_DISTANCE`] apart. Gaussian draws are sums of four uniform ones (close enough,
+/// and plain arithmetic, so every platform draws the same).
+fn pattern_points() -> [(f64, f64); 2 * PAIRS] {
+    let mut state = PATTERN_SEED;
+    let mut gaussian = || {
+        // Irwin–Hall: four uniforms on [−½, ½) have variance 1/3.
+        let sum: f64 = (0..4).map(|_| unit(splitmix64(&mut state)) - 0.5).sum();
+        sum * 3f64.sqrt() * PATTERN_SIGMA
+    };
+    let mut point = || loop {
+        let (x, y) = (gaussian(), gaussian());
+        if x * x + y * y <= PATTERN_RADIUS * PATTERN_RADIUS {
+            return (x, y);
+        }
+    };
+    let mut points = [(0.0, 0.0); 2 * PAIRS];
+    for pair in points.chunks_exact_mut(2) {
+        loop {
+            let (a, b) = (point(), point());
+            if (a.0 - b.0).hypot(a.1 - b.1) >= MIN_PAIR_DISTANCE {
+                pair[0] = a;
+                pair[1] = b;
+                break;
+            }
+        }
+    }
+    points
+}
+
+/// The next value of the SplitMix64 generator (Steele, Lea & Flood 2014).
+fn splitmix64(state: &mut u64) -> u64 {
+    *state = state.wrapping_add(0x9e37_79b9_7f4a_7c15);
+    let mut z = *state;
+    z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+    z ^ (z >> 31)
+}
+
+/// `bits`' top 53 bits as a number in [0, 1).
+fn unit(bits: u64) -> f64 {
+    (bits >> 11) as f64 / (1u64 << 53) as f64
+}
+
+/// What the tests borrow: the pattern's generator.
+#[cfg(test)]
+pub(crate) mod tests_support {
+    /// A number in [0, 1) from the generator the pattern is drawn with.
+    pub(crate) fn uniform(state: &mut u64) -> f64 {
+        super::unit(super::splitmix64(state))
+    }
+}

@@ -1,0 +1,201 @@
+//! The image pyramid (bilinear, pixel centres aligned, each level from the one before as
+//! OpenCV's ORB does) and the smoothing the descriptor reads (a 7-tap Gaussian, σ = 2 cut at ±3, as ORB,
+//! in both directions). Vertical passes run over whole rows in 16-bit integers, which the
+//! compiler vectorises; the resampling's horizontal pass reads a precomputed table.
+
+use crate::{BORDER_PX, GrayView, MAX_LEVELS, Params};
+
+/// Fractional bits of the bilinear weights.
+const WEIGHT_BITS: u32 = 8;
+/// The weight of a whole pixel.
+const WEIGHT_ONE: u16 = 1 << WEIGHT_BITS;
+
+/// Levels 1.. of the pyramid (level 0 is the caller's image) and the resampling buffers.
+#[derive(Default)]
+pub(crate) struct Pyramid {
+    /// Pixels of levels 1.., packed.
+    levels: Vec<Vec<u8>>,
+    /// Width and height of every level.
+    sizes: [(usize, usize); MAX_LEVELS],
+    /// Full-resolution pixels per pixel of every level.
+    scales: [f32; MAX_LEVELS],
+    /// One source row pair blended vertically, weights included.
+    blend: Vec<u16>,
+    /// Per destination column: left source column and the right one's weight.
+    columns: Vec<(u32, u16)>,
+}
+
+impl Pyramid {
+    /// Builds the levels of `image` that are large enough to hold a corner; returns how many
+    /// there are (0 when even `image` is too small).
+    pub(crate) fn build(&mut self, image: GrayView<'_>, params: &Params) -> usize {
+        let (width, height) = (image.width(), image.height());
+        // The smallest level worth building: room for one corner inside the border.
+        let min_side = 2 * params.edge_px.max(BORDER_PX) + 1;
+        let mut count = 0;
+        for level in 0..params.levels {
+            let scale = params.scale_factor.powi(level as i32);
+            let size = (
+                (width as f32 / scale).round() as usize,
+                (height as f32 / scale).round() as usize,
+            );
+            if size.0 < min_side || size.1 < min_side {
+                break;
+            }
+            self.sizes[level] = if level == 0 { (width, height) } else { size };
+            self.scales[level] = scale;
+            count = level + 1;
+        }
+        if self.levels.len() < count.saturating_sub(1) {
+            self.levels.resize_with(count - 1, Vec::new);
+        }
+        for level in 1..count {
+            let (width, height) = self.sizes[level];
+            let (done, rest) = self.levels.split_at_mut(level - 1);
+            let pixels = &mut rest[0];
+            pixels.resize(width * height, 0);
+            let source = match level {
+                1 => Ok(image),
+                _ => {
+                    let (w, h) = self.sizes[level - 1];
+                    GrayView::packed(&done[level - 2], w, h)
+                }
+            };
+            let Ok(source) = source else {
+                return level; // cannot happen: the buffer was sized for it
+            };
+            let buffers = (&mut self.columns, &mut self.blend);
+            resample(source, pixels, width, buffers);
+        }
+        count
+    }
+
+    /// Level `level`'s pixels (`image` itself at level 0). `level` < the count `build` gave
+    /// (`None` otherwise).
+    pub(crate) fn plane<'a>(&'a self, level: usize, image: GrayView<'a>) -> Option<GrayView<'a>> {
+        if level == 0 {
+            return Some(image);
+        }
+        let (width, height) = self.sizes[level];
+        GrayView::packed(self.levels.get(level - 1)?, width, height).ok()
+    }
+
+    /// Full-resolution pixels per pixel of level `level`.
+    pub(crate) fn scale(&self, level: usize) -> f32 {
+        self.scales[level]
+    }
+}
+
+/// Bilinear resampling of `source` into `out` (`width` × `height`, packed), pixel
+/// centres aligned: destination pixel `d` samples source position `(d + ½)·s − ½`.
+fn resample(
+    source: GrayView<'_>,
+    out: &mut [u8],
+    width: usize,
+    (columns, blend): (&mut Vec<(u32, u16)>, &mut Vec<u16>),
+) {
+    let sx = source.width() as f32 / width as f32;
+    let height = out.len() / width.max(1);
+    let sy = source.height() as f32 / height.max(1) as f32;
+    columns.clear();
+    columns.extend((0..width).map(|x| sample_at(x, sx, source.width())));
+    blend.resize(source.width(), 0);
+    for (y, row_out) in out.chunks_exact_mut(width).enumerate() {
+        let (top, w_bottom) = sample_at(y, sy, source.height());
+        let top = top as usize;
+        let bottom = (top + 1).min(source.height() - 1);
+        let (upper, lower) = (source.row(top), source.row(bottom));
+        let w_top = WEIGHT_ONE - w_bottom;
+        for ((b, &u), &l) in blend.iter_mut().zip(upper).zip(lower) {
+            *b = u16::from(u) * w_top + u16::from(l) * w_bottom;
+        }
+        let last = source.width() - 1;
+        for (o, &(left, w_right)) in row_out.iter_mut().zip(columns.iter()) {
+            let left = left as usize;
+            let right = (left + 1).min(last);
+            let sum = u32::from(blend[left]) * u32::from(WEIGHT_ONE - w_right)
+                + u32::from(blend[right]) * u32::from(w_right);
+            *o = ((sum + (1 << (2 * WEIGHT_BITS - 1))) >> (2 * WEIGHT_BITS)) as u8;
+        }
+    }
+}
+
+/// For destination index `d` at `scale` source pixels per destination pixel: the source
+/// index before the sample position and the weight of the one after it.
+fn sample_at(d: usize, scale: f32, source_len: usize) -> (u32, u16) {
+    let position = ((d as f32 + 0.5) * scale - 0.5).max(0.0);
+    let before = (position.floor() as usize).min(source_len - 1);
+    let weight = ((position - before as f32) * f32::from(WEIGHT_ONE)).round() as u16;
+    (before as u32, weight.min(WEIGHT_ONE))
+}
+
+/// The smoothed copy of one level, the image the descriptor compares.
+#[derive(Default)]
+pub(crate) struct Smoother {
+    pixels: Vec<u8>,
+    column_sums: Vec<u16>,
+}
+
+/// Weights of the 7-tap kernel (sum 64): a Gaussian of σ = 2 cut at ±3, as ORB smooths
+/// before its comparisons.
+const TAPS: [u16; 7] = [4, 9, 12, 14, 12, 9, 4];
+/// log2 of the kernel's sum.
+const TAP_BITS: u32 = 6;
+
+impl Smoother {
+    /// `image` smoothed in both directions (edges clamped), packed (`None` never: the
+    /// buffer is sized for it).
+    pub(crate) fn smooth<'a>(&'a mut self, image: GrayView<'_>) -> Option<GrayView<'a>> {
+        let (width, height) = (image.width(), image.height());
+        self.pixels.resize(width * height, 0);
+        self.column_sums.resize(width, 0);
+        let last_row = height.saturating_sub(1);
+        for (y, out) in self.pixels.chunks_exact_mut(width.max(1)).enumerate() {
+            let rows: [&[u8]; 7] =
+                std::array::from_fn(|k| image.row((y + k).saturating_sub(3).min(last_row)));
+            let sums = &mut self.column_sums[..width];
+            // One pass over the seven rows (equal lengths, known to the compiler).
+            let [a, b, c, d, e, f, g] = rows.map(|row| &row[..width]);
+            for (x, sum) in sums.iter_mut().enumerate() {
+                let pair = |p: &[u8], q: &[u8]| u16::from(p[x]) + u16::from(q[x]);
+                let s = TAPS[0] * pair(a, g)
+                    + TAPS[1] * pair(b, f)
+                    + TAPS[2] * pair(c, e)
+                    + TAPS[3] * u16::from(d[x]);
+                *sum = (s + (1 << (TAP_BITS - 1))) >> TAP_BITS;
+            }
+            smooth_row(sums, out);
+        }
+        GrayView::packed(&self.pixels, width, height).ok()
+    }
+}
+
+/// One row smoothed horizontally: `out[x]` from `sums[x − 3 ..= x + 3]`, edges clamped.
+fn smooth_row(sums: &[u16], out: &mut [u8]) {
+    let width = sums.len();
+    let tap_sum = |x: usize| {
+        let mut s = 0;
+        for (k, tap) in TAPS.iter().enumerate() {
+            s += sums[(x + k).saturating_sub(3).min(width - 1)] * tap;
+        }
+        ((s + (1 << (TAP_BITS - 1))) >> TAP_BITS) as u8
+    };
+    if width < TAPS.len() {
+        for (x, o) in out.iter_mut().enumerate() {
+            *o = tap_sum(x);
+        }
+        return;
+    }
+    let inner = width - 6;
+    let [a, b, c, d, e, f, g]: [&[u16]; 7] = std::array::from_fn(|k| &sums[k..k + inner]);
+    for (i, o) in out[3..3 + inner].iter_mut().enumerate() {
+        let s = TAPS[0] * (a[i] + g[i])
+            + TAPS[1] * (b[i] + f[i])
+            + TAPS[2] * (c[i] + e[i])
+            + TAPS[3] * d[i];
+        *o = ((s + (1 << (TAP_BITS - 1))) >> TAP_BITS) as u8;
+    }
+    for x in (0..3).chain(width - 3..width) {
+        out[x] = tap_sum(x);
+    }
+}

@@ -1,0 +1,336 @@
+//! The extractor on rendered images with known corners, rotated and brightened copies, and
+//! degenerate images.
+
+use super::*;
+
+/// A view of packed pixels (the tests' images are well formed).
+fn view(pixels: &[u8], width: usize, height: usize) -> GrayView<'_> {
+    GrayView::packed(pixels, width, height).unwrap()
+}
+
+fn extract(params: Params, pixels: &[u8], width: usize, height: usize) -> Corners {
+    let mut extractor = CornerExtractor::new(params).unwrap();
+    let mut out = Corners::default();
+    extractor.extract(view(pixels, width, height), &mut out);
+    out
+}
+
+/// Full resolution only, every corner.
+fn one_level() -> Params {
+    Params {
+        levels: 1,
+        max_corners: 10_000,
+        ..Params::default()
+    }
+}
+
+/// `value` inside the axis-aligned rectangle `[x0, x1) × [y0, y1)`, `background` outside.
+fn rectangle(
+    (width, height): (usize, usize),
+    [x0, y0, x1, y1]: [usize; 4],
+    value: u8,
+    background: u8,
+) -> Vec<u8> {
+    let mut pixels = vec![background; width * height];
+    for y in y0..y1 {
+        pixels[y * width + x0..y * width + x1].fill(value);
+    }
+    pixels
+}
+
+/// Smooth random texture in 40..=215 (no saturation when brightened by up to 40): a sum of
+/// blobs (one per 60 pixels) from a fixed seed.
+fn texture(width: usize, height: usize, seed: u64) -> Vec<u8> {
+    let mut state = seed;
+    let mut next = || describe::tests_support::uniform(&mut state);
+    let blobs: Vec<[f64; 4]> = (0..width * height / 60)
+        .map(|_| {
+            [
+                next() * width as f64,
+                next() * height as f64,
+                2.0 + 5.0 * next(),
+                next() - 0.5,
+            ]
+        })
+        .collect();
+    let mut field = vec![0.0; width * height];
+    for y in 0..height {
+        for x in 0..width {
+            field[y * width + x] = blobs
+                .iter()
+                .map(|&[bx, by, r, a]| {
+                    let d2 = (x as f64 - bx).powi(2) + (y as f64 - by).powi(2);
+                    a * (-d2 / (2.0 * r * r)).exp()
+                })
+                .sum::<f64>();
+        }
+    }
+    let (lo, hi) = field
+        .iter()
+        .fold((f64::MAX, f64::MIN), |(lo, hi), &v| (lo.min(v), hi.max(v)));
+    field
+        .iter()
+        .map(|v| (40.0 + 175.0 * (v - lo) / (hi - lo)).round() as u8)
+        .collect()
+}
+
+#[test]
+fn fast_fires_at_a_rectangles_corners_and_not_on_its_edges_or_flat_areas() {
+    let size = (160, 120);
+    let box_px = [50, 40, 110, 90];
+    for (inside, outside) in [(200, 40), (40, 200)] {
+        let pixels = rectangle(size, box_px, inside, outside);
+        let out = extract(one_level(), &pixels, size.0, size.1);
+        let truth = [[50.0, 40.0], [109.0, 40.0], [50.0, 89.0], [109.0, 89.0]];
+        // Every corner found is at one of the rectangle's, and every one of the rectangle's
+        // is found. Within 2 px: on a sharp step the pixels along the edges next to the
+        // corner pixel score the same, and the first of them in raster order is kept.
+        for c in &out.corners {
+            let nearest = truth
+                .iter()
+                .map(|t: &[f32; 2]| (c.x - t[0]).hypot(c.y - t[1]))
+                .fold(f32::MAX, f32::min);
+            assert!(
+                nearest <= 2.0,
+                "corner at ({}, {}) off the corners",
+                c.x,
+                c.y
+            );
+        }
+        for t in truth {
+            assert!(
+                out.corners
+                    .iter()
+                    .any(|c| (c.x - t[0]).hypot(c.y - t[1]) <= 2.0),
+                "no corner at {t:?} (inside {inside})"
+            );
+        }
+        assert_eq!(out.descriptors.len(), out.corners.len());
+    }
+}
+
+#[test]
+fn the_fast_test_is_exact_on_hand_made_circles() {
+    // A centre of 100 on a 7×7 patch; `bright` circle positions (clockwise from the top)
+    // set to 100 + 30, the others to 100.
+    let patch = |bright: &[usize]| {
+        let mut pixels = vec![100u8; 49];
+        for &k in bright {
+            let (dx, dy) = fast::CIRCLE[k];
+            pixels[((3 + dy) * 7 + 3 + dx) as usize] = 130;
+        }
+        pixels
+    };
+    let arc = |start: usize, len: usize| (start..start + len).map(|k| k % 16).collect::<Vec<_>>();
+    for start in [0, 5, 11, 15] {
+        // 9 contiguous (around the wrap too): a corner, scored 30 − 1.
+        let pixels = patch(&arc(start, 9));
+        assert_eq!(fast::corner_score(view(&pixels, 7, 7), 3, 3, 20), Some(29));
+        // At a threshold of 30 it is not one.
+        assert_eq!(fast::corner_score(view(&pixels, 7, 7), 3, 3, 30), None);
+        // 8 contiguous: not a corner (an edge's half circle has 7).
+        let pixels = patch(&arc(start, 8));
+        assert_eq!(fast::corner_score(view(&pixels, 7, 7), 3, 3, 20), None);
+    }
+    // 12 bright but broken into two runs of 6: not a corner.
+    let mut broken = arc(0, 6);
+    broken.extend(arc(8, 6));
+    let pixels = patch(&broken);
+    assert_eq!(fast::corner_score(view(&pixels, 7, 7), 3, 3, 20), None);
+}
+
+#[test]
+fn a_straight_edge_and_a_flat_image_have_no_corners() {
+    let (width, height) = (120, 80);
+    let mut pixels = vec![30u8; width * height];
+    for row in pixels.chunks_exact_mut(width) {
+        row[60..].fill(220);
+    }
+    assert!(extract(Params::default(), &pixels, width, height).is_empty());
+    let flat = vec![128u8; width * height];
+    assert!(extract(Params::default(), &flat, width, height).is_empty());
+}
+
+/// Hamming distance of two descriptors.
+fn distance(a: &[u8; DESCRIPTOR_BYTES], b: &[u8; DESCRIPTOR_BYTES]) -> u32 {
+    a.iter().zip(b).map(|(x, y)| (x ^ y).count_ones()).sum()
+}
+
+/// For each corner of `a` with a corner of `b` within 1 px of `map(a)`: the Hamming
+/// distance of their descriptors.
+fn paired_distances(a: &Corners, b: &Corners, map: impl Fn(f32, f32) -> (f32, f32)) -> Vec<u32> {
+    a.corners
+        .iter()
+        .zip(&a.descriptors)
+        .filter_map(|(c, d)| {
+            let (x, y) = map(c.x, c.y);
+            b.corners
+                .iter()
+                .position(|o| (o.x - x).hypot(o.y - y) <= 1.0)
+                .map(|j| distance(d, &b.descriptors[j]))
+        })
+        .collect()
+}
+
+#[test]
+fn descriptors_survive_a_brightness_shift_and_a_quarter_turn() {
+    let (width, height) = (200, 200);
+    let pixels = texture(width, height, 7);
+    let params = Params {
+        max_corners: 300,
+        fast_threshold: 5,
+        ..one_level()
+    };
+    let original = extract(params, &pixels, width, height);
+    assert!(original.len() >= 50, "{} corners", original.len());
+
+    // A brightness shift changes no comparison: the same corners, the same descriptors.
+    let brighter: Vec<u8> = pixels.iter().map(|&p| p + 40).collect();
+    let shifted = extract(params, &brighter, width, height);
+    assert_eq!(shifted, Corners { ..shifted.clone() });
+    assert_eq!(shifted.corners.len(), original.corners.len());
+    assert_eq!(shifted.descriptors, original.descriptors);
+
+    // A quarter turn clockwise: (x, y) → (height − 1 − y, x). Descriptors steer with the
+    // corner's orientation, so a corner's descriptor stays close to its own, far from
+    // others'.
+    let mut turned = vec![0u8; width * height];
+    for y in 0..height {
+        for x in 0..width {
+            turned[x * height + (height - 1 - y)] = pixels[y * width + x];
+        }
+    }
+    let rotated = extract(params, &turned, height, width);
+    let same = paired_distances(&original, &rotated, |x, y| (height as f32 - 1.0 - y, x));
+    assert!(same.len() >= 30, "{} corners found again", same.len());
+    let mean_same = same.iter().sum::<u32>() as f64 / same.len() as f64;
+    let others: Vec<u32> = original
+        .descriptors
+        .iter()
+        .zip(original.descriptors.iter().skip(1))
+        .map(|(a, b)| distance(a, b))
+        .collect();
+    let mean_other = others.iter().sum::<u32>() as f64 / others.len() as f64;
+    assert!(
+        mean_same < 40.0 && mean_other > 70.0,
+        "mean distance {mean_same:.1} to itself turned, {mean_other:.1} to another"
+    );
+}
+
+#[test]
+fn the_pattern_is_fixed_and_inside_the_border() {
+    let a = describe::Pattern::new();
+    let b = describe::Pattern::new();
+    assert!(a == b);
+    assert!(a.max_offset() < BORDER_PX as i32 - 1);
+}
+
+#[test]
+fn corners_are_kept_to_the_count_spread_over_the_image_and_inside_the_border() {
+    let (width, height) = (320, 240);
+    let pixels = texture(width, height, 3);
+    for levels in [1, 3, 8] {
+        let params = Params {
+            max_corners: 200,
+            levels,
+            fast_threshold: 5,
+            cell_px: 32,
+            ..Params::default()
+        };
+        let out = extract(params, &pixels, width, height);
+        assert!(
+            out.len() <= 200 && out.len() >= 150,
+            "{} corners",
+            out.len()
+        );
+        let mut quadrants = [0; 4];
+        for c in &out.corners {
+            let scale = params.scale_factor.powi(i32::from(c.level));
+            let border = BORDER_PX as f32 * scale - 0.5;
+            assert!(c.x >= border && c.x <= width as f32 - 1.0 - border + scale);
+            assert!(c.y >= border && c.y <= height as f32 - 1.0 - border + scale);
+            let q = usize::from(c.x >= width as f32 / 2.0)
+                + 2 * usize::from(c.y >= height as f32 / 2.0);
+            quadrants[q] += 1;
+        }
+        assert!(
+            quadrants.iter().all(|&n| n * 8 >= out.len()),
+            "{quadrants:?} of {} corners",
+            out.len()
+        );
+    }
+}
+
+#[test]
+fn degenerate_images_give_no_corners_and_bad_buffers_errors() {
+    let params = Params::default();
+    let mut extractor = CornerExtractor::new(params).unwrap();
+    let mut out = Corners::default();
+    let noise: Vec<u8> = (0..200 * 150u32)
+        .map(|k| (k.wrapping_mul(2_654_435_761) >> 24) as u8)
+        .collect();
+    for (width, height) in [
+        (0, 0),
+        (0, 7),
+        (7, 0),
+        (1, 1),
+        (2, 5),
+        (5, 3),
+        (33, 33),
+        (34, 100),
+        (100, 34),
+        (67, 41),
+    ] {
+        let pixels = &noise[..width * height];
+        extractor.extract(view(pixels, width, height), &mut out);
+        assert!(out.len() == out.descriptors.len());
+        if width <= 2 * BORDER_PX || height <= 2 * BORDER_PX {
+            assert!(out.is_empty(), "{width}×{height}");
+        }
+    }
+    // Noise, saturated, strided (rows 7 bytes apart with padding): no panic.
+    extractor.extract(view(&noise, 200, 150), &mut out);
+    assert!(!out.is_empty());
+    let white = vec![255u8; 200 * 150];
+    extractor.extract(view(&white, 200, 150), &mut out);
+    assert!(out.is_empty());
+    let strided = GrayView::new(&noise, 193, 150, 200).unwrap();
+    extractor.extract(strided, &mut out);
+    assert!(!out.is_empty());
+
+    assert!(matches!(
+        GrayView::new(&noise, 201, 150, 200),
+        Err(EdgeLinesError::Size { .. })
+    ));
+    assert!(matches!(
+        GrayView::packed(&noise, 200, 151),
+        Err(EdgeLinesError::Size { .. })
+    ));
+    assert!(GrayView::new(&noise, 10, usize::MAX / 2, 10).is_err());
+    for bad in [
+        Params {
+            levels: 0,
+            ..params
+        },
+        Params {
+            levels: MAX_LEVELS + 1,
+            ..params
+        },
+        Params {
+            scale_factor: 1.0,
+            ..params
+        },
+        Params {
+            scale_factor: f32::NAN,
+            ..params
+        },
+        Params {
+            fast_threshold: 0,
+            ..params
+        },
+    ] {
+        let error = CornerExtractor::new(bad).err().unwrap();
+        assert!(matches!(error, CornersError::Param { .. }), "{error}");
+        assert!(error.to_string().contains("corner parameter"));
+    }
+}
