@@ -10,10 +10,11 @@
 //! `<prefix>-exit`, `<prefix>-given-up` (past the restart limit) and `<prefix>-killed` (did
 //! not stop within its grace), with the process's name in the stage column.
 
+use crate::Mode;
 use crate::clock::{Backoff, Clock};
 use crate::monitor::Monitor;
 use linetrack_msgs::StageKind;
-use linetrack_pipeline_config::SupervisorConfig;
+use linetrack_pipeline_config::{PipelineConfig, SupervisorConfig};
 use std::ffi::OsString;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command};
@@ -370,6 +371,62 @@ pub fn require_binary(rule: &Rule, bin_dir: &Path, key: &str) -> anyhow::Result<
         rule.feature
     );
     Ok(bin)
+}
+
+/// The optional processes `config` turns on, in the order they start (the recorder, the
+/// ROS 2 output, the link); a binary the config needs and that is not there is refused.
+pub(crate) fn processes(
+    config: &PipelineConfig,
+    mode: Mode,
+    bin_dir: &Path,
+    run_dir: &Path,
+    monitor: &mut Monitor,
+) -> anyhow::Result<Vec<OptionalProcess>> {
+    let supervisor = &config.supervisor;
+    let grace = Duration::from_millis(supervisor.shutdown_grace_ms);
+    let in_run_dir = vec!["--run-dir".into(), run_dir.as_os_str().to_owned()];
+    let mut processes = Vec::new();
+    if config.record.mcap && mode == Mode::Threads {
+        tracing::warn!(
+            "[record] mcap = true is ignored with --single-process: the recorder subscribes over shared memory"
+        );
+        monitor.event(
+            "recorder-off",
+            "recorder",
+            None,
+            "no recording in single-process mode".to_string(),
+        );
+    } else if config.record.mcap {
+        require_binary(&RECORDER, bin_dir, "[record] mcap = true")?;
+        tracing::info!("recording into {}", config.record.file(run_dir).display());
+        let settings = Settings {
+            bin_dir: bin_dir.to_path_buf(),
+            args: in_run_dir.clone(),
+            ready_timeout: Duration::from_millis(config.record.startup_timeout_ms),
+            grace: Duration::from_millis(config.record.close_timeout_ms),
+        };
+        processes.push(OptionalProcess::new(RECORDER, settings, supervisor));
+    }
+    if config.ros2.enabled {
+        require_binary(&ROS2, bin_dir, "ros2.enabled = true")?;
+        let settings = Settings {
+            bin_dir: bin_dir.to_path_buf(),
+            args: Vec::new(),
+            ready_timeout: Duration::from_millis(supervisor.startup_timeout_ms),
+            grace,
+        };
+        processes.push(OptionalProcess::new(ROS2, settings, supervisor));
+    }
+    if config.link.enabled && mode == Mode::Processes {
+        let settings = Settings {
+            bin_dir: bin_dir.to_path_buf(),
+            args: in_run_dir,
+            ready_timeout: Duration::ZERO,
+            grace,
+        };
+        processes.push(OptionalProcess::new(LINK, settings, supervisor));
+    }
+    Ok(processes)
 }
 
 #[cfg(test)]
