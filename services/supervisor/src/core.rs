@@ -11,13 +11,16 @@
 //! limit) and which are expected (handed over, finished); hangs ([`Watchdog`]); the hot
 //! swap of the detector (a standby started, the running one asked to hand over, the
 //! standby told to take over, or abandoned when it dies); the automatic detector swap
-//! ([`DetectorPolicy`]); the matcher's mode; when the run is complete or its drain ran
+//! ([`DetectorPolicy`]); the matcher's LBD/ℓ1 mode ([`FallbackController`]); when the run is complete or its drain ran
 //! out; and the ordered stop (every stage asked, killed after the grace, the optional
 //! processes last).
 
 use crate::clock::{Backoff, Every, Timeout, Watchdog};
 use crate::detector_policy::DetectorPolicy;
-use linetrack_msgs::{Command, MatcherMode, StageKind, StatusKind, StatusReport, TracksHeader};
+use crate::fallback::FallbackController;
+use linetrack_msgs::{
+    Command, MatcherMode, PoseRecord, StageKind, StatusKind, StatusReport, TracksHeader,
+};
 use linetrack_pipeline_config::{MatcherPolicy, OnRecordError, PipelineConfig};
 use linetrack_vision::DetectorKind;
 use std::time::Duration;
@@ -50,10 +53,16 @@ pub enum Event {
     },
     /// A stage's status report (ready, a heartbeat, a hand-over, the source's end, …).
     Status(StatusReport),
-    /// A frame reached the end of the pipeline (the detector policy watches them).
-    Pose(TracksHeader),
-    /// The matcher's mode policy switched to `0` (the matcher is told).
-    MatcherSwitched(MatcherMode),
+    /// A frame reached the end of the pipeline: the matcher's policy takes its first
+    /// outcome, the detector policy every arrival.
+    Pose {
+        /// Its header.
+        header: TracksHeader,
+        /// Its pose.
+        pose: PoseRecord,
+        /// Its first outcome (not a frame that reached the end twice).
+        first: bool,
+    },
     /// `linetrack ctl` asked for a detector swap.
     SwapRequest(DetectorKind),
     /// An instance ended.
@@ -210,8 +219,8 @@ pub struct Core {
     detector: DetectorKind,
     swap_to: Option<DetectorKind>,
     detector_policy: Option<DetectorPolicy>,
-    /// The mode the matcher should be in (`matcher.mode = "auto"`).
-    matcher_mode: Option<MatcherMode>,
+    /// The matcher's LBD/ℓ1 policy (`matcher.mode = "auto"`).
+    matcher: Option<FallbackController>,
     startup: Duration,
     waiting: Timeout,
     source_started: bool,
@@ -245,7 +254,13 @@ impl Core {
                 config.budget.line_detector_ms,
                 config.budget.end_to_end_ms,
             ),
-            matcher_mode: (config.matcher.mode == MatcherPolicy::Auto).then_some(MatcherMode::Lbd),
+            matcher: (config.matcher.mode == MatcherPolicy::Auto).then(|| {
+                FallbackController::new(
+                    config.matcher.fallback.clone(),
+                    config.budget.matcher_ms,
+                    config.budget.end_to_end_ms,
+                )
+            }),
             startup: Duration::from_millis(supervisor.startup_timeout_ms),
             waiting: Timeout::new(Duration::from_millis(supervisor.startup_timeout_ms)),
             source_started: false,
@@ -268,6 +283,11 @@ impl Core {
     /// The running (or, during a swap, the last promoted) detector.
     pub fn detector(&self) -> DetectorKind {
         self.detector
+    }
+
+    /// The mode the matcher's policy chose (`matcher.mode = "auto"`).
+    pub fn matcher_mode(&self) -> Option<MatcherMode> {
+        self.matcher.as_ref().map(|m| m.mode())
     }
 
     /// Whether the frame source is still waiting to be started (the shell then asks the
@@ -325,17 +345,11 @@ impl Core {
                 actions.push(Action::WriteStatus);
             }
             Event::Status(report) => self.on_status(report, now, &mut actions),
-            Event::Pose(header) => self.on_pose(&header, &mut actions),
-            Event::MatcherSwitched(mode) => {
-                self.matcher_mode = Some(mode);
-                actions.push(Action::Send {
-                    stage: StageKind::Matcher,
-                    pid: 0,
-                    command: Command::SetMatcherMode,
-                    value: mode.into(),
-                    frame_id: 0,
-                });
-            }
+            Event::Pose {
+                header,
+                pose,
+                first,
+            } => self.on_pose(&header, &pose, first, &mut actions),
             Event::SwapRequest(kind) => self.on_swap_request(kind, &mut actions),
             Event::Exited {
                 pid,
@@ -408,7 +422,7 @@ impl Core {
                         self.promote_standby(report.pid, report.frame_id, actions);
                     }
                 } else if stage == StageKind::Matcher
-                    && let Some(mode) = self.matcher_mode
+                    && let Some(mode) = self.matcher_mode()
                     && mode != MatcherMode::Lbd
                 {
                     actions.push(Action::Send {
@@ -469,7 +483,34 @@ impl Core {
         actions.push(Action::WriteStatus);
     }
 
-    fn on_pose(&mut self, header: &TracksHeader, actions: &mut Vec<Action>) {
+    fn on_pose(
+        &mut self,
+        header: &TracksHeader,
+        pose: &PoseRecord,
+        first: bool,
+        actions: &mut Vec<Action>,
+    ) {
+        if first
+            && let Some(switch) = self
+                .matcher
+                .as_mut()
+                .and_then(|m| m.observe_outcome(header, pose))
+        {
+            let (kind, detail) = switch.event();
+            actions.push(Action::Record {
+                kind,
+                stage: "matcher",
+                frame_id: Some(header.frame.frame_id),
+                detail,
+            });
+            actions.push(Action::Send {
+                stage: StageKind::Matcher,
+                pid: 0,
+                command: Command::SetMatcherMode,
+                value: switch.to.into(),
+                frame_id: 0,
+            });
+        }
         // The detector policy waits while a swap is under way (its own or one asked for).
         if self.swap_to.is_none()
             && let Some(switch) = self
@@ -1210,9 +1251,9 @@ mod tests {
             h.frame.stamps[1].end_ns = 1_080_000_000;
             h
         };
-        assert!(spawns(&run.on(Event::Pose(slow(0)))).is_empty());
-        assert!(spawns(&run.on(Event::Pose(slow(1)))).is_empty());
-        let swap = run.on(Event::Pose(slow(2)));
+        assert!(spawns(&pose(&mut run, slow(0), true)).is_empty());
+        assert!(spawns(&pose(&mut run, slow(1), true)).is_empty());
+        let swap = pose(&mut run, slow(2), true);
         assert_eq!(
             spawns(&swap),
             [(
@@ -1225,26 +1266,79 @@ mod tests {
         assert_eq!(records(&swap)[0].0, "detector-fallback");
         for id in 3..10 {
             assert!(
-                spawns(&run.on(Event::Pose(slow(id)))).is_empty(),
+                spawns(&pose(&mut run, slow(id), true)).is_empty(),
                 "swap under way"
             );
         }
         let mut late = slow(10);
         late.frame
             .mark(FrameStatus::DroppedLate, StageKind::Matcher);
-        assert!(spawns(&run.on(Event::Pose(late))).is_empty());
+        assert!(spawns(&pose(&mut run, late, true)).is_empty());
+    }
+
+    /// Frame `id` matched in `mode` with `stereo` stereo matches (`probe`: the LBD probe's,
+    /// -1 for none).
+    fn matched(id: u64, mode: MatcherMode, stereo: u32, probe: i32) -> TracksHeader {
+        let mut h = TracksHeader::from(FrameHeader::new(id, 0, 1));
+        h.matching.mode = mode.into();
+        h.matching.stereo_matches = stereo;
+        h.matching.lbd_probe_matches = probe;
+        h
+    }
+
+    fn pose(run: &mut Run, header: TracksHeader, first: bool) -> Vec<Action> {
+        run.on(Event::Pose {
+            header,
+            pose: PoseRecord::default(),
+            first,
+        })
     }
 
     #[test]
-    fn the_matcher_is_told_its_mode_and_a_restarted_one_gets_it_again() {
+    fn the_matcher_falls_back_on_a_streak_of_bad_frames_and_recovers_only_past_the_higher_bar() {
         let mut config = config();
         config.matcher.mode = MatcherPolicy::Auto;
+        config.matcher.fallback.bad_frames = 3;
+        config.matcher.fallback.recover_probes = 2;
+        config.matcher.fallback.min_stereo_matches = 12;
+        config.matcher.fallback.recover_stereo_matches = 24;
+        config.matcher.fallback.over_budget = false;
+        config.matcher.fallback.end_to_end = false;
         let mut run = Run::running(&config);
-        let switched = run.on(Event::MatcherSwitched(MatcherMode::L1));
+        let lbd = |id| matched(id, MatcherMode::Lbd, 5, -1);
+        let mut id = 0..;
+        let mut next = || id.next().unwrap_or_default();
+        // Two bad, one good, two bad, and a bad one arriving twice: no streak of three.
+        for header in [lbd(next()), lbd(next())] {
+            assert!(pose(&mut run, header, true).is_empty());
+        }
+        assert!(pose(&mut run, matched(next(), MatcherMode::Lbd, 40, -1), true).is_empty());
+        for header in [lbd(next()), lbd(next())] {
+            assert!(pose(&mut run, header, true).is_empty());
+        }
+        assert!(
+            pose(&mut run, lbd(4), false).is_empty(),
+            "a duplicate says nothing"
+        );
+        let fell = pose(&mut run, lbd(next()), true);
         assert_eq!(
-            sent(&switched),
+            records(&fell),
+            [(
+                "fallback",
+                "lbd -> l1: too few LBD stereo matches (5 < 12), 3 frames in a row".to_string()
+            )]
+        );
+        assert_eq!(
+            sent(&fell),
             [(Command::SetMatcherMode, StageKind::Matcher, 0, 0)]
         );
+        assert_eq!(run.core.matcher_mode(), Some(MatcherMode::L1));
+        // Probes between the two bars (12 and 24) never bring LBD back: the hysteresis.
+        for _ in 0..10 {
+            let probe = matched(next(), MatcherMode::L1, 50, 20);
+            assert!(pose(&mut run, probe, true).is_empty());
+        }
+        // A restarted matcher is told the mode.
         run.exit(run.pid(StageKind::Matcher), false);
         run.clock.advance(200 * MS);
         run.tick();
@@ -1257,6 +1351,24 @@ mod tests {
                 pid: matcher,
                 command: Command::SetMatcherMode,
                 value: MatcherMode::L1.into(),
+                frame_id: 0,
+            })
+        );
+        // One good probe, one in the band: the streak starts again; two good: back.
+        for probe in [30, 20, 30] {
+            let header = matched(next(), MatcherMode::L1, 50, probe);
+            assert!(pose(&mut run, header, true).is_empty());
+        }
+        let back = pose(&mut run, matched(next(), MatcherMode::L1, 50, 30), true);
+        assert_eq!(records(&back)[0].0, "recover");
+        assert_eq!(run.core.matcher_mode(), Some(MatcherMode::Lbd));
+        assert_eq!(
+            back.iter().find(|a| matches!(a, Action::Send { .. })),
+            Some(&Action::Send {
+                stage: StageKind::Matcher,
+                pid: 0,
+                command: Command::SetMatcherMode,
+                value: MatcherMode::Lbd.into(),
                 frame_id: 0,
             })
         );

@@ -10,8 +10,8 @@
 //! it; a frame the detector did not process says nothing.
 
 use crate::fallback::Hysteresis;
-use crate::monitor::stage_ms;
-use linetrack_msgs::{FrameHeader, StageKind, TracksHeader};
+use crate::stamps::{detected, stage_ms};
+use linetrack_msgs::{StageKind, TracksHeader};
 use linetrack_pipeline_config::DetectorFallbackConfig;
 use linetrack_stage_runtime::detector_kind;
 use linetrack_vision::DetectorKind;
@@ -138,18 +138,6 @@ impl DetectorPolicy {
                 ),
             })
     }
-}
-
-/// Whether the detector (stamp index `detector`) detected the frame: not a frame dropped
-/// before it or by it (its stamps then time the drop, not a detection).
-pub(crate) fn detected(header: &FrameHeader, detector: usize) -> bool {
-    header.is_ok()
-        || header
-            .status_by
-            .get()
-            .ok()
-            .and_then(|s| s.stamp_index())
-            .is_some_and(|by| by > detector)
 }
 
 #[cfg(test)]

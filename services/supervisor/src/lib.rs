@@ -34,6 +34,7 @@ pub mod optional;
 pub mod run_dir;
 mod shell;
 pub mod stage_runner;
+pub mod stamps;
 mod status;
 pub mod stderr_tail;
 

@@ -6,12 +6,12 @@
 //! is built up as they go ([`Tally`]), so the supervisor's memory does not grow with the
 //! length of the run, and a run that ends any way at all leaves its records.
 
-use crate::fallback::{FallbackController, Switch};
+use crate::stamps::stage_ms;
 use linetrack_msgs::{
     CameraFailure, FrameHeader, FrameStatus, MatcherMode, PoseRecord, StageKind, StatusKind,
     StatusReport, TracksHeader,
 };
-use linetrack_pipeline_config::{CameraConfig, MatcherPolicy, PipelineConfig};
+use linetrack_pipeline_config::{CameraConfig, PipelineConfig};
 use linetrack_run_record::{
     EventRecord, FrameRecord, Percentiles, RecordError, RecordWriter, Report, RunEnd, Summary,
     Tally,
@@ -94,7 +94,6 @@ pub struct Monitor {
     /// publishes died with it (the last stage: no stage after it sees them skipped), and
     /// how it died.
     lost_with_pose_estimator: Option<(u64, String)>,
-    fallback: Option<FallbackController>,
     last_pose: Option<(u64, PoseRecord)>,
     /// The pose before `last_pose` (a restarted pose estimator predicts from the two).
     previous_pose: Option<(u64, PoseRecord)>,
@@ -105,16 +104,6 @@ pub struct Monitor {
     published: Option<u64>,
     /// The sequence's ground truth (empty without): the summary scores `poses.tum` with it.
     ground_truth: Vec<StampedPose>,
-}
-
-/// Milliseconds stage `i` (its stamp index) took on the frame; NaN when a stamp is missing.
-pub(crate) fn stage_ms(header: &FrameHeader, i: usize) -> f64 {
-    let s = header.stamps[i];
-    if s.start_ns == 0 || s.end_ns < s.start_ns {
-        f64::NAN
-    } else {
-        (s.end_ns - s.start_ns) as f64 * 1e-6
-    }
 }
 
 /// Milliseconds between the stage before stage `i` publishing the frame (its capture, for
@@ -140,13 +129,6 @@ impl Monitor {
         first_frame: u64,
         run_dir: &Path,
     ) -> Result<Self, RecordError> {
-        let fallback = (config.matcher.mode == MatcherPolicy::Auto).then(|| {
-            FallbackController::new(
-                config.matcher.fallback.clone(),
-                config.budget.matcher_ms,
-                config.budget.end_to_end_ms,
-            )
-        });
         Ok(Self {
             config: config.clone(),
             started: Instant::now(),
@@ -159,7 +141,6 @@ impl Monitor {
             duplicates: 0,
             presumed_lost: BTreeMap::new(),
             lost_with_pose_estimator: None,
-            fallback,
             last_pose: None,
             previous_pose: None,
             first_frame,
@@ -237,8 +218,9 @@ impl Monitor {
         self.tally.add_event(&event);
     }
 
-    /// Takes one pose message; returns a matcher mode switch when one is due.
-    pub fn on_pose(&mut self, message: &TracksHeader, pose: &PoseRecord) -> Option<Switch> {
+    /// Records one pose message; returns whether it was the frame's first outcome (a frame
+    /// that reaches the end twice keeps its first).
+    pub fn on_pose(&mut self, message: &TracksHeader, pose: &PoseRecord) -> bool {
         let TracksHeader {
             frame: header,
             detection,
@@ -306,8 +288,7 @@ impl Monitor {
             },
             // Only a frame the detector detected names it: one it dropped carries no
             // detection (its code would read as the first detector's).
-            detector: if header.stamps[1].end_ns > 0 && crate::detector_policy::detected(header, 1)
-            {
+            detector: if header.stamps[1].end_ns > 0 && crate::stamps::detected(header, 1) {
                 detection
                     .detector
                     .get()
@@ -325,19 +306,12 @@ impl Monitor {
         if !self.accounted.insert(header.frame_id) {
             self.duplicates += 1;
             tracing::warn!("frame {} reached the end twice", header.frame_id);
-            return None;
+            return false;
         }
         self.presumed_lost.remove(&header.frame_id);
         self.record_frame(&record);
-        if status == FrameStatus::DroppedLate {
-            let switch = self
-                .fallback
-                .as_mut()
-                .and_then(|f| f.observe_dropped_late(header));
-            return self.matcher_switched(header.frame_id, switch);
-        }
         if status != FrameStatus::Ok {
-            return None;
+            return true;
         }
         if self
             .last_pose
@@ -350,34 +324,7 @@ impl Monitor {
             .writer
             .pose(header.sequence_ns, pose.translation, pose.rotation_xyzw);
         self.note(written);
-        let switch = self
-            .fallback
-            .as_mut()
-            .and_then(|f| f.observe(message, pose));
-        self.matcher_switched(header.frame_id, switch)
-    }
-
-    /// Records a matcher mode switch, when there is one, and passes it on.
-    fn matcher_switched(&mut self, frame_id: u64, switch: Option<Switch>) -> Option<Switch> {
-        if let Some(s) = &switch {
-            let kind = if s.to == MatcherMode::L1 {
-                "fallback"
-            } else {
-                "recover"
-            };
-            self.event(
-                kind,
-                "matcher",
-                Some(frame_id),
-                format!(
-                    "{} -> {}: {}",
-                    if s.to == MatcherMode::L1 { "lbd" } else { "l1" },
-                    s.to.name(),
-                    s.reason
-                ),
-            );
-        }
-        switch
+        true
     }
 
     /// Takes what a stage's status report says about the run (the frames the source
@@ -476,11 +423,6 @@ impl Monitor {
         self.lost_with_pose_estimator = Some((first, cause));
     }
 
-    /// The mode the matcher should be in (re-sent to a restarted matcher).
-    pub fn matcher_mode(&self) -> Option<MatcherMode> {
-        self.fallback.as_ref().map(|f| f.mode())
-    }
-
     /// The source published everything up to `last_frame`.
     pub fn source_finished(&mut self, last_frame: u64) {
         self.source_last = Some(last_frame);
@@ -556,17 +498,18 @@ impl Monitor {
         self.accounted.window()
     }
 
-    /// The one-line live status.
-    pub fn status_line(&self) -> String {
+    /// The one-line live status; `auto_mode`: the mode the matcher's policy chose
+    /// (`matcher.mode = "auto"`).
+    pub fn status_line(&self, auto_mode: Option<MatcherMode>) -> String {
         let elapsed = self.started.elapsed().as_secs_f64();
         let e2e = Percentiles::of(self.recent_end_to_end_ms.iter().copied());
         let frames = self.tally.frames();
         let rate = frames as f64 / elapsed.max(1e-3);
         let drops = frames - self.tally.with_pose();
         let misses = self.tally.deadline_misses();
-        let mode = self.fallback.as_ref().map_or_else(
+        let mode = auto_mode.map_or_else(
             || self.config.matcher.mode_name().to_string(),
-            |f| format!("auto:{}", f.mode().name()),
+            |mode| format!("auto:{}", mode.name()),
         );
         let mut line = format!("[{elapsed:6.1} s] frames {frames:>5}  {rate:5.1} fps  ");
         match e2e {

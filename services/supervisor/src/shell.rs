@@ -374,7 +374,9 @@ impl<'m> Supervisor<'m> {
                 }
                 Action::PoseEstimatorDied(cause) => self.monitor.pose_estimator_died(cause),
                 Action::WriteStatus => self.write_status(),
-                Action::StatusLine => println!("{}", self.monitor.status_line()),
+                Action::StatusLine => {
+                    println!("{}", self.monitor.status_line(self.core.matcher_mode()))
+                }
                 Action::Log(Log::Info(line)) => tracing::info!("{line}"),
                 Action::Log(Log::Warn(line)) => tracing::warn!("{line}"),
                 Action::Finish(end) => return Ok(Some(end)),
@@ -524,12 +526,13 @@ impl<'m> Supervisor<'m> {
                     message.header().frame.frame_id
                 );
             }
-            if let Some(switch) = self.monitor.on_pose(message.header(), &pose)
-                && let Some(end) = self.feed(Event::MatcherSwitched(switch.to))?
-            {
-                return Ok(Some(end));
-            }
-            if let Some(end) = self.feed(Event::Pose(*message.header()))? {
+            let first = self.monitor.on_pose(message.header(), &pose);
+            let event = Event::Pose {
+                header: *message.header(),
+                pose,
+                first,
+            };
+            if let Some(end) = self.feed(event)? {
                 return Ok(Some(end));
             }
         }
