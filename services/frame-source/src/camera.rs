@@ -25,12 +25,12 @@
 use crate::{Ports, shutdown_ordered};
 use anyhow::Context;
 use crossbeam_channel::{Receiver, RecvTimeoutError, Sender, TrySendError};
-use linetrack_camera::{Backoff, CameraError, FrameClock, Stamp, StereoCamera, StereoImages};
+use linetrack_camera::{CameraError, FrameClock, Stamp, StereoCamera, StereoImages};
 use linetrack_datasets::Rectifier;
 use linetrack_ipc::Shutdown;
-use linetrack_msgs::{CameraFailure, Clock, FrameHeader, FrameStatus, StageKind, StatusKind};
+use linetrack_msgs::{CameraFailure, FrameHeader, FrameStatus, StageKind, StatusKind};
 use linetrack_pipeline_config::{CameraConfig, Pacing, PipelineConfig};
-use linetrack_stage_runtime::{StageContext, rig_record, stamp_end};
+use linetrack_stage_runtime::{Backoff, Clock, StageContext, rig_record, stamp_end};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::time::{Duration, Instant};

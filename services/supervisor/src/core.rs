@@ -15,7 +15,7 @@
 //! out; and the ordered stop (every stage asked, killed after the grace, the optional
 //! processes last).
 
-use crate::clock::{Backoff, Every, Timeout, Watchdog};
+use crate::clock::{Backoff, Every, Timeout, Watchdog, restart_backoff};
 use crate::detector_policy::DetectorPolicy;
 use crate::fallback::FallbackController;
 use linetrack_msgs::{
@@ -245,7 +245,7 @@ impl Core {
         let status_every = Duration::from_millis(supervisor.status_every_ms);
         Self {
             instances: Vec::new(),
-            restarts: [Backoff::new(supervisor); 4],
+            restarts: [restart_backoff(supervisor); 4],
             watchdog: Watchdog::new(supervisor),
             detector: config.detector,
             swap_to: None,
@@ -770,7 +770,7 @@ impl Core {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::clock::{Clock, ManualClock};
+    use crate::clock::Clock;
     use linetrack_msgs::{FrameHeader, FrameStatus};
     use linetrack_pipeline_config::SupervisorConfig;
     use linetrack_stage_runtime::detector_on_wire;
@@ -800,7 +800,7 @@ mod tests {
     /// The core, a manual clock, and the instances the tests "spawned".
     struct Run {
         core: Core,
-        clock: ManualClock,
+        clock: Clock,
         next_pid: u32,
         pids: Vec<(StageKind, u32)>,
     }
@@ -809,7 +809,7 @@ mod tests {
         fn new(config: &PipelineConfig) -> Self {
             Self {
                 core: Core::new(config, false),
-                clock: ManualClock::default(),
+                clock: Clock::manual(0),
                 next_pid: 100,
                 pids: Vec::new(),
             }
@@ -817,7 +817,7 @@ mod tests {
 
         /// Takes `event` now; every spawn it asks for is started (as the shell does).
         fn on(&mut self, event: Event) -> Vec<Action> {
-            let actions = self.core.on(event, self.clock.now());
+            let actions = self.core.on(event, self.clock.monotonic());
             for action in &actions {
                 if let Action::Spawn {
                     stage,
@@ -836,7 +836,7 @@ mod tests {
                         standby,
                     };
                     assert_eq!(
-                        self.core.on(spawned, self.clock.now()),
+                        self.core.on(spawned, self.clock.monotonic()),
                         [Action::WriteStatus]
                     );
                 }

@@ -11,7 +11,7 @@ use crate::stage_runner::StageRunner;
 use crate::status::{LiveStatus, StageEntry};
 use crate::{Mode, RunOptions, clock, stderr_tail};
 use anyhow::{Context, bail};
-use clock::{Clock, SystemClock};
+use clock::Clock;
 use linetrack_ipc::{Bus, Inlet, LocalHub, Outlet, Scope, Shutdown, Wake};
 use linetrack_msgs::{
     Command, Control, PoseRecord, StageKind, StatusKind, StatusReport, Topic, TracksHeader,
@@ -98,7 +98,7 @@ pub(crate) struct Supervisor<'m> {
     /// Every decision.
     core: Core,
     /// What every timer reads.
-    clock: Box<dyn Clock>,
+    clock: Clock,
 }
 
 impl<'m> Supervisor<'m> {
@@ -174,7 +174,7 @@ impl<'m> Supervisor<'m> {
             processes: Vec::new(),
             optional,
             core: Core::new(config, options.live_status),
-            clock: Box::new(SystemClock::default()),
+            clock: Clock::System,
         })
     }
 
@@ -310,7 +310,7 @@ impl<'m> Supervisor<'m> {
     /// Starts the optional processes that are due (at the start, or a restart), notes
     /// their exits. Called on every turn of the loop.
     fn supervise_optional(&mut self) {
-        let now = self.clock.now();
+        let now = self.clock.monotonic();
         for i in 0..self.optional.len() {
             let command = self.optional[i].wants_start(now).then(|| {
                 let process = &self.optional[i];
@@ -325,7 +325,7 @@ impl<'m> Supervisor<'m> {
     /// Gives the core `event` (now) and carries out what it decides; the end of the run
     /// when it decided that.
     fn feed(&mut self, event: Event) -> anyhow::Result<Option<End>> {
-        let now = self.clock.now();
+        let now = self.clock.monotonic();
         let actions = self.core.on(event, now);
         self.perform(actions)
     }
@@ -469,7 +469,7 @@ impl<'m> Supervisor<'m> {
             return Ok(Some(end));
         }
         self.supervise_optional();
-        let now = self.clock.now();
+        let now = self.clock.monotonic();
         let optional_settled = if self.core.awaiting_source() {
             let mut settled = true;
             for process in &mut self.optional {
@@ -638,7 +638,7 @@ impl<'m> Supervisor<'m> {
     /// Asks every stage to exit, waits for the grace period, kills what is left, then stops
     /// the optional processes.
     fn stop_all(&mut self) {
-        let now = self.clock.now();
+        let now = self.clock.monotonic();
         let actions = self.core.on(Event::Stop, now);
         self.perform_stopping(actions);
         while !self.core.stopped() {
@@ -650,12 +650,12 @@ impl<'m> Supervisor<'m> {
                     success,
                     last_words: String::new(),
                 };
-                let actions = self.core.on(event, self.clock.now());
+                let actions = self.core.on(event, self.clock.monotonic());
                 self.perform_stopping(actions);
             }
             let actions = self
                 .core
-                .on(Event::Tick(Progress::default()), self.clock.now());
+                .on(Event::Tick(Progress::default()), self.clock.monotonic());
             self.perform_stopping(actions);
             if !self.core.stopped() {
                 let _ = self.ports.wake.wait(Duration::from_millis(20));
@@ -685,7 +685,7 @@ impl<'m> Supervisor<'m> {
             {
                 tracing::warn!("shutdown command to {} not sent: {e}", process.rule().name);
             }
-            process.stop(self.clock.as_ref(), self.monitor);
+            process.stop(&self.clock, self.monitor);
         }
         let cleaned = self.bus.remove_stale_resources();
         if cleaned > 0 {

@@ -11,9 +11,9 @@ use linetrack_geometry::{Point, Segment, StereoRig};
 use linetrack_ipc::{Bus, Inlet, IpcError, Outlet, Received, Record, Scope, Shutdown};
 
 mod runner;
+pub mod time;
 use linetrack_msgs::{
-    Clock, Detector, FrameHeader, FrameMessage, FrameStatus, StageKind, StatusKind, StatusReport,
-    Topic,
+    Detector, FrameHeader, FrameMessage, FrameStatus, StageKind, StatusKind, StatusReport, Topic,
 };
 use linetrack_msgs::{RigRecord, SegmentRecord};
 use linetrack_pipeline_config::{BudgetConfig, PipelineConfig};
@@ -24,6 +24,7 @@ use std::collections::VecDeque;
 use std::path::PathBuf;
 use std::process::ExitCode;
 use std::time::Duration;
+pub use time::{Backoff, Clock, GivenUp};
 
 /// The arguments the supervisor passes to every stage.
 #[derive(Debug, Clone, Parser)]
