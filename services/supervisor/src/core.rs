@@ -213,8 +213,10 @@ pub struct Instance {
 #[derive(Debug)]
 pub struct Core {
     instances: Vec<Instance>,
-    /// Each stage's restarts.
-    restarts: [Backoff; 4],
+    /// Each stage's restarts, by stage (a stage not in it has not died yet).
+    restarts: Vec<(StageKind, Backoff)>,
+    /// The backoff a stage's restarts start from.
+    first_backoff: Backoff,
     watchdog: Watchdog,
     detector: DetectorKind,
     swap_to: Option<DetectorKind>,
@@ -234,10 +236,6 @@ pub struct Core {
     stopping: Option<(Duration, bool)>,
 }
 
-fn stage_slot(stage: StageKind) -> usize {
-    stage.stamp_index().unwrap_or(0)
-}
-
 impl Core {
     /// The core of a run of `config`; `live_status`: print the status line.
     pub fn new(config: &PipelineConfig, live_status: bool) -> Self {
@@ -245,7 +243,8 @@ impl Core {
         let status_every = Duration::from_millis(supervisor.status_every_ms);
         Self {
             instances: Vec::new(),
-            restarts: [restart_backoff(supervisor); 4],
+            restarts: Vec::new(),
+            first_backoff: restart_backoff(supervisor),
             watchdog: Watchdog::new(supervisor),
             detector: config.detector,
             swap_to: None,
@@ -378,7 +377,7 @@ impl Core {
             stage,
             detector,
             standby,
-            restarted: self.restarts[stage_slot(stage)].count() > 0,
+            restarted: self.restarts_of(stage) > 0,
         }
     }
 
@@ -586,7 +585,7 @@ impl Core {
             }
             return;
         }
-        let restarting = self.restarts[stage_slot(p.stage)].count() > 0;
+        let restarting = self.restarts_of(p.stage) > 0;
         if !p.ready && !p.standby && !restarting {
             // A stage that cannot start at all will not start on a retry either; one
             // that ran before and dies while restarting is a crash like any other.
@@ -625,7 +624,7 @@ impl Core {
                 p.pid
             )));
         }
-        if let Err(given_up) = self.restarts[stage_slot(p.stage)].schedule(now) {
+        if let Err(given_up) = self.backoff_of(p.stage).schedule(now) {
             actions.push(Action::Finish(End::Failed(format!(
                 "{} died {} times (restart limit {}): giving up; the last time {status}{last_words}",
                 p.stage, given_up.deaths, given_up.limit
@@ -662,10 +661,11 @@ impl Core {
                 p.killed = true;
             }
         }
-        for stage in StageKind::PROCESSING {
-            let slot = &mut self.restarts[stage_slot(stage)];
-            if let Some(count) = slot.take_due(now) {
-                let limit = slot.limit();
+        for i in 0..self.restarts.len() {
+            let (stage, backoff) = &mut self.restarts[i];
+            let stage = *stage;
+            if let Some(count) = backoff.take_due(now) {
+                let limit = backoff.limit();
                 actions.push(Action::Record {
                     kind: "restart",
                     stage: stage.name(),
@@ -756,6 +756,33 @@ impl Core {
             *outputs = true;
             actions.push(Action::StopOutputs);
         }
+    }
+
+    /// How many times `stage` was restarted.
+    fn restarts_of(&self, stage: StageKind) -> u32 {
+        self.restarts
+            .iter()
+            .find(|(s, _)| *s == stage)
+            .map_or(0, |(_, b)| b.count())
+    }
+
+    /// The restarts of `stage`, from the first backoff the first time it dies.
+    fn backoff_of(&mut self, stage: StageKind) -> &mut Backoff {
+        let i = match self.restarts.iter().position(|(s, _)| *s == stage) {
+            Some(i) => i,
+            None => {
+                // Kept in the pipeline's order: restarts due at once start in that order.
+                let order = |s: StageKind| s.stamp_index().unwrap_or(usize::MAX);
+                let at = self
+                    .restarts
+                    .iter()
+                    .position(|(s, _)| order(*s) > order(stage))
+                    .unwrap_or(self.restarts.len());
+                self.restarts.insert(at, (stage, self.first_backoff));
+                at
+            }
+        };
+        &mut self.restarts[i].1
     }
 
     fn all_ready(&self, stages: &[StageKind]) -> bool {
@@ -1046,6 +1073,60 @@ mod tests {
                 );
             }
         }
+    }
+
+    #[test]
+    fn each_stage_has_restarts_of_its_own_a_node_beyond_the_four_too() {
+        let mut run = Run::running(&config());
+        // The matcher has used one restart.
+        run.exit(run.pid(StageKind::Matcher), false);
+        run.clock.advance(200 * MS);
+        assert_eq!(
+            records(&run.tick()),
+            [("restart", "restart 1 of 2".to_string())]
+        );
+        run.report(run.pid(StageKind::Matcher), StatusKind::Ready, 0);
+        // A node that is none of the four processing stages, supervised the same way.
+        let extra = 900;
+        run.on(Event::Spawned {
+            stage: StageKind::Recorder,
+            pid: extra,
+            detector: None,
+            standby: false,
+        });
+        run.report(extra, StatusKind::Ready, 0);
+        for pid in [extra, run.pid(StageKind::FrameSource)] {
+            let crashed = run.exit(pid, false);
+            assert_eq!(finish(&crashed), None);
+        }
+        // Both restart after the first backoff, each its first restart.
+        run.clock.advance(199 * MS);
+        assert!(spawns(&run.tick()).is_empty());
+        run.clock.advance(MS);
+        let restarted = run.tick();
+        assert_eq!(
+            spawns(&restarted),
+            [
+                (StageKind::FrameSource, None, false, true),
+                (StageKind::Recorder, None, false, true)
+            ]
+        );
+        assert_eq!(
+            records(&restarted),
+            [
+                ("restart", "restart 1 of 2".to_string()),
+                ("restart", "restart 1 of 2".to_string())
+            ]
+        );
+        // The matcher's next death is its second.
+        run.exit(run.pid(StageKind::Matcher), false);
+        run.clock.advance(399 * MS);
+        assert!(spawns(&run.tick()).is_empty(), "400 ms: the second backoff");
+        run.clock.advance(MS);
+        assert_eq!(
+            records(&run.tick()),
+            [("restart", "restart 2 of 2".to_string())]
+        );
     }
 
     #[test]

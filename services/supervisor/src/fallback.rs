@@ -2,7 +2,7 @@
 //! hysteresis ([`Hysteresis`]) that this and the detector policy
 //! ([`crate::detector_policy`]) switch on.
 
-use crate::stamps::stage_ms;
+use crate::stamps::{end_ns, stage_ms};
 use linetrack_msgs::{FrameHeader, FrameStatus, MatcherMode, PoseRecord, StageKind, TracksHeader};
 use linetrack_pipeline_config::FallbackConfig;
 
@@ -20,7 +20,7 @@ pub fn end_to_end_miss(header: &FrameHeader, budget_ms: f64) -> Option<String> {
                 .map_or("a stage", |stage| stage.name())
         )),
         FrameStatus::Ok => {
-            let end = header.stamps[StageKind::PoseEstimator.stamp_index()?].end_ns;
+            let end = end_ns(header, StageKind::PoseEstimator);
             let ms = header.age_ms(end);
             (header.capture_ns > 0 && end >= header.capture_ns && ms > budget_ms)
                 .then(|| format!("end to end {ms:.1} ms > {budget_ms:.1} ms"))
@@ -169,7 +169,7 @@ impl FallbackController {
     /// Milliseconds the matcher stage took on `header` (NaN without its stamps: then it
     /// is neither over a bar nor within one).
     fn matcher_ms(header: &FrameHeader) -> f64 {
-        stage_ms(header, StageKind::Matcher.stamp_index().unwrap_or(2))
+        stage_ms(header, StageKind::Matcher)
     }
 
     /// Why an LBD probe does not pass, if it does not.

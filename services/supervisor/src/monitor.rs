@@ -6,7 +6,7 @@
 //! is built up as they go ([`Tally`]), so the supervisor's memory does not grow with the
 //! length of the run, and a run that ends any way at all leaves its records.
 
-use crate::stamps::stage_ms;
+use crate::stamps::{detected, end_ns, stage_ms};
 use linetrack_msgs::{
     CameraFailure, FrameHeader, FrameStatus, MatcherMode, PoseRecord, StageKind, StatusKind,
     StatusReport, TracksHeader,
@@ -106,14 +106,17 @@ pub struct Monitor {
     ground_truth: Vec<StampedPose>,
 }
 
-/// Milliseconds between the stage before stage `i` publishing the frame (its capture, for
-/// the source) and stage `i` taking it; NaN when either stamp is missing.
-fn wait_ms(header: &FrameHeader, i: usize) -> f64 {
-    let ready = match i {
-        0 => header.capture_ns,
-        _ => header.stamps[i - 1].end_ns,
+/// Milliseconds between the stage before `stage` publishing the frame (its capture, for
+/// the source) and `stage` taking it; NaN when either stamp is missing.
+fn wait_ms(header: &FrameHeader, stage: StageKind) -> f64 {
+    let Some(i) = StageKind::PROCESSING.iter().position(|&s| s == stage) else {
+        return f64::NAN;
     };
-    let taken = header.stamps[i].start_ns;
+    let ready = match i.checked_sub(1) {
+        None => header.capture_ns,
+        Some(before) => end_ns(header, StageKind::PROCESSING[before]),
+    };
+    let taken = header.stamp(stage).map_or(0, |s| s.start_ns);
     if ready == 0 || taken == 0 || taken < ready {
         f64::NAN
     } else {
@@ -250,9 +253,9 @@ impl Monitor {
             FrameStatus::Ok => "pose",
             other => other.name(),
         };
-        let stage: [f64; 4] = std::array::from_fn(|i| stage_ms(header, i));
-        let wait: [f64; 4] = std::array::from_fn(|i| wait_ms(header, i));
-        let pose_end = header.stamps[3].end_ns;
+        let stage = StageKind::PROCESSING.map(|s| stage_ms(header, s));
+        let wait = StageKind::PROCESSING.map(|s| wait_ms(header, s));
+        let pose_end = end_ns(header, StageKind::PoseEstimator);
         let end_to_end_ms = if pose_end >= header.capture_ns && header.capture_ns > 0 {
             header.age_ms(pose_end)
         } else {
@@ -288,7 +291,9 @@ impl Monitor {
             },
             // Only a frame the detector detected names it: one it dropped carries no
             // detection (its code would read as the first detector's).
-            detector: if header.stamps[1].end_ns > 0 && crate::stamps::detected(header, 1) {
+            detector: if end_ns(header, StageKind::LineDetector) > 0
+                && detected(header, StageKind::LineDetector)
+            {
                 detection
                     .detector
                     .get()
@@ -638,7 +643,7 @@ mod tests {
             stamp.start_ns = ms(start);
             stamp.end_ns = ms(end);
         }
-        let waits: Vec<f64> = (0..4).map(|i| wait_ms(&header, i)).collect();
+        let waits = StageKind::PROCESSING.map(|s| wait_ms(&header, s));
         let expected = [0.0, 1.0, 0.5, 3.0];
         assert!(
             waits
@@ -649,9 +654,9 @@ mod tests {
         );
         // A stage that never took the frame, or stamps out of order: no wait.
         header.stamps[2].start_ns = 0;
-        assert!(wait_ms(&header, 2).is_nan());
+        assert!(wait_ms(&header, StageKind::Matcher).is_nan());
         header.stamps[3].start_ns = ms(11.0);
-        assert!(wait_ms(&header, 3).is_nan());
+        assert!(wait_ms(&header, StageKind::PoseEstimator).is_nan());
     }
 
     fn pose_of(monitor: &mut Monitor, frame_id: u64) {
