@@ -22,15 +22,17 @@
 //! neither restarts the source nor stops the run. The run ends after `camera.duration_s`
 //! or `source.max_frames` frame ids, or by Ctrl-C / shutdown.
 
-use crate::{Ports, shutdown_ordered};
+use crate::Ports;
 use anyhow::Context;
 use crossbeam_channel::{Receiver, RecvTimeoutError, Sender, TrySendError};
-use linetrack_camera::{Backoff, CameraError, FrameClock, Stamp, StereoCamera, StereoImages};
+use linetrack_camera::{CameraError, FrameClock, Stamp, StereoCamera, StereoImages};
 use linetrack_datasets::Rectifier;
 use linetrack_ipc::Shutdown;
-use linetrack_msgs::{CameraFailure, Clock, FrameHeader, FrameStatus, StageKind, StatusKind};
+use linetrack_msgs::{CameraFailure, FrameHeader, FrameStatus, StageKind, StatusKind};
 use linetrack_pipeline_config::{CameraConfig, Pacing, PipelineConfig};
-use linetrack_stage_runtime::{StageContext, rig_record, stamp_end};
+use linetrack_stage_runtime::{
+    Backoff, Clock, StageContext, rig_record, shutdown_ordered, stamp_end,
+};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::time::{Duration, Instant};
@@ -334,7 +336,9 @@ fn publish_frames(
         m => m.saturating_sub(published),
     };
     loop {
-        if shutdown.requested() || shutdown_ordered(&mut ports.control, ctx.pid)? {
+        if shutdown.requested()
+            || shutdown_ordered(&mut ports.control, StageKind::FrameSource, ctx.pid)?
+        {
             tracing::info!("shutdown after {published} frames");
             return Ok(None);
         }

@@ -12,11 +12,9 @@ mod replay;
 use anyhow::Context;
 use linetrack_datasets::StereoSequence;
 use linetrack_ipc::{Bus, Inlet, Outlet, Shutdown, Wake};
-use linetrack_msgs::{
-    Command, Control, FrameHeader, FrameStatus, RigRecord, StageKind, StatusKind, Topic,
-};
+use linetrack_msgs::{Control, FrameHeader, FrameStatus, RigRecord, StageKind, StatusKind, Topic};
 use linetrack_pipeline_config::Pacing;
-use linetrack_stage_runtime::{Reporter, StageContext, rig_record, stamp_end};
+use linetrack_stage_runtime::{Reporter, StageContext, rig_record, shutdown_ordered, stamp_end};
 use std::time::{Duration, Instant};
 use tracing::info_span;
 
@@ -68,14 +66,6 @@ pub(crate) fn due_offset(
         Pacing::Realtime if rate_hz > 0.0 => Duration::from_secs_f64(k as f64 / rate_hz),
         Pacing::Realtime => Duration::from_nanos(timestamp_ns.saturating_sub(first_ns)),
     }
-}
-
-/// Whether a shutdown command arrived.
-pub(crate) fn shutdown_ordered(control: &mut Inlet<Control, ()>, pid: u32) -> anyhow::Result<bool> {
-    Ok(control.receive_all()?.iter().any(|c| {
-        let c = c.payload().first().copied().unwrap_or_default();
-        c.command.is(Command::Shutdown) && c.is_for(StageKind::FrameSource, pid)
-    }))
 }
 
 /// [`run`] as a process of its own (`linetrack-frame-source`): OpenCV is first set to one
@@ -196,7 +186,9 @@ pub(crate) fn wait_until(
     published: u64,
 ) -> anyhow::Result<bool> {
     loop {
-        if shutdown.requested() || shutdown_ordered(&mut ports.control, ctx.pid)? {
+        if shutdown.requested()
+            || shutdown_ordered(&mut ports.control, StageKind::FrameSource, ctx.pid)?
+        {
             tracing::info!("shutdown after {published} frames");
             return Ok(false);
         }
@@ -226,7 +218,9 @@ pub(crate) fn stay_until_the_run_ends(
         published,
     );
     tracing::info!("finished: {published} frames published");
-    while !shutdown.requested() && !shutdown_ordered(&mut ports.control, ctx.pid)? {
+    while !shutdown.requested()
+        && !shutdown_ordered(&mut ports.control, StageKind::FrameSource, ctx.pid)?
+    {
         ports.rig.update_connections()?;
         ports.reporter.beat(published);
         ports

@@ -9,11 +9,10 @@ use linetrack_ipc::{Bus, Shutdown};
 use linetrack_msgs::{Detector as WireDetector, FrameHeader, SegmentRecord, SegmentsHeader};
 use linetrack_msgs::{StageKind, Topic};
 use linetrack_stage_runtime::{
-    Images, Stage, StageContext, detector_on_wire, run_stage, stereo_views, to_record,
+    Images, RightImageWorker, Stage, StageContext, detector_on_wire, run_stage, stereo_views,
+    to_record,
 };
-use linetrack_vision::{
-    ContrastStretch, GrayImage, LineDetector, SideWorker, copy_image_into, create_detector,
-};
+use linetrack_vision::{ContrastStretch, GrayImage, LineDetector, create_detector};
 
 /// One side's detector, its stretched image and its output buffer (all kept from frame to
 /// frame).
@@ -33,20 +32,12 @@ impl Side {
     }
 }
 
-/// The right image's side with a copy of its image, for the worker that detects it.
-struct RightJob {
-    side: Side,
-    image: Option<GrayImage>,
-    max_gain: f64,
-    result: anyhow::Result<()>,
-}
-
 /// The detector stage: a detector per image side, so that both sides can run at once.
 pub struct Detector {
     left: Side,
     /// The right side: on a thread of its own under `detect_sides_in_parallel`, else
     /// after the left one.
-    right: SideWorker<RightJob>,
+    right: RightImageWorker<Side, anyhow::Error>,
     kind: WireDetector,
     pid: u32,
     max_contrast_gain: f64,
@@ -64,23 +55,13 @@ impl Detector {
                 segments: Vec::new(),
             })
         };
-        let right = RightJob {
-            side: side()?,
-            image: None,
-            max_gain: ctx.config.odometry.max_contrast_gain,
-            result: Ok(()),
-        };
-        let work = |job: &mut RightJob| {
-            job.result = match &job.image {
-                Some(image) => job.side.detect(image, job.max_gain),
-                None => Ok(()),
-            };
-        };
-        let right = if ctx.config.detect_sides_in_parallel {
-            SideWorker::new("detect-right", right, work)?
-        } else {
-            SideWorker::inline("detect-right", right, work)
-        };
+        let max_gain = ctx.config.odometry.max_contrast_gain;
+        let right = RightImageWorker::new(
+            "detect-right",
+            ctx.config.detect_sides_in_parallel,
+            side()?,
+            move |side: &mut Side, image: &GrayImage| side.detect(image, max_gain),
+        )?;
         let mut detector = Self {
             left: side()?,
             right,
@@ -100,7 +81,7 @@ impl Detector {
             .collect();
         let warm = GrayImage::from_pixels(w, h, &card, "warm-up card")?;
         detector.left.detect(&warm, 0.0)?;
-        detector.right.job()?.side.detect(&warm, 0.0)?;
+        detector.right.state()?.detect(&warm, 0.0)?;
         tracing::info!("{} detector ready", kind.name());
         Ok(detector)
     }
@@ -137,13 +118,12 @@ impl Stage for Detector {
         detection.detector_pid = self.pid;
         let (left, right) = stereo_views(frame)?;
         let gain = self.max_contrast_gain;
-        copy_image_into(&mut self.right.job()?.image, &right)?;
         let left_side = &mut self.left;
-        let (job, left_done) = self.right.run_while(|| left_side.detect(&left, gain));
-        let job = job?;
-        let right_done = std::mem::replace(&mut job.result, Ok(()));
+        let (right_side, right_done, left_done) = self
+            .right
+            .run_while(&right, || left_side.detect(&left, gain))?;
         left_done.and(right_done)?;
-        let right_segments = &job.side.segments;
+        let right_segments = &right_side.segments;
         detection.left_count = self.left.segments.len() as u32;
         detection.right_count = right_segments.len() as u32;
         out.extend(

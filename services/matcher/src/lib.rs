@@ -15,10 +15,12 @@ use linetrack_msgs::{
     TrackedLine, TracksHeader, decode,
 };
 use linetrack_pipeline_config::MatcherPolicy;
-use linetrack_stage_runtime::{Images, Stage, StageContext, run_stage, stereo_views, to_segment};
+use linetrack_stage_runtime::{
+    Images, RightImageWorker, Stage, StageContext, run_stage, stereo_views, to_segment,
+};
 use linetrack_vision::{
-    FeatureMatch, GrayImage, LineFeatures, MatcherKind, SegmentMatcher, SideWorker, VisionError,
-    copy_image_into, create_segment_matcher,
+    FeatureMatch, GrayImage, LineFeatures, MatcherKind, SegmentMatcher, VisionError,
+    create_segment_matcher,
 };
 use tracing::info_span;
 
@@ -29,12 +31,10 @@ struct Previous {
     described: bool,
 }
 
-/// The right image's LBD description with a copy of its image, for the worker that does it.
-struct DescribeJob {
+/// The right image's LBD describer and its features, for the worker that describes it.
+struct Describe {
     lbd: Box<dyn SegmentMatcher>,
-    image: Option<GrayImage>,
     features: LineFeatures,
-    result: Result<(), VisionError>,
 }
 
 /// Matching state across frames.
@@ -42,7 +42,7 @@ pub struct FrameMatcher {
     lbd: Box<dyn SegmentMatcher>,
     /// LBD on the right image: on a thread of its own under `detect_sides_in_parallel`,
     /// else after the left image.
-    describe_right: SideWorker<DescribeJob>,
+    describe_right: RightImageWorker<Describe, VisionError>,
     l1: Box<dyn SegmentMatcher>,
     mode: MatcherMode,
     /// Whether ℓ1 frames probe LBD (the `auto` policy only: under `l1` nothing would come
@@ -66,23 +66,16 @@ impl FrameMatcher {
             MatcherPolicy::Auto | MatcherPolicy::Lbd => MatcherMode::Lbd,
             MatcherPolicy::L1 => MatcherMode::L1,
         };
-        let right = DescribeJob {
+        let right = Describe {
             lbd: create_segment_matcher(MatcherKind::Lbd, frontend)?,
-            image: None,
             features: LineFeatures::default(),
-            result: Ok(()),
         };
-        let work = |job: &mut DescribeJob| {
-            job.result = match &job.image {
-                Some(image) => job.lbd.describe(image, &mut job.features),
-                None => Ok(()),
-            };
-        };
-        let describe_right = if ctx.config.detect_sides_in_parallel {
-            SideWorker::new("describe-right", right, work)?
-        } else {
-            SideWorker::inline("describe-right", right, work)
-        };
+        let describe_right = RightImageWorker::new(
+            "describe-right",
+            ctx.config.detect_sides_in_parallel,
+            right,
+            |d: &mut Describe, image: &GrayImage| d.lbd.describe(image, &mut d.features),
+        )?;
         Ok(Self {
             lbd: create_segment_matcher(MatcherKind::Lbd, frontend)?,
             describe_right,
@@ -160,14 +153,13 @@ impl FrameMatcher {
             let span = info_span!("describe");
             let _entered = span.enter();
             if mode == MatcherMode::Lbd || probe {
-                let job = self.describe_right.job()?;
-                copy_image_into(&mut job.image, r)?;
-                std::mem::swap(&mut job.features, &mut right);
+                std::mem::swap(&mut self.describe_right.state()?.features, &mut right);
                 let lbd = &mut self.lbd;
-                let (job, left_done) = self.describe_right.run_while(|| lbd.describe(l, &mut left));
-                let job = job?;
-                std::mem::swap(&mut job.features, &mut right);
-                left_done.and(std::mem::replace(&mut job.result, Ok(())))?;
+                let (described_right, right_done, left_done) = self
+                    .describe_right
+                    .run_while(r, || lbd.describe(l, &mut left))?;
+                std::mem::swap(&mut described_right.features, &mut right);
+                left_done.and(right_done)?;
                 described = true;
             }
             if mode == MatcherMode::L1 {

@@ -4,10 +4,10 @@ use anyhow::Context;
 use linetrack_ipc::{Bus, Inlet, Shutdown};
 use linetrack_mcap::Recording;
 use linetrack_msgs::{
-    Command, Control, FrameHeader, PoseRecord, RigRecord, SegmentRecord, SegmentsHeader, StageKind,
+    Control, FrameHeader, PoseRecord, RigRecord, SegmentRecord, SegmentsHeader, StageKind,
     StatusKind, StatusReport, Topic, TrackedLine, TracksHeader, now_ns,
 };
-use linetrack_stage_runtime::{GapWatch, Reporter, StageContext};
+use linetrack_stage_runtime::{GapWatch, Reporter, StageContext, shutdown_ordered};
 use std::collections::BTreeMap;
 use std::time::Duration;
 
@@ -55,7 +55,8 @@ pub fn run(ctx: &StageContext, bus: &Bus, shutdown: &Shutdown) -> anyhow::Result
     let every = record.every_nth_image;
     let mut result = Ok(());
     loop {
-        let stop = shutdown.requested() || shutdown_ordered(&mut inlets.control, ctx.pid)?;
+        let stop = shutdown.requested()
+            || shutdown_ordered(&mut inlets.control, StageKind::Recorder, ctx.pid)?;
         // On a stop, one more pass writes what the queues still hold.
         if let Err(e) = drain(&mut inlets, &mut recording, &mut losses, every) {
             result = Err(e);
@@ -106,14 +107,6 @@ pub fn run(ctx: &StageContext, bus: &Bus, shutdown: &Shutdown) -> anyhow::Result
         );
     }
     result
-}
-
-/// Whether a shutdown command for the recorder arrived.
-fn shutdown_ordered(control: &mut Inlet<Control, ()>, pid: u32) -> anyhow::Result<bool> {
-    Ok(control.receive_all()?.iter().any(|c| {
-        let c = c.payload().first().copied().unwrap_or_default();
-        c.command.is(Command::Shutdown) && c.is_for(StageKind::Recorder, pid)
-    }))
 }
 
 /// Writes everything queued.

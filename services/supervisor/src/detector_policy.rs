@@ -10,8 +10,8 @@
 //! it; a frame the detector did not process says nothing.
 
 use crate::fallback::Hysteresis;
-use crate::monitor::stage_ms;
-use linetrack_msgs::{FrameHeader, StageKind, TracksHeader};
+use crate::stamps::{detected, end_ns, stage_ms};
+use linetrack_msgs::{StageKind, TracksHeader};
 use linetrack_pipeline_config::DetectorFallbackConfig;
 use linetrack_stage_runtime::detector_kind;
 use linetrack_vision::DetectorKind;
@@ -74,9 +74,8 @@ impl DetectorPolicy {
             // watch it afresh.
             self.streaks.reset();
         }
-        let index = StageKind::LineDetector.stamp_index()?;
-        let detected_here = header.stamps[index].end_ns != 0
-            && detected(header, index)
+        let detected_here = end_ns(header, StageKind::LineDetector) != 0
+            && detected(header, StageKind::LineDetector)
             && message
                 .detection
                 .detector
@@ -91,7 +90,7 @@ impl DetectorPolicy {
         if !detected_here && late.is_none() {
             return None;
         }
-        let ms = stage_ms(header, index);
+        let ms = stage_ms(header, StageKind::LineDetector);
         let kind = running;
         let budget = self.budget_ms;
         if kind == SLOW {
@@ -138,18 +137,6 @@ impl DetectorPolicy {
                 ),
             })
     }
-}
-
-/// Whether the detector (stamp index `detector`) detected the frame: not a frame dropped
-/// before it or by it (its stamps then time the drop, not a detection).
-pub(crate) fn detected(header: &FrameHeader, detector: usize) -> bool {
-    header.is_ok()
-        || header
-            .status_by
-            .get()
-            .ok()
-            .and_then(|s| s.stamp_index())
-            .is_some_and(|by| by > detector)
 }
 
 #[cfg(test)]

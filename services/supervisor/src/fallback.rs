@@ -2,7 +2,7 @@
 //! hysteresis ([`Hysteresis`]) that this and the detector policy
 //! ([`crate::detector_policy`]) switch on.
 
-use crate::monitor::stage_ms;
+use crate::stamps::{end_ns, stage_ms};
 use linetrack_msgs::{FrameHeader, FrameStatus, MatcherMode, PoseRecord, StageKind, TracksHeader};
 use linetrack_pipeline_config::FallbackConfig;
 
@@ -20,7 +20,7 @@ pub fn end_to_end_miss(header: &FrameHeader, budget_ms: f64) -> Option<String> {
                 .map_or("a stage", |stage| stage.name())
         )),
         FrameStatus::Ok => {
-            let end = header.stamps[StageKind::PoseEstimator.stamp_index()?].end_ns;
+            let end = end_ns(header, StageKind::PoseEstimator);
             let ms = header.age_ms(end);
             (header.capture_ns > 0 && end >= header.capture_ns && ms > budget_ms)
                 .then(|| format!("end to end {ms:.1} ms > {budget_ms:.1} ms"))
@@ -130,6 +130,21 @@ pub struct FallbackController {
     streaks: Hysteresis,
 }
 
+impl Switch {
+    /// Its kind in `events.csv` (`fallback` to ℓ1, `recover` to LBD) and its detail.
+    pub fn event(&self) -> (&'static str, String) {
+        let (kind, from) = if self.to == MatcherMode::L1 {
+            ("fallback", "lbd")
+        } else {
+            ("recover", "l1")
+        };
+        (
+            kind,
+            format!("{from} -> {}: {}", self.to.name(), self.reason),
+        )
+    }
+}
+
 impl FallbackController {
     /// A controller starting in LBD mode.
     pub fn new(config: FallbackConfig, matcher_budget_ms: f64, end_to_end_budget_ms: f64) -> Self {
@@ -154,7 +169,7 @@ impl FallbackController {
     /// Milliseconds the matcher stage took on `header` (NaN without its stamps: then it
     /// is neither over a bar nor within one).
     fn matcher_ms(header: &FrameHeader) -> f64 {
-        stage_ms(header, StageKind::Matcher.stamp_index().unwrap_or(2))
+        stage_ms(header, StageKind::Matcher)
     }
 
     /// Why an LBD probe does not pass, if it does not.
@@ -226,6 +241,18 @@ impl FallbackController {
                 self.streaks.observe(header.frame_id, false);
                 None
             }
+        }
+    }
+
+    /// Takes the first outcome of a frame that reached the end: a frame dropped late
+    /// ([`FallbackController::observe_dropped_late`]) or a processed one
+    /// ([`FallbackController::observe`]); other drops say nothing. Returns a switch when one
+    /// is due.
+    pub fn observe_outcome(&mut self, header: &TracksHeader, pose: &PoseRecord) -> Option<Switch> {
+        match header.frame.status.get().ok()? {
+            FrameStatus::DroppedLate => self.observe_dropped_late(&header.frame),
+            FrameStatus::Ok => self.observe(header, pose),
+            _ => None,
         }
     }
 

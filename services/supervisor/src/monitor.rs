@@ -6,12 +6,12 @@
 //! is built up as they go ([`Tally`]), so the supervisor's memory does not grow with the
 //! length of the run, and a run that ends any way at all leaves its records.
 
-use crate::fallback::{FallbackController, Switch};
+use crate::stamps::{detected, end_ns, stage_ms};
 use linetrack_msgs::{
     CameraFailure, FrameHeader, FrameStatus, MatcherMode, PoseRecord, StageKind, StatusKind,
     StatusReport, TracksHeader,
 };
-use linetrack_pipeline_config::{CameraConfig, MatcherPolicy, PipelineConfig};
+use linetrack_pipeline_config::{CameraConfig, PipelineConfig};
 use linetrack_run_record::{
     EventRecord, FrameRecord, Percentiles, RecordError, RecordWriter, Report, RunEnd, Summary,
     Tally,
@@ -94,7 +94,6 @@ pub struct Monitor {
     /// publishes died with it (the last stage: no stage after it sees them skipped), and
     /// how it died.
     lost_with_pose_estimator: Option<(u64, String)>,
-    fallback: Option<FallbackController>,
     last_pose: Option<(u64, PoseRecord)>,
     /// The pose before `last_pose` (a restarted pose estimator predicts from the two).
     previous_pose: Option<(u64, PoseRecord)>,
@@ -107,24 +106,17 @@ pub struct Monitor {
     ground_truth: Vec<StampedPose>,
 }
 
-/// Milliseconds stage `i` (its stamp index) took on the frame; NaN when a stamp is missing.
-pub(crate) fn stage_ms(header: &FrameHeader, i: usize) -> f64 {
-    let s = header.stamps[i];
-    if s.start_ns == 0 || s.end_ns < s.start_ns {
-        f64::NAN
-    } else {
-        (s.end_ns - s.start_ns) as f64 * 1e-6
-    }
-}
-
-/// Milliseconds between the stage before stage `i` publishing the frame (its capture, for
-/// the source) and stage `i` taking it; NaN when either stamp is missing.
-fn wait_ms(header: &FrameHeader, i: usize) -> f64 {
-    let ready = match i {
-        0 => header.capture_ns,
-        _ => header.stamps[i - 1].end_ns,
+/// Milliseconds between the stage before `stage` publishing the frame (its capture, for
+/// the source) and `stage` taking it; NaN when either stamp is missing.
+fn wait_ms(header: &FrameHeader, stage: StageKind) -> f64 {
+    let Some(i) = StageKind::PROCESSING.iter().position(|&s| s == stage) else {
+        return f64::NAN;
     };
-    let taken = header.stamps[i].start_ns;
+    let ready = match i.checked_sub(1) {
+        None => header.capture_ns,
+        Some(before) => end_ns(header, StageKind::PROCESSING[before]),
+    };
+    let taken = header.stamp(stage).map_or(0, |s| s.start_ns);
     if ready == 0 || taken == 0 || taken < ready {
         f64::NAN
     } else {
@@ -140,13 +132,6 @@ impl Monitor {
         first_frame: u64,
         run_dir: &Path,
     ) -> Result<Self, RecordError> {
-        let fallback = (config.matcher.mode == MatcherPolicy::Auto).then(|| {
-            FallbackController::new(
-                config.matcher.fallback.clone(),
-                config.budget.matcher_ms,
-                config.budget.end_to_end_ms,
-            )
-        });
         Ok(Self {
             config: config.clone(),
             started: Instant::now(),
@@ -159,7 +144,6 @@ impl Monitor {
             duplicates: 0,
             presumed_lost: BTreeMap::new(),
             lost_with_pose_estimator: None,
-            fallback,
             last_pose: None,
             previous_pose: None,
             first_frame,
@@ -237,8 +221,9 @@ impl Monitor {
         self.tally.add_event(&event);
     }
 
-    /// Takes one pose message; returns a matcher mode switch when one is due.
-    pub fn on_pose(&mut self, message: &TracksHeader, pose: &PoseRecord) -> Option<Switch> {
+    /// Records one pose message; returns whether it was the frame's first outcome (a frame
+    /// that reaches the end twice keeps its first).
+    pub fn on_pose(&mut self, message: &TracksHeader, pose: &PoseRecord) -> bool {
         let TracksHeader {
             frame: header,
             detection,
@@ -268,9 +253,9 @@ impl Monitor {
             FrameStatus::Ok => "pose",
             other => other.name(),
         };
-        let stage: [f64; 4] = std::array::from_fn(|i| stage_ms(header, i));
-        let wait: [f64; 4] = std::array::from_fn(|i| wait_ms(header, i));
-        let pose_end = header.stamps[3].end_ns;
+        let stage = StageKind::PROCESSING.map(|s| stage_ms(header, s));
+        let wait = StageKind::PROCESSING.map(|s| wait_ms(header, s));
+        let pose_end = end_ns(header, StageKind::PoseEstimator);
         let end_to_end_ms = if pose_end >= header.capture_ns && header.capture_ns > 0 {
             header.age_ms(pose_end)
         } else {
@@ -306,7 +291,8 @@ impl Monitor {
             },
             // Only a frame the detector detected names it: one it dropped carries no
             // detection (its code would read as the first detector's).
-            detector: if header.stamps[1].end_ns > 0 && crate::detector_policy::detected(header, 1)
+            detector: if end_ns(header, StageKind::LineDetector) > 0
+                && detected(header, StageKind::LineDetector)
             {
                 detection
                     .detector
@@ -325,19 +311,12 @@ impl Monitor {
         if !self.accounted.insert(header.frame_id) {
             self.duplicates += 1;
             tracing::warn!("frame {} reached the end twice", header.frame_id);
-            return None;
+            return false;
         }
         self.presumed_lost.remove(&header.frame_id);
         self.record_frame(&record);
-        if status == FrameStatus::DroppedLate {
-            let switch = self
-                .fallback
-                .as_mut()
-                .and_then(|f| f.observe_dropped_late(header));
-            return self.matcher_switched(header.frame_id, switch);
-        }
         if status != FrameStatus::Ok {
-            return None;
+            return true;
         }
         if self
             .last_pose
@@ -350,34 +329,7 @@ impl Monitor {
             .writer
             .pose(header.sequence_ns, pose.translation, pose.rotation_xyzw);
         self.note(written);
-        let switch = self
-            .fallback
-            .as_mut()
-            .and_then(|f| f.observe(message, pose));
-        self.matcher_switched(header.frame_id, switch)
-    }
-
-    /// Records a matcher mode switch, when there is one, and passes it on.
-    fn matcher_switched(&mut self, frame_id: u64, switch: Option<Switch>) -> Option<Switch> {
-        if let Some(s) = &switch {
-            let kind = if s.to == MatcherMode::L1 {
-                "fallback"
-            } else {
-                "recover"
-            };
-            self.event(
-                kind,
-                "matcher",
-                Some(frame_id),
-                format!(
-                    "{} -> {}: {}",
-                    if s.to == MatcherMode::L1 { "lbd" } else { "l1" },
-                    s.to.name(),
-                    s.reason
-                ),
-            );
-        }
-        switch
+        true
     }
 
     /// Takes what a stage's status report says about the run (the frames the source
@@ -476,11 +428,6 @@ impl Monitor {
         self.lost_with_pose_estimator = Some((first, cause));
     }
 
-    /// The mode the matcher should be in (re-sent to a restarted matcher).
-    pub fn matcher_mode(&self) -> Option<MatcherMode> {
-        self.fallback.as_ref().map(|f| f.mode())
-    }
-
     /// The source published everything up to `last_frame`.
     pub fn source_finished(&mut self, last_frame: u64) {
         self.source_last = Some(last_frame);
@@ -556,17 +503,18 @@ impl Monitor {
         self.accounted.window()
     }
 
-    /// The one-line live status.
-    pub fn status_line(&self) -> String {
+    /// The one-line live status; `auto_mode`: the mode the matcher's policy chose
+    /// (`matcher.mode = "auto"`).
+    pub fn status_line(&self, auto_mode: Option<MatcherMode>) -> String {
         let elapsed = self.started.elapsed().as_secs_f64();
         let e2e = Percentiles::of(self.recent_end_to_end_ms.iter().copied());
         let frames = self.tally.frames();
         let rate = frames as f64 / elapsed.max(1e-3);
         let drops = frames - self.tally.with_pose();
         let misses = self.tally.deadline_misses();
-        let mode = self.fallback.as_ref().map_or_else(
+        let mode = auto_mode.map_or_else(
             || self.config.matcher.mode_name().to_string(),
-            |f| format!("auto:{}", f.mode().name()),
+            |mode| format!("auto:{}", mode.name()),
         );
         let mut line = format!("[{elapsed:6.1} s] frames {frames:>5}  {rate:5.1} fps  ");
         match e2e {
@@ -695,7 +643,7 @@ mod tests {
             stamp.start_ns = ms(start);
             stamp.end_ns = ms(end);
         }
-        let waits: Vec<f64> = (0..4).map(|i| wait_ms(&header, i)).collect();
+        let waits = StageKind::PROCESSING.map(|s| wait_ms(&header, s));
         let expected = [0.0, 1.0, 0.5, 3.0];
         assert!(
             waits
@@ -706,9 +654,9 @@ mod tests {
         );
         // A stage that never took the frame, or stamps out of order: no wait.
         header.stamps[2].start_ns = 0;
-        assert!(wait_ms(&header, 2).is_nan());
+        assert!(wait_ms(&header, StageKind::Matcher).is_nan());
         header.stamps[3].start_ns = ms(11.0);
-        assert!(wait_ms(&header, 3).is_nan());
+        assert!(wait_ms(&header, StageKind::PoseEstimator).is_nan());
     }
 
     fn pose_of(monitor: &mut Monitor, frame_id: u64) {

@@ -10,10 +10,11 @@
 //! `<prefix>-exit`, `<prefix>-given-up` (past the restart limit) and `<prefix>-killed` (did
 //! not stop within its grace), with the process's name in the stage column.
 
-use crate::clock::{Backoff, Clock};
+use crate::Mode;
+use crate::clock::{Backoff, Clock, restart_backoff};
 use crate::monitor::Monitor;
 use linetrack_msgs::StageKind;
-use linetrack_pipeline_config::SupervisorConfig;
+use linetrack_pipeline_config::{PipelineConfig, SupervisorConfig};
 use std::ffi::OsString;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command};
@@ -132,7 +133,7 @@ impl OptionalProcess {
             settings,
             running: None,
             settled: !rule.gates_source,
-            backoff: Backoff::new(config),
+            backoff: restart_backoff(config),
             start_due: true,
             done: false,
         }
@@ -309,7 +310,7 @@ impl OptionalProcess {
     /// Stops it: SIGTERM unless its rule has the supervisor send a command (sent before
     /// this), then up to its grace period for it to exit, then kill. An unsuccessful end or
     /// a kill is recorded.
-    pub fn stop(&mut self, clock: &dyn Clock, monitor: &mut Monitor) {
+    pub fn stop(&mut self, clock: &Clock, monitor: &mut Monitor) {
         let Some(mut running) = self.running.take() else {
             return;
         };
@@ -320,7 +321,7 @@ impl OptionalProcess {
             let _ = rustix::process::kill_process(pid, rustix::process::Signal::TERM);
         }
         let grace = self.settings.grace;
-        let deadline = clock.now().saturating_add(grace);
+        let deadline = clock.monotonic().saturating_add(grace);
         loop {
             match running.child.try_wait() {
                 Ok(Some(status)) if status.success() => {
@@ -336,7 +337,7 @@ impl OptionalProcess {
                     );
                     return;
                 }
-                Ok(None) | Err(_) if clock.now() < deadline => clock.pause(POLL),
+                Ok(None) | Err(_) if clock.monotonic() < deadline => clock.pause(POLL),
                 _ => break,
             }
         }
@@ -372,10 +373,66 @@ pub fn require_binary(rule: &Rule, bin_dir: &Path, key: &str) -> anyhow::Result<
     Ok(bin)
 }
 
+/// The optional processes `config` turns on, in the order they start (the recorder, the
+/// ROS 2 output, the link); a binary the config needs and that is not there is refused.
+pub(crate) fn processes(
+    config: &PipelineConfig,
+    mode: Mode,
+    bin_dir: &Path,
+    run_dir: &Path,
+    monitor: &mut Monitor,
+) -> anyhow::Result<Vec<OptionalProcess>> {
+    let supervisor = &config.supervisor;
+    let grace = Duration::from_millis(supervisor.shutdown_grace_ms);
+    let in_run_dir = vec!["--run-dir".into(), run_dir.as_os_str().to_owned()];
+    let mut processes = Vec::new();
+    if config.record.mcap && mode == Mode::Threads {
+        tracing::warn!(
+            "[record] mcap = true is ignored with --single-process: the recorder subscribes over shared memory"
+        );
+        monitor.event(
+            "recorder-off",
+            "recorder",
+            None,
+            "no recording in single-process mode".to_string(),
+        );
+    } else if config.record.mcap {
+        require_binary(&RECORDER, bin_dir, "[record] mcap = true")?;
+        tracing::info!("recording into {}", config.record.file(run_dir).display());
+        let settings = Settings {
+            bin_dir: bin_dir.to_path_buf(),
+            args: in_run_dir.clone(),
+            ready_timeout: Duration::from_millis(config.record.startup_timeout_ms),
+            grace: Duration::from_millis(config.record.close_timeout_ms),
+        };
+        processes.push(OptionalProcess::new(RECORDER, settings, supervisor));
+    }
+    if config.ros2.enabled {
+        require_binary(&ROS2, bin_dir, "ros2.enabled = true")?;
+        let settings = Settings {
+            bin_dir: bin_dir.to_path_buf(),
+            args: Vec::new(),
+            ready_timeout: Duration::from_millis(supervisor.startup_timeout_ms),
+            grace,
+        };
+        processes.push(OptionalProcess::new(ROS2, settings, supervisor));
+    }
+    if config.link.enabled && mode == Mode::Processes {
+        let settings = Settings {
+            bin_dir: bin_dir.to_path_buf(),
+            args: in_run_dir,
+            ready_timeout: Duration::ZERO,
+            grace,
+        };
+        processes.push(OptionalProcess::new(LINK, settings, supervisor));
+    }
+    Ok(processes)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::clock::ManualClock;
+    use crate::clock::Clock;
 
     fn scratch(name: &str) -> PathBuf {
         let dir = std::env::temp_dir().join(format!("ltsup-{name}-{}", std::process::id()));
@@ -399,10 +456,10 @@ mod tests {
     }
 
     /// A scratch folder, a monitor recording into it and a manual clock.
-    fn setup(name: &str) -> (PathBuf, Monitor, ManualClock) {
+    fn setup(name: &str) -> (PathBuf, Monitor, Clock) {
         let dir = scratch(name);
         let monitor = monitor(&dir);
-        (dir, monitor, ManualClock::default())
+        (dir, monitor, Clock::manual(0))
     }
 
     /// `rule`'s process started with `command` at the clock's time.
@@ -410,12 +467,12 @@ mod tests {
         rule: Rule,
         command: Command,
         dir: &Path,
-        clock: &ManualClock,
+        clock: &Clock,
         monitor: &mut Monitor,
     ) -> OptionalProcess {
         let mut p = OptionalProcess::new(rule, settings(dir), &SupervisorConfig::default());
-        assert!(p.wants_start(clock.now()));
-        p.supervise(Some(command), clock.now(), monitor);
+        assert!(p.wants_start(clock.monotonic()));
+        p.supervise(Some(command), clock.monotonic(), monitor);
         p
     }
 
@@ -431,11 +488,11 @@ mod tests {
 
     /// Waits for the child's exit (a real process's, not on the manual clock), then lets
     /// the handler see it.
-    fn reap(p: &mut OptionalProcess, clock: &ManualClock, monitor: &mut Monitor) {
+    fn reap(p: &mut OptionalProcess, clock: &Clock, monitor: &mut Monitor) {
         if let Some(r) = &mut p.running {
             let _ = r.child.wait();
         }
-        p.supervise(None, clock.now(), monitor);
+        p.supervise(None, clock.monotonic(), monitor);
         assert_eq!(p.pid(), None);
     }
 
@@ -451,16 +508,19 @@ mod tests {
         let mut link = OptionalProcess::new(LINK, settings(&dir), &config);
         let mut starts = 0;
         for _ in 0..3 {
-            assert!(link.wants_start(clock.now()));
-            link.supervise(Some(sh("exit 3")), clock.now(), &mut monitor);
+            assert!(link.wants_start(clock.monotonic()));
+            link.supervise(Some(sh("exit 3")), clock.monotonic(), &mut monitor);
             starts += 1;
             assert!(link.pid().is_some());
             reap(&mut link, &clock, &mut monitor);
-            assert!(!link.wants_start(clock.now()), "not before its backoff");
+            assert!(
+                !link.wants_start(clock.monotonic()),
+                "not before its backoff"
+            );
             clock.advance(Duration::from_millis(150));
         }
         assert_eq!(starts, 3);
-        assert!(!link.wants_start(clock.now()), "given up");
+        assert!(!link.wants_start(clock.monotonic()), "given up");
         let events = events_of(&dir);
         assert_eq!(events.matches("link-exit").count(), 3, "{events}");
         assert_eq!(events.matches("link-given-up").count(), 1, "{events}");
@@ -475,13 +535,16 @@ mod tests {
         let (dir, mut monitor, clock) = setup("optional-left");
         let mut recorder = started(RECORDER, sh("exit 9"), &dir, &clock, &mut monitor);
         assert!(
-            !recorder.settled(clock.now(), &mut monitor),
+            !recorder.settled(clock.monotonic(), &mut monitor),
             "not ready yet"
         );
         reap(&mut recorder, &clock, &mut monitor);
         clock.advance(Duration::from_secs(3600));
-        assert!(!recorder.wants_start(clock.now()));
-        assert!(recorder.settled(clock.now(), &mut monitor), "gone: no wait");
+        assert!(!recorder.wants_start(clock.monotonic()));
+        assert!(
+            recorder.settled(clock.monotonic(), &mut monitor),
+            "gone: no wait"
+        );
         let events = events_of(&dir);
         assert!(
             events.contains("recorder-exit")
@@ -492,7 +555,7 @@ mod tests {
         // A binary that cannot be started is recorded the same way.
         let no_binary = Command::new(dir.join("no-such-binary"));
         let mut ros2 = started(ROS2, no_binary, &dir, &clock, &mut monitor);
-        assert!(!ros2.wants_start(clock.now()));
+        assert!(!ros2.wants_start(clock.monotonic()));
         assert!(
             events_of(&dir).contains("output-failed"),
             "{}",
@@ -506,9 +569,9 @@ mod tests {
         let (dir, mut monitor, clock) = setup("optional-ready");
         let mut ros2 = started(ROS2, sh("exec sleep 30"), &dir, &clock, &mut monitor);
         clock.advance(Duration::from_secs(10));
-        assert!(!ros2.settled(clock.now(), &mut monitor));
+        assert!(!ros2.settled(clock.monotonic(), &mut monitor));
         clock.advance(Duration::from_millis(1));
-        assert!(ros2.settled(clock.now(), &mut monitor));
+        assert!(ros2.settled(clock.monotonic(), &mut monitor));
         assert!(events_of(&dir).contains("output-not-ready"));
         // The link does not gate the source at all.
         let link = OptionalProcess::new(LINK, settings(&dir), &SupervisorConfig::default());
@@ -555,9 +618,9 @@ mod tests {
         std::io::BufRead::read_line(&mut std::io::BufReader::new(stdout), &mut line)
             .unwrap_or_else(|e| panic!("{e}"));
         assert_eq!(line, "trapped\n");
-        let before = clock.now();
+        let before = clock.monotonic();
         ros2.stop(&clock, &mut monitor);
-        let waited = clock.now() - before;
+        let waited = clock.monotonic() - before;
         assert!(
             waited >= Duration::from_secs(3) && waited <= Duration::from_millis(3020),
             "{waited:?}"

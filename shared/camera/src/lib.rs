@@ -6,7 +6,8 @@
 //!   or numbered images through OpenCV `videoio`, read as grey, size-checked and rectified
 //!   with maps computed once ([`StereoCamera`]);
 //! - [`timing`]: capture timestamps (the driver's, else the monotonic read time), frames
-//!   lost in gaps of the driver's timestamps, late frames, and the reconnection backoff.
+//!   lost in gaps of the driver's timestamps, and late frames (the reconnection backoff is the
+//!   stage runtime's `Backoff`).
 //!
 //! The frame source (`services/frame-source`) runs the capture on its own thread, counts
 //! the frames it could not take, and reports a camera that disappears; this crate knows
@@ -21,7 +22,7 @@ pub use calibration::{StereoCalibration, read_calibration};
 pub use capture::{
     Device, DeviceKind, StereoCamera, StereoImages, rectify_calibration, split_side_by_side,
 };
-pub use timing::{Backoff, FrameClock, Stamp};
+pub use timing::{FrameClock, Stamp};
 
 use std::path::PathBuf;
 

@@ -133,45 +133,9 @@ impl FrameClock {
     }
 }
 
-/// An exponential backoff: `first`, doubling up to `max`, back to `first` on [`Backoff::reset`].
-#[derive(Debug, Clone, Copy)]
-pub struct Backoff {
-    first: std::time::Duration,
-    max: std::time::Duration,
-    next: std::time::Duration,
-    attempts: u64,
-}
-
-impl Backoff {
-    /// A backoff from `first` to `max`.
-    pub fn new(first: std::time::Duration, max: std::time::Duration) -> Self {
-        Self {
-            first,
-            max: max.max(first),
-            next: first,
-            attempts: 0,
-        }
-    }
-
-    /// The wait before the next attempt, and the attempt's number (1-based).
-    pub fn next_wait(&mut self) -> (std::time::Duration, u64) {
-        let wait = self.next;
-        self.next = (self.next * 2).min(self.max);
-        self.attempts += 1;
-        (wait, self.attempts)
-    }
-
-    /// After a success.
-    pub fn reset(&mut self) {
-        self.next = self.first;
-        self.attempts = 0;
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-    use std::time::Duration;
 
     const MS: u64 = 1_000_000;
 
@@ -246,19 +210,5 @@ mod tests {
         clock.stamp(Some(0.0), 0);
         clock.stamp(Some(50.0), 50 * MS);
         assert_eq!(clock.stamp(Some(500.0), 500 * MS).dropped_before, 0);
-    }
-
-    #[test]
-    fn backoff_doubles_to_its_maximum_and_resets() {
-        let mut b = Backoff::new(Duration::from_millis(100), Duration::from_millis(350));
-        let waits: Vec<(u64, u64)> = (0..4)
-            .map(|_| {
-                let (w, n) = b.next_wait();
-                (w.as_millis() as u64, n)
-            })
-            .collect();
-        assert_eq!(waits, [(100, 1), (200, 2), (350, 3), (350, 4)]);
-        b.reset();
-        assert_eq!(b.next_wait(), (Duration::from_millis(100), 1));
     }
 }

@@ -176,7 +176,7 @@ mod clock;
 mod records;
 mod topology;
 
-pub use clock::{Clock, now_ns};
+pub use clock::now_ns;
 pub use records::*;
 pub use topology::{StageKind, Topic, wake_service_name};
 

@@ -143,6 +143,11 @@ impl FrameHeader {
         self.status_by = stage.into();
     }
 
+    /// The stamp of `stage` (none for a stage that stamps no frame).
+    pub fn stamp(&self, stage: StageKind) -> Option<&StageStamp> {
+        stage.stamp_index().and_then(|i| self.stamps.get(i))
+    }
+
     /// The stamp of `stage`.
     pub fn stamp_mut(&mut self, stage: StageKind) -> Option<&mut StageStamp> {
         stage.stamp_index().map(|i| &mut self.stamps[i])

@@ -11,19 +11,22 @@ use linetrack_geometry::{Point, Segment, StereoRig};
 use linetrack_ipc::{Bus, Inlet, IpcError, Outlet, Received, Record, Scope, Shutdown};
 
 mod runner;
+mod side;
+pub mod time;
+use linetrack_msgs::{Command, Control, RigRecord, SegmentRecord};
 use linetrack_msgs::{
-    Clock, Detector, FrameHeader, FrameMessage, FrameStatus, StageKind, StatusKind, StatusReport,
-    Topic,
+    Detector, FrameHeader, FrameMessage, FrameStatus, StageKind, StatusKind, StatusReport, Topic,
 };
-use linetrack_msgs::{RigRecord, SegmentRecord};
 use linetrack_pipeline_config::{BudgetConfig, PipelineConfig};
 use linetrack_vision::DetectorKind;
 use linetrack_vision::{BorrowedGray, GrayImage, VisionError};
 pub use runner::{Stage, run_stage};
+pub use side::RightImageWorker;
 use std::collections::VecDeque;
 use std::path::PathBuf;
 use std::process::ExitCode;
 use std::time::Duration;
+pub use time::{Backoff, Clock, GivenUp};
 
 /// The arguments the supervisor passes to every stage.
 #[derive(Debug, Clone, Parser)]
@@ -597,6 +600,19 @@ fn start(
         clock: Clock::System,
     };
     run(&ctx, &bus, &shutdown)
+}
+
+/// Whether a [`Command::Shutdown`] for `stage` (instance `pid`, or every instance) came in
+/// on `control`: how a source or a sink that runs its own loop hears the supervisor's stop.
+pub fn shutdown_ordered(
+    control: &mut Inlet<Control, ()>,
+    stage: StageKind,
+    pid: u32,
+) -> Result<bool, IpcError> {
+    Ok(control.receive_all()?.iter().any(|c| {
+        let c = c.payload().first().copied().unwrap_or_default();
+        c.command.is(Command::Shutdown) && c.is_for(stage, pid)
+    }))
 }
 
 /// Asks for shutdown when the process that started this one (the supervisor) dies: a stage

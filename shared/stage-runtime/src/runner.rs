@@ -413,7 +413,7 @@ mod tests {
         let mut ctx = StageContext::in_process(StageKind::LineDetector, config, PathBuf::new());
         ctx.pid = pid;
         ctx.args.standby = standby;
-        ctx.clock = linetrack_msgs::Clock::manual(1);
+        ctx.clock = crate::Clock::manual(1);
         ctx
     }
 

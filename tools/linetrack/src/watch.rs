@@ -111,7 +111,7 @@ impl Watch {
             self.received.topics.values().map(|c| c.bytes).sum::<u64>() / 1000
         );
         match &self.monitor {
-            Some(m) => format!("{}  {link}", m.status_line()),
+            Some(m) => format!("{}  {link}", m.status_line(None)),
             None => format!("waiting for the first frame  {link}"),
         }
     }
