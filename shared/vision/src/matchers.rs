@@ -65,11 +65,10 @@ pub trait SegmentMatcher: Send {
     fn match_predicted(
         &mut self,
         first: &LineFeatures,
-        predicted: &[bool],
+        _predicted: &[bool],
         second: &LineFeatures,
         out: &mut Vec<FeatureMatch>,
     ) {
-        let _ = predicted;
         self.match_lines(MatchCase::FrameToFrame, first, second, out);
     }
 }
