@@ -47,6 +47,19 @@ impl Default for StereoPhotometric {
     }
 }
 
+/// What moves the last frame's segments to where they are matched
+/// ([`OdometryConfig::predicted_matching`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum LinePrediction {
+    /// The last measured motion (constant velocity).
+    ConstantVelocity,
+    /// With points: the frame's own motion estimated from its tracked points first (their
+    /// matches need no segments), then the segments predicted with it; where the points
+    /// give no believed motion, the last motion. Lines only: the last motion.
+    PointsFirst,
+}
+
 /// Configuration of the odometry.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -76,6 +89,8 @@ pub struct OdometryConfig {
     /// start 13 → 0 (the old positions' flow filter assumed a coherent flow, which a
     /// forward motion's is not).
     pub predicted_matching: bool,
+    /// What predicts the segments' positions for `predicted_matching`.
+    pub line_prediction: LinePrediction,
     /// Frame to frame, ORB points: the second-best Hamming distance must be at least this
     /// times the best (the stereo ratio is the front end's `orb.min_distance_ratio`).
     pub frame_to_frame_ratio: f64,
@@ -156,6 +171,7 @@ impl Default for OdometryConfig {
             max_displacement_px: 60.0,
             predicted_window_px: 30.0,
             predicted_matching: true,
+            line_prediction: LinePrediction::ConstantVelocity,
             frame_to_frame_ratio: 1.5,
             reject_look_alikes: true,
             subpixel_stereo: true,

@@ -4,8 +4,8 @@
 
 use crate::stats::since;
 use crate::{
-    FrameResult, FrameStats, MatchedLines, MotionTracker, OdometryConfig, OdometryError,
-    Preparation,
+    FrameResult, FrameStats, LinePrediction, MatchedLines, MotionTracker, OdometryConfig,
+    OdometryError, Preparation,
 };
 use linetrack_geometry::{MatchCase, Segment, StereoRig};
 use linetrack_vision::{
@@ -75,6 +75,15 @@ impl Odometry {
         self.matcher
             .match_lines(MatchCase::Stereo, &lines_l, &lines_r, &mut stereo);
         stats.stereo_ms = since(started);
+        // With points first, the frame's points give the motion its segments are predicted
+        // with (timed as motion estimation).
+        let started = Instant::now();
+        if self.previous_lines.is_some()
+            && self.tracker.config().line_prediction == LinePrediction::PointsFirst
+        {
+            self.tracker.predict_from_points(&prepared);
+        }
+        let points_first_ms = since(started);
         let started = Instant::now();
         let mut tracked = Vec::new();
         if let Some(previous) = &mut self.previous_lines {
@@ -96,6 +105,7 @@ impl Odometry {
             }
         }
         stats.frame_to_frame_ms = since(started);
+        stats.motion_ms = points_first_ms;
         let lines = MatchedLines {
             left: &lines_l.segments,
             right: &lines_r.segments,

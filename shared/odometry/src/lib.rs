@@ -24,7 +24,7 @@ mod landmarks;
 mod stats;
 mod tracker;
 
-pub use config::{Features, LostLimits, OdometryConfig, StereoPhotometric};
+pub use config::{Features, LinePrediction, LostLimits, OdometryConfig, StereoPhotometric};
 pub use front_end::Odometry;
 pub use linetrack_trajectory::metrics;
 pub use stats::{FrameResult, FrameStats};

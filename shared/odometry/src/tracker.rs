@@ -227,6 +227,10 @@ pub struct MotionTracker {
     last_motion: Isometry3<f64>,
     /// Whether `last_motion` was measured (not the identity of a fresh start).
     motion_known: bool,
+    /// The motion this frame's segments are predicted with when it is not `last_motion`
+    /// ([`LinePrediction::PointsFirst`](crate::LinePrediction)): set before the frame's
+    /// segments are matched, used up by its update.
+    segment_motion: Option<Isometry3<f64>>,
     /// Row profiles across this frame's left and right segments (photometric check).
     profiles: [SegmentProfiles; 2],
     /// The reference frame's left image as its points were found in (stretched or not),
@@ -254,6 +258,7 @@ impl MotionTracker {
             pose: Isometry3::identity(),
             last_motion: Isometry3::identity(),
             motion_known: false,
+            segment_motion: None,
             profiles: Default::default(),
             reference_image: None,
             points_ahead: None,
@@ -356,6 +361,7 @@ impl MotionTracker {
         let mut lists = std::mem::take(&mut self.spares.lists);
         let result = self.track_frame(&mut lists, images, lines, stats);
         self.spares.lists = lists;
+        self.segment_motion = None;
         // Point work done ahead for another frame is stale now.
         self.points_ahead = None;
         result
@@ -479,7 +485,7 @@ impl MotionTracker {
             &self.last_motion,
             &self.config.motion,
         );
-        stats.motion_ms = since(started);
+        stats.motion_ms += since(started);
         let prediction = self.last_motion;
         estimate.map_err(|why| why.to_string()).and_then(|e| {
             let change = prediction.inverse() * e.motion;

@@ -8,7 +8,7 @@
 #![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failure here is a test failure
 
 use linetrack_geometry::StereoRig;
-use linetrack_odometry::{Features, Odometry, OdometryConfig, metrics};
+use linetrack_odometry::{Features, LinePrediction, Odometry, OdometryConfig, metrics};
 use linetrack_scene_render::{Preset, SequenceRenderer};
 use linetrack_vision::{DetectorKind, GrayImage, MatcherKind};
 use nalgebra::Isometry3;
@@ -136,6 +136,35 @@ fn reprojecting_into_the_right_image_too_tracks_as_well() {
             .zip(&off.estimate)
             .any(|(a, b)| (a.translation.vector - b.translation.vector).norm() > 1e-9),
         "the option changed no pose: its rows were not used"
+    );
+}
+
+#[test]
+fn predicting_segments_from_the_points_first_tracks_as_well() {
+    // The segments are matched where the frame's own point motion puts them, not where the
+    // last motion does: a different prediction, so different matches, within the same bar.
+    let (rig, frames) = rendered(3, 0..20, &[]);
+    let config = OdometryConfig {
+        line_prediction: LinePrediction::PointsFirst,
+        ..OdometryConfig::default()
+    };
+    let points_first = run(config, rig, &frames);
+    let constant_velocity = run(OdometryConfig::default(), rig, &frames);
+    assert!(
+        points_first.lost.iter().all(|l| !l),
+        "lost frames: {:?}",
+        points_first.lost
+    );
+    let (ate, ate_cv) = (points_first.ate(), constant_velocity.ate());
+    eprintln!("ATE points first {ate:.4} m, constant velocity {ate_cv:.4} m");
+    assert!(ate < 0.008, "ATE {ate} m");
+    assert!(
+        points_first
+            .estimate
+            .iter()
+            .zip(&constant_velocity.estimate)
+            .any(|(a, b)| (a.translation.vector - b.translation.vector).norm() > 1e-9),
+        "the option changed no pose: the points' motion predicted nothing"
     );
 }
 

@@ -6,6 +6,7 @@ use super::points::{PointSearch, PointWorkMs};
 use super::{MatchedLines, MotionTracker, SeenImages, keep_spare};
 use crate::stats::since;
 use crate::{Features, FrameResult, FrameStats, OdometryError};
+use linetrack_stereo_vo::{estimate_motion, estimate_motion_near};
 use linetrack_vision::{GrayImage, PointFeatures, VisionError, stretch_contrast_into};
 use std::time::Instant;
 
@@ -200,6 +201,47 @@ impl MotionTracker {
             });
         }
         Ok(prepared)
+    }
+
+    /// [`LinePrediction::PointsFirst`](crate::LinePrediction): the prepared frame's motion
+    /// estimated from its tracked points alone (the work [`Preparation::CornersAndPoints`]
+    /// did for it), so that its segments are predicted with it rather than with the last
+    /// motion. Returns whether there is such a motion: none without that work, with too few
+    /// points, or when the estimate is not believed (then the last motion predicts, as
+    /// before). Its milliseconds are the frame's `motion_ms`' share.
+    pub fn predict_from_points(&mut self, prepared: &PreparedImages) -> bool {
+        self.segment_motion = None;
+        let done_ahead = self
+            .points_ahead
+            .is_some_and(|ahead| ahead.serial == prepared.serial);
+        if !done_ahead || self.reference.is_none() {
+            return false;
+        }
+        let points = &self.spares.lists.observations.points;
+        let estimate = if self.motion_known {
+            estimate_motion_near
+        } else {
+            estimate_motion
+        }(
+            &self.rig,
+            points,
+            &[],
+            &self.last_motion,
+            &self.config.motion,
+        );
+        let Ok(estimate) = estimate else {
+            return false;
+        };
+        let change = self.last_motion.inverse() * estimate.motion;
+        let departure = [
+            change.translation.vector.norm(),
+            change.rotation.angle().to_degrees(),
+        ];
+        if self.motion_known && self.departs_sharply(&self.last_motion, departure).is_some() {
+            return false;
+        }
+        self.segment_motion = Some(estimate.motion);
+        true
     }
 
     /// The milliseconds of the point work done ahead for preparation `serial`, if it was

@@ -15,15 +15,16 @@ use linetrack_stereo_vo::{
     LineObservation, TriangulationLimits, disparity_weight, triangulate_segment,
 };
 use linetrack_vision::{AppearanceGates, FeatureMatch, GrayImage};
-use nalgebra::Point3;
+use nalgebra::{Isometry3, Point3};
 use std::time::Instant;
 
 impl MotionTracker {
     /// Where the last frame's left segments (`previous`, as given to the last update) should
     /// lie in the next frame: each one that stands for a landmark is lifted onto the
-    /// landmark's 3-D line, moved by the last motion and projected (and flagged in
-    /// `moved`); the others stay where they were. Returns false, leaving `out` and `moved`
-    /// empty, before a motion is known or without a last frame (nothing to predict with).
+    /// landmark's 3-D line, moved by the predicted motion (the last one, or the points'
+    /// of [`MotionTracker::predict_from_points`]) and projected (and flagged in `moved`);
+    /// the others stay where they were. Returns false, leaving `out` and `moved` empty,
+    /// without a predicted motion (before one is known) or without a last frame.
     pub fn predict_segments(
         &self,
         previous: &[Segment],
@@ -32,7 +33,8 @@ impl MotionTracker {
     ) -> bool {
         out.clear();
         moved.clear();
-        let Some(reference) = self.reference.as_ref().filter(|_| self.motion_known) else {
+        let Some((reference, motion)) = self.reference.as_ref().zip(self.segment_prediction())
+        else {
             return false;
         };
         let to_previous = reference.pose.inverse();
@@ -45,13 +47,20 @@ impl MotionTracker {
                     let line = landmark.world.transformed(&to_previous);
                     let lift = |p: &Point| self.lift_onto(p, &line);
                     let [a, b] = [lift(&seen.start)?, lift(&seen.end)?]
-                        .map(|x| self.rig.project_left(&(self.last_motion * x)));
+                        .map(|x| self.rig.project_left(&(motion * x)));
                     Some(Segment::new(a?, b?))
                 });
             out.push(predicted.unwrap_or(*seen));
             moved.push(predicted.is_some());
         }
         true
+    }
+
+    /// The motion the frame's segments are predicted with, if any: the points' of
+    /// [`MotionTracker::predict_from_points`], else the last motion once one is known.
+    pub(super) fn segment_prediction(&self) -> Option<Isometry3<f64>> {
+        self.segment_motion
+            .or_else(|| self.motion_known.then_some(self.last_motion))
     }
 
     /// The point of the 3-D line through `line` (left camera frame) nearest to the ray
@@ -166,8 +175,8 @@ impl MotionTracker {
     }
 
     /// Observations of `previous`'s segment landmarks among this frame's `left` segments.
-    /// Once a motion is known, a match whose segment lies farther from the line the last
-    /// motion predicts than `predicted_window_px` is not believed (a look-alike).
+    /// With a predicted motion, a match whose segment lies farther from the line it
+    /// predicts than `predicted_window_px` is not believed (a look-alike).
     pub(super) fn observe_lines(
         &self,
         previous: &Reference,
@@ -176,6 +185,7 @@ impl MotionTracker {
         observations: &mut Observations,
     ) {
         let to_previous = previous.pose.inverse();
+        let prediction = self.segment_prediction();
         for m in tracked {
             let (Some(Some(landmark)), Some(seen)) =
                 (previous.line_landmarks.get(m.query), left.get(m.train))
@@ -183,7 +193,7 @@ impl MotionTracker {
                 continue;
             };
             let endpoints = landmark.world.transformed(&to_previous);
-            if self.motion_known && !self.near_prediction(&endpoints, seen) {
+            if prediction.is_some_and(|motion| !self.near_prediction(&motion, &endpoints, seen)) {
                 continue;
             }
             if let Some(obs) = LineObservation::new(endpoints, seen, landmark.observation_weight())
@@ -195,11 +205,15 @@ impl MotionTracker {
     }
 
     /// Whether both endpoints of `seen` lie within `predicted_window_px` of the line on
-    /// which the last motion projects `endpoints` (previous camera frame); true when the
+    /// which `motion` projects `endpoints` (previous camera frame); true when the
     /// prediction leaves the image.
-    fn near_prediction(&self, endpoints: &[Point3<f64>; 2], seen: &Segment) -> bool {
-        let [Some(a), Some(b)] = endpoints.map(|x| self.rig.project_left(&(self.last_motion * x)))
-        else {
+    fn near_prediction(
+        &self,
+        motion: &Isometry3<f64>,
+        endpoints: &[Point3<f64>; 2],
+        seen: &Segment,
+    ) -> bool {
+        let [Some(a), Some(b)] = endpoints.map(|x| self.rig.project_left(&(motion * x))) else {
             return true;
         };
         let Some(predicted) = LineObservation::new(*endpoints, &Segment::new(a, b), 1.0) else {
@@ -306,6 +320,18 @@ mod tests {
         assert!((out[0].end - expected[1]).norm() < 1e-9, "{:?}", out[0]);
         // Without a landmark a segment stays where it was.
         assert_eq!(out[1], elsewhere);
+
+        // Points first: the frame's own motion from its points predicts instead of the
+        // last one, also when no motion is known (after a lost frame).
+        let from_points = Isometry3::translation(-0.08, 0.01, -0.3);
+        tracker.segment_motion = Some(from_points);
+        for known in [true, false] {
+            tracker.motion_known = known;
+            assert!(tracker.predict_segments(&previous, &mut out, &mut moved));
+            let expected = [at(0.25), at(0.75)].map(|x| project(from_points * x));
+            assert!((out[0].start - expected[0]).norm() < 1e-9, "{:?}", out[0]);
+            assert!((out[0].end - expected[1]).norm() < 1e-9, "{:?}", out[0]);
+        }
     }
 
     #[test]
