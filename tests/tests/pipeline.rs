@@ -494,6 +494,47 @@ fn a_hot_swap_to_fld_loses_and_duplicates_no_frame() {
 }
 
 #[test]
+fn a_hot_swap_of_the_matcher_loses_and_duplicates_no_frame_in_both_modes() {
+    for threads in [false, true] {
+        let dir = scratch(if threads { "mswap-threads" } else { "mswap" });
+        // The light detector and matcher: a loaded machine keeps up at 10 Hz, so that a
+        // frame lost would be the swap's.
+        let mut args = vec!["--detector", "edgelines", "--matcher", "l1"];
+        if threads {
+            args.push("--single-process");
+        }
+        let mut run = start_with_args(&dir, &base_sequence(FRAMES), &quick(), &args);
+        ctl_after_8_frames(&mut run, &["swap-matcher"]);
+        let (status, out, records) = run.finish(RUN_TIMEOUT);
+        assert!(status.success(), "{status}\n{out}");
+        // Every frame recorded exactly once, each with a pose.
+        assert_every_frame_accounted(&records);
+        assert!(
+            records.frames.iter().all(|f| f.has_pose()),
+            "a frame without a pose (threads: {threads})"
+        );
+        let swaps = records.events_of("swap");
+        assert_eq!(swaps.len(), 1, "{:?}", records.events);
+        assert_eq!(swaps[0].stage, "matcher");
+        let at = swaps[0]
+            .frame_id
+            .unwrap_or_else(|| panic!("swap without a frame"));
+        assert!(at > 0 && at < FRAMES as u64, "swap at {at}");
+        // The new matcher took over knowing the frame before: the hand-over frame is
+        // tracked from it, as every frame after the first is.
+        let handed = records
+            .frames
+            .iter()
+            .find(|f| f.frame_id == at)
+            .unwrap_or_else(|| panic!("no record of frame {at}"));
+        assert!(
+            handed.tracked_matches > 0,
+            "frame {at}: no frame-to-frame match after the swap (threads: {threads})"
+        );
+    }
+}
+
+#[test]
 fn single_process_mode_is_supervised_the_same_way() {
     // The same supervision core runs thread stages: `linetrack ctl` swaps the detector of
     // a `--single-process` run too, and its records are the same.
@@ -582,12 +623,13 @@ fn an_unparsable_stage_runner_is_refused_naming_the_variable() {
     );
 }
 
-fn hot_swap(mut run: Run) {
+/// `linetrack ctl <action>` on `run`, once 8 frames have an outcome; it must succeed.
+fn ctl_after_8_frames(run: &mut Run, action: &[&str]) {
     run.wait_for("8 frames", RUN_TIMEOUT, |s| s.frames >= 8);
     let ctl = std::process::Command::new(bin_dir().join("linetrack"))
         .args(["ctl", "--run-dir"])
         .arg(&run.run_dir)
-        .args(["swap-detector", "fld"])
+        .args(action)
         .env(linetrack_ipc::Scope::PREFIX_VAR, &run.prefix)
         .output()
         .unwrap_or_else(|e| panic!("linetrack ctl: {e}"));
@@ -597,6 +639,10 @@ fn hot_swap(mut run: Run) {
         String::from_utf8_lossy(&ctl.stdout),
         String::from_utf8_lossy(&ctl.stderr)
     );
+}
+
+fn hot_swap(mut run: Run) {
+    ctl_after_8_frames(&mut run, &["swap-detector", "fld"]);
     let (status, out, records) = run.finish(RUN_TIMEOUT);
     assert!(status.success(), "{status}\n{out}");
     assert_every_frame_accounted(&records);

@@ -22,21 +22,17 @@
 //! neither restarts the source nor stops the run. The run ends after `camera.duration_s`
 //! or `source.max_frames` frame ids, or by Ctrl-C / shutdown.
 
-use crate::Ports;
+use crate::Rig;
 use anyhow::Context;
 use crossbeam_channel::{Receiver, RecvTimeoutError, Sender, TrySendError};
 use linetrack_camera::{CameraError, FrameClock, Stamp, StereoCamera, StereoImages};
 use linetrack_datasets::Rectifier;
-use linetrack_ipc::Shutdown;
-use linetrack_msgs::{CameraFailure, FrameHeader, FrameStatus, StageKind, StatusKind};
+use linetrack_msgs::{CameraFailure, FrameStatus, StageKind, StatusKind};
 use linetrack_pipeline_config::{CameraConfig, Pacing, PipelineConfig};
-use linetrack_stage_runtime::{
-    Backoff, Clock, StageContext, rig_record, shutdown_ordered, stamp_end,
-};
+use linetrack_stage_runtime::{Backoff, Clock, Source, SourceOut, StageContext, Step, rig_record};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::time::{Duration, Instant};
-use tracing::info_span;
 
 /// Pairs the capture thread may hand over before the publishing loop takes them; one more
 /// is counted as `capture-dropped`.
@@ -222,234 +218,205 @@ pub fn rectifier(camera: &CameraConfig) -> anyhow::Result<Rectifier> {
     Ok(rectifier)
 }
 
-/// Publishes one frame id without pixels, marked `status`.
-fn publish_marker(
-    ports: &mut Ports,
-    ctx: &StageContext,
-    frame_id: u64,
-    timestamp_ns: u64,
-    status: FrameStatus,
-) -> anyhow::Result<()> {
-    let now = ctx.clock.now_ns();
-    let mut header = FrameHeader::new(frame_id, timestamp_ns, now);
-    if let Some(stamp) = header.stamp_mut(StageKind::FrameSource) {
-        stamp.start_ns = now;
+/// The camera as a source: the capture thread's pairs, stamped with their capture times,
+/// and the frame ids it lost as markers.
+pub(crate) struct CameraSource {
+    rig: Rig,
+    rectifier: Arc<Rectifier>,
+    camera: CameraConfig,
+    pacing: Pacing,
+    rate_hz: f64,
+    max_frames: u64,
+    duration: Option<Duration>,
+    late_ns: u64,
+    drop_late: bool,
+    frames: Option<Receiver<Captured>>,
+    not_taken: Arc<AtomicU64>,
+    stop: Arc<AtomicBool>,
+    /// When the source started, on its monotonic clock.
+    began: Duration,
+    last_timestamp_ns: u64,
+}
+
+impl CameraSource {
+    /// The camera of `ctx.config.camera`, its calibration read and its rectification
+    /// computed; the capture starts with the source.
+    pub(crate) fn new(ctx: &StageContext, rig: Rig) -> anyhow::Result<Self> {
+        let config: &PipelineConfig = &ctx.config;
+        let camera = &config.camera;
+        let rectifier = Arc::new(rectifier(camera)?);
+        // With `source.rate_hz` the source sets the pace (a file read slower than its
+        // timestamps): waiting is then its own doing, not lateness.
+        let source = &config.source;
+        let paced_by_rate = source.pacing == Pacing::Realtime && source.rate_hz > 0.0;
+        Ok(Self {
+            rig,
+            rectifier,
+            camera: camera.clone(),
+            pacing: source.pacing,
+            rate_hz: source.rate_hz,
+            max_frames: source.max_frames as u64,
+            duration: (camera.duration_s > 0.0).then(|| Duration::from_secs_f64(camera.duration_s)),
+            late_ns: (camera.late_ms * 1e6) as u64,
+            drop_late: config.budget.drop_late && !paced_by_rate,
+            frames: None,
+            not_taken: Arc::new(AtomicU64::new(0)),
+            stop: Arc::new(AtomicBool::new(false)),
+            began: Duration::ZERO,
+            last_timestamp_ns: 0,
+        })
     }
-    header.mark(status, StageKind::FrameSource);
-    stamp_end(&mut header, StageKind::FrameSource, ctx.clock.now_ns());
-    ports.frames.publish(&header, &[])?;
-    Ok(())
-}
 
-/// Runs the source on the camera of `ctx.config.camera`.
-pub fn publish(ctx: &StageContext, mut ports: Ports, shutdown: &Shutdown) -> anyhow::Result<()> {
-    let config: &PipelineConfig = &ctx.config;
-    let camera = &config.camera;
-    let rectifier = Arc::new(rectifier(camera)?);
-    let rig = rectifier.rig();
-    tracing::info!(
-        "camera {:?}{}: rig {rig:?}",
-        camera.capture,
-        camera
-            .right()
-            .map_or_else(|| " (side by side)".to_string(), |r| format!(" and {r:?}"))
-    );
-    ports.rig.publish(&(), &[&[rig_record(&rig)]])?;
-    let (tx, rx) = crossbeam_channel::bounded(HANDOVER_FRAMES);
-    let not_taken = Arc::new(AtomicU64::new(0));
-    let stop = Arc::new(AtomicBool::new(false));
-    let thread = CaptureThread {
-        camera: camera.clone(),
-        pacing: config.source.pacing,
-        rate_hz: config.source.rate_hz,
-        rectifier,
-        clock: ctx.clock.clone(),
-        frames: tx,
-        not_taken: Arc::clone(&not_taken),
-        stop: Arc::clone(&stop),
-    };
-    std::thread::Builder::new()
-        .name("camera".to_string())
-        .spawn(move || thread.run())
-        .context("starting the capture thread")?;
-    let start = ctx.args.start_frame as u64;
-    ports.reporter.report(StatusKind::Ready, start, 0);
-    let result = publish_frames(ctx, &mut ports, shutdown, &rx, &not_taken, start);
-    // The capture thread ends at its next frame or wait (a read blocked in a hung driver
-    // ends with the process).
-    stop.store(true, Ordering::SeqCst);
-    drop(rx);
-    let published = match result? {
-        Some(published) => published,
-        None => return Ok(()),
-    };
-    crate::stay_until_the_run_ends(ctx, &mut ports, shutdown, start, published)
-}
-
-/// Publishes `count` `capture-dropped` markers from frame `first` on; returns `count`.
-fn publish_dropped(
-    ports: &mut Ports,
-    ctx: &StageContext,
-    first: u64,
-    timestamp_ns: u64,
-    count: u64,
-) -> anyhow::Result<u64> {
-    for k in 0..count {
-        publish_marker(
-            ports,
-            ctx,
-            first + k,
-            timestamp_ns,
-            FrameStatus::CaptureDropped,
-        )?;
+    /// How many more frame ids the limit allows after `published`.
+    fn room(&self, published: u64) -> u64 {
+        match self.max_frames {
+            0 => u64::MAX,
+            m => m.saturating_sub(published),
+        }
     }
-    Ok(count)
-}
 
-/// The publishing loop: `Some(frame ids published)` when the duration or frame limit is
-/// reached, `None` when shut down first.
-fn publish_frames(
-    ctx: &StageContext,
-    ports: &mut Ports,
-    shutdown: &Shutdown,
-    rx: &Receiver<Captured>,
-    not_taken: &AtomicU64,
-    start: u64,
-) -> anyhow::Result<Option<u64>> {
-    let camera = &ctx.config.camera;
-    let max_frames = ctx.config.source.max_frames as u64;
-    let duration = (camera.duration_s > 0.0).then(|| Duration::from_secs_f64(camera.duration_s));
-    let late_ns = (camera.late_ms * 1e6) as u64;
-    // With `source.rate_hz` the source sets the pace (a file read slower than its
-    // timestamps): waiting is then its own doing, not lateness.
-    let source = &ctx.config.source;
-    let paced_by_rate = source.pacing == Pacing::Realtime && source.rate_hz > 0.0;
-    let drop_late = ctx.config.budget.drop_late && !paced_by_rate;
-    let began = Instant::now();
-    let mut published = 0u64;
-    let mut reported = 0u64;
-    let mut last_timestamp_ns = 0u64;
-    let limit_reached = |published: u64| max_frames > 0 && published >= max_frames;
-    // How many more frames the limit allows.
-    let room = |published: u64| match max_frames {
-        0 => u64::MAX,
-        m => m.saturating_sub(published),
-    };
-    loop {
-        if shutdown.requested()
-            || shutdown_ordered(&mut ports.control, StageKind::FrameSource, ctx.pid)?
-        {
-            tracing::info!("shutdown after {published} frames");
-            return Ok(None);
+    /// Publishes up to `count` `capture-dropped` markers (as many as the limit allows).
+    fn publish_dropped(&self, out: &mut SourceOut, count: u64) -> anyhow::Result<()> {
+        for _ in 0..count.min(self.room(out.published())) {
+            let now = out.now_ns();
+            out.marker(
+                out.next_id(),
+                self.last_timestamp_ns,
+                now,
+                FrameStatus::CaptureDropped,
+            )?;
         }
-        if limit_reached(published) || duration.is_some_and(|d| began.elapsed() >= d) {
-            return Ok(Some(published));
-        }
-        // Frames the queue could not take, in the order they were lost.
-        let lost = not_taken.swap(0, Ordering::SeqCst);
-        published += publish_dropped(
-            ports,
-            ctx,
-            start + published,
-            last_timestamp_ns,
-            lost.min(room(published)),
-        )?;
-        let wait = POLL.min(ports.reporter.until_due().max(Duration::from_millis(1)));
-        match rx.recv_timeout(wait) {
-            Ok(Captured::Frame { images, stamp }) => {
-                published += publish_dropped(
-                    ports,
-                    ctx,
-                    start + published,
-                    last_timestamp_ns,
-                    stamp.dropped_before.min(room(published)),
-                )?;
-                if limit_reached(published) {
-                    continue;
+        Ok(())
+    }
+
+    /// Takes what the capture thread handed over.
+    fn take(&mut self, out: &mut SourceOut, captured: Captured) -> anyhow::Result<()> {
+        match captured {
+            Captured::Frame { images, stamp } => {
+                self.publish_dropped(out, stamp.dropped_before)?;
+                if self.room(out.published()) == 0 {
+                    return Ok(());
                 }
-                let frame_id = start + published;
-                last_timestamp_ns = stamp.timestamp_ns;
-                if drop_late && stamp.lag_ns > late_ns {
+                let frame_id = out.next_id();
+                self.last_timestamp_ns = stamp.timestamp_ns;
+                if self.drop_late && stamp.lag_ns > self.late_ns {
                     tracing::warn!(
                         "frame {frame_id}: waited {:.1} ms more than the least-delayed frame: dropped as late",
                         stamp.lag_ns as f64 * 1e-6
                     );
-                    publish_marker(
-                        ports,
-                        ctx,
+                    let now = out.now_ns();
+                    out.marker(frame_id, stamp.timestamp_ns, now, FrameStatus::CaptureLate)?;
+                } else {
+                    let size = (images.left.width() as u32, images.left.height() as u32);
+                    let (Some(left), Some(right)) = (images.left.pixels(), images.right.pixels())
+                    else {
+                        anyhow::bail!(
+                            "frame {frame_id}: rectified images are not continuous in memory"
+                        );
+                    };
+                    out.frame(
                         frame_id,
                         stamp.timestamp_ns,
-                        FrameStatus::CaptureLate,
+                        stamp.capture_ns,
+                        size,
+                        &[left, right],
                     )?;
-                } else {
-                    publish_images(ports, ctx, frame_id, &images, &stamp)?;
                 }
-                published += 1;
-                ports.rig.update_connections()?;
             }
-            Ok(Captured::Lost {
+            Captured::Lost {
                 error,
                 failure,
                 attempt,
                 retry_in,
-            }) => {
+            } => {
                 tracing::warn!(
                     "camera lost (attempt {attempt}): {error}; retrying in {:.1} s",
                     retry_in.as_secs_f64()
                 );
-                ports.reporter.report_detail(
-                    StatusKind::CameraLost,
-                    start + published,
-                    attempt,
-                    failure.into(),
-                );
+                let at = out.next_id();
+                out.reporter()
+                    .report_detail(StatusKind::CameraLost, at, attempt, failure.into());
             }
-            Ok(Captured::Back { device, attempts }) => {
+            Captured::Back { device, attempts } => {
                 tracing::info!(
                     "camera back: {device} delivers again after {attempts} failed attempts"
                 );
-                ports
-                    .reporter
-                    .report(StatusKind::CameraBack, start + published, attempts);
+                let at = out.next_id();
+                out.reporter().report(StatusKind::CameraBack, at, attempts);
             }
+        }
+        Ok(())
+    }
+}
+
+impl Source for CameraSource {
+    const KIND: StageKind = StageKind::FrameSource;
+    const FRAME_BYTES: usize = crate::FRAME_BYTES;
+
+    fn start(&mut self, out: &mut SourceOut) -> anyhow::Result<()> {
+        let rig = self.rectifier.rig();
+        tracing::info!(
+            "camera {:?}{}: rig {rig:?}",
+            self.camera.capture,
+            self.camera
+                .right()
+                .map_or_else(|| " (side by side)".to_string(), |r| format!(" and {r:?}"))
+        );
+        self.rig.publish(rig_record(&rig))?;
+        let (tx, rx) = crossbeam_channel::bounded(HANDOVER_FRAMES);
+        let thread = CaptureThread {
+            camera: self.camera.clone(),
+            pacing: self.pacing,
+            rate_hz: self.rate_hz,
+            rectifier: Arc::clone(&self.rectifier),
+            clock: out.clock().clone(),
+            frames: tx,
+            not_taken: Arc::clone(&self.not_taken),
+            stop: Arc::clone(&self.stop),
+        };
+        std::thread::Builder::new()
+            .name("camera".to_string())
+            .spawn(move || thread.run())
+            .context("starting the capture thread")?;
+        self.frames = Some(rx);
+        self.began = out.clock().monotonic();
+        Ok(())
+    }
+
+    fn step(&mut self, out: &mut SourceOut, wait: Duration) -> anyhow::Result<Step> {
+        let elapsed = out.clock().monotonic().saturating_sub(self.began);
+        if self.room(out.published()) == 0 || self.duration.is_some_and(|d| elapsed >= d) {
+            // The capture thread ends at its next frame or wait (a read blocked in a hung
+            // driver ends with the process).
+            self.stop.store(true, Ordering::SeqCst);
+            self.frames = None;
+            return Ok(Step::Finished);
+        }
+        // Frames the queue could not take, in the order they were lost.
+        let lost = self.not_taken.swap(0, Ordering::SeqCst);
+        self.publish_dropped(out, lost)?;
+        let Some(frames) = &self.frames else {
+            return Ok(Step::Finished);
+        };
+        // The source's wake-ups are not waited on here (the hand-over queue is), and
+        // iceoryx2 keeps them as flags, not a queue: commands are read on every turn.
+        match frames.recv_timeout(POLL.min(wait)) {
+            Ok(captured) => self.take(out, captured)?,
             Err(RecvTimeoutError::Timeout) => {}
             Err(RecvTimeoutError::Disconnected) => {
                 anyhow::bail!("the capture thread ended unexpectedly")
             }
         }
-        // Commands are read above on every turn; the source's wake-ups are not waited on
-        // here (the hand-over queue is), and iceoryx2 keeps them as flags, not a queue.
-        if published > reported {
-            // The supervisor counts frames published from these.
-            ports
-                .reporter
-                .report(StatusKind::Heartbeat, start + published - 1, published);
-            reported = published;
-        }
-        ports.reporter.beat(published);
+        Ok(Step::Again)
+    }
+
+    fn poll(&mut self) -> anyhow::Result<()> {
+        self.rig.poll()
     }
 }
 
-/// Publishes a pair, stamped with its capture time.
-fn publish_images(
-    ports: &mut Ports,
-    ctx: &StageContext,
-    frame_id: u64,
-    images: &StereoImages,
-    stamp: &Stamp,
-) -> anyhow::Result<()> {
-    let span = info_span!("publish_frame", frame_id);
-    let _entered = span.enter();
-    let mut header = FrameHeader::new(frame_id, stamp.timestamp_ns, stamp.capture_ns);
-    if let Some(s) = header.stamp_mut(StageKind::FrameSource) {
-        s.start_ns = stamp.capture_ns;
+impl Drop for CameraSource {
+    fn drop(&mut self) {
+        self.stop.store(true, Ordering::SeqCst);
     }
-    header.width = images.left.width() as u32;
-    header.height = images.left.height() as u32;
-    let (Some(left), Some(right)) = (images.left.pixels(), images.right.pixels()) else {
-        anyhow::bail!("frame {frame_id}: rectified images are not continuous in memory");
-    };
-    stamp_end(&mut header, StageKind::FrameSource, ctx.clock.now_ns());
-    ports.frames.publish(&header, &[left, right])?;
-    Ok(())
 }

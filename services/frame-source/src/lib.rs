@@ -2,7 +2,10 @@
 //! and publishes each frame's two images into one shared-memory message, paced at the
 //! sequence's rate or as fast as it can. A frame that cannot be read is published as a
 //! `corrupt` marker (no pixels) so that downstream stages and the records count it.
-//! With `[camera]` set, it reads a live stereo camera instead ([`camera`]).
+//! With `[camera]` set, it reads a live stereo camera instead ([`camera`]); with
+//! `source.replay`, an MCAP recording. Each of the three is a
+//! [`linetrack_stage_runtime::Source`]: the stage runtime publishes, stamps, beats, stops
+//! and, after the last frame, keeps the source (and its rig) until the run ends.
 
 pub mod camera;
 mod gain_jumps;
@@ -10,33 +13,33 @@ mod gain_jumps;
 mod replay;
 
 use anyhow::Context;
-use linetrack_datasets::StereoSequence;
-use linetrack_ipc::{Bus, Inlet, Outlet, Shutdown, Wake};
-use linetrack_msgs::{Control, FrameHeader, FrameStatus, RigRecord, StageKind, StatusKind, Topic};
-use linetrack_pipeline_config::Pacing;
-use linetrack_stage_runtime::{Reporter, StageContext, rig_record, shutdown_ordered, stamp_end};
-use std::time::{Duration, Instant};
-use tracing::info_span;
+use linetrack_datasets::{StereoSequence, StereoStream};
+use linetrack_ipc::{Bus, Outlet, Shutdown};
+use linetrack_msgs::{FrameStatus, RigRecord, StageKind, Topic};
+use linetrack_pipeline_config::{Pacing, SourceConfig};
+use linetrack_stage_runtime::{Source, SourceOut, StageContext, Step, rig_record, run_source};
+use std::time::Duration;
 
-/// The source's connections.
-pub struct Ports {
-    frames: Outlet<u8, FrameHeader>,
-    rig: Outlet<RigRecord, ()>,
-    control: Inlet<Control, ()>,
-    wake: Wake,
-    reporter: Reporter,
-}
+/// Bytes a frame message holds before more are allocated: a 752×480 stereo pair.
+const FRAME_BYTES: usize = 2 * 752 * 480;
 
-impl Ports {
-    /// Opens the source's services on `bus`.
-    fn open(bus: &Bus, ctx: &StageContext) -> anyhow::Result<Self> {
-        Ok(Self {
-            frames: bus.outlet(Topic::Frames, 2 * 752 * 480)?,
-            rig: bus.outlet(Topic::Rig, 1)?,
-            control: bus.inlet(Topic::Control)?,
-            wake: bus.wake(StageKind::FrameSource)?,
-            reporter: Reporter::new(bus, ctx, 0)?,
-        })
+/// The rig's outlet: published before the first frame, held until the run ends.
+pub(crate) struct Rig(Outlet<RigRecord, ()>);
+
+impl Rig {
+    fn open(bus: &Bus) -> anyhow::Result<Self> {
+        Ok(Self(bus.outlet(Topic::Rig, 1)?))
+    }
+
+    /// Publishes `rig` (the pose estimator needs it before the first frame's tracks).
+    fn publish(&mut self, rig: RigRecord) -> anyhow::Result<()> {
+        self.0.publish(&(), &[&[rig]])?;
+        Ok(())
+    }
+
+    /// A stage that (re)started since gets the rig.
+    fn poll(&mut self) -> anyhow::Result<()> {
+        Ok(self.0.update_connections()?)
     }
 }
 
@@ -68,6 +71,12 @@ pub(crate) fn due_offset(
     }
 }
 
+/// How long until `due` (from the start `began`) on `out`'s clock: `None` when it is due.
+pub(crate) fn not_yet(out: &SourceOut, began: Duration, due: Duration) -> Option<Duration> {
+    let wait = (began + due).saturating_sub(out.clock().monotonic());
+    (!wait.is_zero()).then_some(wait)
+}
+
 /// [`run`] as a process of its own (`linetrack-frame-source`): OpenCV is first set to one
 /// thread, so that its work (rectifying the frames read ahead, or a camera's on the capture
 /// thread) runs on the thread that asks for it, at that thread's priority
@@ -80,154 +89,147 @@ pub fn run_process(ctx: &StageContext, bus: &Bus, shutdown: &Shutdown) -> anyhow
     run(ctx, bus, shutdown)
 }
 
-/// Runs the source: publishes the rig and the sequence, then holds the rig until the run
-/// ends (shutdown by signal or command).
+/// Runs the source: publishes the rig and the frames of the camera, the recording or the
+/// sequence the config names, then holds the rig until the run ends (shutdown by signal or
+/// command).
 pub fn run(ctx: &StageContext, bus: &Bus, shutdown: &Shutdown) -> anyhow::Result<()> {
-    publish(ctx, Ports::open(bus, ctx)?, shutdown)
-}
-
-fn publish(ctx: &StageContext, mut ports: Ports, shutdown: &Shutdown) -> anyhow::Result<()> {
+    let rig = Rig::open(bus)?;
     if ctx.config.camera.enabled() {
-        return camera::publish(ctx, ports, shutdown);
+        return run_source(ctx, bus, camera::CameraSource::new(ctx, rig)?, shutdown);
     }
     if let Some(file) = ctx.config.source.replay() {
         #[cfg(feature = "mcap")]
-        return replay::publish(ctx, ports, shutdown, file);
+        return run_source(
+            ctx,
+            bus,
+            replay::ReplaySource::open(ctx, rig, file)?,
+            shutdown,
+        );
         #[cfg(not(feature = "mcap"))]
         anyhow::bail!("{}: {NO_MCAP}", file.display());
     }
-    let source = &ctx.config.source;
-    let sequence = StereoSequence::open(&source.sequence)
-        .with_context(|| format!("opening sequence {}", source.sequence.display()))?;
-    let total = sequence.frames.len();
-    let start = ctx.args.start_frame.min(total);
-    let end = if source.max_frames > 0 {
-        total.min(source.max_frames)
-    } else {
-        total
-    };
-    let first_ns = sequence.frames.get(start).map_or(0, |f| f.timestamp_ns);
-    let rate = if source.rate_hz > 0.0 {
-        source.rate_hz
-    } else {
-        0.0
-    };
-    tracing::info!(
-        "{}: frames {start}..{end} of {total}, {:?}",
-        sequence.name,
-        source.pacing
-    );
-    // The rig goes first: the pose estimator needs it before the first frame's tracks.
-    ports.rig.publish(&(), &[&[rig_record(&sequence.rig)]])?;
-    let origin_ns = sequence.frames.first().map_or(0, |f| f.timestamp_ns);
-    let mut gain_jumps =
-        gain_jumps::GainJumps::new(source.gain_jumps_s, source.gain_jumps_seed, origin_ns);
-    let reader_nice = source.reader_nice;
-    let stream = sequence.into_stream_with(start, 4, move || read_in_background(reader_nice));
-    ports.reporter.report(StatusKind::Ready, start as u64, 0);
+    run_source(ctx, bus, SequenceSource::open(ctx, rig)?, shutdown)
+}
 
-    let began = Instant::now();
-    let mut published = 0u64;
-    for (k, item) in stream.take(end.saturating_sub(start)).enumerate() {
-        let (index, timestamp_ns) = match &item {
+/// A sequence's frames, read ahead on a thread of their own.
+struct SequenceSource {
+    rig: Rig,
+    rig_record: RigRecord,
+    stream: std::iter::Take<StereoStream>,
+    source: SourceConfig,
+    first_ns: u64,
+    gain_jumps: Option<gain_jumps::GainJumps>,
+    /// When the first frame was due, on the source's monotonic clock.
+    began: Duration,
+    /// Frames taken from the stream.
+    taken: usize,
+    /// The frame taken and waiting for its time.
+    pending: Option<<StereoStream as Iterator>::Item>,
+}
+
+impl SequenceSource {
+    /// Opens `ctx`'s sequence from the frame to start at.
+    fn open(ctx: &StageContext, rig: Rig) -> anyhow::Result<Self> {
+        let source = ctx.config.source.clone();
+        let sequence = StereoSequence::open(&source.sequence)
+            .with_context(|| format!("opening sequence {}", source.sequence.display()))?;
+        let total = sequence.frames.len();
+        let start = ctx.args.start_frame.min(total);
+        let end = if source.max_frames > 0 {
+            total.min(source.max_frames)
+        } else {
+            total
+        };
+        let first_ns = sequence.frames.get(start).map_or(0, |f| f.timestamp_ns);
+        tracing::info!(
+            "{}: frames {start}..{end} of {total}, {:?}",
+            sequence.name,
+            source.pacing
+        );
+        let rig_record = rig_record(&sequence.rig);
+        let origin_ns = sequence.frames.first().map_or(0, |f| f.timestamp_ns);
+        let gain_jumps =
+            gain_jumps::GainJumps::new(source.gain_jumps_s, source.gain_jumps_seed, origin_ns);
+        let reader_nice = source.reader_nice;
+        let stream = sequence
+            .into_stream_with(start, 4, move || read_in_background(reader_nice))
+            .take(end.saturating_sub(start));
+        Ok(Self {
+            rig,
+            rig_record,
+            stream,
+            source,
+            first_ns,
+            gain_jumps,
+            began: Duration::ZERO,
+            taken: 0,
+            pending: None,
+        })
+    }
+}
+
+impl Source for SequenceSource {
+    const KIND: StageKind = StageKind::FrameSource;
+    const FRAME_BYTES: usize = FRAME_BYTES;
+
+    fn start(&mut self, out: &mut SourceOut) -> anyhow::Result<()> {
+        self.rig.publish(self.rig_record)?;
+        self.began = out.clock().monotonic();
+        Ok(())
+    }
+
+    fn step(&mut self, out: &mut SourceOut, _wait: Duration) -> anyhow::Result<Step> {
+        if self.pending.is_none() {
+            let Some(item) = self.stream.next() else {
+                return Ok(Step::Finished);
+            };
+            self.pending = Some(item);
+            self.taken += 1;
+        }
+        let Some(item) = &self.pending else {
+            return Ok(Step::Finished);
+        };
+        let (index, timestamp_ns) = match item {
             Ok(frame) => (frame.index, frame.timestamp_ns),
             Err(e) => (e.index, e.timestamp_ns),
         };
-        let due = began + due_offset(source.pacing, rate, first_ns, timestamp_ns, k);
-        if !wait_until(ctx, &mut ports, shutdown, due, published)? {
-            return Ok(());
+        let rate = self.source.rate_hz.max(0.0);
+        let due = due_offset(
+            self.source.pacing,
+            rate,
+            self.first_ns,
+            timestamp_ns,
+            self.taken - 1,
+        );
+        if let Some(wait) = not_yet(out, self.began, due) {
+            return Ok(Step::Idle(wait));
         }
-        let span = info_span!("publish_frame", frame_id = index as u64);
-        let _entered = span.enter();
-        let capture_ns = ctx.clock.now_ns();
-        let mut header = FrameHeader::new(index as u64, timestamp_ns, capture_ns);
-        if let Some(stamp) = header.stamp_mut(StageKind::FrameSource) {
-            stamp.start_ns = capture_ns;
-        }
+        let capture_ns = out.now_ns();
+        let (id, item) = (index as u64, self.pending.take());
         match item {
-            Ok(frame) => {
-                let (w, h) = (frame.left.width() as u32, frame.left.height() as u32);
-                header.width = w;
-                header.height = h;
+            Some(Ok(frame)) => {
+                let size = (frame.left.width() as u32, frame.left.height() as u32);
                 let (Some(left), Some(right)) = (frame.left.pixels(), frame.right.pixels()) else {
                     anyhow::bail!("frame {index}: images are not continuous in memory");
                 };
-                let [left, right] = match &mut gain_jumps {
+                let [left, right] = match &mut self.gain_jumps {
                     Some(jumps) => jumps.apply(timestamp_ns, [left, right]),
                     None => [left, right],
                 };
-                stamp_end(&mut header, StageKind::FrameSource, ctx.clock.now_ns());
-                ports.frames.publish(&header, &[left, right])?;
+                out.frame(id, timestamp_ns, capture_ns, size, &[left, right])?;
             }
-            Err(e) => {
+            Some(Err(e)) => {
                 tracing::warn!("{e}");
-                header.mark(FrameStatus::Corrupt, StageKind::FrameSource);
-                stamp_end(&mut header, StageKind::FrameSource, ctx.clock.now_ns());
-                ports.frames.publish(&header, &[])?;
+                out.marker(id, timestamp_ns, capture_ns, FrameStatus::Corrupt)?;
             }
+            None => {}
         }
-        published += 1;
-        ports
-            .reporter
-            .report(StatusKind::Heartbeat, index as u64, published);
-        // A stage that (re)started since gets the rig.
-        ports.rig.update_connections()?;
+        Ok(Step::Again)
     }
-    stay_until_the_run_ends(ctx, &mut ports, shutdown, start as u64, published)
-}
 
-/// Waits for a frame's time `due`, waking for commands and beating; `false` when the run
-/// is shutting down instead.
-pub(crate) fn wait_until(
-    ctx: &StageContext,
-    ports: &mut Ports,
-    shutdown: &Shutdown,
-    due: Instant,
-    published: u64,
-) -> anyhow::Result<bool> {
-    loop {
-        if shutdown.requested()
-            || shutdown_ordered(&mut ports.control, StageKind::FrameSource, ctx.pid)?
-        {
-            tracing::info!("shutdown after {published} frames");
-            return Ok(false);
-        }
-        let now = Instant::now();
-        if now >= due {
-            return Ok(true);
-        }
-        ports
-            .wake
-            .wait((due - now).min(ports.reporter.until_due().max(Duration::from_millis(1))))?;
-        ports.reporter.beat(published);
+    fn poll(&mut self) -> anyhow::Result<()> {
+        self.rig.poll()
     }
-}
-
-/// Reports the source finished after `published` frames from `start`, then stays until the
-/// run ends: it holds the rig, which a stage restarted after the last frame still needs.
-pub(crate) fn stay_until_the_run_ends(
-    ctx: &StageContext,
-    ports: &mut Ports,
-    shutdown: &Shutdown,
-    start: u64,
-    published: u64,
-) -> anyhow::Result<()> {
-    ports.reporter.report(
-        StatusKind::SourceFinished,
-        (start + published).saturating_sub(1),
-        published,
-    );
-    tracing::info!("finished: {published} frames published");
-    while !shutdown.requested()
-        && !shutdown_ordered(&mut ports.control, StageKind::FrameSource, ctx.pid)?
-    {
-        ports.rig.update_connections()?;
-        ports.reporter.beat(published);
-        ports
-            .wake
-            .wait(ports.reporter.until_due().max(Duration::from_millis(1)))?;
-    }
-    Ok(())
 }
 
 /// Puts the calling thread (the one reading frames ahead) under the `other` policy at nice

@@ -2,103 +2,156 @@
 //! recorded rig first, then each recorded stereo frame with its sequence timestamp, paced
 //! as a sequence is. Frames are numbered from 0 in the order recorded (a recording of
 //! every frame keeps the recorded run's ids); frames recorded without both images (a
-//! decimated recording, markers) are not replayed.
+//! decimated recording, markers) are not replayed. A thread reads the file and hands the
+//! frames over through a short queue: the source is driven by what arrives on it, as a
+//! source fed by another system's callbacks is.
 
-use crate::{Ports, due_offset, stay_until_the_run_ends, wait_until};
+use crate::{Rig, due_offset, not_yet};
 use anyhow::Context;
-use linetrack_ipc::Shutdown;
-use linetrack_mcap::Replay;
-use linetrack_msgs::{FrameHeader, StageKind, StatusKind};
-use linetrack_stage_runtime::{StageContext, stamp_end};
-use std::path::Path;
-use std::time::Instant;
-use tracing::info_span;
+use crossbeam_channel::{Receiver, RecvTimeoutError};
+use linetrack_mcap::{Replay, ReplayFrame};
+use linetrack_msgs::{RigRecord, StageKind};
+use linetrack_pipeline_config::SourceConfig;
+use linetrack_stage_runtime::{Source, SourceOut, StageContext, Step};
+use std::path::{Path, PathBuf};
+use std::time::Duration;
 
-/// Publishes the recording `file`'s rig and frames, then stays until the run ends.
-pub(crate) fn publish(
-    ctx: &StageContext,
-    mut ports: Ports,
-    shutdown: &Shutdown,
+/// Frames the reading thread may hand over ahead of their time.
+const READ_AHEAD: usize = 2;
+
+/// What the reading thread hands over: frame `k` of the recording, or why reading stopped.
+type Read = anyhow::Result<(usize, ReplayFrame)>;
+
+/// A recording's frames, read on a thread of their own.
+pub(crate) struct ReplaySource {
+    rig: Rig,
+    recorded_rig: RigRecord,
+    replay: Option<Replay>,
+    file: PathBuf,
+    source: SourceConfig,
+    range: (usize, usize),
+    frames: Option<Receiver<Read>>,
+    /// When the first frame was due, on the source's monotonic clock, and its timestamp.
+    began: Duration,
+    first_ns: Option<u64>,
+    pending: Option<(usize, ReplayFrame)>,
+}
+
+impl ReplaySource {
+    /// Opens the recording `file` (checked: the rig and the frames are readable).
+    pub(crate) fn open(ctx: &StageContext, rig: Rig, file: &Path) -> anyhow::Result<Self> {
+        let source = ctx.config.source.clone();
+        let replay =
+            Replay::open(file).with_context(|| format!("source.replay {}", file.display()))?;
+        let start = ctx.args.start_frame;
+        let end = if source.max_frames > 0 {
+            replay.frames.min(source.max_frames)
+        } else {
+            replay.frames
+        };
+        tracing::info!(
+            "replaying {}: frames {start}..{end} of {}, {:?}",
+            file.display(),
+            replay.frames,
+            source.pacing
+        );
+        Ok(Self {
+            rig,
+            recorded_rig: replay.rig,
+            replay: Some(replay),
+            file: file.to_path_buf(),
+            source,
+            range: (start, end),
+            frames: None,
+            began: Duration::ZERO,
+            first_ns: None,
+            pending: None,
+        })
+    }
+}
+
+/// Reads frames `start..end` of `replay` into `tx` until done or nobody takes them.
+fn read(
+    replay: &Replay,
     file: &Path,
-) -> anyhow::Result<()> {
-    let source = &ctx.config.source;
-    let replay = Replay::open(file).with_context(|| format!("source.replay {}", file.display()))?;
-    let start = ctx.args.start_frame;
-    let end = if source.max_frames > 0 {
-        replay.frames.min(source.max_frames)
-    } else {
-        replay.frames
-    };
-    tracing::info!(
-        "replaying {}: frames {start}..{end} of {}, {:?}",
-        file.display(),
-        replay.frames,
-        source.pacing
-    );
-    ports.rig.publish(&(), &[&[replay.rig]])?;
-    ports.reporter.report(StatusKind::Ready, start as u64, 0);
-    let began = Instant::now();
-    let mut first_ns = None;
-    let mut published = 0u64;
-    let mut index = 0usize;
-    let mut failure = None;
-    let mut stopped = false;
-    replay.for_each_frame(|frame| {
-        let k = index;
-        index += 1;
-        if k < start {
+    (start, end): (usize, usize),
+    tx: &crossbeam_channel::Sender<Read>,
+) {
+    let mut k = 0usize;
+    let read = replay.for_each_frame(|frame| {
+        let index = k;
+        k += 1;
+        if index < start {
             return true;
         }
-        if k >= end {
-            return false;
+        index < end && tx.send(Ok((index, frame))).is_ok()
+    });
+    if let Err(e) = read {
+        let _ = tx.send(Err(
+            anyhow::Error::new(e).context(format!("source.replay {}", file.display()))
+        ));
+    }
+}
+
+impl Source for ReplaySource {
+    const KIND: StageKind = StageKind::FrameSource;
+    const FRAME_BYTES: usize = crate::FRAME_BYTES;
+
+    fn start(&mut self, out: &mut SourceOut) -> anyhow::Result<()> {
+        self.rig.publish(self.recorded_rig)?;
+        let (tx, rx) = crossbeam_channel::bounded(READ_AHEAD);
+        let (replay, file, range) = (self.replay.take(), self.file.clone(), self.range);
+        std::thread::Builder::new()
+            .name("replay-reader".to_string())
+            .spawn(move || {
+                if let Some(replay) = replay {
+                    read(&replay, &file, range, &tx);
+                }
+            })
+            .context("starting the recording's reader thread")?;
+        self.frames = Some(rx);
+        self.began = out.clock().monotonic();
+        Ok(())
+    }
+
+    fn step(&mut self, out: &mut SourceOut, wait: Duration) -> anyhow::Result<Step> {
+        if self.pending.is_none() {
+            let Some(frames) = &self.frames else {
+                return Ok(Step::Finished);
+            };
+            match frames.recv_timeout(wait) {
+                Ok(read) => self.pending = Some(read?),
+                Err(RecvTimeoutError::Timeout) => return Ok(Step::Again),
+                Err(RecvTimeoutError::Disconnected) => return Ok(Step::Finished),
+            }
         }
-        let first = *first_ns.get_or_insert(frame.timestamp_ns);
-        let due = began
-            + due_offset(
-                source.pacing,
-                source.rate_hz,
-                first,
-                frame.timestamp_ns,
-                k - start,
-            );
-        let mut step = || -> anyhow::Result<bool> {
-            if !wait_until(ctx, &mut ports, shutdown, due, published)? {
-                return Ok(false);
-            }
-            let span = info_span!("publish_frame", frame_id = k as u64);
-            let _entered = span.enter();
-            let capture_ns = ctx.clock.now_ns();
-            let mut header = FrameHeader::new(k as u64, frame.timestamp_ns, capture_ns);
-            if let Some(stamp) = header.stamp_mut(StageKind::FrameSource) {
-                stamp.start_ns = capture_ns;
-            }
-            header.width = frame.width;
-            header.height = frame.height;
-            stamp_end(&mut header, StageKind::FrameSource, ctx.clock.now_ns());
-            ports.frames.publish(&header, &[&frame.pixels])?;
-            published += 1;
-            ports
-                .reporter
-                .report(StatusKind::Heartbeat, k as u64, published);
-            ports.rig.update_connections()?;
-            Ok(true)
+        let Some((k, frame)) = &self.pending else {
+            return Ok(Step::Finished);
         };
-        match step() {
-            Ok(go_on) => {
-                stopped = !go_on;
-                go_on
-            }
-            Err(e) => {
-                failure = Some(e);
-                false
-            }
+        let first = *self.first_ns.get_or_insert(frame.timestamp_ns);
+        let due = due_offset(
+            self.source.pacing,
+            self.source.rate_hz,
+            first,
+            frame.timestamp_ns,
+            k - self.range.0,
+        );
+        if let Some(wait) = not_yet(out, self.began, due) {
+            return Ok(Step::Idle(wait));
         }
-    })?;
-    if let Some(e) = failure {
-        return Err(e);
+        let capture_ns = out.now_ns();
+        out.frame(
+            *k as u64,
+            frame.timestamp_ns,
+            capture_ns,
+            (frame.width, frame.height),
+            &[&frame.pixels],
+        )?;
+        self.pending = None;
+        Ok(Step::Again)
     }
-    if stopped {
-        return Ok(());
+
+    fn poll(&mut self) -> anyhow::Result<()> {
+        self.rig.poll()
     }
-    stay_until_the_run_ends(ctx, &mut ports, shutdown, start as u64, published)
 }

@@ -1,6 +1,6 @@
-//! The onboard side: the `linetrack-link` process's loop.
+//! The onboard side: what the `linetrack-link` process does with the run's messages.
 //!
-//! The loop subscribes to the allowed topics in the run's shared memory and wakes with the
+//! It subscribes to the allowed topics in the run's shared memory and wakes with the
 //! supervisor (poses and status wake it: a frame's pose comes after its segments, tracks
 //! and images, so each wake-up finds the frame's messages in place). Each message is
 //! encoded and handed to the sender thread through a bounded queue; a full queue (the link
@@ -11,8 +11,8 @@
 
 use crate::wire::{Message, key, shrink};
 use crate::{LinkError, peer_config};
-use crossbeam_channel::{Receiver, TrySendError};
-use linetrack_ipc::{Bus, Inlet, Record, Shutdown};
+use crossbeam_channel::{Receiver, Sender, TrySendError};
+use linetrack_ipc::{Bus, Inlet, Record};
 use linetrack_msgs::{
     FrameHeader, PoseRecord, SegmentRecord, SegmentsHeader, StageKind, StatusReport, Topic,
     TrackedLine, TracksHeader,
@@ -20,7 +20,7 @@ use linetrack_msgs::{
 use linetrack_pipeline_config::LinkConfig;
 use serde::Serialize;
 use std::collections::BTreeMap;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 use zenoh::Wait;
@@ -29,8 +29,8 @@ use zenoh::qos::CongestionControl;
 /// Messages waiting for the sender thread: a stalled link fills it within about a second
 /// of frames, then messages are dropped.
 const QUEUE: usize = 64;
-/// The longest the loop sleeps without a wake-up (it also checks for shutdown).
-const WAKE_TIMEOUT: Duration = Duration::from_millis(100);
+/// The longest the link sleeps without a wake-up (it also checks for shutdown).
+pub const WAKE_TIMEOUT: Duration = Duration::from_millis(100);
 /// How often `link.json` is rewritten.
 const COUNTS_EVERY: Duration = Duration::from_secs(1);
 
@@ -112,77 +112,106 @@ fn drain<P: Record, H: Record>(
     Ok(())
 }
 
-/// Forwards the allowed topics of the run on `bus` until `shutdown`; writes the counters
-/// to `counts_path`. Fails only when the link cannot be set up (the endpoint cannot be
-/// listened on, the shared memory cannot be joined).
-pub fn run(
-    config: &LinkConfig,
-    bus: &Bus,
-    shutdown: &Shutdown,
-    counts_path: &Path,
-) -> Result<LinkCounts, LinkError> {
-    let zenoh_error = |what, endpoint: &str| {
-        let endpoint = endpoint.to_string();
-        move |e: zenoh::Error| LinkError::Zenoh {
-            what,
-            endpoint,
-            message: e.to_string(),
-        }
-    };
-    let session = zenoh::open(peer_config("listen", &config.listen)?)
-        .wait()
-        .map_err(zenoh_error("session", &config.listen))?;
-    let mut publishers = BTreeMap::new();
-    for topic in &config.topics {
-        let key = key(&config.key_prefix, topic);
-        let publisher = session
-            .declare_publisher(key.clone())
-            .congestion_control(CongestionControl::Block)
-            .wait()
-            .map_err(zenoh_error("publisher", &key))?;
-        publishers.insert(topic.clone(), publisher);
-    }
-    let mut inlets = Inlets {
-        poses: inlet_if(config, bus, "poses", Topic::Poses)?,
-        status: inlet_if(config, bus, "status", Topic::Status)?,
-        segments: inlet_if(config, bus, "segments", Topic::Segments)?,
-        tracks: inlet_if(config, bus, "tracks", Topic::Tracks)?,
-        frames: inlet_if(config, bus, "images", Topic::Frames)?,
-    };
-    // Every frame's pose message is seen even when poses are not forwarded: it counts frames.
-    let mut frame_counter = match inlets.poses {
-        Some(_) => None,
-        None => Some(bus.inlet::<PoseRecord, TracksHeader>(Topic::Poses)?),
-    };
-    let wake = bus.wake(StageKind::Supervisor)?;
-    tracing::info!(
-        "link: listening on {}, forwarding {:?} under {}/",
-        config.listen,
-        config.topics,
-        config.key_prefix
-    );
+/// The onboard side of the link, open: the allowed topics' subscribers, the sender thread
+/// and its zenoh session. [`Onboard::drain`] forwards what is waiting; [`Onboard::finish`]
+/// closes it. The `linetrack-link` process runs it as a sink of the stage runtime, which
+/// wakes it with the supervisor (poses and status).
+pub struct Onboard {
+    inlets: Inlets,
+    /// Every frame's pose message, when poses are not forwarded: it counts frames.
+    frame_counter: Option<Inlet<PoseRecord, TracksHeader>>,
+    counts: Arc<Mutex<LinkCounts>>,
+    counts_path: PathBuf,
+    tx: Sender<(&'static str, Vec<u8>)>,
+    sender: std::thread::JoinHandle<()>,
+    session: zenoh::Session,
+    scale: u32,
+    every: u64,
+    next_write: Instant,
+    batch: Vec<Message>,
+}
 
-    let counts = Arc::new(Mutex::new(LinkCounts::default()));
-    let (tx, rx) = crossbeam_channel::bounded::<(&'static str, Vec<u8>)>(QUEUE);
-    let sender = {
-        let counts = Arc::clone(&counts);
-        std::thread::Builder::new()
-            .name("link-sender".to_string())
-            .spawn(move || send_all(&rx, &publishers, &counts))
-            .map_err(LinkError::Thread)?
-    };
-    let lock = |counts: &Mutex<LinkCounts>| {
-        counts
+impl Onboard {
+    /// Opens the link on `bus`: listens on `config.listen`, subscribes to the allowed
+    /// topics; the counters go to `counts_path`. Fails when the endpoint cannot be listened
+    /// on or the shared memory cannot be joined.
+    pub fn open(config: &LinkConfig, bus: &Bus, counts_path: &Path) -> Result<Self, LinkError> {
+        let zenoh_error = |what, endpoint: &str| {
+            let endpoint = endpoint.to_string();
+            move |e: zenoh::Error| LinkError::Zenoh {
+                what,
+                endpoint,
+                message: e.to_string(),
+            }
+        };
+        let session = zenoh::open(peer_config("listen", &config.listen)?)
+            .wait()
+            .map_err(zenoh_error("session", &config.listen))?;
+        let mut publishers = BTreeMap::new();
+        for topic in &config.topics {
+            let key = key(&config.key_prefix, topic);
+            let publisher = session
+                .declare_publisher(key.clone())
+                .congestion_control(CongestionControl::Block)
+                .wait()
+                .map_err(zenoh_error("publisher", &key))?;
+            publishers.insert(topic.clone(), publisher);
+        }
+        let inlets = Inlets {
+            poses: inlet_if(config, bus, "poses", Topic::Poses)?,
+            status: inlet_if(config, bus, "status", Topic::Status)?,
+            segments: inlet_if(config, bus, "segments", Topic::Segments)?,
+            tracks: inlet_if(config, bus, "tracks", Topic::Tracks)?,
+            frames: inlet_if(config, bus, "images", Topic::Frames)?,
+        };
+        let frame_counter = match inlets.poses {
+            Some(_) => None,
+            None => Some(bus.inlet::<PoseRecord, TracksHeader>(Topic::Poses)?),
+        };
+        tracing::info!(
+            "link: listening on {}, forwarding {:?} under {}/",
+            config.listen,
+            config.topics,
+            config.key_prefix
+        );
+        let counts = Arc::new(Mutex::new(LinkCounts::default()));
+        let (tx, rx) = crossbeam_channel::bounded::<(&'static str, Vec<u8>)>(QUEUE);
+        let sender = {
+            let counts = Arc::clone(&counts);
+            std::thread::Builder::new()
+                .name("link-sender".to_string())
+                .spawn(move || send_all(&rx, &publishers, &counts))
+                .map_err(LinkError::Thread)?
+        };
+        Ok(Self {
+            inlets,
+            frame_counter,
+            counts,
+            counts_path: counts_path.to_path_buf(),
+            tx,
+            sender,
+            session,
+            scale: config.image_scale,
+            every: u64::from(config.image_every),
+            next_write: Instant::now(),
+            batch: Vec::new(),
+        })
+    }
+
+    /// The counters so far.
+    pub fn counts(&self) -> LinkCounts {
+        self.counts
             .lock()
             .unwrap_or_else(|poisoned| poisoned.into_inner())
             .clone()
-    };
-    let (scale, every) = (config.image_scale, u64::from(config.image_every));
-    let mut next_write = Instant::now();
-    let mut batch = Vec::new();
-    while !shutdown.requested() {
-        wake.wait(WAKE_TIMEOUT)?;
-        drain(&mut inlets.frames, &mut batch, |header, pixels| {
+    }
+
+    /// Hands everything waiting to the sender thread (what its full queue cannot take is
+    /// dropped and counted); rewrites the counters when they are due.
+    pub fn drain(&mut self) -> Result<(), LinkError> {
+        let (scale, every) = (self.scale, self.every);
+        let (inlets, batch) = (&mut self.inlets, &mut self.batch);
+        drain(&mut inlets.frames, batch, |header, pixels| {
             if header.frame_id % every != 0 {
                 return None;
             }
@@ -195,30 +224,30 @@ pub fn run(
                 pixels,
             })
         })?;
-        drain(&mut inlets.segments, &mut batch, |header, s| {
+        drain(&mut inlets.segments, batch, |header, s| {
             Some(Message::Segments {
                 header: *header,
                 segments: s.to_vec(),
             })
         })?;
-        drain(&mut inlets.tracks, &mut batch, |header, t| {
+        drain(&mut inlets.tracks, batch, |header, t| {
             Some(Message::Tracks {
                 header: *header,
                 tracks: t.to_vec(),
             })
         })?;
         let before_poses = batch.len();
-        drain(&mut inlets.poses, &mut batch, |header, p| {
+        drain(&mut inlets.poses, batch, |header, p| {
             Some(Message::Pose {
                 header: *header,
                 pose: *p.first()?,
             })
         })?;
         let mut frames = (batch.len() - before_poses) as u64;
-        if let Some(inlet) = &mut frame_counter {
+        if let Some(inlet) = &mut self.frame_counter {
             frames += inlet.receive_all()?.len() as u64;
         }
-        drain(&mut inlets.status, &mut batch, |_, r| {
+        drain(&mut inlets.status, batch, |_, r| {
             Some(Message::Status {
                 report: *r.first()?,
             })
@@ -227,7 +256,7 @@ pub fn run(
         for message in batch.drain(..) {
             let topic = message.topic();
             match message.encode() {
-                Ok(bytes) => match tx.try_send((topic, bytes)) {
+                Ok(bytes) => match self.tx.try_send((topic, bytes)) {
                     Ok(()) => {}
                     Err(TrySendError::Full(_) | TrySendError::Disconnected(_)) => {
                         dropped.push(topic)
@@ -237,27 +266,69 @@ pub fn run(
             }
         }
         {
-            let mut c = counts.lock().unwrap_or_else(|p| p.into_inner());
+            let mut c = self.counts.lock().unwrap_or_else(|p| p.into_inner());
             c.frames += frames;
             for topic in dropped {
                 c.topic(topic).dropped += 1;
             }
         }
-        if Instant::now() >= next_write {
-            if let Err(e) = lock(&counts).write(counts_path) {
+        if Instant::now() >= self.next_write {
+            if let Err(e) = self.counts().write(&self.counts_path) {
                 tracing::warn!("link: {e}");
             }
-            next_write = Instant::now() + COUNTS_EVERY;
+            self.next_write = Instant::now() + COUNTS_EVERY;
         }
+        Ok(())
     }
-    drop(tx);
-    // The sender ends with its queue: at most a blocked put's wait (zenoh closes a link
-    // that stays congested).
-    let _ = sender.join();
-    let counts = lock(&counts);
-    counts.write(counts_path)?;
-    let _ = session.close().wait();
-    Ok(counts)
+
+    /// Closes the link: the sender sends what is queued, the counters are written a last
+    /// time; returns them.
+    pub fn finish(self) -> Result<LinkCounts, LinkError> {
+        drop(self.tx);
+        // The sender ends with its queue: at most a blocked put's wait (zenoh closes a link
+        // that stays congested).
+        let _ = self.sender.join();
+        let counts = self
+            .counts
+            .lock()
+            .unwrap_or_else(|poisoned| poisoned.into_inner())
+            .clone();
+        counts.write(&self.counts_path)?;
+        let _ = self.session.close().wait();
+        Ok(counts)
+    }
+}
+
+impl linetrack_stage_runtime::Sink for Onboard {
+    const KIND: StageKind = StageKind::Link;
+    const WAKES_WITH: StageKind = StageKind::Supervisor;
+
+    fn drain(&mut self) -> anyhow::Result<()> {
+        Ok(Onboard::drain(self)?)
+    }
+
+    fn count(&self) -> u64 {
+        self.counts().frames
+    }
+
+    fn max_sleep(&self) -> Duration {
+        WAKE_TIMEOUT
+    }
+
+    fn finish(self) -> anyhow::Result<()> {
+        let counts = Onboard::finish(self)?;
+        tracing::info!(
+            "link: {} frames; per topic (sent, bytes, dropped, unheard): {}",
+            counts.frames,
+            counts
+                .topics
+                .iter()
+                .map(|(t, c)| format!("{t} {} {} {} {}", c.sent, c.bytes, c.dropped, c.unheard))
+                .collect::<Vec<_>>()
+                .join(", ")
+        );
+        Ok(())
+    }
 }
 
 /// The sender thread: puts each queued message on its topic's publisher until the queue

@@ -247,6 +247,10 @@ impl Stage for FrameMatcher {
         true
     }
 
+    fn keeps_state(&self) -> bool {
+        true
+    }
+
     fn process(
         &mut self,
         header: &mut TracksHeader,

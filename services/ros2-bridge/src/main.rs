@@ -1,54 +1,23 @@
 //! The `linetrack-ros2` process: the pipeline's poses as ROS 2 messages, started by the
-//! supervisor when `[ros2] enabled = true`.
+//! supervisor when `[ros2] enabled = true`. It starts as every node of the pipeline does
+//! (`linetrack_stage_runtime::node_main`: the arguments, the config, logging, signals, the
+//! run's shared memory).
 
 use anyhow::Context;
-use clap::Parser;
-use linetrack_ipc::{Bus, Scope, Shutdown};
-use linetrack_pipeline_config::PipelineConfig;
+use linetrack_ipc::{Bus, Shutdown};
+use linetrack_msgs::StageKind;
 use linetrack_ros2_bridge::PoseSink;
 use linetrack_ros2_bridge::dds::DdsSink;
-use std::path::PathBuf;
+use linetrack_stage_runtime::StageContext;
 use std::process::ExitCode;
 
-/// What the supervisor passes.
-#[derive(Debug, Parser)]
-#[command(
-    about = "Publishes a linetrack run's poses to ROS 2; started by the supervisor (`linetrack run`)."
-)]
-struct Args {
-    /// The run's pipeline config.
-    #[arg(long)]
-    config: PathBuf,
-    /// The run's id: it names the shared-memory services.
-    #[arg(long)]
-    run_id: String,
-    /// The supervisor's pid: the bridge ends when that process does.
-    #[arg(long)]
-    supervisor_pid: Option<u32>,
-}
-
 fn main() -> ExitCode {
-    match run(Args::parse()) {
-        Ok(()) => ExitCode::SUCCESS,
-        Err(e) => {
-            tracing::error!("ros2: {e:#}");
-            eprintln!("linetrack-ros2: {e:#}");
-            ExitCode::FAILURE
-        }
-    }
+    linetrack_stage_runtime::node_main(StageKind::Ros2Bridge, "warn", run)
 }
 
-fn run(args: Args) -> anyhow::Result<()> {
-    let config = PipelineConfig::from_file(&args.config)?;
-    let _logs = linetrack_telemetry::init("ros2", "warn", None)?;
-    let shutdown = Shutdown::on_signals()?;
-    linetrack_stage_runtime::end_with_parent(&shutdown, args.supervisor_pid)?;
-    let bus = Bus::shared_memory(
-        &Scope::new(&args.run_id).with_configured_root(config.ipc.root.as_deref()),
-        &format!("ros2-{}", std::process::id()),
-    )?;
-    let ros2 = config.ros2.clone();
-    let tally = linetrack_ros2_bridge::run(&config.ros2, &bus, &shutdown, move || {
+fn run(ctx: &StageContext, bus: &Bus, shutdown: &Shutdown) -> anyhow::Result<()> {
+    let ros2 = ctx.config.ros2.clone();
+    let tally = linetrack_ros2_bridge::run(&ctx.config.ros2, bus, shutdown, move || {
         Ok(Box::new(DdsSink::new(&ros2)?) as Box<dyn PoseSink>)
     })
     .context("ROS 2 output")?;

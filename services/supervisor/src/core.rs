@@ -9,8 +9,9 @@
 //! processes settled) or the start-up has failed; restarts with backoff up to the limit
 //! ([`Backoff`]); which exits end the run (a stage that never got ready, one past its
 //! limit) and which are expected (handed over, finished); hangs ([`Watchdog`]); the hot
-//! swap of the detector (a standby started, the running one asked to hand over, the
-//! standby told to take over, or abandoned when it dies); the automatic detector swap
+//! swap of a stage of [`HOT_SWAPPABLE`], the detector or the matcher (a standby started,
+//! the running one asked to hand over, the standby told to take over, or abandoned when it
+//! dies); the automatic detector swap
 //! ([`DetectorPolicy`]); the matcher's LBD/ℓ1 mode ([`FallbackController`]); when the run is complete or its drain ran
 //! out; and the ordered stop (every stage asked, killed after the grace, the optional
 //! processes last).
@@ -24,6 +25,7 @@ use linetrack_msgs::{
 use linetrack_pipeline_config::{MatcherPolicy, OnRecordError, PipelineConfig};
 use linetrack_vision::DetectorKind;
 use std::time::Duration;
+pub use swap::HOT_SWAPPABLE;
 
 /// How often `status.json` is rewritten while the run goes.
 const STATUS_FILE_EVERY: Duration = Duration::from_millis(200);
@@ -48,7 +50,7 @@ pub enum Event {
         pid: u32,
         /// The detector it runs (the line detector).
         detector: Option<DetectorKind>,
-        /// Started as a standby detector.
+        /// Started as a standby (a hot swap).
         standby: bool,
     },
     /// A stage's status report (ready, a heartbeat, a hand-over, the source's end, …).
@@ -65,6 +67,9 @@ pub enum Event {
     },
     /// `linetrack ctl` asked for a detector swap.
     SwapRequest(DetectorKind),
+    /// `linetrack ctl` asked for a fresh instance of a hot-swappable stage (see
+    /// [`HOT_SWAPPABLE`]) to take over from the running one.
+    SwapStage(StageKind),
     /// An instance ended.
     Exited {
         /// Its id.
@@ -105,7 +110,7 @@ pub enum Action {
         stage: StageKind,
         /// The detector it is to run.
         detector: Option<DetectorKind>,
-        /// As a standby detector.
+        /// As a standby (a hot swap).
         standby: bool,
         /// A restart: the pose estimator resumes from the last poses, the source from the
         /// next frame.
@@ -219,6 +224,9 @@ pub struct Core {
     first_backoff: Backoff,
     watchdog: Watchdog,
     detector: DetectorKind,
+    /// The stage whose hot swap is under way.
+    swapping: Option<StageKind>,
+    /// The detector a detector swap starts.
     swap_to: Option<DetectorKind>,
     detector_policy: Option<DetectorPolicy>,
     /// The matcher's LBD/ℓ1 policy (`matcher.mode = "auto"`).
@@ -247,6 +255,7 @@ impl Core {
             first_backoff: restart_backoff(supervisor),
             watchdog: Watchdog::new(supervisor),
             detector: config.detector,
+            swapping: None,
             swap_to: None,
             detector_policy: DetectorPolicy::new(
                 &config.detector_fallback,
@@ -350,6 +359,7 @@ impl Core {
                 first,
             } => self.on_pose(&header, &pose, first, &mut actions),
             Event::SwapRequest(kind) => self.on_swap_request(kind, &mut actions),
+            Event::SwapStage(stage) => self.on_swap_stage(stage, &mut actions),
             Event::Exited {
                 pid,
                 status,
@@ -392,35 +402,10 @@ impl Core {
             Some(StatusKind::Ready) => {
                 process.ready = true;
                 if standby {
-                    if let Some(old) = self
-                        .instances
-                        .iter()
-                        .find(|p| p.stage == StageKind::LineDetector && !p.standby && !p.retiring)
-                    {
-                        let old_pid = old.pid;
-                        actions.push(Action::Log(Log::Info(format!(
-                            "standby detector {} ready holding frames from {}; asking {old_pid} to hand over",
-                            report.pid, report.frame_id
-                        ))));
-                        actions.push(Action::Send {
-                            stage: StageKind::LineDetector,
-                            pid: old_pid,
-                            command: Command::HandOver,
-                            value: 0,
-                            frame_id: report.frame_id,
-                        });
-                    } else {
-                        // No running detector to hand over from: take over at once.
-                        actions.push(Action::Send {
-                            stage: StageKind::LineDetector,
-                            pid: report.pid,
-                            command: Command::TakeOver,
-                            value: 0,
-                            frame_id: report.frame_id,
-                        });
-                        self.promote_standby(report.pid, report.frame_id, actions);
-                    }
-                } else if stage == StageKind::Matcher
+                    self.on_standby_ready(stage, &report, actions);
+                }
+                // A matcher, standby or not, runs the mode the policy chose.
+                if stage == StageKind::Matcher
                     && let Some(mode) = self.matcher_mode()
                     && mode != MatcherMode::Lbd
                 {
@@ -437,27 +422,7 @@ impl Core {
             Some(StatusKind::HandedOver) => {
                 process.retiring = true;
                 let old_kind = process.detector;
-                if let Some(new_pid) = self.instances.iter().find(|p| p.standby).map(|p| p.pid) {
-                    actions.push(Action::Send {
-                        stage: StageKind::LineDetector,
-                        pid: new_pid,
-                        command: Command::TakeOver,
-                        value: 0,
-                        frame_id: report.frame_id,
-                    });
-                    self.promote_standby(new_pid, report.frame_id, actions);
-                    let from = old_kind.map(|k| k.name()).unwrap_or("?");
-                    actions.push(Action::Record {
-                        kind: "swap",
-                        stage: "line-detector",
-                        frame_id: Some(report.frame_id),
-                        detail: format!(
-                            "{from} (pid {}) -> {} (pid {new_pid})",
-                            report.pid,
-                            self.detector.name()
-                        ),
-                    });
-                }
+                self.on_handed_over(stage, old_kind, &report, actions);
             }
             Some(StatusKind::SourceFinished) => {
                 process.retiring = true;
@@ -466,20 +431,6 @@ impl Core {
             }
             _ => actions.push(Action::Report { report, stage }),
         }
-    }
-
-    fn promote_standby(&mut self, pid: u32, frame_id: u64, actions: &mut Vec<Action>) {
-        if let Some(p) = self.instances.iter_mut().find(|p| p.pid == pid) {
-            p.standby = false;
-            if let Some(kind) = p.detector {
-                self.detector = kind;
-            }
-        }
-        self.swap_to = None;
-        actions.push(Action::Log(Log::Info(format!(
-            "detector {pid} takes over at frame {frame_id}"
-        ))));
-        actions.push(Action::WriteStatus);
     }
 
     fn on_pose(
@@ -511,7 +462,7 @@ impl Core {
             });
         }
         // The detector policy waits while a swap is under way (its own or one asked for).
-        if self.swap_to.is_none()
+        if self.swapping.is_none()
             && let Some(switch) = self
                 .detector_policy
                 .as_mut()
@@ -531,34 +482,6 @@ impl Core {
             });
             self.start_swap(switch.to, actions);
         }
-    }
-
-    fn on_swap_request(&mut self, kind: DetectorKind, actions: &mut Vec<Action>) {
-        if self.swap_to.is_some() {
-            actions.push(Action::Log(Log::Warn(format!(
-                "swap to {} refused: a swap is in progress",
-                kind.name()
-            ))));
-        } else if kind == self.detector {
-            actions.push(Action::Log(Log::Info(format!(
-                "swap to {} ignored: already running",
-                kind.name()
-            ))));
-        } else {
-            actions.push(Action::Record {
-                kind: "swap-requested",
-                stage: "line-detector",
-                frame_id: None,
-                detail: format!("{} -> {}", self.detector.name(), kind.name()),
-            });
-            self.start_swap(kind, actions);
-        }
-    }
-
-    /// Starts a standby detector of `kind`; the running one hands over to it.
-    fn start_swap(&mut self, kind: DetectorKind, actions: &mut Vec<Action>) {
-        self.swap_to = Some(kind);
-        actions.push(self.spawn(StageKind::LineDetector, true));
     }
 
     fn on_exit(
@@ -611,10 +534,11 @@ impl Core {
         if p.standby {
             actions.push(Action::Record {
                 kind: "swap-abandoned",
-                stage: "line-detector",
+                stage: p.stage.name(),
                 frame_id: None,
-                detail: "the standby detector died before taking over".to_string(),
+                detail: format!("the standby {} died before taking over", p.stage),
             });
+            self.swapping = None;
             self.swap_to = None;
             return;
         }
@@ -793,6 +717,8 @@ impl Core {
         })
     }
 }
+
+mod swap;
 
 #[cfg(test)]
 mod tests {
@@ -1296,6 +1222,60 @@ mod tests {
                 false,
                 true
             )]
+        );
+    }
+
+    #[test]
+    fn the_matcher_hot_swaps_to_a_fresh_instance_warmed_on_the_frame_before() {
+        let mut run = Run::running(&config());
+        let refused = run.on(Event::SwapStage(StageKind::PoseEstimator));
+        assert!(
+            spawns(&refused).is_empty() && records(&refused).is_empty(),
+            "not hot-swappable: {refused:?}"
+        );
+        let old = run.pid(StageKind::Matcher);
+        let asked = run.on(Event::SwapStage(StageKind::Matcher));
+        assert_eq!(
+            records(&asked),
+            [("swap-requested", "a fresh instance".to_string())]
+        );
+        assert_eq!(spawns(&asked), [(StageKind::Matcher, None, true, false)]);
+        let standby = run.pid(StageKind::Matcher);
+        let detector = run.on(Event::SwapRequest(DetectorKind::Fld));
+        assert!(
+            spawns(&detector).is_empty(),
+            "one swap at a time: {detector:?}"
+        );
+        // Ready holding frames from 40: the old one hands over at 41, so that the new one
+        // has frame 40 to match frame 41 with.
+        let ready = run.report(standby, StatusKind::Ready, 40);
+        let hand_over: Vec<_> = sent(&ready)
+            .into_iter()
+            .filter(|s| s.0 == Command::HandOver)
+            .collect();
+        assert_eq!(
+            hand_over,
+            [(Command::HandOver, StageKind::Matcher, old, 41)]
+        );
+        let handed = run.report(old, StatusKind::HandedOver, 41);
+        assert_eq!(
+            sent(&handed),
+            [(Command::TakeOver, StageKind::Matcher, standby, 41)]
+        );
+        assert_eq!(
+            records(&handed),
+            [("swap", format!("pid {old} -> pid {standby}"))]
+        );
+        assert!(run.core.expects_exit(old, true));
+        let exited = run.exit(old, true);
+        assert!(
+            records(&exited).is_empty() && finish(&exited).is_none(),
+            "{exited:?}"
+        );
+        // Over: the detector may be swapped now.
+        assert_eq!(
+            spawns(&run.on(Event::SwapRequest(DetectorKind::Fld))).len(),
+            1
         );
     }
 

@@ -77,6 +77,8 @@ pub(crate) fn stage_code(stage: StageKind) -> Option<StageRun> {
         StageKind::LineDetector => Some(linetrack_line_detector::run),
         StageKind::Matcher => Some(linetrack_matcher::run),
         StageKind::PoseEstimator => Some(linetrack_pose_estimator::run),
-        StageKind::Supervisor | StageKind::Recorder | StageKind::Ros2Bridge => None,
+        StageKind::Supervisor | StageKind::Recorder | StageKind::Ros2Bridge | StageKind::Link => {
+            None
+        }
     }
 }

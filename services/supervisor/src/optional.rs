@@ -411,7 +411,7 @@ pub(crate) fn processes(
         require_binary(&ROS2, bin_dir, "ros2.enabled = true")?;
         let settings = Settings {
             bin_dir: bin_dir.to_path_buf(),
-            args: Vec::new(),
+            args: in_run_dir.clone(),
             ready_timeout: Duration::from_millis(supervisor.startup_timeout_ms),
             grace,
         };

@@ -544,19 +544,24 @@ impl<'m> Supervisor<'m> {
             let Some(&c) = message.payload().first() else {
                 continue;
             };
-            if !c.is_for(StageKind::Supervisor, std::process::id())
-                || !c.command.is(Command::SwapDetector)
-            {
+            if !c.is_for(StageKind::Supervisor, std::process::id()) {
                 continue;
             }
-            let kind = match linetrack_msgs::decode(c.value) {
-                Ok(detector) => detector_kind(detector),
+            let request = match c.command.get() {
+                Ok(Command::SwapDetector) => {
+                    linetrack_msgs::decode(c.value).map(|d| Event::SwapRequest(detector_kind(d)))
+                }
+                Ok(Command::SwapStage) => linetrack_msgs::decode(c.value).map(Event::SwapStage),
+                _ => continue,
+            };
+            let event = match request {
+                Ok(event) => event,
                 Err(unknown) => {
                     tracing::warn!("swap request refused: {unknown}");
                     continue;
                 }
             };
-            if let Some(end) = self.feed(Event::SwapRequest(kind))? {
+            if let Some(end) = self.feed(event)? {
                 return Ok(Some(end));
             }
         }

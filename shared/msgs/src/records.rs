@@ -443,16 +443,19 @@ wire_enum! {
         /// To the matcher: use [`MatcherMode`] `value` from the next frame.
         #[default]
         SetMatcherMode = 0,
-        /// To the detector with pid `target_pid`: hand over to the standby detector, which holds
-        /// frames from `frame_id` on.
+        /// To the instance `target_pid` of a hot-swappable stage: hand over to the standby,
+        /// which holds frames from `frame_id` on.
         HandOver = 1,
-        /// To the standby detector `target_pid`: the old detector published every frame below
+        /// To the standby `target_pid`: the old instance published every frame below
         /// `frame_id`; take over from there.
         TakeOver = 2,
         /// To the supervisor: swap the detector for [`Detector`] `value`.
         SwapDetector = 3,
         /// To everyone: finish and exit.
         Shutdown = 4,
+        /// To the supervisor: a fresh instance of the stage [`StageKind`] `value` takes over
+        /// from the running one (a hot swap).
+        SwapStage = 5,
     }
 }
 

@@ -23,6 +23,8 @@ wire_enum! {
         Recorder = 5,
         /// Publishes the poses to ROS 2 (`[ros2]`); no processing stage.
         Ros2Bridge = 6,
+        /// Forwards the run to a ground station over zenoh (`[link]`); no processing stage.
+        Link = 7,
     }
 }
 
@@ -45,6 +47,7 @@ impl StageKind {
             StageKind::Supervisor => "supervisor",
             StageKind::Recorder => "recorder",
             StageKind::Ros2Bridge => "ros2-bridge",
+            StageKind::Link => "link",
         }
     }
 

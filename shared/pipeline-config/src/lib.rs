@@ -396,7 +396,10 @@ impl BudgetConfig {
             StageKind::LineDetector => Some(self.line_detector_ms),
             StageKind::Matcher => Some(self.matcher_ms),
             StageKind::PoseEstimator => Some(self.pose_estimator_ms),
-            StageKind::Supervisor | StageKind::Recorder | StageKind::Ros2Bridge => None,
+            StageKind::Supervisor
+            | StageKind::Recorder
+            | StageKind::Ros2Bridge
+            | StageKind::Link => None,
         }
     }
 }

@@ -1,9 +1,14 @@
-//! What every stage process of the pipeline shares.
+//! What every node process of the pipeline shares.
 //!
-//! A stage binary's `main` is one call, [`stage_main`]: it parses the [`StageArgs`] the
-//! supervisor passes, loads the run's config, starts telemetry, joins the run's
-//! shared-memory bus, arms SIGINT/SIGTERM, and runs the stage's loop. The loop uses a
-//! [`Reporter`] for heartbeats and events, and [`late_drop`] for the budget policy.
+//! A node binary's `main` is one call, [`stage_main`] (or [`node_main`] with a log filter of
+//! its own): it parses the [`StageArgs`] the supervisor passes, loads the run's config,
+//! starts telemetry, joins the run's shared-memory bus, arms SIGINT/SIGTERM, and runs the
+//! node's loop. The loop is the runtime's, by the node's role: [`run_stage`] for a
+//! processing stage (one input message in, one output message out, per frame),
+//! [`run_source`] for a node that brings frames in (a sequence, a recording, a camera, or
+//! frames delivered by another system's callbacks), [`run_sink`] for one that takes
+//! messages out (the recorder, the link). Each uses a [`Reporter`] for heartbeats and
+//! events, and hears the supervisor's stop through [`shutdown_ordered`].
 
 use anyhow::Context;
 use clap::Parser;
@@ -12,6 +17,8 @@ use linetrack_ipc::{Bus, Inlet, IpcError, Outlet, Received, Record, Scope, Shutd
 
 mod runner;
 mod side;
+mod sink;
+mod source;
 pub mod time;
 use linetrack_msgs::{Command, Control, RigRecord, SegmentRecord};
 use linetrack_msgs::{
@@ -22,6 +29,8 @@ use linetrack_vision::DetectorKind;
 use linetrack_vision::{BorrowedGray, GrayImage, VisionError};
 pub use runner::{Stage, run_stage};
 pub use side::RightImageWorker;
+pub use sink::{Sink, run_sink};
+pub use source::{Source, SourceOut, Step, run_source};
 use std::collections::VecDeque;
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -554,8 +563,18 @@ pub fn stage_main(
     stage: StageKind,
     run: fn(&StageContext, &Bus, &Shutdown) -> anyhow::Result<()>,
 ) -> ExitCode {
+    node_main(stage, "warn", run)
+}
+
+/// [`stage_main`] for any node, logging by `log_filter` (a `tracing` filter such as
+/// `"info,zenoh=warn"`) unless `RUST_LOG` says otherwise.
+pub fn node_main(
+    stage: StageKind,
+    log_filter: &str,
+    run: fn(&StageContext, &Bus, &Shutdown) -> anyhow::Result<()>,
+) -> ExitCode {
     let args = StageArgs::parse();
-    match start(stage, args, run) {
+    match start(stage, log_filter, args, run) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
             tracing::error!("{stage}: {e:#}");
@@ -567,6 +586,7 @@ pub fn stage_main(
 
 fn start(
     stage: StageKind,
+    log_filter: &str,
     args: StageArgs,
     run: fn(&StageContext, &Bus, &Shutdown) -> anyhow::Result<()>,
 ) -> anyhow::Result<()> {
@@ -582,7 +602,7 @@ fn start(
         .output
         .trace
         .then(|| linetrack_telemetry::span_file(&args.run_dir, stage.name(), pid));
-    let _spans = linetrack_telemetry::init(stage.name(), "warn", spans.as_deref())?;
+    let _spans = linetrack_telemetry::init(stage.name(), log_filter, spans.as_deref())?;
     for refusal in refused {
         tracing::warn!("{refusal}");
     }
@@ -603,7 +623,7 @@ fn start(
 }
 
 /// Whether a [`Command::Shutdown`] for `stage` (instance `pid`, or every instance) came in
-/// on `control`: how a source or a sink that runs its own loop hears the supervisor's stop.
+/// on `control`: how the runtime's loops hear the supervisor's stop.
 pub fn shutdown_ordered(
     control: &mut Inlet<Control, ()>,
     stage: StageKind,
@@ -628,6 +648,9 @@ pub fn end_with_parent(shutdown: &Shutdown, supervisor: Option<u32>) -> anyhow::
     }
     Ok(())
 }
+
+#[cfg(test)]
+mod role_tests;
 
 #[cfg(test)]
 mod tests {

@@ -76,6 +76,13 @@ pub trait Stage {
         false
     }
 
+    /// Whether a frame's processing leaves what the next frame needs (the matcher matches
+    /// each frame with the one before): a standby taking over at frame F then processes
+    /// the held frame before F first, without publishing it.
+    fn keeps_state(&self) -> bool {
+        false
+    }
+
     /// What is published for a frame that was dropped or failed, into `out` (given
     /// empty; nothing by default).
     fn placeholder(&self, _out: &mut Vec<Self::Output>) {}
@@ -260,15 +267,21 @@ impl<S: Stage> Runner<'_, S> {
     /// old instance; the rest are processed now.
     fn take_over(&mut self, from: u64, ports: &mut Ports<S>) -> anyhow::Result<()> {
         tracing::info!("taking over at frame {from}");
+        // What arrived since the last turn is held too.
+        let overflow = self.waiting.receive(&mut ports.input)?;
+        ports.reporter.overflow(overflow);
         if let Some(first) = self.waiting.first_id()
             && first > from
         {
             tracing::warn!("frames {from}..{first} were released before the take-over");
         }
-        let inputs: Vec<Received<S::Input, S::InputHeader>> =
-            std::iter::from_fn(|| self.waiting.take_next())
-                .filter(|m| m.header().frame().frame_id >= from)
-                .collect();
+        let (before, inputs): (Vec<_>, Vec<_>) = std::iter::from_fn(|| self.waiting.take_next())
+            .partition(|m| m.header().frame().frame_id < from);
+        if self.stage.keeps_state()
+            && let Some(last) = before.last()
+        {
+            self.warm_up(last, ports);
+        }
         self.role = Role::Active;
         // Held inputs were queued by the swap, not by slowness: none is dropped as behind
         // (the age limit still applies).
@@ -276,6 +289,31 @@ impl<S: Stage> Runner<'_, S> {
             self.one_frame(input, false, ports)?;
         }
         Ok(())
+    }
+
+    /// Processes `input` (a frame the old instance published) for the state it leaves; the
+    /// result is not published.
+    fn warm_up(&mut self, input: &Received<S::Input, S::InputHeader>, ports: &Ports<S>) {
+        let mut header = S::OutputHeader::from(*input.header());
+        let frame_id = header.frame().frame_id;
+        if !header.frame().is_ok() {
+            // Dropped or failed upstream: the old instance did not process it either.
+            return;
+        }
+        let images = if ports.frames.is_some() {
+            self.images.take(frame_id)
+        } else {
+            None
+        };
+        self.records.clear();
+        match self
+            .stage
+            .process(&mut header, input, images.as_ref(), &mut self.records)
+        {
+            Ok(()) => tracing::info!("warmed up on frame {frame_id}"),
+            Err(e) => tracing::warn!("warming up on frame {frame_id}: {e:#}"),
+        }
+        self.records.clear();
     }
 
     /// Processes the waiting inputs (at most the subscriber's borrow limit at once),
@@ -376,6 +414,9 @@ mod tests {
     /// and fails a blank frame.
     struct Tag {
         instance: f32,
+        /// Keeps the last frame it processed (as the matcher keeps the previous frame).
+        remembers: bool,
+        last: Option<u64>,
     }
 
     impl Stage for Tag {
@@ -400,10 +441,20 @@ mod tests {
             out: &mut Vec<SegmentRecord>,
         ) -> anyhow::Result<()> {
             anyhow::ensure!(input.payload().first() != Some(&0), "a blank frame");
+            let last = self.last.replace(header.frame.frame_id);
             out.push(SegmentRecord {
-                endpoints: [self.instance, header.frame.frame_id as f32, 0.0, 0.0],
+                endpoints: [
+                    self.instance,
+                    header.frame.frame_id as f32,
+                    last.map_or(-1.0, |l| l as f32),
+                    0.0,
+                ],
             });
             Ok(())
+        }
+
+        fn keeps_state(&self) -> bool {
+            self.remembers
         }
     }
 
@@ -431,6 +482,16 @@ mod tests {
 
     #[test]
     fn a_hand_over_between_two_instances_publishes_every_frame_once() {
+        hand_over(false);
+    }
+
+    #[test]
+    fn a_standby_that_keeps_state_takes_over_with_the_frame_before_processed() {
+        hand_over(true);
+    }
+
+    /// Two instances of a stage (that `remembers` its last frame or not) hand over.
+    fn hand_over(remembers: bool) {
         let hub = linetrack_ipc::LocalHub::default();
         let bus = hub.bus();
         let mut frames = bus
@@ -448,7 +509,11 @@ mod tests {
         let start = |pid: u32, standby: bool, instance: f32| {
             let hub = hub.clone();
             std::thread::spawn(move || {
-                let stage = Tag { instance };
+                let stage = Tag {
+                    instance,
+                    remembers,
+                    last: None,
+                };
                 run_stage(
                     &context(pid, standby),
                     &hub.bus(),
@@ -529,6 +594,11 @@ mod tests {
             })
             .collect();
         assert_eq!(seen, expected, "(frame, instance, records)");
+        // The new instance's first frame: the one before it was processed (not published)
+        // by the new instance when it keeps state, else it starts afresh.
+        let before_first = results[next as usize].payload()[0].endpoints[2];
+        let expected_before = if remembers { (next - 1) as f32 } else { -1.0 };
+        assert_eq!(before_first, expected_before);
         assert_eq!(
             results[3].header().frame.status.get(),
             Ok(linetrack_msgs::FrameStatus::StageError)

@@ -3,7 +3,8 @@
 //! - `linetrack run`: the pipeline end to end (one process per stage over shared memory, or
 //!   `--single-process`), with a live status line and the final latency report.
 //! - `linetrack replay FILE.mcap`: the same, its frames read from a recording (`[record]`).
-//! - `linetrack ctl swap-detector fld`: hot-swaps the detector of a running pipeline.
+//! - `linetrack ctl swap-detector fld`: hot-swaps the detector of a running pipeline;
+//!   `linetrack ctl swap-matcher` swaps its matcher for a fresh instance.
 //! - `linetrack report [RUN_DIR]`: the latency report of a run, with its latency pictures
 //!   ([`latency_plots`]) and a picture of a few frames of its trace ([`trace_picture`]).
 //! - `linetrack watch --connect tcp/HOST:PORT` (feature `link`): the far side of the
@@ -44,6 +45,7 @@ const DEFAULT_FRAMES: usize = 100;
         --calibration camchain.yaml --duration 60   # a live side-by-side stereo camera
     linetrack replay ~/.local/state/linetrack/runs/latest/recording.mcap   # a recorded run again
     linetrack ctl swap-detector fld                 # while a run is going, from another shell
+    linetrack ctl swap-matcher                      # a fresh matcher takes over, likewise
     linetrack report                                # the newest run: latency report and pictures
 
 A run folder holds frames.csv, events.csv, poses.tum (TUM), summary.json (how the run ended,
@@ -172,6 +174,13 @@ pub enum CtlAction {
     SwapDetector {
         /// The detector to switch to.
         detector: DetectorKind,
+        /// How long to wait for the take-over, seconds.
+        #[arg(long, default_value_t = 30.0)]
+        timeout: f64,
+    },
+    /// Replace the matcher by a fresh instance without stopping (it takes over with the
+    /// frame before the hand-over matched, as the old one had it); waits for the take-over.
+    SwapMatcher {
         /// How long to wait for the take-over, seconds.
         #[arg(long, default_value_t = 30.0)]
         timeout: f64,
@@ -442,40 +451,81 @@ pub fn ctl(args: &CtlArgs) -> anyhow::Result<()> {
                 println!("detector is already {}", detector.name());
                 return Ok(());
             }
-            let mut scope = Scope::with_prefix(&status.ipc_prefix, &status.run_id);
-            if let Some(root) = &status.ipc_root {
-                scope = scope.with_root(root.clone());
-            }
-            let bus = Bus::shared_memory(&scope, &format!("ctl-{}", std::process::id()))?;
-            let mut control = bus.outlet::<Control, ()>(Topic::Control, 1)?;
-            let request = Control::new(
-                Command::SwapDetector,
-                StageKind::Supervisor,
-                status.supervisor_pid,
-                linetrack_supervisor::detector_wire_code(*detector),
-                0,
-            );
-            control.publish(&(), &[&[request]])?;
-            println!(
-                "asked the supervisor (pid {}) to swap {} -> {}",
-                status.supervisor_pid,
-                status.detector,
-                detector.name()
-            );
-            let deadline = Instant::now() + Duration::from_secs_f64(timeout.max(0.1));
-            // Keep the request's publisher alive until the swap shows in the run's status.
-            while Instant::now() < deadline {
-                std::thread::sleep(Duration::from_millis(100));
-                let now = live_status(&run_dir)?;
-                if now.detector == detector.name() {
-                    println!("{} took over", detector.name());
-                    return Ok(());
-                }
-                if now.finished() {
-                    bail!("the run finished before the swap");
-                }
-            }
-            bail!("no take-over within {timeout} s (see the supervisor's log)")
+            let code = linetrack_supervisor::detector_wire_code(*detector);
+            let took_over = |now: &LiveStatus| now.detector == detector.name();
+            let asked = format!("swap {} -> {}", status.detector, detector.name());
+            let done = format!("{} took over", detector.name());
+            let _asking = request(&status, (Command::SwapDetector, code), &asked)?;
+            wait_for(&run_dir, *timeout, took_over, &done)
+        }
+        CtlAction::SwapMatcher { timeout } => {
+            let matchers = |s: &LiveStatus| -> Vec<u32> {
+                let matcher = StageKind::Matcher.name();
+                s.stages
+                    .iter()
+                    .filter(|e| e.stage == matcher && !e.standby)
+                    .map(|e| e.pid)
+                    .collect()
+            };
+            let before = matchers(&status);
+            let took_over = |now: &LiveStatus| {
+                let running = matchers(now);
+                running.len() == 1 && !before.contains(&running[0])
+            };
+            let code = u32::from(StageKind::Matcher);
+            let asked = format!("swap the matcher (pid {before:?}) for a fresh one");
+            let _asking = request(&status, (Command::SwapStage, code), &asked)?;
+            wait_for(&run_dir, *timeout, took_over, "a fresh matcher took over")
         }
     }
+}
+
+/// Sends `command` with `value` to the run's supervisor; `asked` says what. Returns the
+/// request's publisher: keep it until the request is answered.
+fn request(
+    status: &LiveStatus,
+    (command, value): (Command, u32),
+    asked: &str,
+) -> anyhow::Result<(Bus, linetrack_ipc::Outlet<Control, ()>)> {
+    let mut scope = Scope::with_prefix(&status.ipc_prefix, &status.run_id);
+    if let Some(root) = &status.ipc_root {
+        scope = scope.with_root(root.clone());
+    }
+    let bus = Bus::shared_memory(&scope, &format!("ctl-{}", std::process::id()))?;
+    let mut control = bus.outlet::<Control, ()>(Topic::Control, 1)?;
+    let request = Control::new(
+        command,
+        StageKind::Supervisor,
+        status.supervisor_pid,
+        value,
+        0,
+    );
+    control.publish(&(), &[&[request]])?;
+    println!(
+        "asked the supervisor (pid {}) to {asked}",
+        status.supervisor_pid
+    );
+    Ok((bus, control))
+}
+
+/// Waits up to `timeout` seconds until the run's status says `took_over`; prints `done`.
+fn wait_for(
+    run_dir: &Path,
+    timeout: f64,
+    took_over: impl Fn(&LiveStatus) -> bool,
+    done: &str,
+) -> anyhow::Result<()> {
+    let deadline = Instant::now() + Duration::from_secs_f64(timeout.max(0.1));
+    while Instant::now() < deadline {
+        std::thread::sleep(Duration::from_millis(100));
+        let now = live_status(run_dir)?;
+        if took_over(&now) {
+            println!("{done}");
+            return Ok(());
+        }
+        if now.finished() {
+            bail!("the run finished before the swap");
+        }
+    }
+    bail!("no take-over within {timeout} s (see the supervisor's log)")
 }

@@ -1,0 +1,201 @@
+//! The source role: a node that brings frames into the pipeline (a sequence read from
+//! disk, a recording replayed, a live camera, or frames another system delivers). The
+//! runtime owns what every source shares: the frames' outlet, the stamps, the ready report,
+//! a heartbeat that counts the frames published, the supervisor's stop, and, once the
+//! source has no more frames, the `SourceFinished` report and staying until the run ends
+//! (a stage restarted after the last frame still needs what the source holds: the rig).
+//!
+//! A source only says what one turn publishes ([`Source::step`]). A turn may wait up to the
+//! time it is given for input of its own (a capture thread's queue, a subscription's
+//! callback through a channel), or say how long nothing is due ([`Step::Idle`]) so that
+//! the runtime sleeps on its wake-up meanwhile, where a command still reaches it.
+
+use crate::{Reporter, StageContext, shutdown_ordered, stamp_end};
+use linetrack_ipc::{Bus, Inlet, Outlet, Shutdown};
+use linetrack_msgs::{Control, FrameHeader, FrameStatus, StageKind, StatusKind, Topic};
+use std::time::Duration;
+use tracing::info_span;
+
+/// What a turn of a source did.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Step {
+    /// Call again (it published, or its wait for input ended).
+    Again,
+    /// Nothing is due for this long: the runtime sleeps on its wake-up meanwhile (at most
+    /// until the next heartbeat).
+    Idle(Duration),
+    /// No more frames: the runtime reports the source finished and stays until the run ends.
+    Finished,
+}
+
+/// One source's work.
+pub trait Source {
+    /// Which node it is.
+    const KIND: StageKind;
+    /// Bytes a frame message holds before more are allocated.
+    const FRAME_BYTES: usize;
+
+    /// Publishes what must reach the stages before the first frame (the rig); the runtime
+    /// reports the source ready after it.
+    fn start(&mut self, out: &mut SourceOut) -> anyhow::Result<()>;
+
+    /// One turn: publishes into `out` what is due, waiting at most `wait` for input it does
+    /// not have yet.
+    fn step(&mut self, out: &mut SourceOut, wait: Duration) -> anyhow::Result<Step>;
+
+    /// Called on every turn and while the source stays after its last frame (the rig's
+    /// outlet connects the stages that started since).
+    fn poll(&mut self) -> anyhow::Result<()> {
+        Ok(())
+    }
+}
+
+/// Where a source publishes: the frames' outlet, stamped and counted, and its reporter.
+pub struct SourceOut {
+    frames: Outlet<u8, FrameHeader>,
+    reporter: Reporter,
+    kind: StageKind,
+    clock: crate::Clock,
+    start: u64,
+    published: u64,
+    last_id: u64,
+}
+
+impl SourceOut {
+    /// The first frame id of this instance (after a restart, where the last one stopped).
+    pub fn start(&self) -> u64 {
+        self.start
+    }
+
+    /// Frame ids published so far by this instance (markers too).
+    pub fn published(&self) -> u64 {
+        self.published
+    }
+
+    /// The id that follows the ones published so far.
+    pub fn next_id(&self) -> u64 {
+        self.start + self.published
+    }
+
+    /// The source's clock, UNIX-epoch nanoseconds.
+    pub fn now_ns(&self) -> u64 {
+        self.clock.now_ns()
+    }
+
+    /// The source's clock.
+    pub fn clock(&self) -> &crate::Clock {
+        &self.clock
+    }
+
+    /// The status reporter (a camera's lost and back events).
+    pub fn reporter(&mut self) -> &mut Reporter {
+        &mut self.reporter
+    }
+
+    /// Publishes frame `frame_id` taken at `capture_ns`: its images, `width`×`height` each,
+    /// in `images` (left then right).
+    pub fn frame(
+        &mut self,
+        frame_id: u64,
+        timestamp_ns: u64,
+        capture_ns: u64,
+        size: (u32, u32),
+        images: &[&[u8]],
+    ) -> anyhow::Result<()> {
+        let span = info_span!("publish_frame", frame_id);
+        let _entered = span.enter();
+        let mut header = self.header(frame_id, timestamp_ns, capture_ns);
+        (header.width, header.height) = size;
+        self.publish(header, images)
+    }
+
+    /// Publishes frame `frame_id` without pixels, marked `status` (read corrupt, dropped or
+    /// late at the capture), taken at `capture_ns`.
+    pub fn marker(
+        &mut self,
+        frame_id: u64,
+        timestamp_ns: u64,
+        capture_ns: u64,
+        status: FrameStatus,
+    ) -> anyhow::Result<()> {
+        let mut header = self.header(frame_id, timestamp_ns, capture_ns);
+        header.mark(status, self.kind);
+        self.publish(header, &[])
+    }
+
+    fn header(&self, frame_id: u64, timestamp_ns: u64, capture_ns: u64) -> FrameHeader {
+        let mut header = FrameHeader::new(frame_id, timestamp_ns, capture_ns);
+        if let Some(stamp) = header.stamp_mut(self.kind) {
+            stamp.start_ns = capture_ns;
+        }
+        header
+    }
+
+    fn publish(&mut self, mut header: FrameHeader, images: &[&[u8]]) -> anyhow::Result<()> {
+        stamp_end(&mut header, self.kind, self.clock.now_ns());
+        self.frames.publish(&header, images)?;
+        self.published += 1;
+        self.last_id = header.frame_id;
+        Ok(())
+    }
+}
+
+/// Runs `source` until the run ends (a signal or the supervisor's stop): its frames, then,
+/// once it has no more, stays (see the module's doc).
+pub fn run_source<S: Source>(
+    ctx: &StageContext,
+    bus: &Bus,
+    mut source: S,
+    shutdown: &Shutdown,
+) -> anyhow::Result<()> {
+    let mut out = SourceOut {
+        frames: bus.outlet(Topic::Frames, S::FRAME_BYTES)?,
+        reporter: Reporter::new(bus, ctx, 0)?,
+        kind: S::KIND,
+        clock: ctx.clock.clone(),
+        start: ctx.args.start_frame as u64,
+        published: 0,
+        last_id: 0,
+    };
+    let mut control: Inlet<Control, ()> = bus.inlet(Topic::Control)?;
+    let wake = bus.wake(S::KIND)?;
+    let stop = |control: &mut Inlet<Control, ()>| -> anyhow::Result<bool> {
+        Ok(shutdown.requested() || shutdown_ordered(control, S::KIND, ctx.pid)?)
+    };
+    source.start(&mut out)?;
+    out.reporter.report(StatusKind::Ready, out.start, 0);
+    let mut reported = 0;
+    loop {
+        if stop(&mut control)? {
+            tracing::info!("shutdown after {} frames", out.published);
+            return Ok(());
+        }
+        let wait = out.reporter.until_due().max(Duration::from_millis(1));
+        let step = source.step(&mut out, wait)?;
+        if out.published > reported {
+            // The supervisor counts the frames published from these.
+            out.reporter
+                .report(StatusKind::Heartbeat, out.last_id, out.published);
+            reported = out.published;
+        }
+        out.reporter.beat(out.published);
+        source.poll()?;
+        match step {
+            Step::Again => {}
+            Step::Idle(idle) => wake.wait(idle.min(wait))?,
+            Step::Finished => break,
+        }
+    }
+    out.reporter.report(
+        StatusKind::SourceFinished,
+        out.next_id().saturating_sub(1),
+        out.published,
+    );
+    tracing::info!("finished: {} frames published", out.published);
+    while !stop(&mut control)? {
+        source.poll()?;
+        out.reporter.beat(out.published);
+        wake.wait(out.reporter.until_due().max(Duration::from_millis(1)))?;
+    }
+    Ok(())
+}
