@@ -306,7 +306,7 @@ pub fn run(args: &RunArgs) -> anyhow::Result<PathBuf> {
         Mode::Processes
     };
     println!(
-        "linetrack: {} on {} ({}, {}), detector {}, matcher {}",
+        "linetrack: {} on {} ({}, {}), detector {}, matcher {}, points {}",
         if args.single_process {
             "single process"
         } else {
@@ -343,6 +343,7 @@ pub fn run(args: &RunArgs) -> anyhow::Result<PathBuf> {
         },
         config.detector.name(),
         config.matcher.mode_name(),
+        config.points_text(),
     );
     let options = RunOptions {
         mode,
