@@ -246,15 +246,15 @@ pub(crate) fn corner_score(image: GrayView<'_>, x: usize, y: usize, threshold: u
 /// The largest, over the 16 arcs of [`ARC`] positions, of the arc's smallest value.
 #[inline(always)]
 fn best_arc_minimum(values: [i16; 16]) -> i16 {
-    // Minima over runs of 2, 4, 8 and then 9 positions, by doubling (lane k: the run
-    // starting at position k, around the circle).
-    let rotate =
-        |a: [i16; 16], by: usize| -> [i16; 16] { std::array::from_fn(|k| a[(k + by) % 16]) };
-    let lanewise_min =
-        |a: [i16; 16], b: [i16; 16]| -> [i16; 16] { std::array::from_fn(|k| a[k].min(b[k])) };
-    let two = lanewise_min(values, rotate(values, 1));
-    let four = lanewise_min(two, rotate(two, 2));
-    let eight = lanewise_min(four, rotate(four, 4));
-    let nine = lanewise_min(eight, rotate(values, ARC - 1));
+    // The circle twice over, so that every run is a window of one array; minima over runs
+    // of 2, 4, 8 and then 9 positions by doubling (entry k: the run starting at position
+    // k), each a lane-wise minimum of two windows (loops the compiler vectorises).
+    let mut twice = [0i16; 32];
+    twice[..16].copy_from_slice(&values);
+    twice[16..].copy_from_slice(&values);
+    let two: [i16; 24] = std::array::from_fn(|k| twice[k].min(twice[k + 1]));
+    let four: [i16; 20] = std::array::from_fn(|k| two[k].min(two[k + 2]));
+    let eight: [i16; 16] = std::array::from_fn(|k| four[k].min(four[k + 4]));
+    let nine: [i16; 16] = std::array::from_fn(|k| eight[k].min(twice[k + ARC - 1]));
     nine.into_iter().fold(i16::MIN, i16::max)
 }

@@ -206,6 +206,41 @@ fn the_build_for_the_cpu_finds_what_the_baseline_build_finds() {
 }
 
 #[test]
+fn a_corner_scores_the_best_arcs_weakest_difference() {
+    // Random circles, against the score written out: over the 16 arcs of 9 positions, the
+    // best of each arc's smallest difference (brighter, or darker), less one.
+    let mut state = 17;
+    let mut checked = 0;
+    for _ in 0..20_000 {
+        let mut pixels = vec![0u8; 49];
+        for p in &mut pixels {
+            *p = (describe::tests_support::uniform(&mut state) * 256.0) as u8;
+        }
+        let centre = i16::from(pixels[24]);
+        let around: Vec<i16> = fast::CIRCLE
+            .iter()
+            .map(|&(dx, dy)| i16::from(pixels[((3 + dy) * 7 + 3 + dx) as usize]) - centre)
+            .collect();
+        let best = |sign: i16| {
+            (0..16)
+                .map(|start| {
+                    (0..9)
+                        .map(|k| sign * around[(start + k) % 16])
+                        .min()
+                        .unwrap()
+                })
+                .max()
+                .unwrap()
+        };
+        let strongest = best(1).max(best(-1));
+        let expected = (strongest > 10).then(|| (strongest - 1).clamp(1, 255) as u8);
+        assert_eq!(fast::corner_score(view(&pixels, 7, 7), 3, 3, 10), expected);
+        checked += usize::from(expected.is_some());
+    }
+    assert!(checked > 100, "{checked} corners among the random circles");
+}
+
+#[test]
 fn a_straight_edge_and_a_flat_image_have_no_corners() {
     let (width, height) = (120, 80);
     let mut pixels = vec![30u8; width * height];
