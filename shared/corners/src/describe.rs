@@ -107,6 +107,7 @@ impl Pattern {
     /// `j` of byte `i` is set when pair `8i + j`'s first point is darker than its second.
     /// The corner is at least `BORDER_PX` from the borders; [`Pattern::prepare`] was called
     /// with `smooth`'s stride.
+    #[inline(always)]
     pub(crate) fn describe(
         &self,
         smooth: GrayView<'_>,
@@ -130,6 +131,7 @@ impl Pattern {
 
     /// Direction from `(x, y)` to the intensity centroid of the disc of radius 15 around it
     /// in `image`, radians, image axes. The point is at least `BORDER_PX` from the borders.
+    #[inline(always)]
     pub(crate) fn orientation(&self, image: GrayView<'_>, x: usize, y: usize) -> f32 {
         let (mut m10, mut m01) = (0i64, 0i64);
         for k in 0..DISC_ROWS {
@@ -176,6 +178,7 @@ impl Pattern {
 }
 
 /// The nearest of the [`ANGLE_STEPS`] orientations to `angle_rad`.
+#[inline(always)]
 fn angle_step(angle_rad: f32) -> usize {
     let steps = ANGLE_STEPS as f64;
     let step = (f64::from(angle_rad) / TAU * steps).round() as i64;

@@ -33,9 +33,11 @@ const ARC: usize = 9;
 /// borders: replaces
 /// `candidates` with them and `scores` with the image's score map (0 where no corner).
 ///
-/// Each row is first screened with the 8 even positions of the circle (an arc of 9 holds 4
-/// contiguous ones), in one vectorised pass; the few centres that pass are tested on the
-/// whole circle.
+/// Each row is screened [`LANES`] centres at a time in two vectorised steps: first the 4
+/// compass positions (0, 4, 8, 12: an arc of 9 holds 2 neighbouring ones), and a block none
+/// of whose centres passes is done; then the 8 even positions (an arc of 9 holds 4
+/// contiguous ones). The few centres that pass both are tested on the whole circle.
+#[inline(always)]
 pub(crate) fn detect(
     image: GrayView<'_>,
     threshold: u8,
@@ -51,6 +53,7 @@ pub(crate) fn detect(
     if width <= 2 * edge || height <= 2 * edge {
         return;
     }
+    let ring = Ring::new(image.stride());
     let inner = width - 2 * edge;
     for y in edge..height - edge {
         let span = |dx: isize, dy: isize| {
@@ -63,34 +66,33 @@ pub(crate) fn detect(
             let (dx, dy) = CIRCLE[2 * k];
             span(dx, dy)
         });
-        // Blocks of 16 centres in fixed-size arrays, which the compiler vectorises; the
-        // row's tail in a last, partial block (zero-padded, its flags past the row dropped);
-        // the few centres that pass are tested on the whole circle.
+        // Blocks of LANES centres in fixed-size arrays, which the compiler vectorises; the
+        // row's tail in a last, partial block (zero-padded, its flags past the row dropped).
         for start in (0..inner).step_by(LANES) {
-            let block = [
-                lane(centre, start),
-                lane(even[0], start),
-                lane(even[1], start),
-                lane(even[2], start),
-                lane(even[3], start),
-                lane(even[4], start),
-                lane(even[5], start),
-                lane(even[6], start),
-                lane(even[7], start),
-            ];
-            let flags = compass_block(&block, threshold);
+            let c = lane(centre, start);
+            let [p0, p4, p8, p12] = [0, 2, 4, 6].map(|k| lane(even[k], start));
+            let (high, low) = (
+                c.map(|c| c.saturating_add(threshold)),
+                c.map(|c| c.saturating_sub(threshold)),
+            );
+            if !any_compass(&high, &low, [&p0, &p4, &p8, &p12]) {
+                continue;
+            }
+            let [p2, p6, p10, p14] = [1, 3, 5, 7].map(|k| lane(even[k], start));
+            let around = [&p0, &p2, &p4, &p6, &p8, &p10, &p12, &p14];
+            let flags = even_screen(&high, &low, around);
             // One bit per centre that passed, past the row's end cleared.
             let mut passed = flags
                 .iter()
                 .enumerate()
-                .fold(0u32, |bits, (i, &f)| bits | (u32::from(f) << i));
+                .fold(0u64, |bits, (i, &f)| bits | (u64::from(f) << i));
             if inner - start < LANES {
                 passed &= (1 << (inner - start)) - 1;
             }
             while passed != 0 {
                 let x = edge + start + passed.trailing_zeros() as usize;
                 passed &= passed - 1;
-                if let Some(score) = corner_score(image, x, y, threshold) {
+                if let Some(score) = ring.score(image.pixels(), y * image.stride() + x, threshold) {
                     scores[y * width + x] = score;
                     candidates.push(Candidate {
                         x: x as u32,
@@ -103,8 +105,8 @@ pub(crate) fn detect(
     }
 }
 
-/// Centres a block of the screening pass holds.
-const LANES: usize = 16;
+/// Centres a block of the screening pass holds (a 256-bit vector of bytes).
+const LANES: usize = 32;
 
 /// `row[start..start + LANES]`, zero-padded past the row's end.
 #[inline(always)]
@@ -120,19 +122,42 @@ fn lane(row: &[u8], start: usize) -> [u8; LANES] {
     out
 }
 
-/// The screening of one block: `block[0]` the centres, `block[1 + k]` circle position 2k;
-/// per centre 1 when 4 contiguous even positions are all brighter than the centre by more
-/// than `threshold`, or all darker, else 0.
+/// Whether any centre of a block has two neighbouring compass positions (`compass[k]`:
+/// circle position 4k) both above its `high` (the centre plus the threshold, saturated),
+/// or both below its `low`. Whole-lane byte masks (0 or 255), so the loop vectorises.
 #[inline(always)]
-fn compass_block(block: &[[u8; LANES]; 9], threshold: u8) -> [u8; LANES] {
+fn any_compass(high: &[u8; LANES], low: &[u8; LANES], compass: [&[u8; LANES]; 4]) -> bool {
+    let [p0, p4, p8, p12] = compass;
+    let mut any = [0u8; LANES];
+    for i in 0..LANES {
+        let (h, l) = (high[i], low[i]);
+        let above = |p: &[u8; LANES]| if p[i] > h { 0xFF } else { 0 };
+        let below = |p: &[u8; LANES]| if p[i] < l { 0xFF } else { 0 };
+        let (b0, b4, b8, b12) = (above(p0), above(p4), above(p8), above(p12));
+        let (d0, d4, d8, d12) = (below(p0), below(p4), below(p8), below(p12));
+        any[i] = (b0 & b4)
+            | (b4 & b8)
+            | (b8 & b12)
+            | (b12 & b0)
+            | (d0 & d4)
+            | (d4 & d8)
+            | (d8 & d12)
+            | (d12 & d0);
+    }
+    any.iter().fold(0, |a, &b| a | b) != 0
+}
+
+/// The screening of one block on the 8 even circle positions (`around[k]`: position 2k):
+/// per centre 1 when 4 contiguous ones are all above its `high`, or all below its `low`,
+/// else 0.
+#[inline(always)]
+fn even_screen(high: &[u8; LANES], low: &[u8; LANES], around: [&[u8; LANES]; 8]) -> [u8; LANES] {
     let mut out = [0; LANES];
-    for (i, o) in out.iter_mut().enumerate() {
-        let c = block[0][i];
-        let (high, low) = (c.saturating_add(threshold), c.saturating_sub(threshold));
-        let around: [u8; 8] = std::array::from_fn(|k| block[1 + k][i]);
-        let bright = four_in_a_row(around.map(|p| u8::from(p > high)));
-        let dark = four_in_a_row(around.map(|p| u8::from(p < low)));
-        *o = bright | dark;
+    for i in 0..LANES {
+        let (h, l) = (high[i], low[i]);
+        let bright: [u8; 8] = std::array::from_fn(|k| u8::from(around[k][i] > h));
+        let dark: [u8; 8] = std::array::from_fn(|k| u8::from(around[k][i] < l));
+        out[i] = four_in_a_row(bright) | four_in_a_row(dark);
     }
     out
 }
@@ -147,7 +172,17 @@ fn four_in_a_row([e0, e1, e2, e3, e4, e5, e6, e7]: [u8; 8]) -> u8 {
     (a & b) | (b & c) | (c & d) | (d & a) | (ab & bc) | (bc & cd) | (cd & da) | (da & ab)
 }
 
+/// `values` with their signs turned.
+#[inline(always)]
+fn negated(mut values: [i16; 16]) -> [i16; 16] {
+    for v in &mut values {
+        *v = -*v;
+    }
+    values
+}
+
 /// Whether `mask` has [`ARC`] contiguous set bits, around the circle.
+#[inline(always)]
 fn has_arc(mask: u16) -> bool {
     let twice = u32::from(mask) | (u32::from(mask) << 16);
     let mut run = twice & (twice >> 1);
@@ -157,46 +192,69 @@ fn has_arc(mask: u16) -> bool {
     run & 0xFFFF != 0
 }
 
-/// Whether `(x, y)` is a FAST-9 corner at `threshold`, and if so its score: the largest
-/// threshold at which it still is one, i.e. the best, over the arcs of 9, of the smallest
-/// difference along the arc (brighter or darker) less one.
-pub(crate) fn corner_score(image: GrayView<'_>, x: usize, y: usize, threshold: u8) -> Option<u8> {
-    let stride = image.stride();
-    let reach = 3 * stride + 3;
-    let start = (y * stride + x).checked_sub(reach)?;
-    let window = image.pixels().get(start..start + 2 * reach + 1)?;
-    let centre = i16::from(window[reach]);
-    let around: [i16; 16] = std::array::from_fn(|k| {
-        let (dx, dy) = CIRCLE[k];
-        let at = (reach as isize + dy * stride as isize + dx) as usize;
-        i16::from(window[at]) - centre
-    });
-    let t = i16::from(threshold);
-    let (mut brighter, mut darker) = (0u16, 0u16);
-    for (k, &d) in around.iter().enumerate() {
-        brighter |= u16::from(d > t) << k;
-        darker |= u16::from(d < -t) << k;
+/// The circle's 16 pixels as offsets into an image of rows `stride` bytes apart, from
+/// `reach` bytes before the centre (so none is negative).
+pub(crate) struct Ring {
+    offsets: [usize; 16],
+    reach: usize,
+}
+
+impl Ring {
+    /// The circle in an image of rows `stride` bytes apart.
+    pub(crate) fn new(stride: usize) -> Self {
+        let reach = 3 * stride + 3;
+        let offsets = CIRCLE.map(|(dx, dy)| (reach as isize + dy * stride as isize + dx) as usize);
+        Self { offsets, reach }
     }
-    let best = match (has_arc(brighter), has_arc(darker)) {
-        (false, false) => return None,
-        (true, false) => best_arc_minimum(around),
-        (false, true) => best_arc_minimum(around.map(|d| -d)),
-        (true, true) => best_arc_minimum(around).max(best_arc_minimum(around.map(|d| -d))),
-    };
-    Some((best - 1).clamp(1, 255) as u8)
+
+    /// Whether the pixel `at` of `pixels` (rows of the ring's stride) is a FAST-9 corner
+    /// at `threshold`, and if so its score: the largest threshold at which it still is one,
+    /// i.e. the best, over the arcs of 9, of the smallest difference along the arc (brighter
+    /// or darker) less one. `None` too when the circle leaves `pixels`.
+    #[inline(always)]
+    pub(crate) fn score(&self, pixels: &[u8], at: usize, threshold: u8) -> Option<u8> {
+        let start = at.checked_sub(self.reach)?;
+        let window = pixels.get(start..start + 2 * self.reach + 1)?;
+        let centre = i16::from(window[self.reach]);
+        let mut around = [0i16; 16];
+        for (d, &at) in around.iter_mut().zip(&self.offsets) {
+            *d = i16::from(window[at]) - centre;
+        }
+        let t = i16::from(threshold);
+        let (mut brighter, mut darker) = (0u16, 0u16);
+        for (k, &d) in around.iter().enumerate() {
+            brighter |= u16::from(d > t) << k;
+            darker |= u16::from(d < -t) << k;
+        }
+        let best = match (has_arc(brighter), has_arc(darker)) {
+            (false, false) => return None,
+            (true, false) => best_arc_minimum(around),
+            (false, true) => best_arc_minimum(negated(around)),
+            (true, true) => best_arc_minimum(around).max(best_arc_minimum(negated(around))),
+        };
+        Some((best - 1).clamp(1, 255) as u8)
+    }
+}
+
+/// Whether `(x, y)` is a FAST-9 corner of `image` at `threshold`, and if so its score
+/// ([`Ring::score`]).
+#[cfg(test)]
+pub(crate) fn corner_score(image: GrayView<'_>, x: usize, y: usize, threshold: u8) -> Option<u8> {
+    Ring::new(image.stride()).score(image.pixels(), y * image.stride() + x, threshold)
 }
 
 /// The largest, over the 16 arcs of [`ARC`] positions, of the arc's smallest value.
+#[inline(always)]
 fn best_arc_minimum(values: [i16; 16]) -> i16 {
-    // Minima over runs of 2, 4, 8 and then 9 positions, by doubling (lane k: the run
-    // starting at position k, around the circle).
-    let rotate =
-        |a: [i16; 16], by: usize| -> [i16; 16] { std::array::from_fn(|k| a[(k + by) % 16]) };
-    let lanewise_min =
-        |a: [i16; 16], b: [i16; 16]| -> [i16; 16] { std::array::from_fn(|k| a[k].min(b[k])) };
-    let two = lanewise_min(values, rotate(values, 1));
-    let four = lanewise_min(two, rotate(two, 2));
-    let eight = lanewise_min(four, rotate(four, 4));
-    let nine = lanewise_min(eight, rotate(values, ARC - 1));
+    // The circle twice over, so that every run is a window of one array; minima over runs
+    // of 2, 4, 8 and then 9 positions by doubling (entry k: the run starting at position
+    // k), each a lane-wise minimum of two windows (loops the compiler vectorises).
+    let mut twice = [0i16; 32];
+    twice[..16].copy_from_slice(&values);
+    twice[16..].copy_from_slice(&values);
+    let two: [i16; 24] = std::array::from_fn(|k| twice[k].min(twice[k + 1]));
+    let four: [i16; 20] = std::array::from_fn(|k| two[k].min(two[k + 2]));
+    let eight: [i16; 16] = std::array::from_fn(|k| four[k].min(four[k + 4]));
+    let nine: [i16; 16] = std::array::from_fn(|k| eight[k].min(twice[k + ARC - 1]));
     nine.into_iter().fold(i16::MIN, i16::max)
 }

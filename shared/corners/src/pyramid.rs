@@ -28,6 +28,7 @@ pub(crate) struct Pyramid {
 impl Pyramid {
     /// Builds the levels of `image` that are large enough to hold a corner; returns how many
     /// there are (0 when even `image` is too small).
+    #[inline(always)]
     pub(crate) fn build(&mut self, image: GrayView<'_>, params: &Params) -> usize {
         let (width, height) = (image.width(), image.height());
         // The smallest level worth building: room for one corner inside the border.
@@ -88,6 +89,7 @@ impl Pyramid {
 
 /// Bilinear resampling of `source` into `out` (`width` × `height`, packed), pixel
 /// centres aligned: destination pixel `d` samples source position `(d + ½)·s − ½`.
+#[inline(always)]
 fn resample(
     source: GrayView<'_>,
     out: &mut [u8],
@@ -145,6 +147,7 @@ const TAP_BITS: u32 = 6;
 impl Smoother {
     /// `image` smoothed in both directions (edges clamped), packed (`None` never: the
     /// buffer is sized for it).
+    #[inline(always)]
     pub(crate) fn smooth<'a>(&'a mut self, image: GrayView<'_>) -> Option<GrayView<'a>> {
         let (width, height) = (image.width(), image.height());
         self.pixels.resize(width * height, 0);
@@ -171,6 +174,7 @@ impl Smoother {
 }
 
 /// One row smoothed horizontally: `out[x]` from `sums[x − 3 ..= x + 3]`, edges clamped.
+#[inline(always)]
 fn smooth_row(sums: &[u16], out: &mut [u8]) {
     let width = sums.len();
     let tap_sum = |x: usize| {

@@ -39,11 +39,15 @@ pub(crate) fn level_shares(pyramid: &Pyramid, count: usize, wanted: usize) -> [u
 }
 
 /// Keeps the candidates whose score is a strict maximum of their 3×3 neighbourhood in
-/// `scores` (ties go to the first in raster order), best first (then in raster order).
+/// `scores` (ties go to the first in raster order), and orders them best first (then in
+/// raster order): all of them when `whole`, else only the first `wanted` (the rest after
+/// them in no order).
 pub(crate) fn suppress_and_sort(
     image: GrayView<'_>,
     scores: &[u8],
     candidates: &mut Vec<Candidate>,
+    wanted: usize,
+    whole: bool,
 ) {
     let width = image.width();
     candidates.retain(|c| {
@@ -59,12 +63,20 @@ pub(crate) fn suppress_and_sort(
             && s >= scores[below]
             && s >= scores[below + 1]
     });
-    candidates.sort_unstable_by(|a, b| {
+    let best_first = |a: &Candidate, b: &Candidate| {
         b.score
             .cmp(&a.score)
             .then(a.y.cmp(&b.y))
             .then(a.x.cmp(&b.x))
-    });
+    };
+    // The order is total (no two candidates share a position), so the first `wanted` are
+    // the same whichever way they are found.
+    if !whole && wanted < candidates.len() {
+        candidates.select_nth_unstable_by(wanted, best_first);
+        candidates[..wanted].sort_unstable_by(best_first);
+    } else {
+        candidates.sort_unstable_by(best_first);
+    }
 }
 
 /// The grid's buffers, kept between levels and images.

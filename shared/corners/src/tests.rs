@@ -140,6 +140,107 @@ fn the_fast_test_is_exact_on_hand_made_circles() {
 }
 
 #[test]
+fn the_screened_detector_finds_exactly_the_corners_of_the_whole_circle_test() {
+    // Every pixel tested on its whole circle, against the row detector with its two
+    // screening steps: the same corners with the same scores, on noise (full range, so the
+    // thresholds saturate at 0 and 255), on smooth texture, across widths that leave a
+    // partial block at the end of a row.
+    let mut state = 99;
+    for (width, height) in [(133, 77), (96, 60), (201, 50)] {
+        let noise: Vec<u8> = (0..width * height)
+            .map(|_| (describe::tests_support::uniform(&mut state) * 256.0) as u8)
+            .collect();
+        for (kind, pixels) in [("noise", noise), ("texture", texture(width, height, 3))] {
+            for threshold in [1, 5, 20, 60, 200] {
+                let image = view(&pixels, width, height);
+                let (mut scores, mut found) = (Vec::new(), Vec::new());
+                fast::detect(image, threshold, 0, &mut scores, &mut found);
+                let mut expected = Vec::new();
+                for y in BORDER_PX..height - BORDER_PX {
+                    for x in BORDER_PX..width - BORDER_PX {
+                        if let Some(score) = fast::corner_score(image, x, y, threshold) {
+                            expected.push(select::Candidate {
+                                x: x as u32,
+                                y: y as u32,
+                                score,
+                            });
+                        }
+                    }
+                }
+                let case = format!("{kind} {width}×{height}, threshold {threshold}");
+                assert_eq!(found, expected, "{case}");
+                if kind == "noise" && threshold <= 20 {
+                    assert!(!found.is_empty(), "{case}: no corners to compare");
+                }
+            }
+        }
+    }
+}
+
+#[test]
+fn the_build_for_the_cpu_finds_what_the_baseline_build_finds() {
+    // `extract` runs the work compiled for AVX2 where the CPU has it; the baseline build
+    // (`extract_on_any_cpu`, what other CPUs run) must give the same corners and
+    // descriptors, every level, with and without the grid.
+    let mut state = 5;
+    let (width, height) = (300, 220);
+    let noise: Vec<u8> = (0..width * height)
+        .map(|_| (describe::tests_support::uniform(&mut state) * 256.0) as u8)
+        .collect();
+    for pixels in [noise, texture(width, height, 11)] {
+        for cell_px in [0, 24] {
+            let params = Params {
+                max_corners: 400,
+                fast_threshold: 12,
+                cell_px,
+                ..Params::default()
+            };
+            let mut extractor = CornerExtractor::new(params).unwrap();
+            let (mut dispatched, mut baseline) = (Corners::default(), Corners::default());
+            extractor.extract(view(&pixels, width, height), &mut dispatched);
+            extractor.extract_on_any_cpu(view(&pixels, width, height), &mut baseline);
+            assert!(dispatched.len() > 100, "{} corners", dispatched.len());
+            assert_eq!(dispatched, baseline, "grid {cell_px}");
+        }
+    }
+}
+
+#[test]
+fn a_corner_scores_the_best_arcs_weakest_difference() {
+    // Random circles, against the score written out: over the 16 arcs of 9 positions, the
+    // best of each arc's smallest difference (brighter, or darker), less one.
+    let mut state = 17;
+    let mut checked = 0;
+    for _ in 0..20_000 {
+        let mut pixels = vec![0u8; 49];
+        for p in &mut pixels {
+            *p = (describe::tests_support::uniform(&mut state) * 256.0) as u8;
+        }
+        let centre = i16::from(pixels[24]);
+        let around: Vec<i16> = fast::CIRCLE
+            .iter()
+            .map(|&(dx, dy)| i16::from(pixels[((3 + dy) * 7 + 3 + dx) as usize]) - centre)
+            .collect();
+        let best = |sign: i16| {
+            (0..16)
+                .map(|start| {
+                    (0..9)
+                        .map(|k| sign * around[(start + k) % 16])
+                        .min()
+                        .unwrap()
+                })
+                .max()
+                .unwrap()
+        };
+        let strongest = best(1).max(best(-1));
+        let expected = (strongest > 10).then(|| (strongest - 1).clamp(1, 255) as u8);
+        assert_eq!(fast::corner_score(view(&pixels, 7, 7), 3, 3, 10), expected);
+        checked += usize::from(expected.is_some());
+    }
+    assert!(checked > 100, "{checked} corners among the random circles");
+}
+
+#[test]
 fn a_straight_edge_and_a_flat_image_have_no_corners() {
     let (width, height) = (120, 80);
     let mut pixels = vec![30u8; width * height];

@@ -776,6 +776,25 @@ impl Default for PipelineConfig {
 }
 
 impl PipelineConfig {
+    /// What finds the pose estimator's points, for reports: the corner extractor's name
+    /// (`[odometry.frontend.orb] extractor`, e.g. "orb-opencv" or "fast-brief") with its
+    /// point count and pyramid, or "none (lines only)".
+    pub fn points_text(&self) -> String {
+        match self.odometry.features {
+            linetrack_odometry::Features::LinesOnly => "none (lines only)".to_string(),
+            linetrack_odometry::Features::PointsAndLines => {
+                let orb = &self.odometry.frontend.orb;
+                format!(
+                    "{} ({} points, {} levels of {})",
+                    orb.extractor.name(),
+                    orb.features,
+                    orb.levels,
+                    orb.scale_factor
+                )
+            }
+        }
+    }
+
     /// Parses and validates TOML text; `origin` names it in errors.
     pub fn from_toml_str(text: &str, origin: &str) -> Result<Self, ConfigError> {
         let config: Self = toml::from_str(text).map_err(|e| ConfigError::Parse {
@@ -1000,6 +1019,23 @@ impl PipelineConfig {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_points_line_names_the_corner_extractor_that_runs() {
+        let mut config = PipelineConfig::default();
+        assert_eq!(
+            config.points_text(),
+            "orb-opencv (1500 points, 8 levels of 1.2)"
+        );
+        let text = "[odometry.frontend.orb]\nextractor = \"fast-brief\"\nfeatures = 1200\nlevels = 4\nscale_factor = 1.44\n";
+        let chosen = PipelineConfig::from_toml_str(text, "test").unwrap();
+        assert_eq!(
+            chosen.points_text(),
+            "fast-brief (1200 points, 4 levels of 1.44)"
+        );
+        config.odometry.features = linetrack_odometry::Features::LinesOnly;
+        assert_eq!(config.points_text(), "none (lines only)");
+    }
 
     #[test]
     fn the_shipped_config_is_the_default() {

@@ -24,6 +24,10 @@
 //!   points an image, a 30 px window);
 //! - `orb/refine-track`: the sub-pixel refinement of frame 0's frame-to-frame point matches;
 //! - `orb/refine-stereo`: the sub-pixel columns of frame 0's stereo point matches;
+//! - `stereo-frontend/{orb-opencv,fast-brief}`: the whole stereo front end of one frame
+//!   with each point extractor: both images' segments (edgelines), ℓ1 profiles and stereo
+//!   match; both images' 1500 points (8 levels of 1.2), their stereo match and every
+//!   partner's sub-pixel column (the 8 ms bar; the contrast stretch, `stretch`, apart);
 //! - `stretch`: the contrast stretch of one image (the odometry's default gain limit, 4).
 //!
 //! Monocular tracking of a frame = detect + describe + frame-to-frame match; stereo =
@@ -239,6 +243,54 @@ fn bench_frontend(c: &mut Criterion) {
                 b.iter(|| points_extractor.extract(black_box(&left), &mut points))
             });
         }
+    }
+    // The whole stereo front end of one EuRoC frame, as the odometry runs it: both images'
+    // segments with the pipeline's default detector (edgelines), their ℓ1 profiles and
+    // stereo match; both images' points (the odometry's 1500, 8 levels of 1.2) with each
+    // extractor, their stereo match and the sub-pixel column of every partner.
+    let mut line_detector = create_detector(DetectorKind::EdgeLines, &config).expect("detector");
+    let mut line_matcher = create_segment_matcher(MatcherKind::L1, &config).expect("l1");
+    let (mut lines_l, mut lines_r) = (LineFeatures::default(), LineFeatures::default());
+    let mut line_matches = Vec::new();
+    for extractor in PointExtractorKind::ALL {
+        let options = OrbOptions {
+            extractor,
+            ..odometry_orb
+        };
+        let mut points_extractor = PointExtractor::new(&options).expect("extractor");
+        let (mut points_l, mut points_r) = (PointFeatures::default(), PointFeatures::default());
+        let name = format!("stereo-frontend/{}", extractor.name());
+        group.bench_function(name, |b| {
+            b.iter(|| {
+                line_detector.detect(black_box(&left), &mut lines_l.segments)?;
+                line_detector.detect(black_box(&right), &mut lines_r.segments)?;
+                line_matcher.describe(&left, &mut lines_l)?;
+                line_matcher.describe(&right, &mut lines_r)?;
+                line_matcher.match_lines(MatchCase::Stereo, &lines_l, &lines_r, &mut line_matches);
+                points_extractor.extract(black_box(&left), &mut points_l)?;
+                points_extractor.extract(black_box(&right), &mut points_r)?;
+                point_matcher.match_points(
+                    MatchCase::Stereo,
+                    &points_l,
+                    &points_r,
+                    &config.appearance_gates,
+                    odometry_orb.min_distance_ratio,
+                    &mut out,
+                );
+                let refined = out
+                    .iter()
+                    .filter_map(|m| {
+                        refine_stereo_column(
+                            &left,
+                            &right,
+                            points_l.points[m.query],
+                            points_r.points[m.train],
+                        )
+                    })
+                    .count();
+                Ok::<_, linetrack_vision::VisionError>((line_matches.len(), refined))
+            })
+        });
     }
     odometry_extractor
         .extract(&left, &mut o_first)

@@ -315,7 +315,7 @@ pub fn run(args: &RunArgs) -> anyhow::Result<PathBuf> {
         Mode::Processes
     };
     println!(
-        "linetrack: {} on {} ({}, {}), detector {}, matcher {}",
+        "linetrack: {} on {} ({}, {}), detector {}, matcher {}, points {}",
         if args.single_process {
             "single process"
         } else {
@@ -352,6 +352,7 @@ pub fn run(args: &RunArgs) -> anyhow::Result<PathBuf> {
         },
         config.detector.name(),
         config.matcher.mode_name(),
+        config.points_text(),
     );
     let options = RunOptions {
         mode,
@@ -390,11 +391,18 @@ pub fn report(run_dir: &Path) -> anyhow::Result<String> {
         .with_context(|| format!("{} holds no run records", run_dir.display()))?;
     let (frames, events) = (&records.frames, &records.events);
     let report = Report::new(frames, events);
-    let budget = PipelineConfig::from_file(&run_dir.join("pipeline.toml"))
-        .map(|c| c.budget)
-        .ok();
+    let config = PipelineConfig::from_file(&run_dir.join("pipeline.toml")).ok();
+    let budget = config.as_ref().map(|c| c.budget.clone());
     let [distributions, timeline] = latency_plots::write(run_dir, frames, events, budget.as_ref())?;
-    let mut text = format!("run {}\n{}", run_dir.display(), report.to_text());
+    let points = config.as_ref().map_or_else(
+        || "unknown (no readable pipeline.toml)".to_string(),
+        PipelineConfig::points_text,
+    );
+    let mut text = format!(
+        "run {}\npoints: {points}\n{}",
+        run_dir.display(),
+        report.to_text()
+    );
     text.push_str(&records.gaps_text());
     for e in events.iter().filter(|e| e.kind != "stale-cleanup") {
         let at = e

@@ -370,7 +370,7 @@ fn bench(args: &Args) -> anyhow::Result<()> {
     }
     let _ = writeln!(
         out,
-        "## End to end, {} frames × {} runs per mode, `{}` at its own rate, {} + {}, {}, ms\n",
+        "## End to end, {} frames × {} runs per mode, `{}` at its own rate, {} + {}, {}, ms\n\npoints: {}\n",
         args.frames,
         args.repeats,
         args.sequence.display(),
@@ -379,7 +379,8 @@ fn bench(args: &Args) -> anyhow::Result<()> {
         match base.odometry.features {
             Features::PointsAndLines => "points and lines",
             Features::LinesOnly => "lines only",
-        }
+        },
+        base.points_text()
     );
     let names = [
         "one process per stage (iceoryx2)",
