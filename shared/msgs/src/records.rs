@@ -324,9 +324,13 @@ pub struct TrackedLine {
     pub previous: i32,
 }
 
-/// The pose of a frame.
+/// The pose of a frame, with its uncertainty. The covariances are symmetric 6×6 matrices
+/// sent as their upper triangle row by row (21 values: (0,0), (0,1), …, (0,5), (1,1), …,
+/// (5,5)); all zeros means none. The type name carries the layout's version: a process of
+/// another build refuses to connect instead of misreading the record.
 #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
 #[repr(C)]
+#[type_name("linetrack::PoseRecord/2")]
 #[derive(serde::Serialize, serde::Deserialize)]
 pub struct PoseRecord {
     /// Position of the left camera in the first frame's world, metres.
@@ -341,6 +345,15 @@ pub struct PoseRecord {
     pub observations: [u32; 2],
     /// RMS residual of the inliers, pixels.
     pub rms_px: f64,
+    /// Covariance of the pose: position (x, y, z, metres) then orientation (rotation
+    /// vector about x, y, z, radians; `R_true = exp(θ)·R`), both in the world's axes (the
+    /// first frame's camera), chained over the frames since the first.
+    pub covariance: [f64; 21],
+    /// Covariance of this frame's motion `p_curr = motion · p_prev` (left-multiplied error,
+    /// translation metres then rotation radians, in the current camera frame; to first order
+    /// the pose's error in its own body frame); zeros when the frame was lost or is the
+    /// first one tracked.
+    pub step_covariance: [f64; 21],
 }
 
 wire_enum! {
