@@ -53,10 +53,15 @@ pub fn ros_pose(record: &PoseRecord, convention: Convention) -> Option<Pose> {
 
 /// The stamp of a frame's messages.
 pub fn stamp(header: &FrameHeader, source: StampSource) -> Time {
-    Time::from_ns(match source {
+    Time::from_ns(stamp_ns(header, source))
+}
+
+/// The stamp of a frame's messages, nanoseconds.
+pub fn stamp_ns(header: &FrameHeader, source: StampSource) -> u64 {
+    match source {
         StampSource::Capture => header.capture_ns,
         StampSource::Sequence => header.sequence_ns,
-    })
+    }
 }
 
 /// The newest poses, at most a fixed number: the published path.

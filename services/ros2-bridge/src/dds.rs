@@ -1,14 +1,19 @@
 //! The DDS side (cargo feature `ros2`): a ROS 2 node with ros2-client over RustDDS that
-//! publishes the poses and the path.
+//! publishes the poses, the path, the odometry and `/tf`.
 //!
 //! QoS: the pose topic is reliable, keep-last 10, volatile (ROS 2's default for a
 //! publisher: a late subscriber does not get old poses, a slow one gets them all up to 10
 //! behind); the path is reliable, keep-last 1, transient-local, so that a subscriber that
-//! starts mid-run (RViz, `ros2 topic echo`) gets the trajectory so far at once. A writer
+//! starts mid-run (RViz, `ros2 topic echo`) gets the trajectory so far at once. The odometry
+//! is as the pose; `/tf` is reliable, keep-last [`TF_DEPTH`], volatile (tf2's broadcaster's
+//! profile). A writer
 //! whose subscriber does not keep up waits at most [`WRITE_WAIT`] and the write is
 //! counted as failed: the bridge falls behind, never the pipeline.
 
-use crate::ros_msgs::{PATH_TYPE, POSE_STAMPED_TYPE, Path, PoseStamped};
+use crate::ros_msgs::{
+    ODOMETRY_TYPE, Odometry, PATH_TYPE, POSE_STAMPED_TYPE, Path, PoseStamped, TF_MESSAGE_TYPE,
+    TfMessage,
+};
 use crate::{BridgeError, PoseSink};
 use linetrack_pipeline_config::{MAX_DOMAIN_ID, Ros2Config};
 use ros2_client::dds::rustdds::DomainParticipantBuilder;
@@ -26,6 +31,10 @@ pub const WRITE_WAIT: Duration = Duration::from_millis(20);
 pub const LINGER: Duration = Duration::from_millis(500);
 /// History depth of the pose topic.
 pub const POSE_DEPTH: usize = 10;
+/// History depth of `/tf` (tf2's `TransformBroadcaster`'s).
+pub const TF_DEPTH: usize = 100;
+/// The topic of the transforms.
+pub const TF_TOPIC: &str = "/tf";
 
 /// The domain id: the config's, else `ROS_DOMAIN_ID`, else 0.
 pub fn domain_id(config: &Ros2Config) -> Result<u16, BridgeError> {
@@ -55,6 +64,9 @@ pub struct DdsSink {
     path_topic: String,
     poses: Publisher<PoseStamped>,
     path: Option<Publisher<Path>>,
+    odom_topic: String,
+    odometry: Option<Publisher<Odometry>>,
+    tf: Option<Publisher<TfMessage>>,
     // Dropped last: the writers belong to it.
     _node: Node,
 }
@@ -142,6 +154,39 @@ impl DdsSink {
                     .map_err(|e| setup("path writer")(e.to_string()))?,
             )
         };
+        let odometry = if config.odom_topic.is_empty() {
+            None
+        } else {
+            let topic = node
+                .create_topic(
+                    &topic_name("odom_topic", &config.odom_topic)?,
+                    MessageTypeName::new(ODOMETRY_TYPE.0, ODOMETRY_TYPE.1),
+                    &pose_qos,
+                )
+                .map_err(|e| setup("odometry topic")(e.to_string()))?;
+            Some(
+                node.create_publisher::<Odometry>(&topic, None)
+                    .map_err(|e| setup("odometry writer")(e.to_string()))?,
+            )
+        };
+        let tf = if config.tf {
+            let tf_qos = pose_qos
+                .clone()
+                .history(History::KeepLast { depth: TF_DEPTH });
+            let topic = node
+                .create_topic(
+                    &topic_name("tf", TF_TOPIC)?,
+                    MessageTypeName::new(TF_MESSAGE_TYPE.0, TF_MESSAGE_TYPE.1),
+                    &tf_qos,
+                )
+                .map_err(|e| setup("tf topic")(e.to_string()))?;
+            Some(
+                node.create_publisher::<TfMessage>(&topic, None)
+                    .map_err(|e| setup("tf writer")(e.to_string()))?,
+            )
+        } else {
+            None
+        };
         tracing::info!(
             "ROS 2 node {} on domain {domain}{}: {} and {}",
             config.node_name,
@@ -162,6 +207,9 @@ impl DdsSink {
             path_topic: config.path_topic.clone(),
             poses,
             path,
+            odom_topic: config.odom_topic.clone(),
+            odometry,
+            tf,
             _node: node,
         })
     }
@@ -187,6 +235,26 @@ impl PoseSink for DdsSink {
 
     fn wants_path(&self) -> bool {
         self.path.is_some()
+    }
+
+    fn odometry(&mut self, message: Odometry) -> Result<(), BridgeError> {
+        match &self.odometry {
+            Some(writer) => writer.publish(message).map_err(|e| BridgeError::Write {
+                topic: self.odom_topic.clone(),
+                message: e.to_string(),
+            }),
+            None => Ok(()),
+        }
+    }
+
+    fn transform(&mut self, message: TfMessage) -> Result<(), BridgeError> {
+        match &self.tf {
+            Some(writer) => writer.publish(message).map_err(|e| BridgeError::Write {
+                topic: TF_TOPIC.to_string(),
+                message: e.to_string(),
+            }),
+            None => Ok(()),
+        }
     }
 
     fn finish(&mut self) {

@@ -186,7 +186,7 @@ impl StepNees {
         values.sort_by(f64::total_cmp);
         let mean = values.iter().sum::<f64>() / values.len() as f64;
         let middle = values.len() / 2;
-        let median = if values.len() % 2 == 0 {
+        let median = if values.len().is_multiple_of(2) {
             0.5 * (values[middle - 1] + values[middle])
         } else {
             values[middle]
