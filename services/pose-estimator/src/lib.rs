@@ -331,6 +331,7 @@ impl PoseTracker {
         record.inliers = result.stats.inliers.map(|n| n as u32);
         record.observations = result.stats.observations.map(|n| n as u32);
         record.rms_px = result.stats.rms_px;
+        record.conditioning = result.stats.conditioning;
         if let Some(reason) = &result.reason {
             tracing::debug!("frame {} lost: {reason}", header.frame_id);
         }

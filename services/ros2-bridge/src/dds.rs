@@ -11,8 +11,8 @@
 //! counted as failed: the bridge falls behind, never the pipeline.
 
 use crate::ros_msgs::{
-    ODOMETRY_TYPE, Odometry, PATH_TYPE, POSE_STAMPED_TYPE, Path, PoseStamped, TF_MESSAGE_TYPE,
-    TfMessage,
+    DIAGNOSTIC_ARRAY_TYPE, DiagnosticArray, ODOMETRY_TYPE, Odometry, PATH_TYPE, POSE_STAMPED_TYPE,
+    Path, PoseStamped, TF_MESSAGE_TYPE, TfMessage,
 };
 use crate::{BridgeError, PoseSink};
 use linetrack_pipeline_config::{MAX_DOMAIN_ID, Ros2Config};
@@ -67,6 +67,8 @@ pub struct DdsSink {
     odom_topic: String,
     odometry: Option<Publisher<Odometry>>,
     tf: Option<Publisher<TfMessage>>,
+    diagnostics_topic: String,
+    diagnostics: Option<Publisher<DiagnosticArray>>,
     // Dropped last: the writers belong to it.
     _node: Node,
 }
@@ -187,6 +189,21 @@ impl DdsSink {
         } else {
             None
         };
+        let diagnostics = if config.diagnostics_topic.is_empty() {
+            None
+        } else {
+            let topic = node
+                .create_topic(
+                    &topic_name("diagnostics_topic", &config.diagnostics_topic)?,
+                    MessageTypeName::new(DIAGNOSTIC_ARRAY_TYPE.0, DIAGNOSTIC_ARRAY_TYPE.1),
+                    &pose_qos,
+                )
+                .map_err(|e| setup("diagnostics topic")(e.to_string()))?;
+            Some(
+                node.create_publisher::<DiagnosticArray>(&topic, None)
+                    .map_err(|e| setup("diagnostics writer")(e.to_string()))?,
+            )
+        };
         tracing::info!(
             "ROS 2 node {} on domain {domain}{}: {} and {}",
             config.node_name,
@@ -210,6 +227,8 @@ impl DdsSink {
             odom_topic: config.odom_topic.clone(),
             odometry,
             tf,
+            diagnostics_topic: config.diagnostics_topic.clone(),
+            diagnostics,
             _node: node,
         })
     }
@@ -241,6 +260,16 @@ impl PoseSink for DdsSink {
         match &self.odometry {
             Some(writer) => writer.publish(message).map_err(|e| BridgeError::Write {
                 topic: self.odom_topic.clone(),
+                message: e.to_string(),
+            }),
+            None => Ok(()),
+        }
+    }
+
+    fn diagnostics(&mut self, message: DiagnosticArray) -> Result<(), BridgeError> {
+        match &self.diagnostics {
+            Some(writer) => writer.publish(message).map_err(|e| BridgeError::Write {
+                topic: self.diagnostics_topic.clone(),
                 message: e.to_string(),
             }),
             None => Ok(()),

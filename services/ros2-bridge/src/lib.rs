@@ -19,16 +19,20 @@
 pub mod convert;
 #[cfg(feature = "ros2")]
 pub mod dds;
+pub mod health;
 pub mod odometry;
 pub mod ros_msgs;
 
 use convert::PathWindow;
+use health::Health;
 use linetrack_ipc::{Bus, Shutdown};
 use linetrack_msgs::{PoseRecord, StageKind, StatusKind, StatusReport, Topic, TracksHeader};
+use linetrack_pipeline_config::BudgetConfig;
 use linetrack_pipeline_config::Ros2Config;
 use nalgebra::Isometry3;
-use ros_msgs::{Header, Odometry, Path, PoseStamped, TfMessage};
+use ros_msgs::{DiagnosticArray, Header, Odometry, Path, PoseStamped, TfMessage, Time};
 use std::time::Duration;
+use std::time::Instant;
 
 /// A failed write is logged the first time and then once per this many failures.
 pub const LOG_EVERY: u64 = 100;
@@ -85,6 +89,8 @@ pub trait PoseSink {
     fn odometry(&mut self, message: Odometry) -> Result<(), BridgeError>;
     /// Publishes one `/tf` message.
     fn transform(&mut self, message: TfMessage) -> Result<(), BridgeError>;
+    /// Publishes one health report.
+    fn diagnostics(&mut self, message: DiagnosticArray) -> Result<(), BridgeError>;
     /// Called once after the last message, before the sink is dropped.
     fn finish(&mut self) {}
 }
@@ -218,10 +224,12 @@ impl Bridge {
 
 /// The bridge's loop: subscribes to the poses, makes the sink (`make_sink`: DDS), tells the
 /// supervisor it is ready, then publishes every pose until `shutdown`, and the ones still
-/// queued after it. A sink that cannot be made ends it with that error (the run goes on
-/// without ROS 2 output).
+/// queued after it; with a diagnostics topic, the run's health (against `budget`) once a
+/// second and once at the end. A sink that cannot be made ends it with that error (the run
+/// goes on without ROS 2 output).
 pub fn run(
     config: &Ros2Config,
+    budget: &BudgetConfig,
     bus: &Bus,
     shutdown: &Shutdown,
     make_sink: impl FnOnce() -> Result<Box<dyn PoseSink>, BridgeError>,
@@ -239,17 +247,33 @@ pub fn run(
     };
     status.publish(&(), &[&[ready]])?;
     let mut bridge = Bridge::new(config);
+    let mut health = (!config.diagnostics_topic.is_empty()).then(|| Health::new(budget));
+    let wall_clock = || Time::from_ns(linetrack_msgs::now_ns());
     loop {
         let stopping = shutdown.requested();
         for message in poses.receive_all()? {
             if let Some(pose) = message.payload().first() {
                 bridge.on_pose(message.header(), pose, sink.as_mut());
+                if let Some(health) = &mut health {
+                    health.observe(message.header(), pose);
+                }
             }
+        }
+        if let Some(report) = health
+            .as_mut()
+            .and_then(|h| h.report_if_due(Instant::now(), wall_clock()))
+        {
+            let written = sink.diagnostics(report);
+            bridge.note(written);
         }
         if stopping {
             break;
         }
         wake.wait(WAKE_TIMEOUT)?;
+    }
+    if let Some(health) = &mut health {
+        let written = sink.diagnostics(health.report(wall_clock()));
+        bridge.note(written);
     }
     sink.finish();
     Ok(bridge.tally())
@@ -294,6 +318,9 @@ mod tests {
         }
         fn transform(&mut self, message: TfMessage) -> Result<(), BridgeError> {
             self.transforms.push(message);
+            Ok(())
+        }
+        fn diagnostics(&mut self, _: DiagnosticArray) -> Result<(), BridgeError> {
             Ok(())
         }
     }

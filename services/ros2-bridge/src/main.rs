@@ -48,10 +48,11 @@ fn run(args: Args) -> anyhow::Result<()> {
         &format!("ros2-{}", std::process::id()),
     )?;
     let ros2 = config.ros2.clone();
-    let tally = linetrack_ros2_bridge::run(&config.ros2, &bus, &shutdown, move || {
-        Ok(Box::new(DdsSink::new(&ros2)?) as Box<dyn PoseSink>)
-    })
-    .context("ROS 2 output")?;
+    let tally =
+        linetrack_ros2_bridge::run(&config.ros2, &config.budget, &bus, &shutdown, move || {
+            Ok(Box::new(DdsSink::new(&ros2)?) as Box<dyn PoseSink>)
+        })
+        .context("ROS 2 output")?;
     tracing::info!("ROS 2 output: {tally:?}");
     Ok(())
 }

@@ -219,6 +219,39 @@ pub struct TfMessage {
     pub transforms: Vec<TransformStamped>,
 }
 
+/// `diagnostic_msgs/msg/KeyValue`.
+#[derive(Debug, Clone, PartialEq, Eq, Default, Serialize, Deserialize)]
+pub struct KeyValue {
+    /// What the value is.
+    pub key: String,
+    /// The value, as text.
+    pub value: String,
+}
+
+/// `diagnostic_msgs/msg/DiagnosticStatus`.
+#[derive(Debug, Clone, PartialEq, Eq, Default, Serialize, Deserialize)]
+pub struct DiagnosticStatus {
+    /// 0 OK, 1 WARN, 2 ERROR, 3 STALE.
+    pub level: u8,
+    /// What is reported on (`linetrack: matcher`).
+    pub name: String,
+    /// A human-readable summary.
+    pub message: String,
+    /// The hardware it runs on (empty).
+    pub hardware_id: String,
+    /// The figures.
+    pub values: Vec<KeyValue>,
+}
+
+/// `diagnostic_msgs/msg/DiagnosticArray`.
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+pub struct DiagnosticArray {
+    /// When.
+    pub header: Header,
+    /// One status per component.
+    pub status: Vec<DiagnosticStatus>,
+}
+
 /// ROS package and type name of `PoseStamped` (DDS: `geometry_msgs::msg::dds_::PoseStamped_`).
 pub const POSE_STAMPED_TYPE: (&str, &str) = ("geometry_msgs", "PoseStamped");
 /// ROS package and type name of `Path` (DDS: `nav_msgs::msg::dds_::Path_`).
@@ -227,6 +260,9 @@ pub const PATH_TYPE: (&str, &str) = ("nav_msgs", "Path");
 pub const ODOMETRY_TYPE: (&str, &str) = ("nav_msgs", "Odometry");
 /// ROS package and type name of `TFMessage` (DDS: `tf2_msgs::msg::dds_::TFMessage_`).
 pub const TF_MESSAGE_TYPE: (&str, &str) = ("tf2_msgs", "TFMessage");
+/// ROS package and type name of `DiagnosticArray` (DDS:
+/// `diagnostic_msgs::msg::dds_::DiagnosticArray_`).
+pub const DIAGNOSTIC_ARRAY_TYPE: (&str, &str) = ("diagnostic_msgs", "DiagnosticArray");
 
 #[cfg(feature = "ros2")]
 mod message_impls {
@@ -235,4 +271,5 @@ mod message_impls {
     impl Message for super::Path {}
     impl Message for super::Odometry {}
     impl Message for super::TfMessage {}
+    impl Message for super::DiagnosticArray {}
 }

@@ -345,6 +345,9 @@ pub struct PoseRecord {
     pub observations: [u32; 2],
     /// RMS residual of the inliers, pixels.
     pub rms_px: f64,
+    /// Conditioning of the motion estimate's normal matrix: its smallest eigenvalue over
+    /// its largest (0 when lost).
+    pub conditioning: f64,
     /// Covariance of the pose: position (x, y, z, metres) then orientation (rotation
     /// vector about x, y, z, radians; `R_true = exp(θ)·R`), both in the world's axes (the
     /// first frame's camera), chained over the frames since the first.

@@ -113,6 +113,10 @@ pub struct Ros2Config {
     pub tf: bool,
     /// The camera's pose in `child_frame_id`.
     pub camera_in_base: CameraMount,
+    /// The `diagnostic_msgs/msg/DiagnosticArray` topic: the pipeline's health once a
+    /// second (stage latencies and budget misses, drops, matcher mode, tracking); empty =
+    /// none.
+    pub diagnostics_topic: String,
 }
 
 impl Default for Ros2Config {
@@ -133,6 +137,7 @@ impl Default for Ros2Config {
             child_frame_id: "base_link".to_string(),
             tf: false,
             camera_in_base: CameraMount::default(),
+            diagnostics_topic: "/diagnostics".to_string(),
         }
     }
 }
@@ -164,6 +169,9 @@ impl Ros2Config {
             ));
         }
         self.camera_in_base.validate()?;
+        if !self.diagnostics_topic.is_empty() {
+            ros_name("ros2.diagnostics_topic", &self.diagnostics_topic, true)?;
+        }
         if self.frame_id.is_empty() {
             return Err(
                 "ros2.frame_id is empty: name the frame the poses are in (e.g. \"odom\")"
