@@ -19,14 +19,14 @@ use linetrack_msgs::{
 };
 use linetrack_odometry::{
     Features, FrameStats, MatchedLines, MotionTracker, OdometryConfig, PoseCovariance, Preparation,
-    PreparedImages, upper_triangle,
+    PreparedImages,
 };
 use linetrack_stage_runtime::{
     Images, Stage, StageContext, held_capacity, rig_from_record, run_stage, stereo_views,
     to_segment,
 };
 use linetrack_vision::FeatureMatch;
-use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion};
+use nalgebra::{Isometry3, Matrix6, Quaternion, Translation3, UnitQuaternion};
 use std::collections::VecDeque;
 
 /// A pose as a record.
@@ -38,6 +38,11 @@ pub fn pose_record(pose: &Isometry3<f64>) -> PoseRecord {
         rotation_xyzw: [q.i, q.j, q.k, q.w],
         ..PoseRecord::default()
     }
+}
+
+/// A symmetric 6×6 covariance as the pose record carries it.
+fn packed(covariance: &Matrix6<f64>) -> [f64; 21] {
+    PoseRecord::pack_covariance(&(*covariance).into())
 }
 
 /// Where a restarted pose estimator picks up: the last pose the run recorded and the
@@ -200,7 +205,7 @@ impl PoseTracker {
     /// The current pose as a record, with its covariance (what a dropped frame repeats).
     pub fn pose_record(&self) -> PoseRecord {
         PoseRecord {
-            covariance: upper_triangle(&self.covariance.covariance()),
+            covariance: packed(&self.covariance.covariance()),
             ..pose_record(&self.pose())
         }
     }
@@ -325,8 +330,8 @@ impl PoseTracker {
             self.covariance.advance(&before, &result.pose, step);
         }
         let mut record = pose_record(&result.pose);
-        record.covariance = upper_triangle(&self.covariance.covariance());
-        record.step_covariance = step.map(upper_triangle).unwrap_or_default();
+        record.covariance = packed(&self.covariance.covariance());
+        record.step_covariance = step.map(packed).unwrap_or_default();
         record.lost = u32::from(result.lost || resumed.is_some());
         record.inliers = result.stats.inliers.map(|n| n as u32);
         record.observations = result.stats.observations.map(|n| n as u32);

@@ -19,7 +19,7 @@ use linetrack_pipeline_config::{MAX_DOMAIN_ID, Ros2Config};
 use ros2_client::dds::rustdds::DomainParticipantBuilder;
 use ros2_client::qos::{Durability, History, WhenFull};
 use ros2_client::{
-    Context, MessageTypeName, Name, Node, NodeName, NodeOptions, Publisher, QosProfile,
+    Context, Message, MessageTypeName, Name, Node, NodeName, NodeOptions, Publisher, QosProfile,
 };
 use std::net::{IpAddr, Ipv4Addr};
 use std::time::Duration;
@@ -58,17 +58,75 @@ pub fn localhost_only(config: &Ros2Config) -> bool {
     config.localhost_only || std::env::var("ROS_LOCALHOST_ONLY").is_ok_and(|v| v.trim() == "1")
 }
 
-/// A ROS 2 node with the pose and path writers.
+/// A topic's writer and the topic's name (for errors).
+struct Writer<M: Message> {
+    topic: String,
+    publisher: Publisher<M>,
+}
+
+impl<M: Message> Writer<M> {
+    /// The topic `topic` (config key `key`) of ROS type `type_name` on `node`, and its
+    /// writer.
+    fn new(
+        node: &mut Node,
+        key: &'static str,
+        topic: &str,
+        type_name: (&str, &str),
+        qos: &QosProfile,
+    ) -> Result<Self, BridgeError> {
+        let made = node
+            .create_topic(
+                &topic_name(key, topic)?,
+                MessageTypeName::new(type_name.0, type_name.1),
+                qos,
+            )
+            .map_err(|e| setup(key)(e.to_string()))?;
+        let publisher = node
+            .create_publisher::<M>(&made, None)
+            .map_err(|e| setup(key)(e.to_string()))?;
+        Ok(Self {
+            topic: topic.to_string(),
+            publisher,
+        })
+    }
+
+    /// The same when `topic` is configured (not empty).
+    fn optional(
+        node: &mut Node,
+        key: &'static str,
+        topic: &str,
+        type_name: (&str, &str),
+        qos: &QosProfile,
+    ) -> Result<Option<Self>, BridgeError> {
+        if topic.is_empty() {
+            Ok(None)
+        } else {
+            Self::new(node, key, topic, type_name, qos).map(Some)
+        }
+    }
+
+    fn publish(&self, message: M) -> Result<(), BridgeError> {
+        self.publisher
+            .publish(message)
+            .map_err(|e| BridgeError::Write {
+                topic: self.topic.clone(),
+                message: e.to_string(),
+            })
+    }
+}
+
+/// Publishes on `writer` when there is one.
+fn publish_if<M: Message>(writer: &Option<Writer<M>>, message: M) -> Result<(), BridgeError> {
+    writer.as_ref().map_or(Ok(()), |w| w.publish(message))
+}
+
+/// A ROS 2 node with the pose, path, odometry, `/tf` and diagnostics writers.
 pub struct DdsSink {
-    pose_topic: String,
-    path_topic: String,
-    poses: Publisher<PoseStamped>,
-    path: Option<Publisher<Path>>,
-    odom_topic: String,
-    odometry: Option<Publisher<Odometry>>,
-    tf: Option<Publisher<TfMessage>>,
-    diagnostics_topic: String,
-    diagnostics: Option<Publisher<DiagnosticArray>>,
+    poses: Writer<PoseStamped>,
+    path: Option<Writer<Path>>,
+    odometry: Option<Writer<Odometry>>,
+    tf: Option<Writer<TfMessage>>,
+    diagnostics: Option<Writer<DiagnosticArray>>,
     // Dropped last: the writers belong to it.
     _node: Node,
 }
@@ -128,82 +186,47 @@ impl DdsSink {
             .clone()
             .durability(Durability::Volatile)
             .history(History::KeepLast { depth: POSE_DEPTH });
-        let pose_topic = node
-            .create_topic(
-                &topic_name("pose_topic", &config.pose_topic)?,
-                MessageTypeName::new(POSE_STAMPED_TYPE.0, POSE_STAMPED_TYPE.1),
-                &pose_qos,
-            )
-            .map_err(|e| setup("pose topic")(e.to_string()))?;
-        let poses = node
-            .create_publisher::<PoseStamped>(&pose_topic, None)
-            .map_err(|e| setup("pose writer")(e.to_string()))?;
-        let path = if config.path_topic.is_empty() {
-            None
-        } else {
-            let path_qos = reliable
-                .durability(Durability::TransientLocal)
-                .history(History::KeepLast { depth: 1 });
-            let topic = node
-                .create_topic(
-                    &topic_name("path_topic", &config.path_topic)?,
-                    MessageTypeName::new(PATH_TYPE.0, PATH_TYPE.1),
-                    &path_qos,
-                )
-                .map_err(|e| setup("path topic")(e.to_string()))?;
-            Some(
-                node.create_publisher::<Path>(&topic, None)
-                    .map_err(|e| setup("path writer")(e.to_string()))?,
-            )
-        };
-        let odometry = if config.odom_topic.is_empty() {
-            None
-        } else {
-            let topic = node
-                .create_topic(
-                    &topic_name("odom_topic", &config.odom_topic)?,
-                    MessageTypeName::new(ODOMETRY_TYPE.0, ODOMETRY_TYPE.1),
-                    &pose_qos,
-                )
-                .map_err(|e| setup("odometry topic")(e.to_string()))?;
-            Some(
-                node.create_publisher::<Odometry>(&topic, None)
-                    .map_err(|e| setup("odometry writer")(e.to_string()))?,
-            )
-        };
-        let tf = if config.tf {
-            let tf_qos = pose_qos
-                .clone()
-                .history(History::KeepLast { depth: TF_DEPTH });
-            let topic = node
-                .create_topic(
-                    &topic_name("tf", TF_TOPIC)?,
-                    MessageTypeName::new(TF_MESSAGE_TYPE.0, TF_MESSAGE_TYPE.1),
-                    &tf_qos,
-                )
-                .map_err(|e| setup("tf topic")(e.to_string()))?;
-            Some(
-                node.create_publisher::<TfMessage>(&topic, None)
-                    .map_err(|e| setup("tf writer")(e.to_string()))?,
-            )
-        } else {
-            None
-        };
-        let diagnostics = if config.diagnostics_topic.is_empty() {
-            None
-        } else {
-            let topic = node
-                .create_topic(
-                    &topic_name("diagnostics_topic", &config.diagnostics_topic)?,
-                    MessageTypeName::new(DIAGNOSTIC_ARRAY_TYPE.0, DIAGNOSTIC_ARRAY_TYPE.1),
-                    &pose_qos,
-                )
-                .map_err(|e| setup("diagnostics topic")(e.to_string()))?;
-            Some(
-                node.create_publisher::<DiagnosticArray>(&topic, None)
-                    .map_err(|e| setup("diagnostics writer")(e.to_string()))?,
-            )
-        };
+        let poses = Writer::new(
+            &mut node,
+            "pose_topic",
+            &config.pose_topic,
+            POSE_STAMPED_TYPE,
+            &pose_qos,
+        )?;
+        let path_qos = reliable
+            .durability(Durability::TransientLocal)
+            .history(History::KeepLast { depth: 1 });
+        let path = Writer::optional(
+            &mut node,
+            "path_topic",
+            &config.path_topic,
+            PATH_TYPE,
+            &path_qos,
+        )?;
+        let odometry = Writer::optional(
+            &mut node,
+            "odom_topic",
+            &config.odom_topic,
+            ODOMETRY_TYPE,
+            &pose_qos,
+        )?;
+        let tf_qos = pose_qos
+            .clone()
+            .history(History::KeepLast { depth: TF_DEPTH });
+        let tf = Writer::optional(
+            &mut node,
+            "tf",
+            if config.tf { TF_TOPIC } else { "" },
+            TF_MESSAGE_TYPE,
+            &tf_qos,
+        )?;
+        let diagnostics = Writer::optional(
+            &mut node,
+            "diagnostics_topic",
+            &config.diagnostics_topic,
+            DIAGNOSTIC_ARRAY_TYPE,
+            &pose_qos,
+        )?;
         tracing::info!(
             "ROS 2 node {} on domain {domain}{}: {} and {}",
             config.node_name,
@@ -220,14 +243,10 @@ impl DdsSink {
             }
         );
         Ok(Self {
-            pose_topic: config.pose_topic.clone(),
-            path_topic: config.path_topic.clone(),
             poses,
             path,
-            odom_topic: config.odom_topic.clone(),
             odometry,
             tf,
-            diagnostics_topic: config.diagnostics_topic.clone(),
             diagnostics,
             _node: node,
         })
@@ -236,20 +255,11 @@ impl DdsSink {
 
 impl PoseSink for DdsSink {
     fn pose(&mut self, message: PoseStamped) -> Result<(), BridgeError> {
-        self.poses.publish(message).map_err(|e| BridgeError::Write {
-            topic: self.pose_topic.clone(),
-            message: e.to_string(),
-        })
+        self.poses.publish(message)
     }
 
     fn path(&mut self, message: Path) -> Result<(), BridgeError> {
-        match &self.path {
-            Some(writer) => writer.publish(message).map_err(|e| BridgeError::Write {
-                topic: self.path_topic.clone(),
-                message: e.to_string(),
-            }),
-            None => Ok(()),
-        }
+        publish_if(&self.path, message)
     }
 
     fn wants_path(&self) -> bool {
@@ -257,33 +267,15 @@ impl PoseSink for DdsSink {
     }
 
     fn odometry(&mut self, message: Odometry) -> Result<(), BridgeError> {
-        match &self.odometry {
-            Some(writer) => writer.publish(message).map_err(|e| BridgeError::Write {
-                topic: self.odom_topic.clone(),
-                message: e.to_string(),
-            }),
-            None => Ok(()),
-        }
-    }
-
-    fn diagnostics(&mut self, message: DiagnosticArray) -> Result<(), BridgeError> {
-        match &self.diagnostics {
-            Some(writer) => writer.publish(message).map_err(|e| BridgeError::Write {
-                topic: self.diagnostics_topic.clone(),
-                message: e.to_string(),
-            }),
-            None => Ok(()),
-        }
+        publish_if(&self.odometry, message)
     }
 
     fn transform(&mut self, message: TfMessage) -> Result<(), BridgeError> {
-        match &self.tf {
-            Some(writer) => writer.publish(message).map_err(|e| BridgeError::Write {
-                topic: TF_TOPIC.to_string(),
-                message: e.to_string(),
-            }),
-            None => Ok(()),
-        }
+        publish_if(&self.tf, message)
+    }
+
+    fn diagnostics(&mut self, message: DiagnosticArray) -> Result<(), BridgeError> {
+        publish_if(&self.diagnostics, message)
     }
 
     fn finish(&mut self) {

@@ -12,30 +12,20 @@
 //! its covariance is the step's (`PoseRecord::step_covariance`, an error of the new pose
 //! in the camera's own frame) through the adjoint of `C`, over the time step squared.
 
+use crate::convert;
 use crate::ros_msgs::{
-    Covariance, Header, Odometry, Point, Pose, PoseWithCovariance, Quaternion, TfMessage,
-    Transform, TransformStamped, Twist, TwistWithCovariance, Vector3 as RosVector3,
+    Covariance, Header, Odometry, PoseWithCovariance, TfMessage, Transform, TransformStamped,
+    Twist, TwistWithCovariance, Vector3 as RosVector3,
 };
 use linetrack_msgs::PoseRecord;
 use linetrack_pipeline_config::{CameraMount, Convention};
 use nalgebra::{
-    Isometry3, Matrix3, Matrix6, Quaternion as NaQuaternion, Rotation3, Translation3,
-    UnitQuaternion, Vector3,
+    Isometry3, Matrix3, Matrix6, Quaternion as NaQuaternion, Translation3, UnitQuaternion, Vector3,
 };
 
-/// The symmetric 6×6 matrix of a covariance sent as its upper triangle (see
-/// [`PoseRecord`]).
-pub fn from_upper_triangle(values: &[f64; 21]) -> Matrix6<f64> {
-    let mut m = Matrix6::zeros();
-    let mut k = 0;
-    for i in 0..6 {
-        for j in i..6 {
-            m[(i, j)] = values[k];
-            m[(j, i)] = values[k];
-            k += 1;
-        }
-    }
-    m
+/// The symmetric 6×6 matrix of a covariance of a [`PoseRecord`].
+fn unpacked(values: &[f64; 21]) -> Matrix6<f64> {
+    Matrix6::from(PoseRecord::unpack_covariance(values))
 }
 
 /// The camera's optical frame in the base frame (`C`).
@@ -49,27 +39,10 @@ pub fn camera_in_base(convention: Convention, mount: &CameraMount) -> Isometry3<
     match convention {
         Convention::Camera => mount,
         Convention::Rep103 => {
-            let m = Matrix3::new(0.0, 0.0, 1.0, -1.0, 0.0, 0.0, 0.0, -1.0, 0.0);
-            let optical =
-                UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(m));
+            let optical = convert::optical_to_rep103();
             mount * Isometry3::from_parts(Translation3::identity(), optical)
         }
     }
-}
-
-/// The pose of a record (the left camera in the first camera's frame); `None` when it is no
-/// finite rotation and position.
-pub fn camera_pose(record: &PoseRecord) -> Option<Isometry3<f64>> {
-    let [x, y, z] = record.translation;
-    let [qx, qy, qz, qw] = record.rotation_xyzw;
-    let q = NaQuaternion::new(qw, qx, qy, qz);
-    let finite = [x, y, z, qx, qy, qz, qw].iter().all(|v| v.is_finite());
-    (finite && q.norm() > f64::EPSILON).then(|| {
-        Isometry3::from_parts(
-            Translation3::new(x, y, z),
-            UnitQuaternion::from_quaternion(q),
-        )
-    })
 }
 
 /// `[[A, B], [0, A]]` blocks.
@@ -90,23 +63,6 @@ fn ros_covariance(m: &Matrix6<f64>) -> Covariance {
         }
     }
     Covariance(out)
-}
-
-fn ros_pose(pose: &Isometry3<f64>) -> Pose {
-    let (t, q) = (pose.translation.vector, pose.rotation);
-    Pose {
-        position: Point {
-            x: t.x,
-            y: t.y,
-            z: t.z,
-        },
-        orientation: Quaternion {
-            x: q.i,
-            y: q.j,
-            z: q.k,
-            w: q.w,
-        },
-    }
 }
 
 fn ros_vector(v: &Vector3<f64>) -> RosVector3 {
@@ -165,14 +121,13 @@ pub fn odometry(
     child_frame_id: &str,
     mount: &Isometry3<f64>,
 ) -> Option<Odometry> {
-    let camera = camera_pose(record)?;
-    let (base, pose_covariance) =
-        base_pose(&camera, &from_upper_triangle(&record.covariance), mount);
+    let camera = convert::camera_pose(record)?;
+    let (base, pose_covariance) = base_pose(&camera, &unpacked(&record.covariance), mount);
     let twist = previous
-        .and_then(|(p, ns)| Some((camera_pose(p)?, stamp_ns.checked_sub(ns)?)))
+        .and_then(|(p, ns)| Some((convert::camera_pose(p)?, stamp_ns.checked_sub(ns)?)))
         .filter(|(_, dt)| *dt > 0)
         .map(|(before, dt_ns)| {
-            let step = from_upper_triangle(&record.step_covariance);
+            let step = unpacked(&record.step_covariance);
             let (twist, covariance) =
                 base_twist(&before, &camera, &step, dt_ns as f64 * 1e-9, mount);
             TwistWithCovariance {
@@ -185,7 +140,7 @@ pub fn odometry(
         header,
         child_frame_id: child_frame_id.to_string(),
         pose: PoseWithCovariance {
-            pose: ros_pose(&base),
+            pose: convert::pose_message(&base),
             covariance: ros_covariance(&pose_covariance),
         },
         twist,
@@ -214,24 +169,16 @@ pub fn transform(odometry: &Odometry) -> TfMessage {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::convert;
     use nalgebra::Vector6;
 
     fn record(pose: &Isometry3<f64>, covariance: &Matrix6<f64>) -> PoseRecord {
         let (t, q) = (pose.translation.vector, pose.rotation);
-        let mut upper = [0.0; 21];
-        let mut k = 0;
-        for i in 0..6 {
-            for j in i..6 {
-                upper[k] = covariance[(i, j)];
-                k += 1;
-            }
-        }
+        let packed = PoseRecord::pack_covariance(&(*covariance).into());
         PoseRecord {
             translation: [t.x, t.y, t.z],
             rotation_xyzw: [q.i, q.j, q.k, q.w],
-            covariance: upper,
-            step_covariance: upper,
+            covariance: packed,
+            step_covariance: packed,
             ..PoseRecord::default()
         }
     }

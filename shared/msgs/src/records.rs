@@ -359,6 +359,36 @@ pub struct PoseRecord {
     pub step_covariance: [f64; 21],
 }
 
+impl PoseRecord {
+    /// The symmetric 6×6 matrix of a covariance sent as its upper triangle
+    /// ([`PoseRecord::covariance`], [`PoseRecord::step_covariance`]).
+    pub fn unpack_covariance(values: &[f64; 21]) -> [[f64; 6]; 6] {
+        let mut m = [[0.0; 6]; 6];
+        let mut k = 0;
+        for i in 0..6 {
+            for j in i..6 {
+                m[i][j] = values[k];
+                m[j][i] = values[k];
+                k += 1;
+            }
+        }
+        m
+    }
+
+    /// The upper triangle of a symmetric 6×6 matrix, row by row (the lower is not read).
+    pub fn pack_covariance(m: &[[f64; 6]; 6]) -> [f64; 21] {
+        let mut out = [0.0; 21];
+        let mut k = 0;
+        for (i, row) in m.iter().enumerate() {
+            for value in &row[i..] {
+                out[k] = *value;
+                k += 1;
+            }
+        }
+        out
+    }
+}
+
 wire_enum! {
     /// What a [`StatusReport`] says.
     pub enum StatusKind: "status kind" {

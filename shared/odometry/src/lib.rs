@@ -30,7 +30,7 @@ pub use config::{Features, LostLimits, OdometryConfig, StereoPhotometric};
 pub use front_end::Odometry;
 pub use linetrack_stereo_vo::nees;
 pub use linetrack_trajectory::metrics;
-pub use pose_covariance::{PoseCovariance, from_upper_triangle, upper_triangle};
+pub use pose_covariance::PoseCovariance;
 pub use stats::{FrameResult, FrameStats};
 pub use tracker::{
     MatchedLines, MotionTracker, Preparation, PreparedImages, SightingKind, StereoSighting,

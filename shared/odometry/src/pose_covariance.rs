@@ -71,49 +71,12 @@ impl PoseCovariance {
     }
 }
 
-/// The upper triangle of a symmetric 6×6 matrix, row by row (21 values): how the
-/// covariances travel in `linetrack_msgs::PoseRecord`.
-pub fn upper_triangle(m: &Matrix6<f64>) -> [f64; 21] {
-    let mut out = [0.0; 21];
-    let mut k = 0;
-    for i in 0..6 {
-        for j in i..6 {
-            out[k] = m[(i, j)];
-            k += 1;
-        }
-    }
-    out
-}
-
-/// The symmetric 6×6 matrix of an [`upper_triangle`].
-pub fn from_upper_triangle(values: &[f64; 21]) -> Matrix6<f64> {
-    let mut m = Matrix6::zeros();
-    let mut k = 0;
-    for i in 0..6 {
-        for j in i..6 {
-            m[(i, j)] = values[k];
-            m[(j, i)] = values[k];
-            k += 1;
-        }
-    }
-    m
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
     use nalgebra::{Translation3, UnitQuaternion, Vector3, Vector6};
     use rand::{Rng, SeedableRng};
     use rand_chacha::ChaCha8Rng;
-
-    #[test]
-    fn the_upper_triangle_round_trips() {
-        let mut m = Matrix6::from_fn(|i, j| (i * 6 + j) as f64);
-        m = m + m.transpose();
-        assert_eq!(from_upper_triangle(&upper_triangle(&m)), m);
-        assert_eq!(upper_triangle(&m)[1], m[(0, 1)]);
-        assert_eq!(upper_triangle(&m)[6], m[(1, 1)]);
-    }
 
     /// The propagated covariance matches the spread of poses chained from sampled noisy
     /// steps (first order: small steps' errors).
