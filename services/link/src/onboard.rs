@@ -211,7 +211,7 @@ pub fn run(
         drain(&mut inlets.poses, &mut batch, |header, p| {
             Some(Message::Pose {
                 header: *header,
-                pose: *p.first()?,
+                pose: Box::new(*p.first()?),
             })
         })?;
         let mut frames = (batch.len() - before_poses) as u64;

@@ -363,16 +363,13 @@ impl PoseRecord {
     /// The symmetric 6×6 matrix of a covariance sent as its upper triangle
     /// ([`PoseRecord::covariance`], [`PoseRecord::step_covariance`]).
     pub fn unpack_covariance(values: &[f64; 21]) -> [[f64; 6]; 6] {
-        let mut m = [[0.0; 6]; 6];
-        let mut k = 0;
-        for i in 0..6 {
-            for j in i..6 {
-                m[i][j] = values[k];
-                m[j][i] = values[k];
-                k += 1;
-            }
-        }
-        m
+        std::array::from_fn(|i| {
+            std::array::from_fn(|j| {
+                let (row, column) = (i.min(j), i.max(j));
+                // Rows 0..row hold 6, 5, … values: 6·row − row·(row − 1)/2 in all.
+                values[6 * row - row * row.saturating_sub(1) / 2 + (column - row)]
+            })
+        })
     }
 
     /// The upper triangle of a symmetric 6×6 matrix, row by row (the lower is not read).
