@@ -2,11 +2,14 @@
 //! `linetrack run` with `[ros2] enabled = true` starts `linetrack-ros2`, and an independent
 //! DDS subscriber — Eclipse Cyclone DDS through its Python binding (`tests/ros2/listen.py`,
 //! installed by `cargo xtask setup` into `target/dds-peer`), with the ROS 2 types under
-//! their DDS names — receives `geometry_msgs/msg/PoseStamped` on `/linetrack/pose` and
-//! `nav_msgs/msg/Path` on `/linetrack/path`. Each test uses its own domain id (from the
+//! their DDS names — receives `geometry_msgs/msg/PoseStamped` on `/linetrack/pose`,
+//! `nav_msgs/msg/Path` on `/linetrack/path`, `nav_msgs/msg/Odometry` on `/linetrack/odom`
+//! `tf2_msgs/msg/TFMessage` on `/tf` and `diagnostic_msgs/msg/DiagnosticArray` on
+//! `/diagnostics`. Each test uses its own domain id (from the
 //! process id) and loopback-only discovery, so parallel runs do not cross.
 
 use linetrack_e2e::*;
+use nalgebra::Matrix6;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
@@ -171,7 +174,7 @@ fn received_poses_match_poses_tum(name: &str, single_process: bool) {
     let extra = format!(
         "[supervisor]\nstatus_every_ms = 0\n[budget]\ndrop_late = false\n\
          [ros2]\nenabled = true\ndomain_id = {domain}\nlocalhost_only = true\nframe_id = \"map\"\n\
-         convention = \"camera\"\nstamp = \"sequence\"\npublish_lost = true\n"
+         convention = \"camera\"\nstamp = \"sequence\"\npublish_lost = true\ntf = true\n"
     );
     let run = if single_process {
         start_single_process(&dir, &base_sequence(FRAMES), &extra)
@@ -202,7 +205,7 @@ fn received_poses_match_poses_tum(name: &str, single_process: bool) {
     // The path is transient-local and re-sent with every pose: wait for the one that holds
     // every pose of the run.
     let deadline = Instant::now() + PEER_TIMEOUT;
-    let (poses, path) = loop {
+    let (poses, path, received) = loop {
         let received = listener.received();
         let path = received
             .iter()
@@ -212,14 +215,20 @@ fn received_poses_match_poses_tum(name: &str, single_process: bool) {
         let full = path
             .as_ref()
             .is_some_and(|p| p["poses"].as_array().map_or(0, Vec::len) >= expected.len());
-        if full || Instant::now() > deadline {
+        let count = |topic: &str| received.iter().filter(|m| m["topic"] == topic).count();
+        let all = count("odom") >= expected.len()
+            && count("tf") >= expected.len()
+            && count("diagnostics") >= 1;
+        if (full && all) || Instant::now() > deadline {
             let poses: Vec<serde_json::Value> = received
-                .into_iter()
+                .iter()
                 .filter(|m| m["topic"] == "pose")
+                .cloned()
                 .collect();
             break (
                 poses,
                 path.unwrap_or_else(|| panic!("no Path message received on domain {domain}")),
+                received,
             );
         }
         std::thread::sleep(Duration::from_millis(100));
@@ -264,11 +273,194 @@ fn received_poses_match_poses_tum(name: &str, single_process: bool) {
         .copied()
         .unwrap_or_else(|| panic!("empty path"));
     assert_matches("the path's last pose", &last, &[last_tum]);
+    assert_odometry_and_tf(&received, &poses, &expected);
+    assert_diagnostics(&received, expected.len());
     assert_eq!(
         records.leftovers,
         Default::default(),
         "iceoryx2 nodes or services left behind"
     );
+}
+
+/// A 6×6 covariance from its 36 row-major values, checked symmetric and positive
+/// semi-definite.
+fn covariance(what: &str, m: &serde_json::Value) -> Matrix6<f64> {
+    let values: Vec<f64> = m
+        .as_array()
+        .map(|a| a.iter().map(|v| v.as_f64().unwrap_or(f64::NAN)).collect())
+        .unwrap_or_default();
+    assert_eq!(values.len(), 36, "{what}: {m}");
+    let c = Matrix6::from_row_slice(&values);
+    assert_eq!(c, c.transpose(), "{what}: not symmetric");
+    let eigen = c.symmetric_eigenvalues();
+    assert!(
+        eigen.min() >= -1e-9 * eigen.max().abs().max(1e-300),
+        "{what}: not positive semi-definite: {eigen}"
+    );
+    c
+}
+
+/// Odometry and /tf: one of each for every frame of poses.tum, with its stamp; the pose
+/// is the PoseStamped's of the same stamp (the camera is the base: no mount configured);
+/// the covariances symmetric and positive semi-definite, the pose's growing from zero.
+fn assert_odometry_and_tf(
+    received: &[serde_json::Value],
+    poses: &[serde_json::Value],
+    expected: &[Stamped],
+) {
+    let of = |topic: &str| -> Vec<&serde_json::Value> {
+        received.iter().filter(|m| m["topic"] == topic).collect()
+    };
+    let (odometry, transforms) = (of("odom"), of("tf"));
+    let stamped_poses: Vec<Stamped> = poses.iter().map(from_json).collect();
+    let mut traces = Vec::new();
+    for o in &odometry {
+        assert_eq!(
+            (&o["frame_id"], &o["child_frame_id"]),
+            (&"map".into(), &"base_link".into())
+        );
+        let got = from_json(o);
+        assert_matches("Odometry", &got, expected);
+        if let Some(p) = stamped_poses.iter().find(|p| p.ns == got.ns) {
+            for (a, b) in got
+                .position
+                .iter()
+                .zip(p.position)
+                .chain(got.orientation.iter().zip(p.orientation))
+            {
+                assert!(
+                    (a - b).abs() <= 1e-12,
+                    "Odometry {got:?} vs PoseStamped {p:?}"
+                );
+            }
+        }
+        let c = covariance("pose covariance", &o["covariance"]);
+        covariance("twist covariance", &o["twist_covariance"]);
+        traces.push((got.ns, c.trace()));
+    }
+    for e in expected {
+        assert!(
+            odometry.iter().any(|o| from_json(o).ns == e.ns),
+            "no Odometry for the frame at {} ns ({} received)",
+            e.ns,
+            odometry.len()
+        );
+    }
+    traces.sort_by_key(|(ns, _)| *ns);
+    assert!(
+        traces.last().is_some_and(|(_, t)| *t > 0.0),
+        "the pose covariance never grew: {traces:?}"
+    );
+    let tf: Vec<serde_json::Value> = transforms
+        .iter()
+        .flat_map(|t| t["transforms"].as_array().cloned().unwrap_or_default())
+        .collect();
+    for e in expected {
+        let t = tf
+            .iter()
+            .find(|t| from_json(t).ns == e.ns)
+            .unwrap_or_else(|| {
+                panic!(
+                    "no /tf for the frame at {} ns ({} received)",
+                    e.ns,
+                    tf.len()
+                )
+            });
+        assert_eq!(
+            (&t["frame_id"], &t["child_frame_id"]),
+            (&"map".into(), &"base_link".into())
+        );
+        assert_matches("/tf", &from_json(t), expected);
+    }
+    eprintln!(
+        "received {} Odometry and {} /tf messages",
+        odometry.len(),
+        tf.len()
+    );
+}
+
+/// Diagnostics: at least the one at the end, reports a second or more apart (the bridge's
+/// period; how many depends on the run's length), each with a status per stage (latency
+/// p50/p99, budget misses), the pipeline's (frames, drops), the matcher's mode and the
+/// tracking's figures; the last one counts every frame of the run.
+fn assert_diagnostics(received: &[serde_json::Value], frames: usize) {
+    let reports: Vec<&serde_json::Value> = received
+        .iter()
+        .filter(|m| m["topic"] == "diagnostics")
+        .collect();
+    assert!(!reports.is_empty(), "no DiagnosticArray received");
+    // Periodic reports a period apart (the wall clock may step by a little against the
+    // bridge's monotonic one); the one at the end comes whenever the run ends.
+    let stamps: Vec<i128> = reports.iter().map(|r| from_stamp(r)).collect();
+    let periodic = &stamps[..stamps.len() - 1];
+    assert!(
+        periodic.windows(2).all(|w| w[1] - w[0] >= 990_000_000),
+        "{stamps:?}"
+    );
+    assert!(stamps.windows(2).all(|w| w[1] >= w[0]), "{stamps:?}");
+    let named = |report: &serde_json::Value, name: &str| -> serde_json::Value {
+        report["status"]
+            .as_array()
+            .and_then(|s| s.iter().find(|s| s["name"] == name).cloned())
+            .unwrap_or_else(|| panic!("no {name} in {report}"))
+    };
+    for report in &reports {
+        for stage in ["frame-source", "line-detector", "matcher", "pose-estimator"] {
+            let s = named(report, &format!("linetrack: {stage}"));
+            for key in [
+                "latency_p50_ms",
+                "latency_p99_ms",
+                "budget_ms",
+                "budget_misses",
+            ] {
+                assert!(s["values"][key].is_string(), "{stage}: no {key}: {s}");
+            }
+        }
+        // "unknown" until a frame arrived (the first report may come before the first pose).
+        let m = named(report, "linetrack: matcher mode");
+        let mode = m["values"]["mode"].as_str().unwrap_or("");
+        assert!(["lbd", "l1", "unknown"].contains(&mode), "{m}");
+        let t = named(report, "linetrack: tracking");
+        for key in [
+            "state",
+            "inlier_points",
+            "inlier_lines",
+            "conditioning",
+            "lost_frames",
+        ] {
+            assert!(t["values"][key].is_string(), "tracking: no {key}: {t}");
+        }
+    }
+    let last = reports.last().copied().unwrap_or(&serde_json::Value::Null);
+    let mode = named(last, "linetrack: matcher mode");
+    let mode_name = mode["values"]["mode"].as_str().unwrap_or("");
+    assert!(["lbd", "l1"].contains(&mode_name), "{mode}");
+    let pipeline = named(last, "linetrack: pipeline");
+    let counted: usize = pipeline["values"]["frames"]
+        .as_str()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(0);
+    assert!(
+        counted >= frames,
+        "the last report counts {counted} frames of {frames}: {pipeline}"
+    );
+    // A report's p50 is a latency: a number of milliseconds, not above its p99.
+    let detector = named(last, "linetrack: line-detector");
+    let number = |key: &str| {
+        detector["values"][key]
+            .as_str()
+            .and_then(|v| v.parse::<f64>().ok())
+    };
+    if let (Some(p50), Some(p99)) = (number("latency_p50_ms"), number("latency_p99_ms")) {
+        assert!(p50 >= 0.0 && p50 <= p99, "{detector}");
+    }
+    eprintln!("received {} DiagnosticArray messages", reports.len());
+}
+
+/// A message's header stamp, ns.
+fn from_stamp(v: &serde_json::Value) -> i128 {
+    i128::from(v["sec"].as_i64().unwrap_or(-1)) * 1_000_000_000
+        + i128::from(v["nanosec"].as_i64().unwrap_or(-1))
 }
 
 #[test]

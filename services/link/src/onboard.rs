@@ -240,7 +240,7 @@ impl Onboard {
         drain(&mut inlets.poses, batch, |header, p| {
             Some(Message::Pose {
                 header: *header,
-                pose: *p.first()?,
+                pose: Box::new(*p.first()?),
             })
         })?;
         let mut frames = (batch.len() - before_poses) as u64;

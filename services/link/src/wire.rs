@@ -16,8 +16,9 @@ pub enum Message {
     Pose {
         /// The frame's header, with the detector's and the matcher's results.
         header: TracksHeader,
-        /// The pose.
-        pose: PoseRecord,
+        /// The pose (boxed: it carries two covariances, the largest variant by far; the
+        /// encoding is the record's).
+        pose: Box<PoseRecord>,
     },
     /// A stage's heartbeat or event.
     Status {
@@ -152,13 +153,14 @@ mod tests {
         let messages = [
             Message::Pose {
                 header: tracks_header(3),
-                pose: PoseRecord {
+                pose: Box::new(PoseRecord {
                     translation: [0.1, -2.0, 1e-9],
                     rotation_xyzw: [0.0, 0.0, 0.6, 0.8],
                     inliers: [3, 40],
                     rms_px: 0.25,
+                    covariance: [1e-4; 21],
                     ..Default::default()
-                },
+                }),
             },
             Message::Status {
                 report: StatusReport {

@@ -8,7 +8,8 @@
 //! tracked (a drop upstream, a restart), it starts again from the current pose instead of
 //! using them. The stereo rig comes from the stream (the frame source publishes it on
 //! [`Topic::Rig`]): the stage never opens the data set, so any source (a live camera) can
-//! feed it.
+//! feed it. Each pose carries its covariance (the motion estimates' chained with
+//! [`PoseCovariance`]) and the frame's step's.
 
 use anyhow::Context;
 use linetrack_geometry::{Segment, StereoRig};
@@ -17,14 +18,15 @@ use linetrack_msgs::{
     FrameHeader, NO_FRAME, PoseRecord, RigRecord, StageKind, Topic, TrackedLine, TracksHeader,
 };
 use linetrack_odometry::{
-    Features, FrameStats, MatchedLines, MotionTracker, OdometryConfig, Preparation, PreparedImages,
+    Features, FrameStats, MatchedLines, MotionTracker, OdometryConfig, PoseCovariance, Preparation,
+    PreparedImages,
 };
 use linetrack_stage_runtime::{
     Images, Stage, StageContext, held_capacity, rig_from_record, run_stage, stereo_views,
     to_segment,
 };
 use linetrack_vision::FeatureMatch;
-use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion};
+use nalgebra::{Isometry3, Matrix6, Quaternion, Translation3, UnitQuaternion};
 use std::collections::VecDeque;
 
 /// A pose as a record.
@@ -36,6 +38,11 @@ pub fn pose_record(pose: &Isometry3<f64>) -> PoseRecord {
         rotation_xyzw: [q.i, q.j, q.k, q.w],
         ..PoseRecord::default()
     }
+}
+
+/// A symmetric 6×6 covariance as the pose record carries it.
+fn packed(covariance: &Matrix6<f64>) -> [f64; 21] {
+    PoseRecord::pack_covariance(&(*covariance).into())
 }
 
 /// Where a restarted pose estimator picks up: the last pose the run recorded and the
@@ -119,6 +126,8 @@ pub struct PoseTracker {
     /// Frames whose images were prepared before their segments arrived, oldest first.
     prepared: VecDeque<(u64, PreparedImages)>,
     buffers: FrameBuffers,
+    /// The pose's covariance, chained over the frames (a resumed pose starts exact).
+    covariance: PoseCovariance,
 }
 
 /// A frame's segments and matches as the back end takes them.
@@ -149,6 +158,7 @@ impl PoseTracker {
             resume,
             prepared: VecDeque::new(),
             buffers: FrameBuffers::default(),
+            covariance: PoseCovariance::default(),
         })
     }
 
@@ -189,6 +199,14 @@ impl PoseTracker {
             (Some(t), _) => t.pose(),
             (None, Some(r)) => r.pose,
             (None, None) => Isometry3::identity(),
+        }
+    }
+
+    /// The current pose as a record, with its covariance (what a dropped frame repeats).
+    pub fn pose_record(&self) -> PoseRecord {
+        PoseRecord {
+            covariance: packed(&self.covariance.covariance()),
+            ..pose_record(&self.pose())
         }
     }
 
@@ -294,6 +312,7 @@ impl PoseTracker {
             .as_mut()
             .context("no stereo rig has arrived from the frame source yet")?;
         let resumed = self.resumed_after.take();
+        let before = tracker.pose();
         if let Some(frame) = resumed {
             tracker.predict_frames(header.frame_id.saturating_sub(frame));
         }
@@ -304,11 +323,20 @@ impl PoseTracker {
             (images, _) => tracker.update(images, matched, FrameStats::default())?,
         };
         self.last_frame = header.frame_id;
+        // A measured step adds its covariance; a predicted one (lost, or across a restart's
+        // gap) the last measured one's; a fresh start (the pose unchanged) nothing.
+        let step = result.step_covariance.as_ref();
+        if step.is_some() || result.lost || resumed.is_some() {
+            self.covariance.advance(&before, &result.pose, step);
+        }
         let mut record = pose_record(&result.pose);
+        record.covariance = packed(&self.covariance.covariance());
+        record.step_covariance = step.map(packed).unwrap_or_default();
         record.lost = u32::from(result.lost || resumed.is_some());
         record.inliers = result.stats.inliers.map(|n| n as u32);
         record.observations = result.stats.observations.map(|n| n as u32);
         record.rms_px = result.stats.rms_px;
+        record.conditioning = result.stats.conditioning;
         if let Some(reason) = &result.reason {
             tracing::debug!("frame {} lost: {reason}", header.frame_id);
         }
@@ -385,7 +413,7 @@ impl Stage for PoseStage {
 
     /// A dropped or failed frame repeats the last pose.
     fn placeholder(&self, out: &mut Vec<PoseRecord>) {
-        out.push(pose_record(&self.tracker.pose()));
+        out.push(self.tracker.pose_record());
     }
 }
 

@@ -3,40 +3,37 @@
 use crate::ros_msgs::{Header, Path, Point, Pose, PoseStamped, Quaternion, Time};
 use linetrack_msgs::{FrameHeader, PoseRecord};
 use linetrack_pipeline_config::{Convention, StampSource};
-use nalgebra::{Matrix3, Quaternion as NaQuaternion, Rotation3, UnitQuaternion, Vector3};
+use nalgebra::{
+    Isometry3, Matrix3, Quaternion as NaQuaternion, Rotation3, Translation3, UnitQuaternion,
+};
 use std::collections::VecDeque;
 
 /// REP-103 body axes from the left camera's optical axes: x forward (the camera's z),
 /// y left (its −x), z up (its −y).
-fn optical_to_rep103() -> UnitQuaternion<f64> {
+pub(crate) fn optical_to_rep103() -> UnitQuaternion<f64> {
     let m = Matrix3::new(0.0, 0.0, 1.0, -1.0, 0.0, 0.0, 0.0, -1.0, 0.0);
     UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(m))
 }
 
-/// The pose of `record` (the left camera in the first frame's camera frame) in
-/// `convention`'s axes; `None` when it is not a finite rotation and position.
-///
-/// With [`Convention::Rep103`] both the world frame (the first camera frame) and the body
-/// frame are turned to x forward, y left, z up: position `M·t`, orientation `M·R·Mᵀ`.
-pub fn ros_pose(record: &PoseRecord, convention: Convention) -> Option<Pose> {
+/// The pose of a record (the left camera in the first frame's camera frame); `None` when it
+/// is not a finite rotation and position.
+pub fn camera_pose(record: &PoseRecord) -> Option<Isometry3<f64>> {
     let [x, y, z] = record.translation;
     let [qx, qy, qz, qw] = record.rotation_xyzw;
-    let finite = [x, y, z, qx, qy, qz, qw].iter().all(|v| v.is_finite());
     let q = NaQuaternion::new(qw, qx, qy, qz);
-    if !finite || q.norm() < f64::EPSILON {
-        return None;
-    }
-    let (t, q) = match convention {
-        Convention::Camera => (Vector3::new(x, y, z), UnitQuaternion::from_quaternion(q)),
-        Convention::Rep103 => {
-            let m = optical_to_rep103();
-            (
-                m * Vector3::new(x, y, z),
-                m * UnitQuaternion::from_quaternion(q) * m.inverse(),
-            )
-        }
-    };
-    Some(Pose {
+    let finite = [x, y, z, qx, qy, qz, qw].iter().all(|v| v.is_finite());
+    (finite && q.norm() >= f64::EPSILON).then(|| {
+        Isometry3::from_parts(
+            Translation3::new(x, y, z),
+            UnitQuaternion::from_quaternion(q),
+        )
+    })
+}
+
+/// A pose as a ROS message.
+pub fn pose_message(pose: &Isometry3<f64>) -> Pose {
+    let (t, q) = (pose.translation.vector, pose.rotation);
+    Pose {
         position: Point {
             x: t.x,
             y: t.y,
@@ -48,15 +45,36 @@ pub fn ros_pose(record: &PoseRecord, convention: Convention) -> Option<Pose> {
             z: q.k,
             w: q.w,
         },
-    })
+    }
+}
+
+/// The pose of `record` (the left camera in the first frame's camera frame) in
+/// `convention`'s axes; `None` when it is not a finite rotation and position.
+///
+/// With [`Convention::Rep103`] both the world frame (the first camera frame) and the body
+/// frame are turned to x forward, y left, z up: position `M·t`, orientation `M·R·Mᵀ`.
+pub fn ros_pose(record: &PoseRecord, convention: Convention) -> Option<Pose> {
+    let pose = camera_pose(record)?;
+    Some(pose_message(&match convention {
+        Convention::Camera => pose,
+        Convention::Rep103 => {
+            let m = Isometry3::from_parts(Translation3::identity(), optical_to_rep103());
+            m * pose * m.inverse()
+        }
+    }))
 }
 
 /// The stamp of a frame's messages.
 pub fn stamp(header: &FrameHeader, source: StampSource) -> Time {
-    Time::from_ns(match source {
+    Time::from_ns(stamp_ns(header, source))
+}
+
+/// The stamp of a frame's messages, nanoseconds.
+pub fn stamp_ns(header: &FrameHeader, source: StampSource) -> u64 {
+    match source {
         StampSource::Capture => header.capture_ns,
         StampSource::Sequence => header.sequence_ns,
-    })
+    }
 }
 
 /// The newest poses, at most a fixed number: the published path.
@@ -113,6 +131,7 @@ impl PathWindow {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use nalgebra::Vector3;
 
     fn record(t: [f64; 3], q: UnitQuaternion<f64>) -> PoseRecord {
         PoseRecord {

@@ -1,20 +1,25 @@
 //! The DDS side (cargo feature `ros2`): a ROS 2 node with ros2-client over RustDDS that
-//! publishes the poses and the path.
+//! publishes the poses, the path, the odometry and `/tf`.
 //!
 //! QoS: the pose topic is reliable, keep-last 10, volatile (ROS 2's default for a
 //! publisher: a late subscriber does not get old poses, a slow one gets them all up to 10
 //! behind); the path is reliable, keep-last 1, transient-local, so that a subscriber that
-//! starts mid-run (RViz, `ros2 topic echo`) gets the trajectory so far at once. A writer
+//! starts mid-run (RViz, `ros2 topic echo`) gets the trajectory so far at once. The odometry
+//! is as the pose; `/tf` is reliable, keep-last [`TF_DEPTH`], volatile (tf2's broadcaster's
+//! profile). A writer
 //! whose subscriber does not keep up waits at most [`WRITE_WAIT`] and the write is
 //! counted as failed: the bridge falls behind, never the pipeline.
 
-use crate::ros_msgs::{PATH_TYPE, POSE_STAMPED_TYPE, Path, PoseStamped};
+use crate::ros_msgs::{
+    DIAGNOSTIC_ARRAY_TYPE, DiagnosticArray, ODOMETRY_TYPE, Odometry, PATH_TYPE, POSE_STAMPED_TYPE,
+    Path, PoseStamped, TF_MESSAGE_TYPE, TfMessage,
+};
 use crate::{BridgeError, PoseSink};
 use linetrack_pipeline_config::{MAX_DOMAIN_ID, Ros2Config};
 use ros2_client::dds::rustdds::DomainParticipantBuilder;
 use ros2_client::qos::{Durability, History, WhenFull};
 use ros2_client::{
-    Context, MessageTypeName, Name, Node, NodeName, NodeOptions, Publisher, QosProfile,
+    Context, Message, MessageTypeName, Name, Node, NodeName, NodeOptions, Publisher, QosProfile,
 };
 use std::net::{IpAddr, Ipv4Addr};
 use std::time::Duration;
@@ -26,6 +31,10 @@ pub const WRITE_WAIT: Duration = Duration::from_millis(20);
 pub const LINGER: Duration = Duration::from_millis(500);
 /// History depth of the pose topic.
 pub const POSE_DEPTH: usize = 10;
+/// History depth of `/tf` (tf2's `TransformBroadcaster`'s).
+pub const TF_DEPTH: usize = 100;
+/// The topic of the transforms.
+pub const TF_TOPIC: &str = "/tf";
 
 /// The domain id: the config's, else `ROS_DOMAIN_ID`, else 0.
 pub fn domain_id(config: &Ros2Config) -> Result<u16, BridgeError> {
@@ -49,12 +58,75 @@ pub fn localhost_only(config: &Ros2Config) -> bool {
     config.localhost_only || std::env::var("ROS_LOCALHOST_ONLY").is_ok_and(|v| v.trim() == "1")
 }
 
-/// A ROS 2 node with the pose and path writers.
+/// A topic's writer and the topic's name (for errors).
+struct Writer<M: Message> {
+    topic: String,
+    publisher: Publisher<M>,
+}
+
+impl<M: Message> Writer<M> {
+    /// The topic `topic` (config key `key`) of ROS type `type_name` on `node`, and its
+    /// writer.
+    fn new(
+        node: &mut Node,
+        key: &'static str,
+        topic: &str,
+        type_name: (&str, &str),
+        qos: &QosProfile,
+    ) -> Result<Self, BridgeError> {
+        let made = node
+            .create_topic(
+                &topic_name(key, topic)?,
+                MessageTypeName::new(type_name.0, type_name.1),
+                qos,
+            )
+            .map_err(|e| setup(key)(e.to_string()))?;
+        let publisher = node
+            .create_publisher::<M>(&made, None)
+            .map_err(|e| setup(key)(e.to_string()))?;
+        Ok(Self {
+            topic: topic.to_string(),
+            publisher,
+        })
+    }
+
+    /// The same when `topic` is configured (not empty).
+    fn optional(
+        node: &mut Node,
+        key: &'static str,
+        topic: &str,
+        type_name: (&str, &str),
+        qos: &QosProfile,
+    ) -> Result<Option<Self>, BridgeError> {
+        if topic.is_empty() {
+            Ok(None)
+        } else {
+            Self::new(node, key, topic, type_name, qos).map(Some)
+        }
+    }
+
+    fn publish(&self, message: M) -> Result<(), BridgeError> {
+        self.publisher
+            .publish(message)
+            .map_err(|e| BridgeError::Write {
+                topic: self.topic.clone(),
+                message: e.to_string(),
+            })
+    }
+}
+
+/// Publishes on `writer` when there is one.
+fn publish_if<M: Message>(writer: &Option<Writer<M>>, message: M) -> Result<(), BridgeError> {
+    writer.as_ref().map_or(Ok(()), |w| w.publish(message))
+}
+
+/// A ROS 2 node with the pose, path, odometry, `/tf` and diagnostics writers.
 pub struct DdsSink {
-    pose_topic: String,
-    path_topic: String,
-    poses: Publisher<PoseStamped>,
-    path: Option<Publisher<Path>>,
+    poses: Writer<PoseStamped>,
+    path: Option<Writer<Path>>,
+    odometry: Option<Writer<Odometry>>,
+    tf: Option<Writer<TfMessage>>,
+    diagnostics: Option<Writer<DiagnosticArray>>,
     // Dropped last: the writers belong to it.
     _node: Node,
 }
@@ -114,34 +186,47 @@ impl DdsSink {
             .clone()
             .durability(Durability::Volatile)
             .history(History::KeepLast { depth: POSE_DEPTH });
-        let pose_topic = node
-            .create_topic(
-                &topic_name("pose_topic", &config.pose_topic)?,
-                MessageTypeName::new(POSE_STAMPED_TYPE.0, POSE_STAMPED_TYPE.1),
-                &pose_qos,
-            )
-            .map_err(|e| setup("pose topic")(e.to_string()))?;
-        let poses = node
-            .create_publisher::<PoseStamped>(&pose_topic, None)
-            .map_err(|e| setup("pose writer")(e.to_string()))?;
-        let path = if config.path_topic.is_empty() {
-            None
-        } else {
-            let path_qos = reliable
-                .durability(Durability::TransientLocal)
-                .history(History::KeepLast { depth: 1 });
-            let topic = node
-                .create_topic(
-                    &topic_name("path_topic", &config.path_topic)?,
-                    MessageTypeName::new(PATH_TYPE.0, PATH_TYPE.1),
-                    &path_qos,
-                )
-                .map_err(|e| setup("path topic")(e.to_string()))?;
-            Some(
-                node.create_publisher::<Path>(&topic, None)
-                    .map_err(|e| setup("path writer")(e.to_string()))?,
-            )
-        };
+        let poses = Writer::new(
+            &mut node,
+            "pose_topic",
+            &config.pose_topic,
+            POSE_STAMPED_TYPE,
+            &pose_qos,
+        )?;
+        let path_qos = reliable
+            .durability(Durability::TransientLocal)
+            .history(History::KeepLast { depth: 1 });
+        let path = Writer::optional(
+            &mut node,
+            "path_topic",
+            &config.path_topic,
+            PATH_TYPE,
+            &path_qos,
+        )?;
+        let odometry = Writer::optional(
+            &mut node,
+            "odom_topic",
+            &config.odom_topic,
+            ODOMETRY_TYPE,
+            &pose_qos,
+        )?;
+        let tf_qos = pose_qos
+            .clone()
+            .history(History::KeepLast { depth: TF_DEPTH });
+        let tf = Writer::optional(
+            &mut node,
+            "tf",
+            if config.tf { TF_TOPIC } else { "" },
+            TF_MESSAGE_TYPE,
+            &tf_qos,
+        )?;
+        let diagnostics = Writer::optional(
+            &mut node,
+            "diagnostics_topic",
+            &config.diagnostics_topic,
+            DIAGNOSTIC_ARRAY_TYPE,
+            &pose_qos,
+        )?;
         tracing::info!(
             "ROS 2 node {} on domain {domain}{}: {} and {}",
             config.node_name,
@@ -158,10 +243,11 @@ impl DdsSink {
             }
         );
         Ok(Self {
-            pose_topic: config.pose_topic.clone(),
-            path_topic: config.path_topic.clone(),
             poses,
             path,
+            odometry,
+            tf,
+            diagnostics,
             _node: node,
         })
     }
@@ -169,24 +255,27 @@ impl DdsSink {
 
 impl PoseSink for DdsSink {
     fn pose(&mut self, message: PoseStamped) -> Result<(), BridgeError> {
-        self.poses.publish(message).map_err(|e| BridgeError::Write {
-            topic: self.pose_topic.clone(),
-            message: e.to_string(),
-        })
+        self.poses.publish(message)
     }
 
     fn path(&mut self, message: Path) -> Result<(), BridgeError> {
-        match &self.path {
-            Some(writer) => writer.publish(message).map_err(|e| BridgeError::Write {
-                topic: self.path_topic.clone(),
-                message: e.to_string(),
-            }),
-            None => Ok(()),
-        }
+        publish_if(&self.path, message)
     }
 
     fn wants_path(&self) -> bool {
         self.path.is_some()
+    }
+
+    fn odometry(&mut self, message: Odometry) -> Result<(), BridgeError> {
+        publish_if(&self.odometry, message)
+    }
+
+    fn transform(&mut self, message: TfMessage) -> Result<(), BridgeError> {
+        publish_if(&self.tf, message)
+    }
+
+    fn diagnostics(&mut self, message: DiagnosticArray) -> Result<(), BridgeError> {
+        publish_if(&self.diagnostics, message)
     }
 
     fn finish(&mut self) {

@@ -19,14 +19,20 @@
 pub mod convert;
 #[cfg(feature = "ros2")]
 pub mod dds;
+pub mod health;
+pub mod odometry;
 pub mod ros_msgs;
 
 use convert::PathWindow;
+use health::Health;
 use linetrack_ipc::{Bus, Shutdown};
 use linetrack_msgs::{PoseRecord, StageKind, StatusKind, StatusReport, Topic, TracksHeader};
+use linetrack_pipeline_config::BudgetConfig;
 use linetrack_pipeline_config::Ros2Config;
-use ros_msgs::{Header, Path, PoseStamped};
+use nalgebra::Isometry3;
+use ros_msgs::{DiagnosticArray, Header, Odometry, Path, PoseStamped, TfMessage, Time};
 use std::time::Duration;
+use std::time::Instant;
 
 /// A failed write is logged the first time and then once per this many failures.
 pub const LOG_EVERY: u64 = 100;
@@ -79,6 +85,12 @@ pub trait PoseSink {
     fn path(&mut self, message: Path) -> Result<(), BridgeError>;
     /// Whether a path topic is configured.
     fn wants_path(&self) -> bool;
+    /// Publishes one odometry message.
+    fn odometry(&mut self, message: Odometry) -> Result<(), BridgeError>;
+    /// Publishes one `/tf` message.
+    fn transform(&mut self, message: TfMessage) -> Result<(), BridgeError>;
+    /// Publishes one health report.
+    fn diagnostics(&mut self, message: DiagnosticArray) -> Result<(), BridgeError>;
     /// Called once after the last message, before the sink is dropped.
     fn finish(&mut self) {}
 }
@@ -104,6 +116,11 @@ pub struct Bridge {
     config: Ros2Config,
     path: PathWindow,
     tally: Tally,
+    /// The camera's optical frame in the base frame, in the published axes.
+    mount: Isometry3<f64>,
+    /// The last pose read of a frame that was not dropped, and its stamp (ns): where the
+    /// next one's twist starts.
+    previous: Option<(PoseRecord, u64)>,
 }
 
 impl Bridge {
@@ -113,6 +130,8 @@ impl Bridge {
             config: config.clone(),
             path: PathWindow::new(config.path_max_poses),
             tally: Tally::default(),
+            mount: odometry::camera_in_base(config.convention, &config.camera_in_base),
+            previous: None,
         }
     }
 
@@ -121,8 +140,9 @@ impl Bridge {
         self.tally
     }
 
-    /// Takes one message of the `poses` topic: publishes the pose and the path when the
-    /// frame was tracked (or lost, with `publish_lost`); nothing otherwise.
+    /// Takes one message of the `poses` topic: publishes the pose, the path, the odometry
+    /// and `/tf` (those configured) when the frame was tracked (or lost, with
+    /// `publish_lost`); nothing otherwise.
     pub fn on_pose(
         &mut self,
         message: &TracksHeader,
@@ -134,6 +154,8 @@ impl Bridge {
             self.tally.dropped += 1;
             return;
         }
+        let stamp_ns = convert::stamp_ns(header, self.config.stamp);
+        let previous = self.previous.replace((*record, stamp_ns));
         if record.lost != 0 && !self.config.publish_lost {
             self.tally.lost += 1;
             return;
@@ -156,8 +178,30 @@ impl Bridge {
         if sink.wants_path() {
             self.path.push(message.clone());
         }
+        let odometry = (!self.config.odom_topic.is_empty() || self.config.tf)
+            .then(|| {
+                odometry::odometry(
+                    record,
+                    message.header.clone(),
+                    stamp_ns,
+                    previous.as_ref().map(|(p, ns)| (p, *ns)),
+                    &self.config.child_frame_id,
+                    &self.mount,
+                )
+            })
+            .flatten();
         let written = sink.pose(message);
         self.note(written);
+        if let Some(odometry) = odometry {
+            if self.config.tf {
+                let written = sink.transform(odometry::transform(&odometry));
+                self.note(written);
+            }
+            if !self.config.odom_topic.is_empty() {
+                let written = sink.odometry(odometry);
+                self.note(written);
+            }
+        }
         if sink.wants_path() {
             let written = sink.path(self.path.message(&self.config.frame_id));
             self.note(written);
@@ -180,10 +224,12 @@ impl Bridge {
 
 /// The bridge's loop: subscribes to the poses, makes the sink (`make_sink`: DDS), tells the
 /// supervisor it is ready, then publishes every pose until `shutdown`, and the ones still
-/// queued after it. A sink that cannot be made ends it with that error (the run goes on
-/// without ROS 2 output).
+/// queued after it; with a diagnostics topic, the run's health (against `budget`) once a
+/// second and once at the end. A sink that cannot be made ends it with that error (the run
+/// goes on without ROS 2 output).
 pub fn run(
     config: &Ros2Config,
+    budget: &BudgetConfig,
     bus: &Bus,
     shutdown: &Shutdown,
     make_sink: impl FnOnce() -> Result<Box<dyn PoseSink>, BridgeError>,
@@ -201,17 +247,33 @@ pub fn run(
     };
     status.publish(&(), &[&[ready]])?;
     let mut bridge = Bridge::new(config);
+    let mut health = (!config.diagnostics_topic.is_empty()).then(|| Health::new(budget));
+    let wall_clock = || Time::from_ns(linetrack_msgs::now_ns());
     loop {
         let stopping = shutdown.requested();
         for message in poses.receive_all()? {
             if let Some(pose) = message.payload().first() {
                 bridge.on_pose(message.header(), pose, sink.as_mut());
+                if let Some(health) = &mut health {
+                    health.observe(message.header(), pose);
+                }
             }
+        }
+        if let Some(report) = health
+            .as_mut()
+            .and_then(|h| h.report_if_due(Instant::now(), wall_clock()))
+        {
+            let written = sink.diagnostics(report);
+            bridge.note(written);
         }
         if stopping {
             break;
         }
         wake.wait(WAKE_TIMEOUT)?;
+    }
+    if let Some(health) = &mut health {
+        let written = sink.diagnostics(health.report(wall_clock()));
+        bridge.note(written);
     }
     sink.finish();
     Ok(bridge.tally())
@@ -227,6 +289,8 @@ mod tests {
     struct Recorded {
         poses: Vec<PoseStamped>,
         paths: Vec<Path>,
+        odometry: Vec<Odometry>,
+        transforms: Vec<TfMessage>,
         fail: bool,
     }
 
@@ -247,6 +311,17 @@ mod tests {
         }
         fn wants_path(&self) -> bool {
             true
+        }
+        fn odometry(&mut self, message: Odometry) -> Result<(), BridgeError> {
+            self.odometry.push(message);
+            Ok(())
+        }
+        fn transform(&mut self, message: TfMessage) -> Result<(), BridgeError> {
+            self.transforms.push(message);
+            Ok(())
+        }
+        fn diagnostics(&mut self, _: DiagnosticArray) -> Result<(), BridgeError> {
+            Ok(())
         }
     }
 
@@ -310,6 +385,46 @@ mod tests {
             &mut sink,
         );
         assert_eq!(sink.poses.len(), 4);
+    }
+
+    /// Every published pose has its odometry (same stamp, same pose) and, with `tf`, its
+    /// transform; the twist runs from the last pose read, lost or not.
+    #[test]
+    fn odometry_and_tf_go_with_every_published_pose() {
+        let config = Ros2Config {
+            convention: Convention::Camera,
+            tf: true,
+            ..Default::default()
+        };
+        let mut bridge = Bridge::new(&config);
+        let mut sink = Recorded::default();
+        let frame = |id: u64| TracksHeader::from(FrameHeader::new(id, 0, id * 100_000_000));
+        bridge.on_pose(&frame(0), &pose(0.0, 0), &mut sink);
+        bridge.on_pose(&frame(1), &pose(0.1, 1), &mut sink);
+        bridge.on_pose(&frame(2), &pose(0.2, 0), &mut sink);
+        assert_eq!((sink.poses.len(), sink.odometry.len()), (2, 2));
+        assert_eq!(sink.transforms.len(), 2);
+        for ((p, o), t) in sink.poses.iter().zip(&sink.odometry).zip(&sink.transforms) {
+            assert_eq!(o.header, p.header);
+            assert_eq!(o.pose.pose, p.pose);
+            assert_eq!(o.child_frame_id, "base_link");
+            assert_eq!(t.transforms[0].header, p.header);
+        }
+        // Frame 2's twist: 0.1 m along x over 0.1 s from the lost frame 1's pose.
+        let twist = sink.odometry[1].twist.twist;
+        assert!((twist.linear.x - 1.0).abs() < 1e-9, "{twist:?}");
+        assert_eq!(sink.odometry[0].twist.twist.linear.x, 0.0);
+        // Without an odometry topic and tf nothing but the pose and the path goes out.
+        let mut quiet = Bridge::new(&Ros2Config {
+            odom_topic: String::new(),
+            ..Default::default()
+        });
+        let mut sink = Recorded::default();
+        quiet.on_pose(&frame(0), &pose(0.0, 0), &mut sink);
+        assert_eq!(
+            (sink.poses.len(), sink.odometry.len(), sink.transforms.len()),
+            (1, 0, 0)
+        );
     }
 
     #[test]

@@ -17,9 +17,13 @@ fn main() -> ExitCode {
 
 fn run(ctx: &StageContext, bus: &Bus, shutdown: &Shutdown) -> anyhow::Result<()> {
     let ros2 = ctx.config.ros2.clone();
-    let tally = linetrack_ros2_bridge::run(&ctx.config.ros2, bus, shutdown, move || {
-        Ok(Box::new(DdsSink::new(&ros2)?) as Box<dyn PoseSink>)
-    })
+    let tally = linetrack_ros2_bridge::run(
+        &ctx.config.ros2,
+        &ctx.config.budget,
+        bus,
+        shutdown,
+        move || Ok(Box::new(DdsSink::new(&ros2)?) as Box<dyn PoseSink>),
+    )
     .context("ROS 2 output")?;
     tracing::info!("ROS 2 output: {tally:?}");
     Ok(())

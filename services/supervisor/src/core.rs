@@ -60,8 +60,8 @@ pub enum Event {
     Pose {
         /// Its header.
         header: TracksHeader,
-        /// Its pose.
-        pose: PoseRecord,
+        /// Its pose (boxed: it carries two covariances, the largest variant by far).
+        pose: Box<PoseRecord>,
         /// Its first outcome (not a frame that reached the end twice).
         first: bool,
     },
@@ -1350,7 +1350,7 @@ mod tests {
     fn pose(run: &mut Run, header: TracksHeader, first: bool) -> Vec<Action> {
         run.on(Event::Pose {
             header,
-            pose: PoseRecord::default(),
+            pose: Box::default(),
             first,
         })
     }

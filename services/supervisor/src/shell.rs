@@ -529,7 +529,7 @@ impl<'m> Supervisor<'m> {
             let first = self.monitor.on_pose(message.header(), &pose);
             let event = Event::Pose {
                 header: *message.header(),
-                pose,
+                pose: Box::new(pose),
                 first,
             };
             if let Some(end) = self.feed(event)? {

@@ -324,6 +324,19 @@ mod tests {
     }
 
     #[test]
+    fn a_covariance_travels_as_its_upper_triangle() {
+        let mut m = [[0.0; 6]; 6];
+        for (i, row) in m.iter_mut().enumerate() {
+            for (j, v) in row.iter_mut().enumerate() {
+                *v = (i.min(j) * 6 + i.max(j)) as f64;
+            }
+        }
+        let packed = PoseRecord::pack_covariance(&m);
+        assert_eq!((packed[1], packed[6], packed[20]), (1.0, 7.0, 35.0));
+        assert_eq!(PoseRecord::unpack_covariance(&packed), m);
+    }
+
+    #[test]
     fn control_addressing() {
         let c = Control::new(Command::HandOver, StageKind::LineDetector, 42, 0, 0);
         assert!(c.is_for(StageKind::LineDetector, 42));

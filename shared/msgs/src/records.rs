@@ -324,9 +324,13 @@ pub struct TrackedLine {
     pub previous: i32,
 }
 
-/// The pose of a frame.
+/// The pose of a frame, with its uncertainty. The covariances are symmetric 6×6 matrices
+/// sent as their upper triangle row by row (21 values: (0,0), (0,1), …, (0,5), (1,1), …,
+/// (5,5)); all zeros means none. The type name carries the layout's version: a process of
+/// another build refuses to connect instead of misreading the record.
 #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
 #[repr(C)]
+#[type_name("linetrack::PoseRecord/2")]
 #[derive(serde::Serialize, serde::Deserialize)]
 pub struct PoseRecord {
     /// Position of the left camera in the first frame's world, metres.
@@ -341,6 +345,45 @@ pub struct PoseRecord {
     pub observations: [u32; 2],
     /// RMS residual of the inliers, pixels.
     pub rms_px: f64,
+    /// Conditioning of the motion estimate's normal matrix: its smallest eigenvalue over
+    /// its largest (0 when lost).
+    pub conditioning: f64,
+    /// Covariance of the pose: position (x, y, z, metres) then orientation (rotation
+    /// vector about x, y, z, radians; `R_true = exp(θ)·R`), both in the world's axes (the
+    /// first frame's camera), chained over the frames since the first.
+    pub covariance: [f64; 21],
+    /// Covariance of this frame's motion `p_curr = motion · p_prev` (left-multiplied error,
+    /// translation metres then rotation radians, in the current camera frame; to first order
+    /// the pose's error in its own body frame); zeros when the frame was lost or is the
+    /// first one tracked.
+    pub step_covariance: [f64; 21],
+}
+
+impl PoseRecord {
+    /// The symmetric 6×6 matrix of a covariance sent as its upper triangle
+    /// ([`PoseRecord::covariance`], [`PoseRecord::step_covariance`]).
+    pub fn unpack_covariance(values: &[f64; 21]) -> [[f64; 6]; 6] {
+        std::array::from_fn(|i| {
+            std::array::from_fn(|j| {
+                let (row, column) = (i.min(j), i.max(j));
+                // Rows 0..row hold 6, 5, … values: 6·row − row·(row − 1)/2 in all.
+                values[6 * row - row * row.saturating_sub(1) / 2 + (column - row)]
+            })
+        })
+    }
+
+    /// The upper triangle of a symmetric 6×6 matrix, row by row (the lower is not read).
+    pub fn pack_covariance(m: &[[f64; 6]; 6]) -> [f64; 21] {
+        let mut out = [0.0; 21];
+        let mut k = 0;
+        for (i, row) in m.iter().enumerate() {
+            for value in &row[i..] {
+                out[k] = *value;
+                k += 1;
+            }
+        }
+        out
+    }
 }
 
 wire_enum! {

@@ -15,18 +15,22 @@
 //!
 //! The back end alone, [`MotionTracker`], takes segments matched elsewhere (the pipeline's
 //! matcher stage) and does the rest. [`metrics`] (from `linetrack-trajectory`) scores
-//! trajectories.
+//! trajectories. Each tracked frame's result carries the covariance of its motion
+//! ([`FrameResult::step_covariance`]); [`PoseCovariance`] chains them into the pose's.
 #![warn(missing_docs)]
 
 mod config;
 mod front_end;
 mod landmarks;
+mod pose_covariance;
 mod stats;
 mod tracker;
 
 pub use config::{Features, LinePrediction, LostLimits, OdometryConfig, StereoPhotometric};
 pub use front_end::Odometry;
+pub use linetrack_stereo_vo::nees;
 pub use linetrack_trajectory::metrics;
+pub use pose_covariance::PoseCovariance;
 pub use stats::{FrameResult, FrameStats};
 pub use tracker::{
     MatchedLines, MotionTracker, Preparation, PreparedImages, SightingKind, StereoSighting,

@@ -1,7 +1,7 @@
 //! What tracking a frame gives back: its pose, whether it was lost, and its
 //! [`FrameStats`] (feature counts, the estimate's figures, the milliseconds of each step).
 
-use nalgebra::Isometry3;
+use nalgebra::{Isometry3, Matrix6};
 use serde::Serialize;
 use std::time::Instant;
 
@@ -55,6 +55,13 @@ pub struct FrameResult {
     pub reason: Option<String>,
     /// Counts and timings.
     pub stats: FrameStats,
+    /// Covariance of this frame's motion estimate (see
+    /// `linetrack_stereo_vo::MotionEstimate::covariance`: the left-multiplied error of
+    /// `p_curr = motion · p_prev`, translation metres then rotation radians, in the current
+    /// left camera frame); `None` when the frame was lost or not tracked against a previous
+    /// one.
+    #[serde(skip)]
+    pub step_covariance: Option<Matrix6<f64>>,
 }
 
 /// Milliseconds since `start`.

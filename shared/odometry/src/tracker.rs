@@ -516,6 +516,7 @@ impl MotionTracker {
         stats: FrameStats,
     ) -> FrameResult {
         let (fresh, observations) = (&lists.fresh, &lists.observations);
+        let step_covariance = verdict.as_ref().ok().and_then(|e| e.covariance);
         let reason = match verdict {
             Ok(e) => {
                 self.last_motion = e.motion;
@@ -539,7 +540,10 @@ impl MotionTracker {
             }
         };
         self.spares.keep_reference(previous);
-        self.result(reason, stats)
+        FrameResult {
+            step_covariance,
+            ..self.result(reason, stats)
+        }
     }
 
     /// The frame's result at the current pose: lost when there is a `reason`.
@@ -549,6 +553,7 @@ impl MotionTracker {
             lost: reason.is_some(),
             reason,
             stats,
+            step_covariance: None,
         }
     }
 

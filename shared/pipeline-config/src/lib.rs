@@ -13,7 +13,7 @@ use linetrack_msgs::StageKind;
 use linetrack_odometry::OdometryConfig;
 pub use linetrack_sched::{Policy, SchedSettings};
 use linetrack_vision::DetectorKind;
-pub use ros2::{Convention, MAX_DOMAIN_ID, Ros2Config, StampSource};
+pub use ros2::{CameraMount, Convention, MAX_DOMAIN_ID, Ros2Config, StampSource};
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 

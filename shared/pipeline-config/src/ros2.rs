@@ -30,6 +30,50 @@ pub enum StampSource {
     Sequence,
 }
 
+/// Where the camera sits on the robot: the left camera's pose in the base frame, in the
+/// published convention's axes (with `rep103`, of the camera's x-forward, y-left, z-up
+/// body frame; with `camera`, of its optical frame). The identity: the base is the camera.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct CameraMount {
+    /// Position of the camera in the base frame, metres.
+    pub translation_m: [f64; 3],
+    /// Orientation of the camera in the base frame, unit quaternion x, y, z, w.
+    pub rotation_xyzw: [f64; 4],
+}
+
+impl Default for CameraMount {
+    fn default() -> Self {
+        Self {
+            translation_m: [0.0; 3],
+            rotation_xyzw: [0.0, 0.0, 0.0, 1.0],
+        }
+    }
+}
+
+impl CameraMount {
+    /// How far a unit quaternion's norm may be from 1 (rounding of hand-written values).
+    pub const UNIT_TOLERANCE: f64 = 1e-3;
+
+    /// The first bad value, named with why.
+    pub fn validate(&self) -> Result<(), String> {
+        if !self.translation_m.iter().all(|v| v.is_finite()) {
+            return Err(format!(
+                "ros2.camera_in_base.translation_m = {:?}: not finite",
+                self.translation_m
+            ));
+        }
+        let norm = self.rotation_xyzw.iter().map(|v| v * v).sum::<f64>().sqrt();
+        if !((norm - 1.0).abs() <= Self::UNIT_TOLERANCE) {
+            return Err(format!(
+                "ros2.camera_in_base.rotation_xyzw = {:?}: not a unit quaternion (norm {norm})",
+                self.rotation_xyzw
+            ));
+        }
+        Ok(())
+    }
+}
+
 /// The ROS 2 output: poses and the path of the run over DDS.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -59,6 +103,20 @@ pub struct Ros2Config {
     /// Publish the predicted poses of frames where tracking was lost (otherwise only
     /// tracked poses go out).
     pub publish_lost: bool,
+    /// The `nav_msgs/msg/Odometry` topic (pose and twist of `child_frame_id` in `frame_id`,
+    /// with covariances), one message per published pose; empty = none.
+    pub odom_topic: String,
+    /// The robot's frame: the odometry's `child_frame_id` and the `/tf` child.
+    pub child_frame_id: String,
+    /// Also publish `frame_id → child_frame_id` on `/tf` (`tf2_msgs/msg/TFMessage`) at
+    /// each published pose.
+    pub tf: bool,
+    /// The camera's pose in `child_frame_id`.
+    pub camera_in_base: CameraMount,
+    /// The `diagnostic_msgs/msg/DiagnosticArray` topic: the pipeline's health once a
+    /// second (stage latencies and budget misses, drops, matcher mode, tracking); empty =
+    /// none.
+    pub diagnostics_topic: String,
 }
 
 impl Default for Ros2Config {
@@ -75,6 +133,11 @@ impl Default for Ros2Config {
             stamp: StampSource::default(),
             path_max_poses: 1000,
             publish_lost: false,
+            odom_topic: "/linetrack/odom".to_string(),
+            child_frame_id: "base_link".to_string(),
+            tf: false,
+            camera_in_base: CameraMount::default(),
+            diagnostics_topic: "/diagnostics".to_string(),
         }
     }
 }
@@ -94,6 +157,20 @@ impl Ros2Config {
         ros_name("ros2.pose_topic", &self.pose_topic, true)?;
         if !self.path_topic.is_empty() {
             ros_name("ros2.path_topic", &self.path_topic, true)?;
+        }
+        if !self.odom_topic.is_empty() {
+            ros_name("ros2.odom_topic", &self.odom_topic, true)?;
+        }
+        if self.child_frame_id.is_empty() || self.child_frame_id == self.frame_id {
+            return Err(format!(
+                "ros2.child_frame_id = {:?}: name the robot's frame, other than frame_id {:?} \
+                 (e.g. \"base_link\")",
+                self.child_frame_id, self.frame_id
+            ));
+        }
+        self.camera_in_base.validate()?;
+        if !self.diagnostics_topic.is_empty() {
+            ros_name("ros2.diagnostics_topic", &self.diagnostics_topic, true)?;
         }
         if self.frame_id.is_empty() {
             return Err(
@@ -182,6 +259,39 @@ mod tests {
                 ..Default::default()
             })
             .starts_with("ros2.path_max_poses")
+        );
+        assert!(
+            bad(Ros2Config {
+                child_frame_id: "odom".into(),
+                ..Default::default()
+            })
+            .starts_with("ros2.child_frame_id")
+        );
+        assert!(
+            bad(Ros2Config {
+                odom_topic: "/odom/".into(),
+                ..Default::default()
+            })
+            .starts_with("ros2.odom_topic")
+        );
+        let mount = |translation_m, rotation_xyzw| Ros2Config {
+            camera_in_base: CameraMount {
+                translation_m,
+                rotation_xyzw,
+            },
+            ..Default::default()
+        };
+        assert!(
+            bad(mount([0.0; 3], [0.0, 0.0, 0.0, 2.0]))
+                .starts_with("ros2.camera_in_base.rotation_xyzw")
+        );
+        assert!(
+            bad(mount([f64::NAN, 0.0, 0.0], [0.0, 0.0, 0.0, 1.0]))
+                .starts_with("ros2.camera_in_base.translation_m")
+        );
+        assert_eq!(
+            mount([0.1, 0.0, 0.3], [0.0, 0.0, 0.6, 0.8]).validate(),
+            Ok(())
         );
         assert_eq!(
             Ros2Config {

@@ -2,13 +2,15 @@
 //! geometry half. Stereo matches are triangulated in the rectified rig ([`triangulate`]);
 //! the motion between consecutive frames is estimated by Gauss–Newton on SE(3) from
 //! point reprojection errors and endpoint-to-line distances ([`motion`]), started from the
-//! best of RANSAC's minimal-set hypotheses ([`robust`]).
+//! best of RANSAC's minimal-set hypotheses ([`robust`]), with the covariance of the estimate
+//! ([`MotionEstimate::covariance`], checked against the truth with [`nees`]).
 //!
 //! Feature detection and matching live in `linetrack-vision`; this crate only sees 2-D
 //! observations and 3-D positions, so it runs (and is tested) without OpenCV.
 #![warn(missing_docs)]
 
 pub mod motion;
+pub mod nees;
 pub mod robust;
 pub mod triangulate;
 

@@ -152,6 +152,12 @@ pub struct MotionEstimate {
     /// Conditioning of the final normal matrix (translations in units of the observations'
     /// depth): its smallest eigenvalue over its largest.
     pub relative_eigenvalue: f64,
+    /// Covariance of the estimate, from the final inliers' residuals (the IRLS sandwich
+    /// `σ̂² · H⁻¹ (Σ v w² JᵀJ) H⁻¹`, see `motion_covariance` in the source): of the
+    /// left-multiplied error `δ = (ρ, φ)` (metres, radians) with
+    /// `true motion = exp(δ) · motion`, in the current left camera frame; `None` when the
+    /// inliers leave no degree of freedom for the residual variance.
+    pub covariance: Option<Matrix6<f64>>,
 }
 
 /// Why no motion could be estimated (the frame is reported as lost).
@@ -378,7 +384,7 @@ fn optimise(
     mut t: Isometry3<f64>,
 ) -> Result<(Isometry3<f64>, usize, f64), MotionError> {
     let Settings { rig, prior, config } = *settings;
-    let robust = |r: f64| 1.0 / (1.0 + (r / config.huber_px).powi(2)).sqrt();
+    let robust = |r: f64| robust_weight(r, config.huber_px);
     for iteration in 1..=config.max_iterations {
         let mut h = Matrix6::zeros();
         let mut g = Vector6::zeros();
@@ -587,5 +593,106 @@ fn estimate(
         iterations: iterations_1 + iterations_2,
         rms_px: if n > 0 { (sum / n as f64).sqrt() } else { 0.0 },
         relative_eigenvalue,
+        covariance: motion_covariance(&settings, points, lines, &active, &motion),
     })
+}
+
+/// The IRLS weight of a residual of norm `r` under the pseudo-Huber loss of scale
+/// `huber_px`.
+fn robust_weight(r: f64, huber_px: f64) -> f64 {
+    1.0 / (1.0 + (r / huber_px).powi(2)).sqrt()
+}
+
+/// The sums of [`motion_covariance`]: the normal matrix `Σ v w JᵀJ`, the weighted
+/// information `Σ v w² JᵀJ`, the residuals' `Σ v ‖r‖²` and how many rows.
+#[derive(Default)]
+struct Sandwich {
+    normal: Matrix6<f64>,
+    information: Matrix6<f64>,
+    squares: f64,
+    rows: usize,
+}
+
+impl Sandwich {
+    /// Adds an observation of uncertainty weight `weight` with residual rows `r` and their
+    /// Jacobian `j`.
+    fn add<const R: usize>(
+        &mut self,
+        weight: f64,
+        huber_px: f64,
+        r: &SMatrix<f64, R, 1>,
+        j: &SMatrix<f64, R, 6>,
+    ) {
+        let w = robust_weight(r.norm(), huber_px);
+        self.normal += weight * w * j.transpose() * j;
+        self.information += weight * w * w * j.transpose() * j;
+        self.squares += weight * r.norm_squared();
+        // A missing stereo partner's row is all zeros: no residual.
+        self.rows += j
+            .row_iter()
+            .filter(|row| row.iter().any(|v| *v != 0.0))
+            .count();
+    }
+}
+
+/// The covariance of the final estimate `motion` from the `active` (final inlier)
+/// observations: `σ̂² · H⁻¹ (Σ vᵢwᵢ²JᵢᵀJᵢ) H⁻¹`, with `H = Σ vᵢwᵢJᵢᵀJᵢ` the final normal
+/// matrix (pseudo-Huber weights `w(‖r‖)`, uncertainty weights `v`; the prior's information
+/// added when there is one) and `σ̂² = Σ vᵢ‖rᵢ‖² / (m − 6)` the residual variance per unit
+/// `v` over the `m` residual rows. It is the covariance of the weighted fit when each row's
+/// error has variance `σ²/v`, independently, the weights `w` taken as given (the IRLS
+/// sandwich).
+///
+/// Why not `σ̂_w² · H⁻¹` (the normal matrix scaled by the *weighted* residual variance
+/// `Σ vw‖r‖²/(m − 6)`): that is a least-squares fit's covariance, exact only when the weights
+/// are the inverse variances. The IRLS weights come from the residuals themselves and shrink
+/// the residuals the variance is measured from. Under Gaussian pixel noise of 0.6 px (the
+/// 1 px pseudo-Huber scale, 40 points, 300 trials) `σ̂_w²·H⁻¹` gave a mean NEES of 7.6
+/// instead of 6; this form is within [5.2, 6.8] at 0.2 and 0.6 px
+/// (`the_covariance_is_honest_under_the_noise_it_assumes`). Tried and dropped: the Hessian
+/// with the weights' derivative in place of `H` (4.6 at 0.6 px: too cautious), and the
+/// observations' own gradient spread `H⁻¹ Σgᵢgᵢᵀ H⁻¹` (8.4 at 0.2 px: the small-sample
+/// optimism of that estimator).
+///
+/// The parameterisation is the optimiser's: the left-multiplied update `δ = (ρ, φ)`
+/// (translation metres, then rotation vector radians) with `true = exp(δ) · motion`, so the
+/// covariance is in the current left camera frame. For the camera's pose
+/// (`pose_k = pose_{k−1} · motion⁻¹`) that is, to first order, the covariance of the
+/// right-multiplied error of the new pose in its own body frame. `None` when `m ≤ 6` or the
+/// normal matrix is not positive definite.
+fn motion_covariance(
+    settings: &Settings<'_>,
+    points: &[PointObservation],
+    lines: &[LineObservation],
+    active: &Active<'_>,
+    motion: &Isometry3<f64>,
+) -> Option<Matrix6<f64>> {
+    let Settings { rig, prior, config } = *settings;
+    let stereo = config.stereo_reprojection;
+    let mut sums = Sandwich::default();
+    for (obs, _) in points.iter().zip(active.points).filter(|(_, on)| **on) {
+        if let Some((r, j)) = point_rows(rig, motion, obs, stereo) {
+            sums.add(obs.weight, config.huber_px, &r, &j);
+        }
+    }
+    for (obs, _) in lines.iter().zip(active.lines).filter(|(_, on)| **on) {
+        if let Some((r, j)) = line_rows(rig, motion, obs, stereo) {
+            sums.add(obs.weight, config.huber_px, &r, &j);
+        }
+    }
+    let Sandwich {
+        mut normal,
+        information,
+        squares,
+        rows,
+    } = sums;
+    let dof = rows.checked_sub(6).filter(|d| *d > 0)?;
+    if let Some(prior) = prior {
+        normal += Matrix6::from_diagonal(&prior.information);
+    }
+    let inverse = normal.cholesky()?.inverse();
+    let variance = squares / dof as f64;
+    let covariance = inverse * information * inverse * variance;
+    let symmetric = (covariance + covariance.transpose()) * 0.5;
+    symmetric.iter().all(|v| v.is_finite()).then_some(symmetric)
 }

@@ -501,3 +501,94 @@ fn a_far_field_with_a_few_near_points_is_not_degenerate() {
         estimate.relative_eigenvalue
     );
 }
+
+/// Gaussian noise of standard deviation `sigma_px` by Box–Muller.
+fn gaussian(rng: &mut ChaCha8Rng, sigma_px: f64) -> f64 {
+    let u: f64 = rng.random_range(f64::EPSILON..1.0);
+    let v: f64 = rng.random_range(0.0..std::f64::consts::TAU);
+    sigma_px * (-2.0 * u.ln()).sqrt() * v.cos()
+}
+
+/// Points seen after `truth` with Gaussian pixel noise of `sigma_px` (no outliers).
+fn noisy_points(
+    seed: u64,
+    truth: &Isometry3<f64>,
+    n: usize,
+    sigma_px: f64,
+) -> Vec<PointObservation> {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let rig = rig();
+    (0..n)
+        .map(|_| {
+            let z = rng.random_range(2.0..10.0);
+            let x = Point3::new(
+                rng.random_range(-0.7..0.7) * z,
+                rng.random_range(-0.5..0.5) * z,
+                z,
+            );
+            let p = truth * x;
+            let pixel = Point::new(
+                rig.focal_px * p.x / p.z + rig.cx_px + gaussian(&mut rng, sigma_px),
+                rig.focal_px * p.y / p.z + rig.cy_px + gaussian(&mut rng, sigma_px),
+            );
+            PointObservation {
+                position: x,
+                pixel,
+                right_x: None,
+                weight: 1.0,
+            }
+        })
+        .collect()
+}
+
+/// Under the noise the model assumes (independent, Gaussian, one σ for every pixel), the
+/// covariance is honest: the NEES of 300 estimates averages 6 (χ²₆: the mean of 300 has a
+/// standard deviation of 0.2), whatever σ is, since σ is estimated from the residuals.
+#[test]
+fn the_covariance_is_honest_under_the_noise_it_assumes() {
+    let truth = pose(0.02, -0.04, 0.01, 0.08, -0.03, 0.15);
+    let config = MotionConfig {
+        ransac_draws: 0,
+        ..MotionConfig::default()
+    };
+    for sigma_px in [0.2, 0.6] {
+        let mut sum = 0.0;
+        let trials = 300;
+        for seed in 0..trials {
+            let points = noisy_points(seed, &truth, 40, sigma_px);
+            let estimate = estimate_motion(&rig(), &points, &[], &Isometry3::identity(), &config)
+                .unwrap_or_else(|e| panic!("seed {seed}: {e}"));
+            let covariance = estimate
+                .covariance
+                .unwrap_or_else(|| panic!("seed {seed}: no covariance"));
+            assert_eq!(covariance, covariance.transpose());
+            sum += nees::nees(&estimate.motion, &truth, &covariance)
+                .unwrap_or_else(|| panic!("seed {seed}: covariance not positive definite"));
+        }
+        let mean = sum / trials as f64;
+        assert!(
+            (5.2..=6.8).contains(&mean),
+            "σ {sigma_px} px: mean NEES {mean}"
+        );
+    }
+}
+
+/// The covariance scales with the noise: four times the pixel variance, four times the
+/// covariance (the same scene, so the same normal matrix up to the residuals).
+#[test]
+fn the_covariance_grows_with_the_residuals() {
+    let truth = pose(0.0, 0.02, 0.0, 0.05, 0.0, 0.1);
+    let config = MotionConfig {
+        ransac_draws: 0,
+        ..MotionConfig::default()
+    };
+    let trace = |sigma_px: f64| {
+        let points = noisy_points(3, &truth, 60, sigma_px);
+        estimate_motion(&rig(), &points, &[], &Isometry3::identity(), &config)
+            .ok()
+            .and_then(|e| e.covariance)
+            .map_or(f64::NAN, |c| c.trace())
+    };
+    let ratio = trace(0.8) / trace(0.4);
+    assert!((3.5..=4.5).contains(&ratio), "{ratio}");
+}

@@ -7,12 +7,12 @@
 use anyhow::Context;
 use clap::Parser;
 use linetrack_datasets::StereoSequence;
-use linetrack_odometry::{Features, FrameResult, Odometry, OdometryConfig, metrics};
+use linetrack_odometry::{Features, FrameResult, Odometry, OdometryConfig, metrics, nees};
 use linetrack_progress::Progress;
 use linetrack_scene_render::IlluminationConfig;
 use linetrack_trajectory::tum::{self, StampedPose};
 use linetrack_vision::{DetectorKind, MatcherKind, perturb};
-use nalgebra::Isometry3;
+use nalgebra::{Isometry3, Matrix6};
 use serde::Serialize;
 use std::fmt::Write as _;
 use std::path::PathBuf;
@@ -35,7 +35,9 @@ row per frame: lost, features, matches, inliers, iterations, conditioning, depar
 prediction, milliseconds per step), metrics.json (the run's settings, lost frames and, with
 ground truth, under `metrics`: poses, path_m, rpe_m, ate_m, ate_aligned_m, drift_percent,
 step_ratio {steps, skipped, overall, median, p10, p90} (estimated over true step length, steps
-under 1 cm left out), zero_motion_ate_m — the names `linetrack run` writes to summary.json).\n\n", linetrack_progress::progress_help!("frames"), "\n\n", linetrack_vision::images_help!())
+under 1 cm left out), zero_motion_ate_m — the names `linetrack run` writes to summary.json; and
+step_nees {steps, mean, median, ratio}: each tracked step's error against the truth in units of
+its covariance (NEES; consistent: mean 6, ratio 1)).\n\n", linetrack_progress::progress_help!("frames"), "\n\n", linetrack_vision::images_help!())
 )]
 pub struct Args {
     /// Dataset folder: EuRoC (holding mav0/), a KITTI odometry sequence, or linetrack-synth output.
@@ -151,6 +153,51 @@ struct RunRecord {
     lost: usize,
     tracking_ms_per_frame: f64,
     metrics: Option<metrics::Summary>,
+    /// With ground truth: how honest the per-frame motion covariance is.
+    step_nees: Option<StepNees>,
+}
+
+/// The normalised estimation error squared of each tracked frame's motion against its
+/// covariance (`linetrack_odometry::nees`), over the frames that have both a covariance
+/// and the truth of the step: a consistent covariance averages 6 (the bar: 3–12).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct StepNees {
+    /// Steps scored.
+    pub steps: usize,
+    /// Their mean NEES.
+    pub mean: f64,
+    /// Their median NEES (χ²₆'s is 5.35).
+    pub median: f64,
+    /// The mean over 6: 1 for a consistent covariance, above 1 overconfident.
+    pub ratio: f64,
+}
+
+impl StepNees {
+    /// The NEES of each `(estimated motion, true motion, covariance)`; `None` without any
+    /// that can be scored.
+    pub fn of(steps: &[(Isometry3<f64>, Isometry3<f64>, Matrix6<f64>)]) -> Option<Self> {
+        let mut values: Vec<f64> = steps
+            .iter()
+            .filter_map(|(estimate, truth, covariance)| nees::nees(estimate, truth, covariance))
+            .collect();
+        if values.is_empty() {
+            return None;
+        }
+        values.sort_by(f64::total_cmp);
+        let mean = values.iter().sum::<f64>() / values.len() as f64;
+        let middle = values.len() / 2;
+        let median = if values.len().is_multiple_of(2) {
+            0.5 * (values[middle - 1] + values[middle])
+        } else {
+            values[middle]
+        };
+        Some(Self {
+            steps: values.len(),
+            mean,
+            median,
+            ratio: mean / nees::MOTION_DOF,
+        })
+    }
 }
 
 /// Runs the odometry; returns the summary.
@@ -190,6 +237,8 @@ pub fn run(args: &Args) -> anyhow::Result<String> {
     let mut csv = csv::Writer::from_path(&frames_path)
         .with_context(|| format!("cannot write {}", frames_path.display()))?;
     let (mut estimate, mut truth, mut stamps) = (Vec::new(), Vec::new(), Vec::new());
+    // Per frame: the covariance of its motion, when it was measured.
+    let mut covariances: Vec<Option<Matrix6<f64>>> = Vec::new();
     let (mut lost, mut skipped, mut busy_ms) = (0usize, Vec::new(), 0.0);
     let started = Instant::now();
     let progress = Progress::new(&format!("{name} frames"), total as u64, args.quiet);
@@ -220,6 +269,8 @@ pub fn run(args: &Args) -> anyhow::Result<String> {
         lost += usize::from(result.lost);
         csv.serialize(FrameRow::new(frame.index, frame.timestamp_ns, &result))
             .with_context(|| format!("cannot write {}", frames_path.display()))?;
+        // The step from the last frame tracked (the estimate before this one).
+        covariances.push(result.step_covariance);
         estimate.push(result.pose);
         stamps.push(frame.timestamp_ns as f64 * 1e-9);
         truth.push(frame.pose);
@@ -253,6 +304,7 @@ pub fn run(args: &Args) -> anyhow::Result<String> {
         lost,
         tracking_ms_per_frame: busy_ms / estimate.len().max(1) as f64,
         metrics: None,
+        step_nees: None,
     };
     let mut summary = format!(
         "{name}: {} frames ({} skipped), {lost} lost, {:.1} ms/frame tracking, {:.1} s in all",
@@ -291,10 +343,56 @@ pub fn run(args: &Args) -> anyhow::Result<String> {
             fmt(m.zero_motion_ate_m, " m"),
         )?;
         record.metrics = Some(m);
+        // p_curr = motion · p_prev: the motion is pose_curr⁻¹ · pose_prev.
+        let steps: Vec<_> = (1..estimate.len())
+            .filter_map(|k| {
+                let covariance = covariances[k]?;
+                let motion = |poses: &[Isometry3<f64>]| poses[k].inverse() * poses[k - 1];
+                Some((motion(&estimate), motion(&truth), covariance))
+            })
+            .collect();
+        record.step_nees = StepNees::of(&steps);
+        if let Some(n) = record.step_nees {
+            write!(
+                summary,
+                "; step NEES mean {:.2} (median {:.2}, {:.2}× its 6 dof, {} steps)",
+                n.mean, n.median, n.ratio, n.steps
+            )?;
+        }
     }
     let json_path = args.output.join("metrics.json");
     std::fs::write(&json_path, serde_json::to_string_pretty(&record)?)
         .with_context(|| format!("cannot write {}", json_path.display()))?;
     write!(summary, " | wrote {}", args.output.display())?;
     Ok(summary)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::{Translation3, Vector6};
+
+    #[test]
+    fn step_nees_averages_the_steps_that_have_a_positive_definite_covariance() {
+        let truth = Isometry3::translation(0.0, 0.0, -0.1);
+        let sigma = 0.01;
+        let cov = Matrix6::from_diagonal(&Vector6::repeat(sigma * sigma));
+        // Errors of 1σ, 2σ and 3σ along x: NEES 1, 4, 9.
+        let off = |k: f64| {
+            Isometry3::from_parts(Translation3::new(-k * sigma, 0.0, 0.0), Default::default())
+                * truth
+        };
+        let steps = [
+            (off(1.0), truth, cov),
+            (off(2.0), truth, cov),
+            (off(3.0), truth, cov),
+            (off(5.0), truth, Matrix6::zeros()),
+        ];
+        let n = StepNees::of(&steps).unwrap_or_else(|| panic!("no figure"));
+        assert_eq!(n.steps, 3);
+        assert!((n.mean - 14.0 / 3.0).abs() < 1e-9, "{n:?}");
+        assert!((n.median - 4.0).abs() < 1e-9, "{n:?}");
+        assert!((n.ratio - 14.0 / 18.0).abs() < 1e-9, "{n:?}");
+        assert_eq!(StepNees::of(&steps[3..]), None);
+    }
 }
