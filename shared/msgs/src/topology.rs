@@ -132,9 +132,7 @@ impl Topic {
             Topic::Frames => &[PoseEstimator, LineDetector, Matcher, Recorder],
             Topic::Segments => &[Matcher, Recorder],
             Topic::Tracks => &[PoseEstimator, Recorder],
-            // The frame source waits for poses with `pacing = "fastest"` and
-            // `drop_late = false` (linetrack_stage_runtime's source role).
-            Topic::Poses => &[Supervisor, Recorder, FrameSource],
+            Topic::Poses => &[Supervisor, Recorder],
             Topic::Rig => &[PoseEstimator, Recorder],
             Topic::Status => &[Supervisor, Recorder],
             Topic::Control => &[
