@@ -488,15 +488,11 @@ impl MotionTracker {
         stats.motion_ms += since(started);
         let prediction = self.last_motion;
         estimate.map_err(|why| why.to_string()).and_then(|e| {
-            let change = prediction.inverse() * e.motion;
             stats.inliers = [e.inlier_points, e.inlier_lines];
             stats.iterations = e.iterations;
             stats.rms_px = e.rms_px;
             stats.conditioning = e.relative_eigenvalue;
-            stats.departure = [
-                change.translation.vector.norm(),
-                change.rotation.angle().to_degrees(),
-            ];
+            stats.departure = departure(&prediction, &e.motion);
             match self.departs_sharply(&prediction, stats.departure) {
                 Some(why) if self.motion_known => Err(why),
                 _ => Ok(e),
@@ -624,6 +620,16 @@ impl MotionTracker {
             )
         })
     }
+}
+
+/// How far `motion` lies from `prediction`: translation (metres) and rotation (degrees) of
+/// the change between them.
+fn departure(prediction: &Isometry3<f64>, motion: &Isometry3<f64>) -> [f64; 2] {
+    let change = prediction.inverse() * motion;
+    [
+        change.translation.vector.norm(),
+        change.rotation.angle().to_degrees(),
+    ]
 }
 
 #[cfg(test)]

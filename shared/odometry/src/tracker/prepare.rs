@@ -3,7 +3,7 @@
 //! done ahead) and how [`MotionTracker::update_prepared`] finishes the frame with it.
 
 use super::points::{PointSearch, PointWorkMs};
-use super::{MatchedLines, MotionTracker, SeenImages, keep_spare};
+use super::{MatchedLines, MotionTracker, SeenImages, departure, keep_spare};
 use crate::stats::since;
 use crate::{Features, FrameResult, FrameStats, OdometryError};
 use linetrack_stereo_vo::{estimate_motion, estimate_motion_near};
@@ -232,11 +232,7 @@ impl MotionTracker {
         let Ok(estimate) = estimate else {
             return false;
         };
-        let change = self.last_motion.inverse() * estimate.motion;
-        let departure = [
-            change.translation.vector.norm(),
-            change.rotation.angle().to_degrees(),
-        ];
+        let departure = departure(&self.last_motion, &estimate.motion);
         if self.motion_known && self.departs_sharply(&self.last_motion, departure).is_some() {
             return false;
         }
