@@ -91,6 +91,15 @@ pub struct OdometryConfig {
     pub predicted_matching: bool,
     /// What predicts the segments' positions for `predicted_matching`.
     pub line_prediction: LinePrediction,
+    /// Frames whose segments were matched without a prediction (the first, and the one
+    /// after a loss) are matched again, at most this many times, where the motion their
+    /// matches give puts them; the pass whose motion keeps the most segments within
+    /// `motion.outlier_px` is kept (0: never). Before a motion is known the segments are
+    /// looked for around their old positions, and on a fast forward motion those that
+    /// move least are found first: far ones, and ones the motion slides along themselves,
+    /// which also fit a shorter step. Needs `predicted_matching` and a matcher that matches
+    /// predicted positions.
+    pub rematch_passes: usize,
     /// Frame to frame, ORB points: the second-best Hamming distance must be at least this
     /// times the best (the stereo ratio is the front end's `orb.min_distance_ratio`).
     pub frame_to_frame_ratio: f64,
@@ -172,6 +181,7 @@ impl Default for OdometryConfig {
             predicted_window_px: 30.0,
             predicted_matching: true,
             line_prediction: LinePrediction::ConstantVelocity,
+            rematch_passes: 0,
             frame_to_frame_ratio: 1.5,
             reject_look_alikes: true,
             subpixel_stereo: true,
@@ -186,6 +196,9 @@ impl Default for OdometryConfig {
         }
     }
 }
+
+/// The most `rematch_passes` accepted: each pass matches the frame's segments once more.
+const MAX_REMATCH_PASSES: usize = 10;
 
 impl OdometryConfig {
     /// Reads a TOML file of these settings (missing keys take their defaults) and checks it;
@@ -229,6 +242,12 @@ impl OdometryConfig {
             return Err(format!(
                 "field `max_contrast_gain` = {}: expected a number in [1, 255]",
                 self.max_contrast_gain
+            ));
+        }
+        if self.rematch_passes > MAX_REMATCH_PASSES {
+            return Err(format!(
+                "field `rematch_passes` = {}: expected at most {MAX_REMATCH_PASSES}",
+                self.rematch_passes
             ));
         }
         if !(self.min_line_angle_deg >= 0.0 && self.min_line_angle_deg < 90.0) {

@@ -9,8 +9,10 @@ use crate::{
 };
 use linetrack_geometry::{MatchCase, Segment, StereoRig};
 use linetrack_vision::{
-    GrayImage, LineDetector, LineFeatures, SegmentMatcher, create_detector, create_segment_matcher,
+    FeatureMatch, GrayImage, LineDetector, LineFeatures, SegmentMatcher, create_detector,
+    create_segment_matcher,
 };
+use nalgebra::Isometry3;
 use std::time::Instant;
 
 /// The odometry: feed frames in order with [`Odometry::track`].
@@ -102,6 +104,17 @@ impl Odometry {
             } else {
                 self.matcher
                     .match_lines(MatchCase::FrameToFrame, previous, &lines_l, &mut tracked);
+                if self.tracker.config().predicted_matching
+                    && self.matcher.matches_predicted_positions()
+                {
+                    let guide = Guide {
+                        matcher: self.matcher.as_mut(),
+                        tracker: &mut self.tracker,
+                        predicted,
+                        moved,
+                    };
+                    guide.rematch(previous, &lines_l, &mut tracked);
+                }
             }
         }
         stats.frame_to_frame_ms = since(started);
@@ -118,5 +131,59 @@ impl Odometry {
             .update_prepared(Some(((left, right), prepared)), lines, stats);
         self.previous_lines = Some(lines_l);
         result
+    }
+}
+
+/// Matches a frame's segments again where the motion of their own matches puts them
+/// (`rematch_passes`), for a frame matched without a prediction.
+struct Guide<'a> {
+    matcher: &'a mut dyn SegmentMatcher,
+    tracker: &'a mut MotionTracker,
+    predicted: &'a mut Vec<Segment>,
+    moved: &'a mut Vec<bool>,
+}
+
+impl Guide<'_> {
+    /// Replaces `tracked` (`previous` → `current` matches made around the old positions)
+    /// by the pass whose motion has the most inlying segments, and predicts the frame's
+    /// segments with that motion; leaves both as they were when no pass gives a motion.
+    fn rematch(
+        self,
+        previous: &mut LineFeatures,
+        current: &LineFeatures,
+        tracked: &mut Vec<FeatureMatch>,
+    ) {
+        let passes = self.tracker.config().rematch_passes;
+        if passes == 0 {
+            return;
+        }
+        let mut best: Option<(usize, Isometry3<f64>, Vec<FeatureMatch>)> = None;
+        let mut pass = tracked.clone();
+        for done in 0..=passes {
+            let Some((motion, inliers)) = self.tracker.segments_motion(&current.segments, &pass)
+            else {
+                break;
+            };
+            if best.as_ref().is_none_or(|(most, ..)| inliers >= *most) {
+                best = Some((inliers, motion, pass.clone()));
+            }
+            self.tracker.predict_segments_with(motion);
+            if done == passes
+                || !self
+                    .tracker
+                    .predict_segments(&previous.segments, self.predicted, self.moved)
+            {
+                break;
+            }
+            std::mem::swap(&mut previous.segments, self.predicted);
+            pass.clear();
+            self.matcher
+                .match_predicted(previous, self.moved, current, &mut pass);
+            std::mem::swap(&mut previous.segments, self.predicted);
+        }
+        if let Some((_, motion, matches)) = best {
+            self.tracker.predict_segments_with(motion);
+            *tracked = matches;
+        }
     }
 }

@@ -474,17 +474,13 @@ impl MotionTracker {
         stats: &mut FrameStats,
     ) -> Result<MotionEstimate, String> {
         let started = Instant::now();
+        let (rig, config) = (&self.rig, &self.config.motion);
+        let (points, lines) = (&observations.points, &observations.lines);
         let estimate = if self.motion_known {
-            estimate_motion_near
+            estimate_motion_near(rig, points, lines, &self.last_motion, config)
         } else {
-            estimate_motion
-        }(
-            &self.rig,
-            &observations.points,
-            &observations.lines,
-            &self.last_motion,
-            &self.config.motion,
-        );
+            estimate_motion(rig, points, lines, &self.start_of_estimate(), config)
+        };
         stats.motion_ms += since(started);
         let prediction = self.last_motion;
         estimate.map_err(|why| why.to_string()).and_then(|e| {

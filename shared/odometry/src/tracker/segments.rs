@@ -12,7 +12,8 @@ use linetrack_geometry::{
 };
 use linetrack_l1_matcher::GrayView;
 use linetrack_stereo_vo::{
-    LineObservation, TriangulationLimits, disparity_weight, triangulate_segment,
+    LineObservation, TriangulationLimits, disparity_weight, estimate_motion, estimate_motion_near,
+    triangulate_segment,
 };
 use linetrack_vision::{AppearanceGates, FeatureMatch, GrayImage};
 use nalgebra::{Isometry3, Point3};
@@ -54,6 +55,40 @@ impl MotionTracker {
             moved.push(predicted.is_some());
         }
         true
+    }
+
+    /// The motion this frame's segments give on their own, and how many of them are
+    /// inliers of it: the reference's segment landmarks observed by `tracked` (previous
+    /// segment → this frame's `left` segment), near the current prediction when there is
+    /// one, the estimate started from that prediction (and held near the last motion
+    /// once one is known). `None` without a reference or an estimate.
+    pub fn segments_motion(
+        &self,
+        left: &[Segment],
+        tracked: &[FeatureMatch],
+    ) -> Option<(Isometry3<f64>, usize)> {
+        let reference = self.reference.as_ref()?;
+        let mut observations = Observations::default();
+        self.observe_lines(reference, left, tracked, &mut observations);
+        let (rig, lines, config) = (&self.rig, &observations.lines, &self.config.motion);
+        let estimate = if self.motion_known {
+            estimate_motion_near(rig, &[], lines, &self.last_motion, config)
+        } else {
+            estimate_motion(rig, &[], lines, &self.start_of_estimate(), config)
+        };
+        estimate.ok().map(|e| (e.motion, e.inlier_lines))
+    }
+
+    /// Predicts this frame's segments with `motion` from now on (as
+    /// [`MotionTracker::predict_from_points`] does with the points').
+    pub fn predict_segments_with(&mut self, motion: Isometry3<f64>) {
+        self.segment_motion = Some(motion);
+    }
+
+    /// Where an estimate without a prior starts: the motion the segments are predicted
+    /// with, else the last one.
+    pub(super) fn start_of_estimate(&self) -> Isometry3<f64> {
+        self.segment_motion.unwrap_or(self.last_motion)
     }
 
     /// The motion the frame's segments are predicted with, if any: the points' of
