@@ -63,13 +63,13 @@ pub fn cell(runs: &[OdometryRun]) -> String {
             let worst_drift = many
                 .iter()
                 .filter_map(|s| s.drift_percent)
-                .fold(f64::NEG_INFINITY, f64::max);
+                .max_by(f64::total_cmp)
+                .map_or("–".to_string(), |d| format!("{d:.2} %"));
             format!(
-                "{:.1} cm / {} (worst {:.1} cm / {:.2} %)",
+                "{:.1} cm / {} (worst {:.1} cm / {worst_drift})",
                 median.ate_m.unwrap_or(f64::NAN) * 1e2,
                 drift(median),
                 worst.ate_m.unwrap_or(f64::NAN) * 1e2,
-                worst_drift
             )
         }
     };
@@ -198,4 +198,34 @@ pub fn run(
         run.truth = Some(truth);
     }
     Ok(run)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn run(ate_m: f64, drift_percent: Option<f64>) -> OdometryRun {
+        OdometryRun {
+            metrics: Some(metrics::Summary {
+                poses: 10,
+                path_m: 1.0,
+                rpe_m: Some(0.001),
+                ate_m: Some(ate_m),
+                ate_aligned_m: Some(ate_m),
+                drift_percent,
+                step_ratio: None,
+                zero_motion_ate_m: Some(1.0),
+            }),
+            ..OdometryRun::default()
+        }
+    }
+
+    #[test]
+    fn seeds_without_a_drift_figure_say_so_instead_of_minus_infinity() {
+        // Paths too short for a drift figure (under `MIN_DRIFT_PATH_M`).
+        let text = cell(&[run(0.01, None), run(0.03, None), run(0.02, None)]);
+        assert_eq!(text, "2.0 cm / – (worst 3.0 cm / –)");
+        let text = cell(&[run(0.01, Some(0.5)), run(0.03, Some(0.2)), run(0.02, None)]);
+        assert_eq!(text, "2.0 cm / – (worst 3.0 cm / 0.50 %)");
+    }
 }
