@@ -131,7 +131,7 @@ pub struct DdsSink {
     _node: Node,
 }
 
-fn setup(what: &'static str) -> impl FnOnce(String) -> BridgeError {
+pub(crate) fn setup(what: &'static str) -> impl FnOnce(String) -> BridgeError {
     move |message| BridgeError::Setup { what, message }
 }
 
@@ -148,7 +148,7 @@ fn name(
 }
 
 /// Splits a topic `/a/b/c` into ros2-client's namespace `/a/b` and base name `c`.
-fn topic_name(key: &'static str, topic: &str) -> Result<Name, BridgeError> {
+pub(crate) fn topic_name(key: &'static str, topic: &str) -> Result<Name, BridgeError> {
     let absolute = if topic.starts_with('/') {
         topic.to_string()
     } else {
@@ -159,27 +159,34 @@ fn topic_name(key: &'static str, topic: &str) -> Result<Name, BridgeError> {
     name(key, topic, Name::new(namespace, base))
 }
 
+/// Joins `config`'s domain (loopback only when it says so) as the node `node_name`;
+/// returns the node and the domain id.
+pub fn join(config: &Ros2Config, node_name: &str) -> Result<(Node, u16), BridgeError> {
+    let domain = domain_id(config)?;
+    let mut participant = DomainParticipantBuilder::new(domain);
+    if localhost_only(config) {
+        participant = participant.with_only_networks([IpAddr::V4(Ipv4Addr::LOCALHOST)]);
+    }
+    let participant = participant
+        .build()
+        .map_err(|e| setup("participant")(e.to_string()))?;
+    let context = Context::from_domain_participant(participant)
+        .map_err(|e| setup("context")(e.to_string()))?;
+    let name = NodeName::new("/", node_name).map_err(|e| BridgeError::Name {
+        key: "node_name",
+        value: node_name.to_string(),
+        message: e.to_string(),
+    })?;
+    let node = context
+        .new_node(name, NodeOptions::new().enable_rosout(false))
+        .map_err(|e| setup("node")(e.to_string()))?;
+    Ok((node, domain))
+}
+
 impl DdsSink {
     /// Joins the domain and makes the node, topics and writers `config` names.
     pub fn new(config: &Ros2Config) -> Result<Self, BridgeError> {
-        let domain = domain_id(config)?;
-        let mut participant = DomainParticipantBuilder::new(domain);
-        if localhost_only(config) {
-            participant = participant.with_only_networks([IpAddr::V4(Ipv4Addr::LOCALHOST)]);
-        }
-        let participant = participant
-            .build()
-            .map_err(|e| setup("participant")(e.to_string()))?;
-        let context = Context::from_domain_participant(participant)
-            .map_err(|e| setup("context")(e.to_string()))?;
-        let node_name = NodeName::new("/", &config.node_name).map_err(|e| BridgeError::Name {
-            key: "node_name",
-            value: config.node_name.clone(),
-            message: e.to_string(),
-        })?;
-        let mut node = context
-            .new_node(node_name, NodeOptions::new().enable_rosout(false))
-            .map_err(|e| setup("node")(e.to_string()))?;
+        let (mut node, domain) = join(config, &config.node_name)?;
         let reliable =
             QosProfile::publisher_default().reliability_reliable(WhenFull::Wait(WRITE_WAIT));
         let pose_qos = reliable
