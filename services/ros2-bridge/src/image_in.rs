@@ -256,8 +256,8 @@ mod tests {
             pixels(&image("mono8", 3, 2, 3, GREY.to_vec()), (3, 2)),
             GREY
         );
-        let padded = vec![0, 50, 100, 9, 150, 200, 255, 9];
-        let read = gray(&image("mono8", 3, 2, 4, padded.clone()), (3, 2));
+        let padded = image("mono8", 3, 2, 4, vec![0, 50, 100, 9, 150, 200, 255, 9]);
+        let read = gray(&padded, (3, 2));
         let mut parts = Vec::new();
         if let Ok(g) = &read {
             g.push_parts(&mut parts).unwrap_or_else(|e| panic!("{e}"));
