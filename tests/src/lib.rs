@@ -185,6 +185,15 @@ fn launch(dir: &Path, sequence: &Path, extra: &str, prefix: &str, args: &[&str])
     launch_with(dir, sequence, extra, prefix, args, &[])
 }
 
+/// [`start_with_args`] with the run's stderr (the supervisor's and, passed on, every
+/// stage's) written to `dir/stderr.log`, for a test that checks a warning.
+pub fn start_logging(dir: &Path, sequence: &Path, extra: &str, args: &[&str]) -> Run {
+    let prefix = format!("lte2e{}_log_", std::process::id());
+    let log = dir.join("stderr.log");
+    let file = std::fs::File::create(&log).unwrap_or_else(|e| panic!("{}: {e}", log.display()));
+    launch_to(dir, sequence, extra, &prefix, args, &[], Stdio::from(file))
+}
+
 fn launch_with(
     dir: &Path,
     sequence: &Path,
@@ -192,6 +201,18 @@ fn launch_with(
     prefix: &str,
     args: &[&str],
     env: &[(&str, &str)],
+) -> Run {
+    launch_to(dir, sequence, extra, prefix, args, env, Stdio::inherit())
+}
+
+fn launch_to(
+    dir: &Path,
+    sequence: &Path,
+    extra: &str,
+    prefix: &str,
+    args: &[&str],
+    env: &[(&str, &str)],
+    stderr: Stdio,
 ) -> Run {
     let prefix = prefix.to_string();
     let (config, run_dir) = write_config(dir, sequence, extra);
@@ -204,7 +225,7 @@ fn launch_with(
         .envs(env.iter().copied())
         .stdin(Stdio::null())
         .stdout(Stdio::piped())
-        .stderr(Stdio::inherit())
+        .stderr(stderr)
         .spawn()
         .unwrap_or_else(|e| panic!("starting linetrack: {e}"));
     Run {
