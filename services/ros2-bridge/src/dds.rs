@@ -16,7 +16,7 @@ use crate::ros_msgs::{
 };
 use crate::{BridgeError, PoseSink};
 use linetrack_pipeline_config::{MAX_DOMAIN_ID, Ros2Config};
-use ros2_client::dds::rustdds::DomainParticipantBuilder;
+use ros2_client::dds::rustdds::{DomainParticipantBuilder, Topic};
 use ros2_client::qos::{Durability, History, WhenFull};
 use ros2_client::{
     Context, Message, MessageTypeName, Name, Node, NodeName, NodeOptions, Publisher, QosProfile,
@@ -58,6 +58,22 @@ pub fn localhost_only(config: &Ros2Config) -> bool {
     config.localhost_only || std::env::var("ROS_LOCALHOST_ONLY").is_ok_and(|v| v.trim() == "1")
 }
 
+/// The topic `topic` (config key `key`) of ROS type `type_name` (package, name) on `node`.
+pub(crate) fn ros_topic(
+    node: &Node,
+    key: &'static str,
+    topic: &str,
+    type_name: (&str, &str),
+    qos: &QosProfile,
+) -> Result<Topic, BridgeError> {
+    node.create_topic(
+        &topic_name(key, topic)?,
+        MessageTypeName::new(type_name.0, type_name.1),
+        qos,
+    )
+    .map_err(|e| setup(key)(e.to_string()))
+}
+
 /// A topic's writer and the topic's name (for errors).
 struct Writer<M: Message> {
     topic: String,
@@ -74,13 +90,7 @@ impl<M: Message> Writer<M> {
         type_name: (&str, &str),
         qos: &QosProfile,
     ) -> Result<Self, BridgeError> {
-        let made = node
-            .create_topic(
-                &topic_name(key, topic)?,
-                MessageTypeName::new(type_name.0, type_name.1),
-                qos,
-            )
-            .map_err(|e| setup(key)(e.to_string()))?;
+        let made = ros_topic(node, key, topic, type_name, qos)?;
         let publisher = node
             .create_publisher::<M>(&made, None)
             .map_err(|e| setup(key)(e.to_string()))?;

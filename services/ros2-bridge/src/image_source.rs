@@ -21,7 +21,7 @@
 
 use crate::BridgeError;
 use crate::camera_info::{InfoError, stereo_rig};
-use crate::dds::{join, setup, topic_name};
+use crate::dds::{join, ros_topic, setup};
 use crate::image_in::gray;
 use crate::pairing::{Paired, Pairing, Side};
 use crate::ros_msgs::Time;
@@ -33,7 +33,7 @@ use linetrack_pipeline_config::Ros2ImagesConfig;
 use linetrack_stage_runtime::{RigOutlet, Source, SourceOut, StageContext, Step, rig_record};
 use ros2_client::dds::rustdds::mio1::{Events, Interest, Poll, Token};
 use ros2_client::qos::{Durability, History, WhenFull};
-use ros2_client::{Message, MessageTypeName, Node, QosProfile, Subscription};
+use ros2_client::{Message, Node, QosProfile, Subscription};
 use std::collections::VecDeque;
 use std::time::Duration;
 
@@ -83,13 +83,7 @@ impl Readers {
         type_name: (&str, &str),
         qos: &QosProfile,
     ) -> Result<Subscription<M>, BridgeError> {
-        let made = node
-            .create_topic(
-                &topic_name(key, topic)?,
-                MessageTypeName::new(type_name.0, type_name.1),
-                qos,
-            )
-            .map_err(|e| setup(key)(e.to_string()))?;
+        let made = ros_topic(node, key, topic, type_name, qos)?;
         node.create_subscription::<M>(&made, None)
             .map_err(|e| setup(key)(e.to_string()))
     }
@@ -259,16 +253,8 @@ impl RosImageSource {
         };
         match stereo_rig(left, right) {
             Ok(rig) => {
+                // The pose estimator logs it when it arrives.
                 self.rig_out.publish(rig_record(&rig))?;
-                tracing::info!(
-                    "rig from the CameraInfo: f {:.2} px, c ({:.2}, {:.2}) px, baseline {:.4} m, {}×{}",
-                    rig.focal_px,
-                    rig.cx_px,
-                    rig.cy_px,
-                    rig.baseline_m,
-                    rig.width_px,
-                    rig.height_px
-                );
                 self.rig = Some(rig);
             }
             Err(e) => {

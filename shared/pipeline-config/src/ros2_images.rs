@@ -144,6 +144,38 @@ mod tests {
     }
 
     #[test]
+    fn the_pipeline_config_reads_it_and_refuses_a_second_source() {
+        let read = |text: &str| crate::PipelineConfig::from_toml_str(text, "x.toml");
+        let config = read(
+            "[camera.ros2_images]\nleft = \"/l/image\"\nright = \"/r/image\"\nstamp_tolerance_ms = 5.0\n",
+        )
+        .unwrap_or_else(|e| panic!("{e}"));
+        assert!(config.camera.ros2_images.enabled() && !config.camera.enabled());
+        assert_eq!(
+            config.camera.ros2_images.right_info_topic(),
+            "/r/camera_info"
+        );
+        for (text, says) in [
+            (
+                "[camera]\ncapture = \"0\"\ncalibration = \"c.yaml\"\n[camera.ros2_images]\nleft = \"/l\"\nright = \"/r\"\n",
+                "frames come from one of them",
+            ),
+            (
+                "[source]\nreplay = \"r.mcap\"\n[camera.ros2_images]\nleft = \"/l\"\nright = \"/r\"\n",
+                "frames come from one of them",
+            ),
+            ("[camera.ros2_images]\nleft = \"/l\"\n", "set both"),
+            ("[camera.ros2_images]\nleft_topic = \"/l\"\n", "left_topic"),
+        ] {
+            let err = match read(text) {
+                Ok(_) => panic!("accepted {text}"),
+                Err(e) => e.to_string(),
+            };
+            assert!(err.contains(says), "{text}: {err}");
+        }
+    }
+
+    #[test]
     fn bad_values_are_named() {
         let both = |left: &str, right: &str| Ros2ImagesConfig {
             left: left.into(),
