@@ -89,15 +89,15 @@ impl Ros2ImagesConfig {
     /// The first bad value, named (`camera.ros2_images.…`) with why.
     pub fn validate(&self) -> Result<(), String> {
         let key = "camera.ros2_images";
-        if self.enabled() != !self.right.trim().is_empty() {
+        let right_set = !self.right.trim().is_empty();
+        if self.enabled() != right_set {
             return Err(format!(
                 "{key}: left = {:?} and right = {:?}: set both image topics or neither",
                 self.left, self.right
             ));
         }
-        if !self.enabled()
-            && !(self.left_info.trim().is_empty() && self.right_info.trim().is_empty())
-        {
+        let info_set = !self.left_info.trim().is_empty() || !self.right_info.trim().is_empty();
+        if !self.enabled() && info_set {
             return Err(format!(
                 "{key}.left_info / right_info are set but no image topics are"
             ));
