@@ -309,3 +309,35 @@ fn real_data_euroc_pairs_from_a_cyclone_dds_camera_give_the_dataset_runs_poses()
         "iceoryx2 nodes or services left behind"
     );
 }
+
+#[test]
+fn frames_from_ros2_topics_in_single_process_mode_are_refused_before_any_stage_starts() {
+    let dir = scratch("ros2-images-threads");
+    let euroc = linetrack_test_data::euroc_dir().unwrap_or_else(|e| panic!("{e}"));
+    let run = start_logging(
+        &dir,
+        &euroc,
+        "",
+        &["--single-process", "--ros2-images", "/l/image", "/r/image"],
+    );
+    let run_dir = run.run_dir.clone();
+    let mut child = run.child;
+    let status = child.wait().unwrap_or_else(|e| panic!("{e}"));
+    let stderr = std::fs::read_to_string(dir.join("stderr.log")).unwrap_or_default();
+    assert!(!status.success(), "{stderr}");
+    assert!(
+        stderr.contains("camera.ros2_images")
+            && stderr.contains("linetrack-ros2-source")
+            && stderr.contains("without --single-process"),
+        "{stderr}"
+    );
+    assert!(
+        !run_dir.join("frames.csv").is_file()
+            || std::fs::read_to_string(run_dir.join("frames.csv"))
+                .unwrap_or_default()
+                .lines()
+                .count()
+                <= 1,
+        "no frame was processed"
+    );
+}
