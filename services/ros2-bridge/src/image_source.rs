@@ -356,10 +356,15 @@ impl Source for RosImageSource {
         }
         let due = self.rig.is_some() && !self.settled.is_empty();
         let timeout = if due { Duration::ZERO } else { wait };
-        self.readers
+        match self
+            .readers
             .poll
             .poll(&mut self.readers.events, Some(timeout))
-            .context("waiting for the DDS readers")?;
+        {
+            // A signal (Ctrl-C, the supervisor's stop): the runtime looks at it next turn.
+            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => return Ok(Step::Again),
+            polled => polled.context("waiting for the DDS readers")?,
+        }
         self.take();
         let Some(rig) = self.rig()? else {
             // Waiting for the CameraInfo: the oldest beyond the queue are dropped.
