@@ -341,3 +341,55 @@ fn frames_from_ros2_topics_in_single_process_mode_are_refused_before_any_stage_s
         "no frame was processed"
     );
 }
+
+#[test]
+fn a_ros2_image_source_without_images_waits_and_stops_cleanly_with_the_run() {
+    let dir = scratch("ros2-images-idle");
+    let euroc = linetrack_test_data::euroc_dir().unwrap_or_else(|e| panic!("{e}"));
+    // A domain nobody publishes on: the source is ready and waits for the CameraInfo.
+    let domain = 1 + ((std::process::id() + 61) % 232) as u16;
+    let extra = format!(
+        "[supervisor]\nstatus_every_ms = 0\n[ros2]\ndomain_id = {domain}\nlocalhost_only = true\n"
+    );
+    let mut run = start_logging(
+        &dir,
+        &euroc,
+        &extra,
+        &["--ros2-images", "/idle/left/image", "/idle/right/image"],
+    );
+    let status = run.wait_for("the ROS 2 image source ready", RUN_TIMEOUT, |s| {
+        s.stages
+            .iter()
+            .any(|st| st.stage == "frame-source" && st.ready)
+    });
+    // It stays, beating: the supervisor neither restarts it (silent past its 3 s
+    // hang_timeout_ms it would) nor ends the run.
+    std::thread::sleep(Duration::from_secs(5));
+    let source = |s: &linetrack_supervisor::LiveStatus| {
+        s.stages
+            .iter()
+            .find(|st| st.stage == "frame-source")
+            .map(|st| st.pid)
+    };
+    let later = run.status().unwrap_or_else(|| panic!("no status"));
+    assert_eq!(source(&later), source(&status), "the source was restarted");
+    assert_eq!(later.frames, 0);
+    signal(status.supervisor_pid, "TERM");
+    let (exit, out, records) = run.finish(RUN_TIMEOUT);
+    let stderr = std::fs::read_to_string(dir.join("stderr.log")).unwrap_or_default();
+    assert!(exit.success(), "{exit}\n{out}\n{stderr}");
+    assert!(out.contains("(interrupted)"), "{out}");
+    assert!(records.frames.is_empty());
+    assert!(
+        ["crash", "hang", "restart"]
+            .iter()
+            .all(|kind| records.events_of(kind).is_empty()),
+        "{:?}",
+        records.events
+    );
+    assert_eq!(
+        records.leftovers,
+        Default::default(),
+        "iceoryx2 nodes or services left behind"
+    );
+}
