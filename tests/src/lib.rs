@@ -172,17 +172,27 @@ pub fn start_through_runner(dir: &Path, sequence: &Path, extra: &str, runner: &s
         &prefix,
         &[],
         &[("LINETRACK_STAGE_RUNNER", runner)],
+        Stdio::inherit(),
     )
 }
 
 /// [`start`] with more environment variables for the supervisor and its children.
 pub fn start_with_env(dir: &Path, sequence: &Path, extra: &str, env: &[(&str, &str)]) -> Run {
     let prefix = format!("lte2e{}_env_", std::process::id());
-    launch_with(dir, sequence, extra, &prefix, &[], env)
+    launch_with(dir, sequence, extra, &prefix, &[], env, Stdio::inherit())
 }
 
 fn launch(dir: &Path, sequence: &Path, extra: &str, prefix: &str, args: &[&str]) -> Run {
-    launch_with(dir, sequence, extra, prefix, args, &[])
+    launch_with(dir, sequence, extra, prefix, args, &[], Stdio::inherit())
+}
+
+/// [`start_with_args`] with the run's stderr (the supervisor's and, passed on, every
+/// stage's) written to `dir/stderr.log`, for a test that checks a warning.
+pub fn start_logging(dir: &Path, sequence: &Path, extra: &str, args: &[&str]) -> Run {
+    let prefix = format!("lte2e{}_log_", std::process::id());
+    let log = dir.join("stderr.log");
+    let file = std::fs::File::create(&log).unwrap_or_else(|e| panic!("{}: {e}", log.display()));
+    launch_with(dir, sequence, extra, &prefix, args, &[], Stdio::from(file))
 }
 
 fn launch_with(
@@ -192,6 +202,7 @@ fn launch_with(
     prefix: &str,
     args: &[&str],
     env: &[(&str, &str)],
+    stderr: Stdio,
 ) -> Run {
     let prefix = prefix.to_string();
     let (config, run_dir) = write_config(dir, sequence, extra);
@@ -204,7 +215,7 @@ fn launch_with(
         .envs(env.iter().copied())
         .stdin(Stdio::null())
         .stdout(Stdio::piped())
-        .stderr(Stdio::inherit())
+        .stderr(stderr)
         .spawn()
         .unwrap_or_else(|e| panic!("starting linetrack: {e}"));
     Run {

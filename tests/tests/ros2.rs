@@ -5,8 +5,12 @@
 //! their DDS names — receives `geometry_msgs/msg/PoseStamped` on `/linetrack/pose`,
 //! `nav_msgs/msg/Path` on `/linetrack/path`, `nav_msgs/msg/Odometry` on `/linetrack/odom`
 //! `tf2_msgs/msg/TFMessage` on `/tf` and `diagnostic_msgs/msg/DiagnosticArray` on
-//! `/diagnostics`. Each test uses its own domain id (from the
+//! `/diagnostics`; and frames from ROS 2 image topics ([`images`]). Each test uses its own
+//! domain id (from the
 //! process id) and loopback-only discovery, so parallel runs do not cross.
+
+#[path = "ros2/images.rs"]
+mod images;
 
 use linetrack_e2e::*;
 use nalgebra::Matrix6;

@@ -14,34 +14,16 @@ mod replay;
 
 use anyhow::Context;
 use linetrack_datasets::{StereoSequence, StereoStream};
-use linetrack_ipc::{Bus, Outlet, Shutdown};
-use linetrack_msgs::{FrameStatus, RigRecord, StageKind, Topic};
+use linetrack_ipc::{Bus, Shutdown};
+use linetrack_msgs::{FrameStatus, RigRecord, StageKind};
 use linetrack_pipeline_config::{Pacing, SourceConfig};
-use linetrack_stage_runtime::{Source, SourceOut, StageContext, Step, rig_record, run_source};
+use linetrack_stage_runtime::{
+    RigOutlet as Rig, Source, SourceOut, StageContext, Step, rig_record, run_source,
+};
 use std::time::Duration;
 
 /// Bytes a frame message holds before more are allocated: a 752×480 stereo pair.
 const FRAME_BYTES: usize = 2 * 752 * 480;
-
-/// The rig's outlet: published before the first frame, held until the run ends.
-pub(crate) struct Rig(Outlet<RigRecord, ()>);
-
-impl Rig {
-    fn open(bus: &Bus) -> anyhow::Result<Self> {
-        Ok(Self(bus.outlet(Topic::Rig, 1)?))
-    }
-
-    /// Publishes `rig` (the pose estimator needs it before the first frame's tracks).
-    fn publish(&mut self, rig: RigRecord) -> anyhow::Result<()> {
-        self.0.publish(&(), &[&[rig]])?;
-        Ok(())
-    }
-
-    /// A stage that (re)started since gets the rig.
-    fn poll(&mut self) -> anyhow::Result<()> {
-        Ok(self.0.update_connections()?)
-    }
-}
 
 /// What a build without the `mcap` feature says when asked to replay.
 pub const NO_MCAP: &str =

@@ -16,7 +16,7 @@ use crate::ros_msgs::{
 };
 use crate::{BridgeError, PoseSink};
 use linetrack_pipeline_config::{MAX_DOMAIN_ID, Ros2Config};
-use ros2_client::dds::rustdds::DomainParticipantBuilder;
+use ros2_client::dds::rustdds::{DomainParticipantBuilder, Topic};
 use ros2_client::qos::{Durability, History, WhenFull};
 use ros2_client::{
     Context, Message, MessageTypeName, Name, Node, NodeName, NodeOptions, Publisher, QosProfile,
@@ -58,6 +58,22 @@ pub fn localhost_only(config: &Ros2Config) -> bool {
     config.localhost_only || std::env::var("ROS_LOCALHOST_ONLY").is_ok_and(|v| v.trim() == "1")
 }
 
+/// The topic `topic` (config key `key`) of ROS type `type_name` (package, name) on `node`.
+pub(crate) fn ros_topic(
+    node: &Node,
+    key: &'static str,
+    topic: &str,
+    type_name: (&str, &str),
+    qos: &QosProfile,
+) -> Result<Topic, BridgeError> {
+    node.create_topic(
+        &topic_name(key, topic)?,
+        MessageTypeName::new(type_name.0, type_name.1),
+        qos,
+    )
+    .map_err(|e| setup(key)(e.to_string()))
+}
+
 /// A topic's writer and the topic's name (for errors).
 struct Writer<M: Message> {
     topic: String,
@@ -74,13 +90,7 @@ impl<M: Message> Writer<M> {
         type_name: (&str, &str),
         qos: &QosProfile,
     ) -> Result<Self, BridgeError> {
-        let made = node
-            .create_topic(
-                &topic_name(key, topic)?,
-                MessageTypeName::new(type_name.0, type_name.1),
-                qos,
-            )
-            .map_err(|e| setup(key)(e.to_string()))?;
+        let made = ros_topic(node, key, topic, type_name, qos)?;
         let publisher = node
             .create_publisher::<M>(&made, None)
             .map_err(|e| setup(key)(e.to_string()))?;
@@ -131,7 +141,7 @@ pub struct DdsSink {
     _node: Node,
 }
 
-fn setup(what: &'static str) -> impl FnOnce(String) -> BridgeError {
+pub(crate) fn setup(what: &'static str) -> impl FnOnce(String) -> BridgeError {
     move |message| BridgeError::Setup { what, message }
 }
 
@@ -148,7 +158,7 @@ fn name(
 }
 
 /// Splits a topic `/a/b/c` into ros2-client's namespace `/a/b` and base name `c`.
-fn topic_name(key: &'static str, topic: &str) -> Result<Name, BridgeError> {
+pub(crate) fn topic_name(key: &'static str, topic: &str) -> Result<Name, BridgeError> {
     let absolute = if topic.starts_with('/') {
         topic.to_string()
     } else {
@@ -159,27 +169,34 @@ fn topic_name(key: &'static str, topic: &str) -> Result<Name, BridgeError> {
     name(key, topic, Name::new(namespace, base))
 }
 
+/// Joins `config`'s domain (loopback only when it says so) as the node `node_name`;
+/// returns the node and the domain id.
+pub fn join(config: &Ros2Config, node_name: &str) -> Result<(Node, u16), BridgeError> {
+    let domain = domain_id(config)?;
+    let mut participant = DomainParticipantBuilder::new(domain);
+    if localhost_only(config) {
+        participant = participant.with_only_networks([IpAddr::V4(Ipv4Addr::LOCALHOST)]);
+    }
+    let participant = participant
+        .build()
+        .map_err(|e| setup("participant")(e.to_string()))?;
+    let context = Context::from_domain_participant(participant)
+        .map_err(|e| setup("context")(e.to_string()))?;
+    let name = NodeName::new("/", node_name).map_err(|e| BridgeError::Name {
+        key: "node_name",
+        value: node_name.to_string(),
+        message: e.to_string(),
+    })?;
+    let node = context
+        .new_node(name, NodeOptions::new().enable_rosout(false))
+        .map_err(|e| setup("node")(e.to_string()))?;
+    Ok((node, domain))
+}
+
 impl DdsSink {
     /// Joins the domain and makes the node, topics and writers `config` names.
     pub fn new(config: &Ros2Config) -> Result<Self, BridgeError> {
-        let domain = domain_id(config)?;
-        let mut participant = DomainParticipantBuilder::new(domain);
-        if localhost_only(config) {
-            participant = participant.with_only_networks([IpAddr::V4(Ipv4Addr::LOCALHOST)]);
-        }
-        let participant = participant
-            .build()
-            .map_err(|e| setup("participant")(e.to_string()))?;
-        let context = Context::from_domain_participant(participant)
-            .map_err(|e| setup("context")(e.to_string()))?;
-        let node_name = NodeName::new("/", &config.node_name).map_err(|e| BridgeError::Name {
-            key: "node_name",
-            value: config.node_name.clone(),
-            message: e.to_string(),
-        })?;
-        let mut node = context
-            .new_node(node_name, NodeOptions::new().enable_rosout(false))
-            .map_err(|e| setup("node")(e.to_string()))?;
+        let (mut node, domain) = join(config, &config.node_name)?;
         let reliable =
             QosProfile::publisher_default().reliability_reliable(WhenFull::Wait(WRITE_WAIT));
         let pose_qos = reliable

@@ -10,18 +10,31 @@
 //! no ROS install). Frames dropped by a stage publish nothing; frames where tracking was
 //! lost publish their predicted pose only with `publish_lost = true`.
 //!
+//! Its second process, `linetrack-ros2-source` ([`image_source`]), is the frame source
+//! when frames come from ROS 2 image topics (`[camera.ros2_images]`, `linetrack run
+//! --ros2-images LEFT RIGHT`): the two `sensor_msgs/Image` paired by stamp
+//! ([`pairing`]), read as grey ([`image_in`]), the rig from their `CameraInfo`
+//! ([`camera_info`]). With it, the bridge stamps its messages with the images' header
+//! stamps whatever `[ros2] stamp` says.
+//!
 //! It never holds up the pipeline: its poses subscription overwrites the oldest message
 //! when it falls behind (the publisher never waits for it), and a DDS write that fails is
 //! logged (the first, then every [`LOG_EVERY`]th) and the next pose is tried.
 
 #![warn(missing_docs)]
 
+pub mod camera_info;
 pub mod convert;
 #[cfg(feature = "ros2")]
 pub mod dds;
 pub mod health;
+pub mod image_in;
+#[cfg(feature = "ros2")]
+pub mod image_source;
 pub mod odometry;
+pub mod pairing;
 pub mod ros_msgs;
+pub mod sensor_msgs;
 
 use convert::PathWindow;
 use health::Health;

@@ -6,6 +6,7 @@
 use anyhow::Context;
 use linetrack_ipc::{Bus, Shutdown};
 use linetrack_msgs::StageKind;
+use linetrack_pipeline_config::StampSource;
 use linetrack_ros2_bridge::PoseSink;
 use linetrack_ros2_bridge::dds::DdsSink;
 use linetrack_stage_runtime::StageContext;
@@ -16,14 +17,15 @@ fn main() -> ExitCode {
 }
 
 fn run(ctx: &StageContext, bus: &Bus, shutdown: &Shutdown) -> anyhow::Result<()> {
-    let ros2 = ctx.config.ros2.clone();
-    let tally = linetrack_ros2_bridge::run(
-        &ctx.config.ros2,
-        &ctx.config.budget,
-        bus,
-        shutdown,
-        move || Ok(Box::new(DdsSink::new(&ros2)?) as Box<dyn PoseSink>),
-    )
+    let mut ros2 = ctx.config.ros2.clone();
+    if ctx.config.camera.ros2_images.enabled() {
+        // Frames from ROS 2 images: the messages carry the images' header stamps.
+        ros2.stamp = StampSource::Sequence;
+    }
+    let config = ros2.clone();
+    let tally = linetrack_ros2_bridge::run(&config, &ctx.config.budget, bus, shutdown, move || {
+        Ok(Box::new(DdsSink::new(&ros2)?) as Box<dyn PoseSink>)
+    })
     .context("ROS 2 output")?;
     tracing::info!("ROS 2 output: {tally:?}");
     Ok(())

@@ -3,6 +3,7 @@
 
 use linetrack_ipc::{Bus, Shutdown};
 use linetrack_msgs::StageKind;
+use linetrack_pipeline_config::PipelineConfig;
 use linetrack_stage_runtime::StageContext;
 use std::process::Child;
 
@@ -80,5 +81,19 @@ pub(crate) fn stage_code(stage: StageKind) -> Option<StageRun> {
         StageKind::Supervisor | StageKind::Recorder | StageKind::Ros2Bridge | StageKind::Link => {
             None
         }
+    }
+}
+
+/// The frame source fed by ROS 2 image topics (`[camera.ros2_images]`), built with this
+/// cargo feature.
+pub const ROS2_SOURCE: (&str, &str) = ("linetrack-ros2-source", "linetrack-ros2-bridge/ros2");
+
+/// The binary of `stage` in a run of `config`: `linetrack-<stage>`, but for the frame
+/// source fed by ROS 2 image topics when `[camera.ros2_images]` names them.
+pub(crate) fn stage_binary(config: &PipelineConfig, stage: StageKind) -> String {
+    if stage == StageKind::FrameSource && config.camera.ros2_images.enabled() {
+        ROS2_SOURCE.0.to_string()
+    } else {
+        format!("linetrack-{}", stage.name())
     }
 }

@@ -13,6 +13,9 @@
 //! shows what the IPC costs. A thread stage has an id in place of a pid (from
 //! [`THREAD_IDS`]); a hung thread cannot be killed, only asked to stop and left behind.
 //!
+//! With `[camera.ros2_images]` the frame source is `linetrack-ros2-source` (frames from
+//! ROS 2 image topics, cargo feature `linetrack-ros2-bridge/ros2`), in processes only.
+//!
 //! With `[record] mcap = true` it first starts `linetrack-recorder` (found like the stages),
 //! starts the frame source once the recorder is subscribed, records its death as an event
 //! without stopping the run, and stops it last so that it closes its file.
@@ -107,6 +110,9 @@ pub fn run(
     // is wrong, before starting any stage.
     let ground_truth = if config.camera.enabled() {
         camera_check::preflight(&config.camera)?;
+        Vec::new()
+    } else if config.camera.ros2_images.enabled() {
+        // The frames, and their rig, come when the topics deliver them.
         Vec::new()
     } else if let Some(file) = config.source.replay() {
         let frames = linetrack_frame_source::check_replay(file)

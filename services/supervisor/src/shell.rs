@@ -4,7 +4,7 @@
 //! recording, writing `status.json`). Every decision is the core's.
 
 use crate::core::{Action, Core, End, Event, Log, Progress};
-use crate::launch::{Launch, THREAD_IDS, stage_code};
+use crate::launch::{Launch, ROS2_SOURCE, THREAD_IDS, stage_binary, stage_code};
 use crate::monitor::Monitor;
 use crate::optional::{self, OptionalProcess, StopBy};
 use crate::stage_runner::StageRunner;
@@ -121,9 +121,23 @@ impl<'m> Supervisor<'m> {
                     .context("locating the stage binaries")?,
             },
         };
+        let ros2_images = config.camera.ros2_images.enabled();
+        if ros2_images && options.mode == Mode::Threads {
+            bail!(
+                "camera.ros2_images: frames from ROS 2 topics come through the {} process: run the stages as processes (without --single-process)",
+                ROS2_SOURCE.0
+            );
+        }
         for stage in StageKind::PROCESSING {
-            let bin = bin_dir.join(format!("linetrack-{}", stage.name()));
+            let bin = bin_dir.join(stage_binary(config, stage));
             if options.mode == Mode::Processes && !bin.is_file() {
+                if ros2_images && stage == StageKind::FrameSource {
+                    bail!(
+                        "{} not found: frames from ROS 2 topics (camera.ros2_images, --ros2-images) need it, built with --features {}",
+                        bin.display(),
+                        ROS2_SOURCE.1
+                    );
+                }
                 bail!(
                     "{} not found: build the stage binaries (cargo build --release --workspace) or set LINETRACK_BIN_DIR",
                     bin.display()
@@ -273,7 +287,7 @@ impl<'m> Supervisor<'m> {
         resume_pose: Option<String>,
         start_frame: u64,
     ) -> anyhow::Result<(Launch, u32, Option<stderr_tail::StderrTail>)> {
-        let bin = self.bin_dir.join(format!("linetrack-{}", stage.name()));
+        let bin = self.bin_dir.join(stage_binary(&self.config, stage));
         let mut command = self.child_command(&bin);
         command.arg("--run-dir").arg(&self.run_dir);
         if let Some(kind) = detector {

@@ -7,6 +7,7 @@
 //! field has a default; [`PipelineConfig::validate`] names the first bad one.
 
 mod ros2;
+mod ros2_images;
 
 pub mod file;
 use linetrack_msgs::StageKind;
@@ -14,6 +15,7 @@ use linetrack_odometry::OdometryConfig;
 pub use linetrack_sched::{Policy, SchedSettings};
 use linetrack_vision::DetectorKind;
 pub use ros2::{CameraMount, Convention, MAX_DOMAIN_ID, Ros2Config, StampSource};
+pub use ros2_images::{MAX_STAMP_TOLERANCE_MS, Ros2ImagesConfig};
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
@@ -178,6 +180,10 @@ pub struct CameraConfig {
     pub retry_ms: u64,
     /// ... up to this.
     pub retry_max_ms: u64,
+    /// Frames from two ROS 2 image topics instead (`[camera.ros2_images]`, needs the
+    /// `linetrack-ros2-source` binary: cargo feature `linetrack-ros2-bridge/ros2`); off
+    /// while its `left` is empty. `duration_s` applies to it too.
+    pub ros2_images: Ros2ImagesConfig,
 }
 
 impl Default for CameraConfig {
@@ -191,6 +197,7 @@ impl Default for CameraConfig {
             duration_s: 0.0,
             retry_ms: 500,
             retry_max_ms: 5000,
+            ros2_images: Ros2ImagesConfig::default(),
         }
     }
 }
@@ -896,6 +903,13 @@ impl PipelineConfig {
         }
         if !cam.enabled() && cam.right().is_some() {
             return Err("camera.capture_right is set but camera.capture is empty".to_string());
+        }
+        cam.ros2_images.validate()?;
+        if cam.ros2_images.enabled() && (cam.enabled() || src.replay().is_some()) {
+            return Err(
+                "camera.ros2_images is set with camera.capture or source.replay: frames come from one of them"
+                    .to_string(),
+            );
         }
         let f = &self.matcher.fallback;
         in_range(

@@ -30,7 +30,7 @@ use linetrack_vision::{BorrowedGray, GrayImage, VisionError};
 pub use runner::{Stage, run_stage};
 pub use side::RightImageWorker;
 pub use sink::{Sink, run_sink};
-pub use source::{Source, SourceOut, Step, run_source};
+pub use source::{RigOutlet, Source, SourceOut, Step, run_source};
 use std::collections::VecDeque;
 use std::path::PathBuf;
 use std::process::ExitCode;

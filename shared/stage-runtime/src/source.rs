@@ -12,7 +12,7 @@
 
 use crate::{Reporter, StageContext, shutdown_ordered, stamp_end};
 use linetrack_ipc::{Bus, Inlet, Outlet, Shutdown};
-use linetrack_msgs::{Control, FrameHeader, FrameStatus, StageKind, StatusKind, Topic};
+use linetrack_msgs::{Control, FrameHeader, FrameStatus, RigRecord, StageKind, StatusKind, Topic};
 use std::time::Duration;
 use tracing::info_span;
 
@@ -137,6 +137,27 @@ impl SourceOut {
         self.published += 1;
         self.last_id = header.frame_id;
         Ok(())
+    }
+}
+
+/// A source's rig outlet: published before the first frame, held until the run ends.
+pub struct RigOutlet(Outlet<RigRecord, ()>);
+
+impl RigOutlet {
+    /// The rig's outlet on `bus`.
+    pub fn open(bus: &Bus) -> anyhow::Result<Self> {
+        Ok(Self(bus.outlet(Topic::Rig, 1)?))
+    }
+
+    /// Publishes `rig` (the pose estimator needs it before the first frame's tracks).
+    pub fn publish(&mut self, rig: RigRecord) -> anyhow::Result<()> {
+        self.0.publish(&(), &[&[rig]])?;
+        Ok(())
+    }
+
+    /// A stage that (re)started since gets the rig.
+    pub fn poll(&mut self) -> anyhow::Result<()> {
+        Ok(self.0.update_connections()?)
     }
 }
 

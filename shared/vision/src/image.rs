@@ -282,11 +282,30 @@ fn pnm_maxval(bytes: &[u8]) -> Option<u32> {
     }
 }
 
+/// The order of a colour image's channels.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ChannelOrder {
+    /// Blue, green, red (OpenCV's, image files').
+    Bgr,
+    /// Red, green, blue (ROS `rgb8`).
+    Rgb,
+}
+
 /// `mat` as 8-bit grey: colour converted by luminance, 16 bits scaled to 8 (over
 /// `full_scale` when the file gives one, else over 65535), 8 bits with a smaller full scale
 /// stretched to 255; anything else (float pixels, two channels) is returned unchanged for
 /// [`GrayImage::from_mat`] to refuse.
 fn to_gray8(mat: Mat, full_scale: Option<u32>) -> Result<Mat, VisionError> {
+    to_gray8_ordered(mat, full_scale, ChannelOrder::Bgr)
+}
+
+/// [`to_gray8`] for colour channels in `order` (the conversion of every input: files,
+/// ROS image messages).
+pub fn to_gray8_ordered(
+    mat: Mat,
+    full_scale: Option<u32>,
+    order: ChannelOrder,
+) -> Result<Mat, VisionError> {
     let scale = match (mat.depth(), full_scale) {
         (core::CV_8U, Some(full)) if (1..255).contains(&full) => Some(255.0 / f64::from(full)),
         (core::CV_8U, _) => None,
@@ -303,9 +322,11 @@ fn to_gray8(mat: Mat, full_scale: Option<u32>) -> Result<Mat, VisionError> {
         }
         None => mat,
     };
-    let code = match eight_bit.channels() {
-        3 => imgproc::COLOR_BGR2GRAY,
-        4 => imgproc::COLOR_BGRA2GRAY,
+    let code = match (eight_bit.channels(), order) {
+        (3, ChannelOrder::Bgr) => imgproc::COLOR_BGR2GRAY,
+        (3, ChannelOrder::Rgb) => imgproc::COLOR_RGB2GRAY,
+        (4, ChannelOrder::Bgr) => imgproc::COLOR_BGRA2GRAY,
+        (4, ChannelOrder::Rgb) => imgproc::COLOR_RGBA2GRAY,
         _ => return Ok(eight_bit),
     };
     let mut gray = Mat::default();

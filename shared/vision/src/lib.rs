@@ -44,8 +44,8 @@ pub use detect::{
 };
 pub use hamming::{BinaryDescriptors, FeatureMatch, HammingMatcher};
 pub use image::{
-    BorrowedGray, ContrastStretch, GrayImage, MAX_FILE_BYTES, MAX_PIXELS, perturb,
-    stretch_contrast, stretch_contrast_into,
+    BorrowedGray, ChannelOrder, ContrastStretch, GrayImage, MAX_FILE_BYTES, MAX_PIXELS, perturb,
+    stretch_contrast, stretch_contrast_into, to_gray8_ordered,
 };
 pub use lbd::LbdExtractor;
 pub use linetrack_frontend_core::{EdgeLinesOptions, LineOptions};

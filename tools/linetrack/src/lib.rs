@@ -43,6 +43,8 @@ const DEFAULT_FRAMES: usize = 100;
     linetrack run --single-process                  # same stages on threads (baseline)
     linetrack run --camera 'v4l2src ! videoconvert ! video/x-raw,format=GRAY8 ! appsink' \\
         --calibration camchain.yaml --duration 60   # a live side-by-side stereo camera
+    linetrack run --ros2-images /stereo/left/image_rect /stereo/right/image_rect
+                                                    # a ROS 2 stereo driver's topics
     linetrack replay ~/.local/state/linetrack/runs/latest/recording.mcap   # a recorded run again
     linetrack ctl swap-detector fld                 # while a run is going, from another shell
     linetrack ctl swap-matcher                      # a fresh matcher takes over, likewise
@@ -102,9 +104,15 @@ pub struct RunArgs {
     /// cam0/sensor.yaml and cam1/sensor.yaml.
     #[arg(long, value_name = "FILE")]
     pub calibration: Option<PathBuf>,
-    /// With a camera: stop after this many seconds (default: the config's camera.duration_s;
-    /// 0 = until Ctrl-C).
-    #[arg(long, value_name = "SECONDS", requires = "camera")]
+    /// Frames from two ROS 2 `sensor_msgs/Image` topics (rectified, mono8, mono16, rgb8 or
+    /// bgr8) paired by header stamp, the rig from their `CameraInfo` (`camera_info` beside
+    /// each, or camera.ros2_images.left_info / right_info); DDS domain from [ros2]. Needs
+    /// `linetrack-ros2-source` (--features linetrack-ros2-bridge/ros2).
+    #[arg(long, num_args = 2, value_names = ["LEFT", "RIGHT"], conflicts_with_all = ["camera", "dataset"])]
+    pub ros2_images: Option<Vec<String>>,
+    /// With a camera or ROS 2 images: stop after this many seconds (default: the config's
+    /// camera.duration_s; 0 = until Ctrl-C).
+    #[arg(long, value_name = "SECONDS")]
     pub duration: Option<f64>,
     /// Stop after this many frames.
     #[arg(long)]
@@ -213,8 +221,10 @@ pub fn main(cli: Cli) -> anyhow::Result<()> {
         Cmd::Run(args) => run(&args).map(|_| ()),
         Cmd::Replay(args) => {
             anyhow::ensure!(
-                args.run.dataset.is_none() && args.run.camera.is_none(),
-                "linetrack replay reads its frames from {}: --dataset and --camera do not apply",
+                args.run.dataset.is_none()
+                    && args.run.camera.is_none()
+                    && args.run.ros2_images.is_none(),
+                "linetrack replay reads its frames from {}: --dataset, --camera and --ros2-images do not apply",
                 args.file.display()
             );
             let run_args = RunArgs {
@@ -250,6 +260,13 @@ pub fn effective_config(args: &RunArgs) -> anyhow::Result<PipelineConfig> {
         );
         config.camera.capture = camera.clone();
         config.camera.capture_right = args.camera_right.clone().unwrap_or_default();
+    }
+    if let Some(topics) = &args.ros2_images {
+        let images = &mut config.camera.ros2_images;
+        images.left = topics.first().cloned().unwrap_or_default();
+        images.right = topics.get(1).cloned().unwrap_or_default();
+        config.camera.capture.clear();
+        config.camera.capture_right.clear();
     }
     if let Some(calibration) = &args.calibration {
         config.camera.calibration = calibration.clone();
@@ -296,6 +313,7 @@ pub fn run(args: &RunArgs) -> anyhow::Result<PathBuf> {
     let config = effective_config(args)?;
     let sequence = &config.source.sequence;
     if !config.camera.enabled()
+        && !config.camera.ros2_images.enabled()
         && config.source.replay().is_none()
         && args.dataset.is_none()
         && !sequence.join("mav0/cam0/data.csv").is_file()
@@ -338,6 +356,9 @@ pub fn run(args: &RunArgs) -> anyhow::Result<PathBuf> {
             )
         } else if let Some(file) = config.source.replay() {
             format!("recording {}", file.display())
+        } else if config.camera.ros2_images.enabled() {
+            let images = &config.camera.ros2_images;
+            format!("ROS 2 images {} + {}", images.left, images.right)
         } else {
             sequence.display().to_string()
         },

@@ -27,8 +27,8 @@ pub const PROFILE: &str = "test-release";
 /// ground-station link (zenoh), and the end-to-end tests that need them.
 pub const FEATURES: &str = "linetrack/mcap,linetrack/link,linetrack-e2e/mcap,linetrack-e2e/link";
 
-/// The features `cargo xtask test-ros2` turns on: the bridge's ROS 2 output and the
-/// end-to-end test that receives it.
+/// The features `cargo xtask test-ros2` turns on: the bridge's ROS 2 output and image
+/// source, and the end-to-end tests that talk to them.
 pub const ROS2_FEATURES: &str = "linetrack-ros2-bridge/ros2,linetrack-e2e/ros2";
 
 /// The crates whose code the features change (their tests run again with them).
