@@ -2,7 +2,7 @@
 //! budget pressure, and back.
 
 use crate::limits::{MAX_FRAMES, check_hysteresis, in_range};
-use linetrack_vision::DetectorKind;
+use linetrack_vision_config::DetectorKind;
 use serde::{Deserialize, Serialize};
 
 /// When the supervisor hot-swaps the line detector from LSD to a faster one under budget

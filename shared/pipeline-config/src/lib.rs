@@ -35,8 +35,8 @@ pub use source::{Pacing, SourceConfig};
 pub use stages::StagesConfig;
 pub use supervisor::SupervisorConfig;
 
-use linetrack_odometry::OdometryConfig;
-use linetrack_vision::DetectorKind;
+use linetrack_odometry_config::OdometryConfig;
+use linetrack_vision_config::DetectorKind;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
@@ -136,8 +136,8 @@ impl PipelineConfig {
     /// point count and pyramid, or "none (lines only)".
     pub fn points_text(&self) -> String {
         match self.odometry.features {
-            linetrack_odometry::Features::LinesOnly => "none (lines only)".to_string(),
-            linetrack_odometry::Features::PointsAndLines => {
+            linetrack_odometry_config::Features::LinesOnly => "none (lines only)".to_string(),
+            linetrack_odometry_config::Features::PointsAndLines => {
                 let orb = &self.odometry.frontend.orb;
                 format!(
                     "{} ({} points, {} levels of {})",
@@ -226,7 +226,7 @@ mod tests {
             chosen.points_text(),
             "fast-brief (1200 points, 4 levels of 1.44)"
         );
-        config.odometry.features = linetrack_odometry::Features::LinesOnly;
+        config.odometry.features = linetrack_odometry_config::Features::LinesOnly;
         assert_eq!(config.points_text(), "none (lines only)");
     }
 
