@@ -218,12 +218,6 @@ fn stereo_matches_on_a_shifted_test_card_have_the_true_disparity() {
     }
 }
 
-// ---------------------------------------------------------------- real images
-
-// ---------------------------------------------------------------- perturbation
-
-// ---------------------------------------------------------------- bad input
-
 // ---------------------------------------------------------------- configuration
 
 #[test]
@@ -253,5 +247,3 @@ fn shipped_frontend_config_matches_the_defaults_and_names_are_checked() {
             .contains("lbd, l1")
     );
 }
-
-// ---------------------------------------------------------------- borrowed pixels
