@@ -19,15 +19,17 @@
 //! ([`FrameResult::step_covariance`]); [`PoseCovariance`] chains them into the pose's.
 #![warn(missing_docs)]
 
-mod config;
 mod front_end;
 mod landmarks;
 mod pose_covariance;
 mod stats;
 mod tracker;
 
-pub use config::{Features, LinePrediction, LostLimits, OdometryConfig, StereoPhotometric};
 pub use front_end::Odometry;
+// The settings, OpenCV-free in their own crate, re-exported where they are run.
+pub use linetrack_odometry_config::{
+    Features, LinePrediction, LostLimits, OdometryConfig, StereoPhotometric,
+};
 pub use linetrack_stereo_vo::nees;
 pub use linetrack_trajectory::metrics;
 pub use pose_covariance::PoseCovariance;

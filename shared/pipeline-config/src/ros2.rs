@@ -146,9 +146,9 @@ impl Ros2Config {
     /// The first bad key, named with why.
     pub fn validate(&self) -> Result<(), String> {
         if let Some(id) = self.domain_id {
-            crate::in_range("ros2.domain_id", id, 0..=MAX_DOMAIN_ID)?;
+            crate::limits::in_range("ros2.domain_id", id, 0..=MAX_DOMAIN_ID)?;
         }
-        crate::in_range(
+        crate::limits::in_range(
             "ros2.path_max_poses",
             self.path_max_poses,
             1..=MAX_PATH_POSES,

@@ -1,4 +1,6 @@
 use super::*;
+use crate::canvas::{HEIGHT, LEGEND_WIDTH, ROW_HEIGHT, WIDTH, value_text};
+use std::path::Path;
 
 fn scratch(name: &str) -> PathBuf {
     let dir = std::env::temp_dir().join(format!("linetrack-plot-{}", std::process::id()));

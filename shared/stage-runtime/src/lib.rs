@@ -15,19 +15,24 @@ use clap::Parser;
 use linetrack_geometry::{Point, Segment, StereoRig};
 use linetrack_ipc::{Bus, Inlet, IpcError, Outlet, Received, Record, Scope, Shutdown};
 
+#[cfg(feature = "images")]
+mod images;
 mod runner;
+#[cfg(feature = "images")]
 mod side;
 mod sink;
 mod source;
 pub mod time;
+#[cfg(feature = "images")]
+pub use images::{stereo_frame, stereo_views};
 use linetrack_msgs::{Command, Control, RigRecord, SegmentRecord};
 use linetrack_msgs::{
     Detector, FrameHeader, FrameMessage, FrameStatus, StageKind, StatusKind, StatusReport, Topic,
 };
 use linetrack_pipeline_config::{BudgetConfig, PipelineConfig};
-use linetrack_vision::DetectorKind;
-use linetrack_vision::{BorrowedGray, GrayImage, VisionError};
+use linetrack_vision_config::DetectorKind;
 pub use runner::{Stage, run_stage};
+#[cfg(feature = "images")]
 pub use side::RightImageWorker;
 pub use sink::{Sink, run_sink};
 pub use source::{RigOutlet, Source, SourceOut, Step, run_source};
@@ -297,43 +302,6 @@ pub fn stamp_end(header: &mut FrameHeader, stage: StageKind, now_ns: u64) {
 /// A frame's images as received: left image then right image, row-major, under the frame's
 /// header.
 pub type Images = Received<u8, FrameHeader>;
-
-/// Frame `frame_id` carrying `left` and `right` as the frame source would publish them,
-/// built in place (tests and tools that run a stage on images of their own).
-pub fn stereo_frame(frame_id: u64, left: &GrayImage, right: &GrayImage) -> anyhow::Result<Images> {
-    left.ensure_same_size(right)?;
-    let (Some(l), Some(r)) = (left.pixels(), right.pixels()) else {
-        anyhow::bail!("{}: the pixels are not one block", left.origin());
-    };
-    let mut header = FrameHeader::new(frame_id, 0, 1);
-    header.width = u32::try_from(left.width())?;
-    header.height = u32::try_from(left.height())?;
-    Ok(Received::local(header, [l, r].concat()))
-}
-
-/// The two images of a frame message, read in place.
-pub fn stereo_views<'a>(
-    frame: &'a Images,
-) -> Result<(BorrowedGray<'a>, BorrowedGray<'a>), VisionError> {
-    let header = frame.header();
-    let (w, h) = (header.width as usize, header.height as usize);
-    let pixels = frame.payload();
-    let origin = |side: &str| format!("frame {} {side} image", header.frame_id);
-    let half = w.saturating_mul(h);
-    if pixels.len() != 2 * half {
-        return Err(VisionError::RawSize {
-            origin: origin("stereo"),
-            len: pixels.len(),
-            width: w,
-            height: 2 * h,
-        });
-    }
-    let (left, right) = pixels.split_at(half);
-    Ok((
-        GrayImage::borrow_pixels(w, h, left, &origin("left"))?,
-        GrayImage::borrow_pixels(w, h, right, &origin("right"))?,
-    ))
-}
 
 /// Messages of `topic` a stage holds at most (see [`Held`]).
 pub const fn held_capacity(topic: Topic) -> usize {

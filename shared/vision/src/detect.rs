@@ -1,8 +1,8 @@
 //! Line segment detection: LSD, FLD and our own edge-drawing detector behind one trait.
 
 use crate::{
-    EdgeLinesOptions, FldOptions, FrontendConfig, GrayImage, LineOptions, LsdOptions, LsdRefine,
-    OpenCvContext, VisionError,
+    DetectorKind, EdgeLinesOptions, FldOptions, FrontendConfig, GrayImage, LineOptions, LsdOptions,
+    LsdRefine, OpenCvContext, VisionError,
 };
 use linetrack_edge_lines::GrayView;
 use linetrack_frontend_core::EdgeLinesSegments;
@@ -10,8 +10,6 @@ use linetrack_geometry::Segment;
 use opencv::core::{Ptr, Vec4f, Vector};
 use opencv::imgproc::{self, LineSegmentDetector, LineSegmentDetectorTrait};
 use opencv::ximgproc::{self, FastLineDetector, FastLineDetectorTrait};
-use serde::{Deserialize, Serialize};
-use std::str::FromStr;
 
 /// Images narrower or lower than this (pixels) have no segments worth detecting; the
 /// detectors return none instead of asking OpenCV (FLD asserts on tiny images). The rule
@@ -27,49 +25,6 @@ pub trait LineDetector: Send {
     /// clipped to the image, at least `min_length_px` long, at most `max_segments`,
     /// longest first. Images smaller than [`MIN_IMAGE_SIDE_PX`] give none.
     fn detect(&mut self, image: &GrayImage, out: &mut Vec<Segment>) -> Result<(), VisionError>;
-}
-
-/// The detectors that can be chosen by name.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum DetectorKind {
-    /// Line Segment Detector (von Gioi et al.), OpenCV imgproc.
-    Lsd,
-    /// Fast Line Detector (Lee et al.), OpenCV ximgproc.
-    Fld,
-    /// Our own edge-drawing detector with line fitting while drawing (`linetrack-edge-lines`,
-    /// no OpenCV).
-    #[serde(rename = "edgelines")]
-    EdgeLines,
-}
-
-impl DetectorKind {
-    /// Every kind, in a fixed order.
-    pub const ALL: [DetectorKind; 3] = [
-        DetectorKind::Lsd,
-        DetectorKind::Fld,
-        DetectorKind::EdgeLines,
-    ];
-
-    /// The name used in configs and on the command line.
-    pub fn name(self) -> &'static str {
-        match self {
-            DetectorKind::Lsd => "lsd",
-            DetectorKind::Fld => "fld",
-            DetectorKind::EdgeLines => "edgelines",
-        }
-    }
-}
-
-impl FromStr for DetectorKind {
-    type Err = String;
-
-    fn from_str(s: &str) -> Result<Self, String> {
-        Self::ALL
-            .into_iter()
-            .find(|k| k.name().eq_ignore_ascii_case(s))
-            .ok_or_else(|| format!("unknown detector {s:?}: expected one of lsd, fld, edgelines"))
-    }
 }
 
 /// Builds the detector `kind` with its options from `config`.

@@ -23,7 +23,6 @@
 //! two meet. Images are not rectified here (the datasets crate does that).
 #![warn(missing_docs)]
 
-mod config;
 mod cpu;
 mod detect;
 mod hamming;
@@ -34,13 +33,9 @@ mod orb;
 mod pair;
 mod worker;
 
-pub use config::{
-    AppearanceGates, FldOptions, FrontendConfig, LbdOptions, LsdOptions, LsdRefine, OrbOptions,
-    PointExtractorKind,
-};
 pub use detect::{
-    DetectorKind, EdgeLinesDetector, FldDetector, LineDetector, LsdDetector, MIN_IMAGE_SIDE_PX,
-    create_detector, keep_longest,
+    EdgeLinesDetector, FldDetector, LineDetector, LsdDetector, MIN_IMAGE_SIDE_PX, create_detector,
+    keep_longest,
 };
 pub use hamming::{BinaryDescriptors, FeatureMatch, HammingMatcher};
 pub use image::{
@@ -48,10 +43,8 @@ pub use image::{
     stretch_contrast, stretch_contrast_into, to_gray8_ordered,
 };
 pub use lbd::LbdExtractor;
-pub use linetrack_frontend_core::{EdgeLinesOptions, LineOptions};
 pub use matchers::{
-    L1SegmentMatcher, LbdSegmentMatcher, LineFeatures, MatcherKind, SegmentMatcher,
-    create_segment_matcher,
+    L1SegmentMatcher, LbdSegmentMatcher, LineFeatures, SegmentMatcher, create_segment_matcher,
 };
 pub use orb::{
     FastBriefExtractor, MIN_TRACK_CORRELATION, OrbExtractor, OrbWorker, PointExtractor,
@@ -59,6 +52,14 @@ pub use orb::{
 };
 pub use pair::{LinePairMatcher, PairResult, PairTimings};
 pub use worker::{SideWorker, copy_image_into};
+
+// The settings, OpenCV-free in their own crate (so that what only reads a configuration
+// builds without OpenCV), re-exported where they are run.
+pub use linetrack_vision_config::{
+    AppearanceGates, DetectorKind, EdgeLinesOptions, FldOptions, FrontendConfig,
+    FrontendConfigError, LbdOptions, LineOptions, LsdOptions, LsdRefine, MatcherKind, OrbOptions,
+    PointExtractorKind,
+};
 
 use std::path::PathBuf;
 

@@ -2,12 +2,10 @@
 
 use crate::{
     AppearanceGates, BinaryDescriptors, FeatureMatch, FrontendConfig, GrayImage, HammingMatcher,
-    LbdExtractor, LbdOptions, VisionError,
+    LbdExtractor, LbdOptions, MatcherKind, VisionError,
 };
 use linetrack_geometry::{self as geometry, MatchCase, Segment, SegmentFeatures};
 use linetrack_l1_matcher::{GrayView, L1Matcher, Match, SegmentProfiles};
-use serde::{Deserialize, Serialize};
-use std::str::FromStr;
 
 /// Segments of one image and whatever a matcher computed on them.
 #[derive(Debug, Clone, Default)]
@@ -70,40 +68,6 @@ pub trait SegmentMatcher: Send {
         out: &mut Vec<FeatureMatch>,
     ) {
         self.match_lines(MatchCase::FrameToFrame, first, second, out);
-    }
-}
-
-/// The segment matchers that can be chosen by name.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum MatcherKind {
-    /// LBD descriptors, mutual best + ratio test.
-    Lbd,
-    /// The geometric ℓ1 matcher.
-    L1,
-}
-
-impl MatcherKind {
-    /// Every kind, in a fixed order.
-    pub const ALL: [MatcherKind; 2] = [MatcherKind::Lbd, MatcherKind::L1];
-
-    /// The name used in configs and on the command line.
-    pub fn name(self) -> &'static str {
-        match self {
-            MatcherKind::Lbd => "lbd",
-            MatcherKind::L1 => "l1",
-        }
-    }
-}
-
-impl FromStr for MatcherKind {
-    type Err = String;
-
-    fn from_str(s: &str) -> Result<Self, String> {
-        Self::ALL
-            .into_iter()
-            .find(|k| k.name().eq_ignore_ascii_case(s))
-            .ok_or_else(|| format!("unknown matcher {s:?}: expected one of lbd, l1"))
     }
 }
 

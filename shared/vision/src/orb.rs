@@ -16,7 +16,6 @@ mod native;
 mod refine;
 
 pub use matching::{PointMatcher, points_may_match};
-pub(crate) use native::fast_brief_params;
 pub use native::{FastBriefExtractor, PointExtractor};
 pub use refine::{MIN_TRACK_CORRELATION, refine_stereo_column, refine_track};
 

@@ -1,5 +1,6 @@
 //! `cargo xtask feature-drift`: fails when building with an optional feature would
-//! compile a shared dependency again with other features.
+//! compile a shared dependency again with other features, and when a crate that must build
+//! without OpenCV depends on it ([`crate::opencv_free`]).
 //!
 //! cargo compiles a crate once per feature set, and everything above it with it. When
 //! zenoh (`link`), MCAP or ros2-client turn on a feature of a crate the whole workspace
@@ -43,12 +44,13 @@ pub fn run(rest: &[String]) -> anyhow::Result<ExitCode> {
     if let Some(arg) = rest.first() {
         if arg == "-h" || arg == "--help" {
             println!(
-                "usage: cargo xtask feature-drift\n  fails, naming the crates, when an optional feature set ({}) changes the features of a dependency the default build compiles; add them to tools/workspace-hack",
+                "usage: cargo xtask feature-drift\n  fails, naming the crates, when an optional feature set ({}) changes the features of a dependency the default build compiles (add them to tools/workspace-hack), or when one of {} depends on OpenCV",
                 FEATURE_SETS
                     .iter()
                     .map(|(name, _)| *name)
                     .collect::<Vec<_>>()
-                    .join(", ")
+                    .join(", "),
+                crate::opencv_free::CRATES.join(", ")
             );
             return Ok(ExitCode::SUCCESS);
         }
@@ -88,9 +90,18 @@ pub fn run(rest: &[String]) -> anyhow::Result<ExitCode> {
         eprintln!(
             "xtask: feature-drift: add the features these crates gain to tools/workspace-hack/Cargo.toml"
         );
-        return Ok(ExitCode::FAILURE);
     }
-    Ok(ExitCode::SUCCESS)
+    if !crate::opencv_free::check()? {
+        failed = true;
+        eprintln!(
+            "xtask: feature-drift: these crates must build without OpenCV: move what they use into an OpenCV-free crate (as the configs are in linetrack-vision-config and linetrack-odometry-config) or behind a feature they leave off"
+        );
+    }
+    Ok(if failed {
+        ExitCode::FAILURE
+    } else {
+        ExitCode::SUCCESS
+    })
 }
 
 /// `cargo tree` of the workspace's test build (the dependency kinds `edges` names) with

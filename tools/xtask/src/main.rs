@@ -16,7 +16,8 @@
 //!   into a virtual environment under the target folder, installed, its pytest suite run
 //!   (ARGS are pytest's) ([`python`]).
 //! - `cargo xtask feature-drift` — fails when an optional feature set would compile a
-//!   shared dependency with other features than the default build ([`feature_drift`]).
+//!   shared dependency with other features than the default build ([`feature_drift`]), or
+//!   when a crate that must build without OpenCV depends on it ([`opencv_free`]).
 //!
 //! The test commands print each step's wall time.
 //! - `cargo xtask setup` — only install the system packages, the MCAP checker and the DDS
@@ -30,6 +31,7 @@
 mod cross;
 mod deb;
 mod feature_drift;
+mod opencv_free;
 mod pose_diff;
 mod python;
 mod python_env;
@@ -60,7 +62,8 @@ const USAGE: &str = "usage: cargo xtask <demo|match-demo|test|setup> [ARGS…]
   test-features  the tests the optional features mcap (recording) and link (zenoh) add
   test-ros2   the ROS 2 output's tests (feature `ros2`) against a Cyclone DDS subscriber
   python      build the Python package's wheel into a venv, install it, run its pytest suite
-  feature-drift  fails when an optional feature set would recompile a shared dependency
+  feature-drift  fails when an optional feature set would recompile a shared dependency,
+                 or when the config crate, the link or the ROS 2 bridge would need OpenCV
   setup       install the system packages and the DDS peer of test-ros2
   cross       aarch64 release binaries, checked under qemu (try `cargo xtask cross --help`)
   deb         the Debian package; --check unpacks and checks it (`cargo xtask deb --help`)";

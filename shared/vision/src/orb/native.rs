@@ -4,33 +4,8 @@
 
 use super::OrbExtractor;
 use crate::{GrayImage, OrbOptions, PointExtractorKind, PointFeatures, VisionError};
-use linetrack_corners::{CornerExtractor, Corners, CornersError, GrayView, Params};
+use linetrack_corners::{CornerExtractor, Corners, GrayView};
 use linetrack_geometry::Point;
-
-/// The `linetrack-corners` parameters for `options` (the point count, levels, scale factor,
-/// FAST threshold, border and grid).
-pub(crate) fn fast_brief_params(options: &OrbOptions) -> Result<Params, CornersError> {
-    let out_of_range = |name, value: i32, reason| CornersError::Param {
-        name,
-        value: value.to_string(),
-        reason,
-    };
-    let params = Params {
-        max_corners: usize::try_from(options.features)
-            .map_err(|_| out_of_range("features", options.features, "must be at least 1"))?,
-        levels: usize::try_from(options.levels)
-            .map_err(|_| out_of_range("levels", options.levels, "must be 1 to 16"))?,
-        scale_factor: options.scale_factor,
-        fast_threshold: u8::try_from(options.fast_threshold).map_err(|_| {
-            out_of_range("fast_threshold", options.fast_threshold, "must be 1 to 255")
-        })?,
-        edge_px: usize::try_from(options.edge_threshold)
-            .map_err(|_| out_of_range("edge_threshold", options.edge_threshold, "must be ≥ 0"))?,
-        cell_px: options.grid_cell_px,
-    };
-    params.validate()?;
-    Ok(params)
-}
 
 /// Our own oriented FAST corners and their descriptors, written as [`PointFeatures`];
 /// keeps its buffers.
@@ -44,10 +19,12 @@ pub struct FastBriefExtractor {
 impl FastBriefExtractor {
     /// An extractor with the settings of `options`.
     pub fn new(options: &OrbOptions) -> Result<Self, VisionError> {
-        let params = fast_brief_params(options).map_err(|source| VisionError::Corners {
-            origin: "[orb] settings".to_string(),
-            source,
-        })?;
+        let params = options
+            .fast_brief_params()
+            .map_err(|source| VisionError::Corners {
+                origin: "[orb] settings".to_string(),
+                source,
+            })?;
         let extractor = CornerExtractor::new(params).map_err(|source| VisionError::Corners {
             origin: "[orb] settings".to_string(),
             source,

@@ -2,7 +2,8 @@
 //! descriptor's options with OpenCV's defaults, and the gates of appearance matching.
 //! `configs/frontend.toml` documents the same fields for users.
 
-use crate::{DetectorKind, MatcherKind, VisionError};
+use crate::{DetectorKind, FrontendConfigError, MatcherKind};
+use linetrack_corners::{CornersError, Params};
 use linetrack_frontend_core::{EdgeLinesOptions, LineOptions};
 use linetrack_l1_matcher::MatcherConfig;
 use serde::{Deserialize, Serialize};
@@ -192,6 +193,33 @@ impl Default for OrbOptions {
     }
 }
 
+impl OrbOptions {
+    /// The `linetrack-corners` parameters of these options (the point count, levels, scale factor,
+    /// FAST threshold, border and grid).
+    pub fn fast_brief_params(&self) -> Result<Params, CornersError> {
+        let out_of_range = |name, value: i32, reason| CornersError::Param {
+            name,
+            value: value.to_string(),
+            reason,
+        };
+        let params = Params {
+            max_corners: usize::try_from(self.features)
+                .map_err(|_| out_of_range("features", self.features, "must be at least 1"))?,
+            levels: usize::try_from(self.levels)
+                .map_err(|_| out_of_range("levels", self.levels, "must be 1 to 16"))?,
+            scale_factor: self.scale_factor,
+            fast_threshold: u8::try_from(self.fast_threshold).map_err(|_| {
+                out_of_range("fast_threshold", self.fast_threshold, "must be 1 to 255")
+            })?,
+            edge_px: usize::try_from(self.edge_threshold)
+                .map_err(|_| out_of_range("edge_threshold", self.edge_threshold, "must be ≥ 0"))?,
+            cell_px: self.grid_cell_px,
+        };
+        params.validate()?;
+        Ok(params)
+    }
+}
+
 /// The point extractors that can be chosen by name.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
 pub enum PointExtractorKind {
@@ -263,26 +291,26 @@ impl Default for AppearanceGates {
 
 impl FrontendConfig {
     /// Parses and validates TOML text.
-    pub fn from_toml_str(text: &str) -> Result<Self, VisionError> {
+    pub fn from_toml_str(text: &str) -> Result<Self, FrontendConfigError> {
         Self::parse(text, "<string>")
     }
 
     /// Reads, parses and validates a TOML file.
-    pub fn from_file(path: &Path) -> Result<Self, VisionError> {
+    pub fn from_file(path: &Path) -> Result<Self, FrontendConfigError> {
         let origin = path.display().to_string();
-        let text = std::fs::read_to_string(path).map_err(|e| VisionError::Config {
+        let text = std::fs::read_to_string(path).map_err(|e| FrontendConfigError {
             origin: origin.clone(),
             message: format!("cannot read: {e}"),
         })?;
         Self::parse(&text, &origin)
     }
 
-    fn parse(text: &str, origin: &str) -> Result<Self, VisionError> {
-        let config: Self = toml::from_str(text).map_err(|e| VisionError::Config {
+    fn parse(text: &str, origin: &str) -> Result<Self, FrontendConfigError> {
+        let config: Self = toml::from_str(text).map_err(|e| FrontendConfigError {
             origin: origin.to_string(),
             message: e.to_string(),
         })?;
-        config.validate().map_err(|message| VisionError::Config {
+        config.validate().map_err(|message| FrontendConfigError {
             origin: origin.to_string(),
             message,
         })?;
@@ -332,7 +360,7 @@ impl FrontendConfig {
             }
         }
         if self.orb.extractor == PointExtractorKind::FastBrief {
-            crate::orb::fast_brief_params(&self.orb).map_err(|e| e.to_string())?;
+            self.orb.fast_brief_params().map_err(|e| e.to_string())?;
         }
         if self.orb.features < 1 || self.orb.levels < 1 || !(self.orb.scale_factor > 1.0) {
             return bad(

@@ -1,9 +1,15 @@
-//! What the odometry is told: its [`OdometryConfig`] (read from TOML, every field defaulted)
-//! with the photometric check of stereo segments and the limits past which a frame is lost.
+//! What the odometry is told, without OpenCV: its [`OdometryConfig`] (read from TOML,
+//! every field defaulted) with the photometric check of stereo segments and the limits past
+//! which a frame is lost.
+//!
+//! `linetrack-odometry` runs these settings (and re-exports every type here); this crate
+//! holds them apart so that what only reads a configuration (`linetrack-pipeline-config`,
+//! and through it the link and the ROS 2 bridge) builds without OpenCV.
+#![warn(missing_docs)]
 
 use linetrack_l1_matcher::{Gates as L1Gates, MatcherConfig as L1Config};
 use linetrack_stereo_vo::MotionConfig;
-use linetrack_vision::{DetectorKind, FrontendConfig, MatcherKind, OrbOptions};
+use linetrack_vision_config::{DetectorKind, FrontendConfig, MatcherKind, OrbOptions};
 use serde::{Deserialize, Serialize};
 
 /// Which features the odometry uses.

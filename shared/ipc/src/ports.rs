@@ -1,0 +1,241 @@
+//! The ports a [`Bus`](crate::Bus) opens: [`Outlet`] publishes a topic, [`Inlet`] receives
+//! it, [`Wake`] blocks a stage until a topic it consumes has news.
+
+use crate::bus::LocalPayload;
+use crate::bus::{LocalMessage, LocalTopic};
+use crate::{IpcError, Record, transfer};
+use crossbeam_channel::{Receiver, Sender, TrySendError};
+use iceoryx2::port::listener::Listener;
+use iceoryx2::port::notifier::Notifier;
+use iceoryx2::port::publisher::Publisher;
+use iceoryx2::port::subscriber::Subscriber;
+use iceoryx2::prelude::ipc;
+use iceoryx2::sample::Sample;
+use std::sync::{Arc, Mutex};
+use std::time::Duration;
+
+pub(crate) enum OutletInner<P: Record, H: Record> {
+    Shm {
+        publisher: Publisher<ipc::Service, [P], H>,
+        notifiers: Vec<Notifier<ipc::Service>>,
+    },
+    Local {
+        subscribers: Arc<Mutex<LocalTopic>>,
+        keep_last: bool,
+        wakes: Vec<Sender<()>>,
+        _message: std::marker::PhantomData<(P, H)>,
+    },
+}
+
+/// Publishes messages on one topic.
+pub struct Outlet<P: Record, H: Record> {
+    pub(crate) service_name: String,
+    pub(crate) inner: OutletInner<P, H>,
+}
+
+impl<P: Record, H: Record> Outlet<P, H> {
+    /// Publishes `header` with the concatenation of `parts` as payload, written once into
+    /// shared memory, and wakes the consumers. Returns how many subscribers got it.
+    pub fn publish(&mut self, header: &H, parts: &[&[P]]) -> Result<usize, IpcError> {
+        let len: usize = parts.iter().map(|p| p.len()).sum();
+        match &mut self.inner {
+            OutletInner::Shm {
+                publisher,
+                notifiers,
+            } => {
+                let mut sample = publisher
+                    .loan_slice_uninit(len)
+                    .map_err(|e| transfer("loan", &self.service_name)(format!("{e:?}")))?;
+                *sample.user_header_mut() = *header;
+                let mut offset = 0;
+                let payload = sample.payload_mut();
+                for part in parts {
+                    payload[offset..offset + part.len()].write_copy_of_slice(part);
+                    offset += part.len();
+                }
+                // SAFETY: `parts` hold exactly `len` records in all, and every one of them was
+                // written into the payload's `len` slots above, so the payload is initialised.
+                #[allow(unsafe_code)]
+                let sample = unsafe { sample.assume_init() };
+                let delivered = sample
+                    .send()
+                    .map_err(|e| transfer("send", &self.service_name)(format!("{e:?}")))?;
+                for notifier in notifiers.iter() {
+                    notifier
+                        .notify()
+                        .map_err(|e| transfer("notify", &self.service_name)(format!("{e:?}")))?;
+                }
+                Ok(delivered)
+            }
+            OutletInner::Local {
+                subscribers,
+                keep_last,
+                wakes,
+                ..
+            } => {
+                let mut payload = Vec::with_capacity(len);
+                for part in parts {
+                    payload.extend_from_slice(part);
+                }
+                let message: LocalMessage = Arc::new(LocalPayload {
+                    header: *header,
+                    payload,
+                });
+                let mut local = subscribers.lock().unwrap_or_else(|p| p.into_inner());
+                if *keep_last {
+                    local.last = Some(Arc::clone(&message));
+                }
+                let mut delivered = 0;
+                for tx in local.subscribers.iter() {
+                    match tx.try_send(Arc::clone(&message)) {
+                        Ok(()) => delivered += 1,
+                        // A full queue loses the message for that subscriber, as a shared
+                        // memory subscriber's overflow would; the gap shows in the records.
+                        Err(TrySendError::Full(_)) | Err(TrySendError::Disconnected(_)) => {}
+                    }
+                }
+                for wake in wakes {
+                    let _ = wake.try_send(());
+                }
+                Ok(delivered)
+            }
+        }
+    }
+
+    /// Hands the topic's history (see [`Topic::history`]) to subscribers that connected
+    /// since the last message: a publisher with nothing new to send calls it now and then.
+    /// (A local subscriber gets the history when it is created.)
+    pub fn update_connections(&self) -> Result<(), IpcError> {
+        use iceoryx2::port::update_connections::UpdateConnections;
+        match &self.inner {
+            OutletInner::Shm { publisher, .. } => publisher
+                .update_connections()
+                .map_err(|e| transfer("update connections", &self.service_name)(format!("{e:?}"))),
+            OutletInner::Local { .. } => Ok(()),
+        }
+    }
+
+    /// The service name.
+    pub fn service_name(&self) -> &str {
+        &self.service_name
+    }
+}
+
+pub(crate) enum InletInner<P: Record, H: Record> {
+    Shm(Subscriber<ipc::Service, [P], H>),
+    Local(Receiver<LocalMessage>, std::marker::PhantomData<(P, H)>),
+}
+
+/// Receives messages on one topic.
+pub struct Inlet<P: Record, H: Record> {
+    pub(crate) service_name: String,
+    /// Messages it may hold at once: the topic's queue depth, which is also the
+    /// subscriber's borrow limit.
+    pub(crate) limit: usize,
+    pub(crate) inner: InletInner<P, H>,
+}
+
+/// A received message: in shared memory, read in place, or a local message.
+pub enum Received<P: Record, H: Record> {
+    /// A shared-memory sample.
+    Shm(Sample<ipc::Service, [P], H>),
+    /// A local message.
+    Local(Arc<LocalPayload<P, H>>),
+}
+
+impl<P: Record, H: Record> Received<P, H> {
+    /// A message that never went through a bus (a stage's input built in place: tests,
+    /// tools).
+    pub fn local(header: H, payload: Vec<P>) -> Self {
+        Received::Local(Arc::new(LocalPayload { header, payload }))
+    }
+
+    /// The header.
+    pub fn header(&self) -> &H {
+        match self {
+            Received::Shm(s) => s.user_header(),
+            Received::Local(m) => &m.header,
+        }
+    }
+
+    /// The records.
+    pub fn payload(&self) -> &[P] {
+        match self {
+            Received::Shm(s) => s.payload(),
+            Received::Local(m) => &m.payload,
+        }
+    }
+}
+
+impl<P: Record, H: Record> Inlet<P, H> {
+    /// The oldest waiting message, if any.
+    pub fn receive(&mut self) -> Result<Option<Received<P, H>>, IpcError> {
+        match &mut self.inner {
+            InletInner::Shm(subscriber) => subscriber
+                .receive()
+                .map(|s| s.map(Received::Shm))
+                .map_err(|e| transfer("receive", &self.service_name)(format!("{e:?}"))),
+            InletInner::Local(rx, _) => match rx.try_recv() {
+                Ok(message) => match message.downcast::<LocalPayload<P, H>>() {
+                    Ok(m) => Ok(Some(Received::Local(m))),
+                    Err(_) => Err(transfer("receive", &self.service_name)(
+                        "a message of another type".to_string(),
+                    )),
+                },
+                Err(_) => Ok(None),
+            },
+        }
+    }
+
+    /// The waiting messages, oldest first, at most [`Inlet::limit`] of them: a publisher
+    /// that keeps sending while they are taken can never push the subscriber past its
+    /// borrow limit. A full batch may leave more waiting.
+    pub fn receive_all(&mut self) -> Result<Vec<Received<P, H>>, IpcError> {
+        let mut all = Vec::new();
+        while all.len() < self.limit
+            && let Some(m) = self.receive()?
+        {
+            all.push(m);
+        }
+        Ok(all)
+    }
+
+    /// The most messages [`Inlet::receive_all`] returns (and a subscriber may borrow).
+    pub fn limit(&self) -> usize {
+        self.limit
+    }
+
+    /// The service name.
+    pub fn service_name(&self) -> &str {
+        &self.service_name
+    }
+}
+
+pub(crate) enum WakeInner {
+    Shm(Box<Listener<ipc::Service>>),
+    Local(Receiver<()>),
+}
+
+/// Blocks a stage until a topic it consumes has a message.
+pub struct Wake {
+    pub(crate) service_name: String,
+    pub(crate) inner: WakeInner,
+}
+
+impl Wake {
+    /// Blocks until woken or `timeout` passes; clears every pending wake-up.
+    pub fn wait(&self, timeout: Duration) -> Result<(), IpcError> {
+        match &self.inner {
+            WakeInner::Shm(listener) => match listener.timed_wait(|_| {}, timeout) {
+                // A signal (SIGINT, SIGTERM) cut the wait short: the caller checks its flag.
+                Ok(_) | Err(iceoryx2::port::listener::ListenerWaitError::InterruptSignal) => Ok(()),
+                Err(e) => Err(transfer("wait", &self.service_name)(format!("{e:?}"))),
+            },
+            WakeInner::Local(rx) => {
+                let _ = rx.recv_timeout(timeout);
+                while rx.try_recv().is_ok() {}
+                Ok(())
+            }
+        }
+    }
+}

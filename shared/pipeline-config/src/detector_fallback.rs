@@ -1,0 +1,69 @@
+//! `[detector_fallback]`: the line detector's hot swap from LSD to a faster one under
+//! budget pressure, and back.
+
+use crate::limits::{MAX_FRAMES, check_hysteresis, in_range};
+use linetrack_vision_config::DetectorKind;
+use serde::{Deserialize, Serialize};
+
+/// When the supervisor hot-swaps the line detector from LSD to a faster one under budget
+/// pressure, and back (`[detector_fallback]`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct DetectorFallbackConfig {
+    /// The off switch: false leaves the detector to the config and `linetrack ctl`.
+    pub enabled: bool,
+    /// The faster detector LSD gives way to (not LSD).
+    pub to: DetectorKind,
+    /// Consecutive LSD frames over `budget.line_detector_ms` before the swap.
+    pub bad_frames: u32,
+    /// Consecutive frames of the faster detector within `recover_budget_fraction` of the
+    /// budget before the swap back to LSD.
+    pub recover_frames: u32,
+    /// The fraction (< 1: the hysteresis band) of `budget.line_detector_ms` the faster
+    /// detector must stay within for the swap back.
+    pub recover_budget_fraction: f64,
+    /// Frames between two swaps of this policy, at least.
+    pub min_interval_frames: u64,
+    /// An LSD frame that misses `budget.end_to_end_ms` (processed late, or dropped late by
+    /// any stage) counts as over budget too: the pipeline's deadline, not only LSD's own.
+    pub end_to_end: bool,
+}
+
+impl Default for DetectorFallbackConfig {
+    fn default() -> Self {
+        Self {
+            enabled: true,
+            to: DetectorKind::Fld,
+            bad_frames: 5,
+            recover_frames: 40,
+            recover_budget_fraction: 0.25,
+            min_interval_frames: 200,
+            end_to_end: true,
+        }
+    }
+}
+
+impl DetectorFallbackConfig {
+    /// The first out-of-range key of `[detector_fallback]`.
+    pub fn validate(&self) -> Result<(), String> {
+        if self.to == DetectorKind::Lsd {
+            return Err(
+                "detector_fallback.to = \"lsd\": the detector LSD gives way to must be a faster one (fld or edgelines)"
+                    .to_string(),
+            );
+        }
+        check_hysteresis(
+            "detector_fallback",
+            &[
+                ("bad_frames", self.bad_frames),
+                ("recover_frames", self.recover_frames),
+            ],
+            self.recover_budget_fraction,
+        )?;
+        in_range(
+            "detector_fallback.min_interval_frames",
+            self.min_interval_frames,
+            0..=MAX_FRAMES as u64,
+        )
+    }
+}

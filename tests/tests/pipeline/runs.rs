@@ -1,0 +1,252 @@
+//! A run's life: single-process mode, the stage runner, a corrupt frame, a run that tracks
+//! nothing, SIGTERM and a killed run cleaned up by the next, a busy run folder.
+
+use super::*;
+
+#[test]
+fn a_corrupt_frame_is_skipped_and_counted() {
+    let dir = scratch("corrupt");
+    let sequence = sequence_copy(FRAMES, &dir);
+    let victim = &images(&sequence, 0)[12];
+    std::fs::write(victim, b"\x89PNG\r\n\x1a\n this is not an image")
+        .unwrap_or_else(|e| panic!("{e}"));
+    let (status, out, records) = start(&dir, &sequence, &quick()).finish(RUN_TIMEOUT);
+    assert!(status.success(), "{status}\n{out}");
+    assert_every_frame_accounted(&records);
+    let frame = &records.frames[12];
+    assert_eq!(
+        (frame.outcome.as_str(), frame.dropped_by.as_str()),
+        ("corrupt", "frame-source")
+    );
+    assert!(out.contains("dropped corrupt: 1"), "{out}");
+    assert!(
+        records.frames[13..]
+            .iter()
+            .filter(|f| f.outcome == "pose")
+            .count()
+            >= FRAMES - 13 - 2,
+        "tracking did not go on"
+    );
+}
+
+#[test]
+fn a_run_that_tracks_nothing_exits_non_zero_saying_so() {
+    let dir = scratch("nothing-tracked");
+    let sequence = sequence_copy(FRAMES, &dir);
+    for image in images(&sequence, 0) {
+        std::fs::write(&image, b"\x89PNG\r\n\x1a\n this is not an image")
+            .unwrap_or_else(|e| panic!("{e}"));
+    }
+    // How long the run is does not change its verdict: half the sequence is enough.
+    let frames = FRAMES / 2;
+    let run = start_with_args(
+        &dir,
+        &sequence,
+        &quick(),
+        &["--frames", &frames.to_string()],
+    );
+    let run_dir = run.run_dir.clone();
+    let (status, out, records) = run.finish(RUN_TIMEOUT);
+    assert!(!status.success(), "rc 0 with nothing tracked\n{out}");
+    assert_ids_accounted(&records, frames as u64, &[]);
+    assert!(records.frames.iter().all(|f| f.outcome == "corrupt"));
+    let summary = linetrack_run_record::Summary::read(&run_dir.join("summary.json"))
+        .unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(summary.end, linetrack_run_record::RunEnd::Failed);
+    let reason = summary.reason.unwrap_or_default();
+    assert!(reason.contains("nothing was tracked"), "{reason}");
+    assert_eq!(
+        records.leftovers,
+        Default::default(),
+        "iceoryx2 nodes or services left behind"
+    );
+}
+
+#[test]
+fn single_process_mode_is_supervised_the_same_way() {
+    // The same supervision core runs thread stages: `linetrack ctl` swaps the detector of
+    // a `--single-process` run too, and its records are the same.
+    let dir = scratch("threads");
+    let mut run = start_single_process(&dir, &base_sequence(FRAMES), &quick());
+    let status = run.wait_for("four stages", RUN_TIMEOUT, |s| s.stages.len() == 4);
+    assert!(
+        status
+            .stages
+            .iter()
+            .all(|s| s.pid >= linetrack_supervisor::THREAD_IDS && s.pid != status.supervisor_pid),
+        "{:?}",
+        status.stages
+    );
+    hot_swap(run);
+}
+
+#[test]
+fn stages_start_through_the_stage_runner() {
+    // LINETRACK_STAGE_RUNNER puts a command before each stage binary (qemu-aarch64-static
+    // for aarch64 binaries on x86, see `cargo xtask cross`). Here the runner is a shell that
+    // notes the binary and execs it: the stage keeps the pid the supervisor started.
+    let dir = scratch("runner");
+    let log = dir.join("runner.log");
+    let runner = format!(
+        "sh -c 'echo \"$0\" >> {}; exec \"$0\" \"$@\"'",
+        log.display()
+    );
+    let run = start_through_runner(&dir, &base_sequence(FRAMES), &quick(), &runner);
+    let (status, out, records) = run.finish(RUN_TIMEOUT);
+    assert!(status.success(), "{status}\n{out}");
+    assert_every_frame_accounted(&records);
+    assert!(records.frames.iter().any(|f| f.has_pose()), "{out}");
+    assert!(
+        records.events_of("restart").is_empty(),
+        "{:?}",
+        records.events
+    );
+    let text = std::fs::read_to_string(&log).unwrap_or_else(|e| panic!("{}: {e}", log.display()));
+    let mut started: Vec<String> = text
+        .lines()
+        .map(|l| {
+            std::path::Path::new(l)
+                .file_name()
+                .map(|n| n.to_string_lossy().into_owned())
+                .unwrap_or_default()
+        })
+        .collect();
+    started.sort();
+    assert_eq!(
+        started,
+        [
+            "linetrack-frame-source",
+            "linetrack-line-detector",
+            "linetrack-matcher",
+            "linetrack-pose-estimator"
+        ],
+        "each stage started once, through the runner"
+    );
+}
+
+#[test]
+fn an_unparsable_stage_runner_is_refused_naming_the_variable() {
+    let dir = scratch("bad-runner");
+    let config = dir.join("pipeline.toml");
+    std::fs::write(&config, SUPERVISION).unwrap_or_else(|e| panic!("{e}"));
+    let output = std::process::Command::new(bin_dir().join("linetrack"))
+        .args(["run", "--quiet", "--frames", "2", "--config"])
+        .arg(&config)
+        .arg("--dataset")
+        .arg(base_sequence(FRAMES))
+        .arg("--run-dir")
+        .arg(dir.join("run"))
+        .env(
+            linetrack_ipc::Scope::PREFIX_VAR,
+            format!("lte2e{}_badrunner_", std::process::id()),
+        )
+        .env("LINETRACK_STAGE_RUNNER", "sh -c 'exec")
+        .output()
+        .unwrap_or_else(|e| panic!("starting linetrack: {e}"));
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(!output.status.success(), "{stderr}");
+    assert!(
+        stderr.contains("LINETRACK_STAGE_RUNNER") && stderr.contains("unbalanced quotes"),
+        "the error names the variable and the fault:\n{stderr}"
+    );
+}
+
+#[test]
+fn sigterm_stops_the_run_cleanly_and_a_killed_run_is_cleaned_up_by_the_next() {
+    let dir = scratch("signals");
+    let sequence = base_sequence(FRAMES);
+    // A run killed outright (supervisor and stages) leaves its shared memory behind ...
+    let mut killed = start(&dir, &sequence, &quick());
+    let status = killed.wait_for("5 frames", RUN_TIMEOUT, |s| s.frames >= 5);
+    // Frozen first, so that no process of the run sees another die (a stage would end
+    // cleanly on its supervisor's death and tidy up), then all killed at once.
+    let pids: Vec<String> = std::iter::once(status.supervisor_pid)
+        .chain(status.stages.iter().map(|s| s.pid))
+        .map(|pid| pid.to_string())
+        .collect();
+    for sig in ["-STOP", "-KILL"] {
+        // A stage may already be on its way out: `kill` then fails for that pid only.
+        let _ = std::process::Command::new("kill")
+            .arg(sig)
+            .args(&pids)
+            .status();
+    }
+    let _ = killed.child.wait();
+    // What the killed supervisor had recorded is on disk, and reports.
+    let survived = Records::read(&killed.run_dir, &killed.prefix);
+    assert!(
+        survived.frames.len() >= 5,
+        "{} frames recorded by the killed run",
+        survived.frames.len()
+    );
+    report_of(&killed.run_dir);
+    std::thread::sleep(Duration::from_millis(300));
+    let left = linetrack_ipc::Scope::with_prefix(&killed.prefix, "")
+        .resources()
+        .unwrap_or_else(|e| panic!("{e}"));
+    assert!(
+        left.nodes > 0,
+        "a killed run should leave nodes behind: {left:?}"
+    );
+    // ... which the next run with the same prefix removes; SIGTERM then ends it cleanly.
+    let mut next = start_with_prefix(
+        &scratch("signals-next"),
+        &sequence,
+        &quick(),
+        &killed.prefix,
+    );
+    let status = next.wait_for("3 frames", RUN_TIMEOUT, |s| s.frames >= 3);
+    signal(status.supervisor_pid, "TERM");
+    let (exit, out, records) = next.finish(RUN_TIMEOUT);
+    assert!(exit.success(), "{exit}\n{out}");
+    assert!(out.contains("(interrupted)"), "{out}");
+    assert!(
+        !records.events_of("stale-cleanup").is_empty(),
+        "{:?}",
+        records.events
+    );
+    assert!(!records.events_of("interrupted").is_empty());
+    assert_eq!(
+        records.leftovers,
+        Default::default(),
+        "resources left after SIGTERM"
+    );
+    for s in &status.stages {
+        assert!(
+            !std::path::Path::new(&format!("/proc/{}", s.pid)).exists()
+                || proc_is_zombie_or_gone(s.pid),
+            "stage {} (pid {}) still running",
+            s.stage,
+            s.pid
+        );
+    }
+}
+
+#[test]
+fn a_second_run_into_a_busy_run_folder_is_refused_naming_the_first() {
+    let dir = scratch("locked");
+    let mut first = start(&dir, &base_sequence(FRAMES), &quick());
+    let status = first.wait_for("3 frames", RUN_TIMEOUT, |s| s.frames >= 3);
+    // The same config, so the same run folder, from another shell.
+    let second = std::process::Command::new(bin_dir().join("linetrack"))
+        .args(["run", "--quiet", "--config"])
+        .arg(dir.join("pipeline.toml"))
+        .env(
+            linetrack_ipc::Scope::PREFIX_VAR,
+            format!("{}second_", first.prefix),
+        )
+        .stdin(std::process::Stdio::null())
+        .output()
+        .unwrap_or_else(|e| panic!("starting the second run: {e}"));
+    let err = String::from_utf8_lossy(&second.stderr);
+    assert!(!second.status.success(), "the second run ran: {err}");
+    assert!(
+        err.contains("in use by another run")
+            && err.contains(&format!("pid {}", status.supervisor_pid)),
+        "{err}"
+    );
+    // The first run was not disturbed.
+    let (exit, out, records) = first.finish(RUN_TIMEOUT);
+    assert!(exit.success(), "{exit}\n{out}");
+    assert_every_frame_accounted(&records);
+}
