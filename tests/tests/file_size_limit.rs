@@ -33,7 +33,7 @@ fn records_over_the_file_size_limit_end_the_run_with_an_error_not_a_signal() {
         .arg(&config)
         .env(linetrack_ipc::Scope::PREFIX_VAR, &prefix)
         .stdin(Stdio::null())
-        .stdout(Stdio::null())
+        .stdout(Stdio::piped())
         // A pipe: a file would be under the limit too.
         .stderr(Stdio::piped())
         .spawn()
@@ -78,6 +78,10 @@ fn records_over_the_file_size_limit_end_the_run_with_an_error_not_a_signal() {
         std::thread::sleep(Duration::from_millis(50));
     };
     let stderr = reader.join().unwrap_or_default();
+    let mut stdout = String::new();
+    if let Some(mut out) = child.stdout.take() {
+        let _ = std::io::Read::read_to_string(&mut out, &mut stdout);
+    }
     assert_eq!(
         status.signal(),
         None,
@@ -105,6 +109,17 @@ fn records_over_the_file_size_limit_end_the_run_with_an_error_not_a_signal() {
         frames.len()
     );
     assert!(frames.len() < FRAMES, "every frame recorded: no limit met");
+    // The run still prints its report; the pictures it could not write are named, not
+    // left cut short.
+    assert!(
+        stdout.contains("run ended records-failed"),
+        "{stdout}\n{stderr}"
+    );
+    assert!(stdout.contains("no latency pictures"), "{stdout}");
+    assert!(
+        !run_dir.join("latency.png").exists(),
+        "a cut latency.png left"
+    );
     let live: linetrack_supervisor::LiveStatus = serde_json::from_str(
         &std::fs::read_to_string(run_dir.join("status.json")).unwrap_or_default(),
     )
