@@ -9,11 +9,20 @@
 //! time it is given for input of its own (a capture thread's queue, a subscription's
 //! callback through a channel), or say how long nothing is due ([`Step::Idle`]) so that
 //! the runtime sleeps on its wake-up meanwhile, where a command still reaches it.
+//!
+//! With `source.pacing = "fastest"` and `budget.drop_late = false` (every frame processed
+//! however late), a source reading files waits for the pipeline ([`BackPressure`]): it
+//! keeps at most [`IN_FLIGHT`] frames published and not yet out of the pose estimator, so
+//! no stage's queue is ever full and no frame is overwritten there (`skipped`). It sleeps
+//! on its wake-up meanwhile, which every pose published rings.
 
 use crate::{Reporter, StageContext, shutdown_ordered, stamp_end};
 use linetrack_ipc::{Bus, Inlet, Outlet, Shutdown};
-use linetrack_msgs::{Control, FrameHeader, FrameStatus, StageKind, StatusKind, Topic};
-use std::time::Duration;
+use linetrack_msgs::{
+    Control, FrameHeader, FrameStatus, PoseRecord, StageKind, StatusKind, Topic, TracksHeader,
+};
+use linetrack_pipeline_config::{Pacing, PipelineConfig};
+use std::time::{Duration, Instant};
 use tracing::info_span;
 
 /// What a turn of a source did.
@@ -162,6 +171,9 @@ pub fn run_source<S: Source>(
     let stop = |control: &mut Inlet<Control, ()>| -> anyhow::Result<bool> {
         Ok(shutdown.requested() || shutdown_ordered(control, S::KIND, ctx.pid)?)
     };
+    let mut pressure = BackPressure::applies(&ctx.config)
+        .then(|| BackPressure::open(bus, &ctx.config))
+        .transpose()?;
     source.start(&mut out)?;
     out.reporter.report(StatusKind::Ready, out.start, 0);
     let mut reported = 0;
@@ -171,6 +183,13 @@ pub fn run_source<S: Source>(
             return Ok(());
         }
         let wait = out.reporter.until_due().max(Duration::from_millis(1));
+        if let Some(pressure) = &mut pressure
+            && pressure.must_wait(out.next_id(), out.published)?
+        {
+            out.reporter.beat(out.published);
+            wake.wait(wait)?;
+            continue;
+        }
         let step = source.step(&mut out, wait)?;
         if out.published > reported {
             // The supervisor counts the frames published from these.
@@ -198,4 +217,71 @@ pub fn run_source<S: Source>(
         wake.wait(out.reporter.until_due().max(Duration::from_millis(1)))?;
     }
     Ok(())
+}
+
+/// Frames a source waiting for the pipeline keeps published and not yet out of the pose
+/// estimator: well under the frames' queue depth (12), so no stage's queue fills.
+pub const IN_FLIGHT: u64 = 4;
+
+/// The source's wait for the pipeline (see the module's doc): the poses (and markers) the
+/// pose estimator publishes say which frames are out.
+struct BackPressure {
+    poses: Inlet<PoseRecord, TracksHeader>,
+    /// The id after the newest frame out of the pose estimator.
+    done: Option<u64>,
+    /// When `done` last moved (or the wait began).
+    moved: Instant,
+    /// A pipeline that moves on no frame for this long (a stage stopped, a frame lost with
+    /// a stage that died) no longer holds the source back.
+    patience: Duration,
+    gave_up: bool,
+}
+
+impl BackPressure {
+    /// Whether a source under `config` waits for the pipeline: files read as fast as they
+    /// can be, every frame processed. A live camera does not wait (its driver would drop).
+    fn applies(config: &PipelineConfig) -> bool {
+        config.source.pacing == Pacing::Fastest
+            && !config.budget.drop_late
+            && !config.camera.enabled()
+    }
+
+    fn open(bus: &Bus, config: &PipelineConfig) -> anyhow::Result<Self> {
+        Ok(Self {
+            poses: bus.inlet(Topic::Poses)?,
+            done: None,
+            moved: Instant::now(),
+            patience: Duration::from_millis(config.supervisor.hang_timeout_ms),
+            gave_up: false,
+        })
+    }
+
+    /// Whether the frame `next` must wait: [`IN_FLIGHT`] frames are out and not through.
+    /// `published` frames of this instance are out.
+    fn must_wait(&mut self, next: u64, published: u64) -> anyhow::Result<bool> {
+        for pose in self.poses.receive_all()? {
+            let after = pose.header().frame.frame_id + 1;
+            if self.done.is_none_or(|done| after > done) {
+                self.done = Some(after);
+                self.moved = Instant::now();
+                self.gave_up = false;
+            }
+        }
+        // Before any frame is through, the first ones published count as in flight.
+        let through = self.done.unwrap_or(next - published.min(next));
+        if next.saturating_sub(through) < IN_FLIGHT || self.gave_up {
+            // Not waiting: a wait starts its patience from here.
+            self.moved = Instant::now();
+            return Ok(false);
+        }
+        if self.moved.elapsed() >= self.patience {
+            tracing::warn!(
+                "no frame through the pipeline for {:?}: publishing without waiting until one is",
+                self.patience
+            );
+            self.gave_up = true;
+            return Ok(false);
+        }
+        Ok(true)
+    }
 }
