@@ -285,3 +285,77 @@ impl BackPressure {
         Ok(true)
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use linetrack_msgs::FrameHeader;
+
+    fn pressure(bus: &Bus, patience: Duration) -> BackPressure {
+        BackPressure {
+            poses: bus.inlet(Topic::Poses).unwrap_or_else(|e| panic!("{e}")),
+            done: None,
+            moved: Instant::now(),
+            patience,
+            gave_up: false,
+        }
+    }
+
+    fn pose_out(outlet: &mut Outlet<PoseRecord, TracksHeader>, frame_id: u64) {
+        let header = TracksHeader {
+            frame: FrameHeader::new(frame_id, 0, 0),
+            ..Default::default()
+        };
+        outlet
+            .publish(&header, &[&[PoseRecord::default()]])
+            .unwrap_or_else(|e| panic!("{e}"));
+    }
+
+    #[test]
+    fn the_source_waits_with_in_flight_frames_out_and_goes_on_as_poses_come() {
+        let bus = Bus::local();
+        let mut poses = bus
+            .outlet::<PoseRecord, TracksHeader>(Topic::Poses, 1)
+            .unwrap_or_else(|e| panic!("{e}"));
+        let mut p = pressure(&bus, Duration::from_secs(3600));
+        let wait = |p: &mut BackPressure, next, published| {
+            p.must_wait(next, published)
+                .unwrap_or_else(|e| panic!("{e}"))
+        };
+        // A source restarted at frame 10: its first IN_FLIGHT frames go out unasked.
+        for k in 0..IN_FLIGHT {
+            assert!(!wait(&mut p, 10 + k, k), "frame {}", 10 + k);
+        }
+        assert!(wait(&mut p, 10 + IN_FLIGHT, IN_FLIGHT));
+        pose_out(&mut poses, 10);
+        assert!(!wait(&mut p, 10 + IN_FLIGHT, IN_FLIGHT));
+        assert!(wait(&mut p, 11 + IN_FLIGHT, IN_FLIGHT + 1));
+        // Frames lost on the way (a marker-less gap): the newest frame through counts.
+        pose_out(&mut poses, 13);
+        assert!(!wait(&mut p, 11 + IN_FLIGHT, IN_FLIGHT + 1));
+        assert!(!wait(&mut p, 13 + IN_FLIGHT, IN_FLIGHT + 3));
+        assert!(wait(&mut p, 14 + IN_FLIGHT, IN_FLIGHT + 4));
+    }
+
+    #[test]
+    fn a_pipeline_that_lets_nothing_through_stops_holding_the_source_back() {
+        let bus = Bus::local();
+        let mut poses = bus
+            .outlet::<PoseRecord, TracksHeader>(Topic::Poses, 1)
+            .unwrap_or_else(|e| panic!("{e}"));
+        // No patience: the first wait gives up at once (no clock read is asserted).
+        let mut p = pressure(&bus, Duration::ZERO);
+        assert!(!p.must_wait(IN_FLIGHT, IN_FLIGHT).unwrap_or_default());
+        assert!(
+            !p.must_wait(IN_FLIGHT + 5, IN_FLIGHT + 5)
+                .unwrap_or_default()
+        );
+        // A frame through: the source waits again (and gives up again with no patience).
+        pose_out(&mut poses, 0);
+        p.patience = Duration::from_secs(3600);
+        assert!(
+            p.must_wait(IN_FLIGHT + 5, IN_FLIGHT + 5)
+                .unwrap_or_default()
+        );
+    }
+}
