@@ -21,7 +21,7 @@ const ROWS_BEFORE_LIMIT: usize = 11;
 const LIMIT: usize = 3072;
 const RUN_TIMEOUT: Duration = Duration::from_secs(120);
 const CONFIG: &str =
-    "[supervisor]\nstatus_every_ms = 0\ndrain_timeout_ms = 4000\n[budget]\ndrop_late = false\n";
+    "[supervisor]\nstatus_every_ms = 0\ndrain_timeout_ms = 30000\n[budget]\ndrop_late = false\n";
 
 #[test]
 fn records_over_the_file_size_limit_end_the_run_with_an_error_not_a_signal() {

@@ -12,8 +12,7 @@ const RUN_TIMEOUT: Duration = Duration::from_secs(180);
 #[test]
 fn fastest_pacing_without_late_drops_records_every_frame_with_a_pose() {
     let dir = scratch("fastest-no-drops");
-    let config =
-        "[supervisor]\nstatus_every_ms = 0\ndrain_timeout_ms = 4000\n[budget]\ndrop_late = false\n";
+    let config = "[supervisor]\nstatus_every_ms = 0\ndrain_timeout_ms = 30000\n[budget]\ndrop_late = false\n";
     let run = start_with_args(
         &dir,
         &base_sequence(FRAMES),

@@ -7,12 +7,22 @@ use std::time::Duration;
 
 const FRAMES: usize = 40;
 const RUN_TIMEOUT: Duration = Duration::from_secs(120);
-/// Quick supervision for tests: short backoff, prompt hang detection.
-const SUPERVISION: &str = "[supervisor]\nrestart_backoff_ms = 100\nhang_timeout_ms = 2000\ndrain_timeout_ms = 4000\nstatus_every_ms = 0\n";
+/// Quick supervision for tests: short backoff, prompt hang detection. The drain after the
+/// source's last frame ends as soon as every frame has an outcome; its 30 s are room for a
+/// loaded machine's backlog (at 4 s, two CPU hogs left the last frames `missing`).
+const SUPERVISION: &str = "[supervisor]\nrestart_backoff_ms = 100\nhang_timeout_ms = 2000\ndrain_timeout_ms = 30000\nstatus_every_ms = 0\n";
 /// ... and every frame processed however late, so that a test machine's load cannot turn
 /// a frame the test looks at into a policy drop (the policy has its own tests).
 fn quick() -> String {
     format!("{SUPERVISION}[budget]\ndrop_late = false\n")
+}
+
+/// [`start`] with `--pacing fastest`: with `drop_late = false` the source waits for the
+/// pipeline, so no frame is overwritten in a full queue (`skipped`) however loaded the
+/// machine is. For tests that look at every frame and act on none mid-run (at 10 Hz, two
+/// CPU hogs left LSD behind and frames were skipped).
+fn start_every_frame(dir: &std::path::Path, sequence: &std::path::Path, extra: &str) -> Run {
+    start_with_args(dir, sequence, extra, &["--pacing", "fastest"])
 }
 
 fn ids(records: &Records) -> Vec<u64> {
@@ -434,7 +444,7 @@ fn a_corrupt_frame_is_skipped_and_counted() {
     let victim = &images(&sequence, 0)[12];
     std::fs::write(victim, b"\x89PNG\r\n\x1a\n this is not an image")
         .unwrap_or_else(|e| panic!("{e}"));
-    let (status, out, records) = start(&dir, &sequence, &quick()).finish(RUN_TIMEOUT);
+    let (status, out, records) = start_every_frame(&dir, &sequence, &quick()).finish(RUN_TIMEOUT);
     assert!(status.success(), "{status}\n{out}");
     assert_every_frame_accounted(&records);
     let frame = &records.frames[12];
@@ -677,7 +687,8 @@ fn lsd_missing_a_budget_no_detector_meets_gives_way_to_fld_after_its_streak() {
         "{SUPERVISION}[budget]\ndrop_late = false\nline_detector_ms = 0.001\n\
          [detector_fallback]\nenabled = true\nbad_frames = 3\nmin_interval_frames = 0\nend_to_end = false\n"
     );
-    let (status, out, records) = start(&dir, &base_sequence(FRAMES), &config).finish(RUN_TIMEOUT);
+    let (status, out, records) =
+        start_every_frame(&dir, &base_sequence(FRAMES), &config).finish(RUN_TIMEOUT);
     assert!(status.success(), "{status}\n{out}");
     assert_every_frame_accounted(&records);
     let fallbacks = records.events_of("detector-fallback");
@@ -768,7 +779,7 @@ fn matching_falls_back_to_l1_when_the_right_image_turns_unmatchable() {
     // (the matcher's own, the end-to-end one).
     let thresholds = "[matcher.fallback]\nmin_stereo_matches = 45\nrecover_stereo_matches = 60\nover_budget = false\nend_to_end = false\n";
     let (status, out, records) =
-        start(&dir, &sequence, &format!("{}{thresholds}", quick())).finish(RUN_TIMEOUT);
+        start_every_frame(&dir, &sequence, &format!("{}{thresholds}", quick())).finish(RUN_TIMEOUT);
     assert!(status.success(), "{status}\n{out}");
     assert_every_frame_accounted(&records);
     let fallbacks = records.events_of("fallback");

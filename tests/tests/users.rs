@@ -17,7 +17,7 @@ const FRAMES: usize = 40;
 const THEIR_FRAMES: usize = 20;
 const RUN_TIMEOUT: Duration = Duration::from_secs(120);
 /// Every frame processed however late (the drop policy has its own tests).
-const CONFIG: &str = "[supervisor]\nrestart_backoff_ms = 100\nhang_timeout_ms = 2000\ndrain_timeout_ms = 4000\nstatus_every_ms = 0\n[budget]\ndrop_late = false\n";
+const CONFIG: &str = "[supervisor]\nrestart_backoff_ms = 100\nhang_timeout_ms = 2000\ndrain_timeout_ms = 30000\nstatus_every_ms = 0\n[budget]\ndrop_late = false\n";
 
 /// Whether user `nobody` can append 16 bytes to `file` (`sh`'s `>>`: creating it if it
 /// does not exist).
