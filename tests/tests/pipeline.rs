@@ -152,7 +152,9 @@ fn every_frame_gets_a_pose_and_the_run_leaves_no_shared_memory() {
 
 fn kill_and_recover(stage: &str) {
     let dir = scratch(&format!("kill-{stage}"));
-    let mut run = start(&dir, &base_sequence(FRAMES), &quick());
+    // The source waits for the pipeline: the frames lost with the victim are the few in
+    // flight, not a loaded machine's backlog (at 10 Hz, two CPU hogs and LSD: 23 of 40).
+    let mut run = start_every_frame(&dir, &base_sequence(FRAMES), &quick());
     let status = run.wait_for("10 frames", RUN_TIMEOUT, |s| s.frames >= 10);
     let victim = status
         .stages
@@ -500,16 +502,24 @@ fn a_run_that_tracks_nothing_exits_non_zero_saying_so() {
 fn a_hot_swap_to_fld_loses_and_duplicates_no_frame() {
     let dir = scratch("swap");
     // Every frame processed, however late: a loss could not hide as a policy drop.
-    hot_swap(start(&dir, &base_sequence(FRAMES), &quick()));
+    hot_swap(start_every_frame(&dir, &base_sequence(FRAMES), &quick()));
 }
 
 #[test]
 fn a_hot_swap_of_the_matcher_loses_and_duplicates_no_frame_in_both_modes() {
     for threads in [false, true] {
         let dir = scratch(if threads { "mswap-threads" } else { "mswap" });
-        // The light detector and matcher: a loaded machine keeps up at 10 Hz, so that a
+        // The light detector and matcher, and the source waiting for the pipeline: no
+        // frame is skipped for load (two CPU hogs made even these skip at 10 Hz), so that a
         // frame lost would be the swap's.
-        let mut args = vec!["--detector", "edgelines", "--matcher", "l1"];
+        let mut args = vec![
+            "--detector",
+            "edgelines",
+            "--matcher",
+            "l1",
+            "--pacing",
+            "fastest",
+        ];
         if threads {
             args.push("--single-process");
         }
@@ -549,7 +559,12 @@ fn single_process_mode_is_supervised_the_same_way() {
     // The same supervision core runs thread stages: `linetrack ctl` swaps the detector of
     // a `--single-process` run too, and its records are the same.
     let dir = scratch("threads");
-    let mut run = start_single_process(&dir, &base_sequence(FRAMES), &quick());
+    let mut run = start_with_args(
+        &dir,
+        &base_sequence(FRAMES),
+        &quick(),
+        &["--single-process", "--pacing", "fastest"],
+    );
     let status = run.wait_for("four stages", RUN_TIMEOUT, |s| s.stages.len() == 4);
     assert!(
         status
