@@ -16,7 +16,7 @@ const FRAMES: usize = 40;
 const ROWS_BEFORE_FULL: usize = 11;
 /// Every frame processed however late: what fills the disk is the only fault.
 const CONFIG: &str =
-    "[supervisor]\nstatus_every_ms = 0\ndrain_timeout_ms = 4000\n[budget]\ndrop_late = false\n";
+    "[supervisor]\nstatus_every_ms = 0\ndrain_timeout_ms = 30000\n[budget]\ndrop_late = false\n";
 
 /// Mounts a 2 MiB tmpfs on `$1`, runs `$2 run` with config `$3` in the background, fills
 /// the tmpfs once `$1/run/frames.csv` has `$5` lines, waits for the run, and copies its

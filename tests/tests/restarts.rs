@@ -23,7 +23,7 @@ fn a_crash_loop_before_ready_uses_every_restart_and_shows_the_stages_last_words(
         starts = starts.display()
     );
     let config = format!(
-        "[supervisor]\nrestart_backoff_ms = 100\nrestart_backoff_max_ms = 400\nmax_restarts = {MAX_RESTARTS}\nhang_timeout_ms = 2000\ndrain_timeout_ms = 4000\nstatus_every_ms = 0\n[budget]\ndrop_late = false\n"
+        "[supervisor]\nrestart_backoff_ms = 100\nrestart_backoff_max_ms = 400\nmax_restarts = {MAX_RESTARTS}\nhang_timeout_ms = 2000\ndrain_timeout_ms = 30000\nstatus_every_ms = 0\n[budget]\ndrop_late = false\n"
     );
     let mut run = start_through_runner(&dir, &base_sequence(FRAMES), &config, &runner);
     let status = run.wait_for("5 frames", RUN_TIMEOUT, |s| s.frames >= 5);

@@ -14,7 +14,7 @@ use std::time::Duration;
 const FRAMES: usize = 40;
 const RUN_TIMEOUT: Duration = Duration::from_secs(120);
 const QUICK: &str = "[supervisor]\nrestart_backoff_ms = 100\nhang_timeout_ms = 2000\n\
-    drain_timeout_ms = 4000\nstatus_every_ms = 0\n[budget]\ndrop_late = false\n";
+    drain_timeout_ms = 30000\nstatus_every_ms = 0\n[budget]\ndrop_late = false\n";
 
 /// `Cpus_allowed_list` of a process or thread status file.
 fn cpus_allowed(status_file: &Path) -> String {

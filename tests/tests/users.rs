@@ -17,7 +17,7 @@ const FRAMES: usize = 40;
 const THEIR_FRAMES: usize = 20;
 const RUN_TIMEOUT: Duration = Duration::from_secs(120);
 /// Every frame processed however late (the drop policy has its own tests).
-const CONFIG: &str = "[supervisor]\nrestart_backoff_ms = 100\nhang_timeout_ms = 2000\ndrain_timeout_ms = 4000\nstatus_every_ms = 0\n[budget]\ndrop_late = false\n";
+const CONFIG: &str = "[supervisor]\nrestart_backoff_ms = 100\nhang_timeout_ms = 2000\ndrain_timeout_ms = 30000\nstatus_every_ms = 0\n[budget]\ndrop_late = false\n";
 
 /// Whether user `nobody` can append 16 bytes to `file` (`sh`'s `>>`: creating it if it
 /// does not exist).
@@ -64,11 +64,19 @@ fn open_dir(dir: &Path) {
         .unwrap_or_else(|e| panic!("{}: {e}", dir.display()));
 }
 
-/// Asserts every file is `owner`'s and readable and writable by its owner only.
+/// Asserts every file is `owner`'s and readable and writable by its owner only. A file gone
+/// since it was listed is passed over (iceoryx2 replaces a publisher's data segment when it
+/// grows, and a run that ends removes its own): the e2e suite under two CPU hogs once
+/// listed a `.dynamic` segment that was gone when looked at. At least one must be left.
 fn assert_private(files: &[PathBuf], owner: u32) {
+    let mut checked = 0;
     for file in files {
-        let meta =
-            std::fs::symlink_metadata(file).unwrap_or_else(|e| panic!("{}: {e}", file.display()));
+        let meta = match std::fs::symlink_metadata(file) {
+            Ok(meta) => meta,
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => continue,
+            Err(e) => panic!("{}: {e}", file.display()),
+        };
+        checked += 1;
         assert_eq!(meta.uid(), owner, "{}", file.display());
         assert_eq!(
             meta.mode() & 0o077,
@@ -78,6 +86,10 @@ fn assert_private(files: &[PathBuf], owner: u32) {
             meta.mode() & 0o777
         );
     }
+    assert!(
+        files.is_empty() || checked > 0,
+        "every one of {files:?} was gone when looked at"
+    );
 }
 
 #[test]

@@ -13,7 +13,7 @@ mod gain_jumps;
 mod replay;
 
 use anyhow::Context;
-use linetrack_datasets::{StereoSequence, StereoStream};
+use linetrack_datasets::{Next, StereoSequence, StereoStream};
 use linetrack_ipc::{Bus, Shutdown};
 use linetrack_msgs::{FrameStatus, RigRecord, StageKind};
 use linetrack_pipeline_config::{Pacing, SourceConfig};
@@ -97,7 +97,9 @@ pub fn run(ctx: &StageContext, bus: &Bus, shutdown: &Shutdown) -> anyhow::Result
 struct SequenceSource {
     rig: Rig,
     rig_record: RigRecord,
-    stream: std::iter::Take<StereoStream>,
+    stream: StereoStream,
+    /// Frames to publish, from the frame to start at.
+    count: usize,
     source: SourceConfig,
     first_ns: u64,
     gain_jumps: Option<gain_jumps::GainJumps>,
@@ -112,6 +114,16 @@ struct SequenceSource {
 impl SequenceSource {
     /// Opens `ctx`'s sequence from the frame to start at.
     fn open(ctx: &StageContext, rig: Rig) -> anyhow::Result<Self> {
+        let reader_nice = ctx.config.source.reader_nice;
+        Self::open_with(ctx, rig, move || read_in_background(reader_nice))
+    }
+
+    /// [`Self::open`] with `on_start` run on the reading thread before its first frame.
+    fn open_with(
+        ctx: &StageContext,
+        rig: Rig,
+        on_start: impl FnOnce() + Send + 'static,
+    ) -> anyhow::Result<Self> {
         let source = ctx.config.source.clone();
         let sequence = StereoSequence::open(&source.sequence)
             .with_context(|| format!("opening sequence {}", source.sequence.display()))?;
@@ -132,14 +144,12 @@ impl SequenceSource {
         let origin_ns = sequence.frames.first().map_or(0, |f| f.timestamp_ns);
         let gain_jumps =
             gain_jumps::GainJumps::new(source.gain_jumps_s, source.gain_jumps_seed, origin_ns);
-        let reader_nice = source.reader_nice;
-        let stream = sequence
-            .into_stream_with(start, 4, move || read_in_background(reader_nice))
-            .take(end.saturating_sub(start));
+        let stream = sequence.into_stream_with(start, 4, on_start);
         Ok(Self {
             rig,
             rig_record,
             stream,
+            count: end.saturating_sub(start),
             source,
             first_ns,
             gain_jumps,
@@ -160,12 +170,19 @@ impl Source for SequenceSource {
         Ok(())
     }
 
-    fn step(&mut self, out: &mut SourceOut, _wait: Duration) -> anyhow::Result<Step> {
+    fn step(&mut self, out: &mut SourceOut, wait: Duration) -> anyhow::Result<Step> {
         if self.pending.is_none() {
-            let Some(item) = self.stream.next() else {
+            if self.taken >= self.count {
                 return Ok(Step::Finished);
-            };
-            self.pending = Some(item);
+            }
+            // The reading thread runs at a lower priority: on a loaded machine it may be
+            // behind for longer than the supervisor's hang timeout. Waiting for it here for
+            // at most `wait` lets the runtime report the source alive meanwhile.
+            match self.stream.next_within(wait) {
+                Next::Frame(item) => self.pending = Some(item),
+                Next::NotYet => return Ok(Step::Again),
+                Next::End => return Ok(Step::Finished),
+            }
             self.taken += 1;
         }
         let Some(item) = &self.pending else {
@@ -232,6 +249,8 @@ fn read_in_background(nice: i32) {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use linetrack_msgs::{StatusKind, StatusReport, Topic};
+    use linetrack_stage_runtime::Clock;
 
     #[test]
     fn pacing_follows_timestamps_or_the_rate() {
@@ -244,5 +263,98 @@ mod tests {
             Duration::from_millis(200)
         );
         assert_eq!(due_offset(Pacing::Fastest, 20.0, 0, 999, 4), Duration::ZERO);
+    }
+
+    /// Status reports of `status` until `count` of them hold `wanted`; the clock moves one
+    /// heartbeat period per look, so that the source's heartbeats fall due.
+    fn reports(
+        bus: &Bus,
+        status: &mut linetrack_ipc::Inlet<StatusReport, ()>,
+        clock: &Clock,
+        every: Duration,
+        wanted: impl Fn(&StatusReport) -> bool,
+        count: usize,
+    ) -> Vec<StatusReport> {
+        // Long enough for a loaded machine: the test waits for messages, never for time.
+        const PATIENCE: Duration = Duration::from_secs(60);
+        let wake = bus
+            .wake(StageKind::Supervisor)
+            .unwrap_or_else(|e| panic!("{e}"));
+        let began = std::time::Instant::now();
+        let mut got = Vec::new();
+        while got.iter().filter(|r| wanted(r)).count() < count {
+            assert!(began.elapsed() < PATIENCE, "gave up waiting: {got:?}");
+            for m in status.receive_all().unwrap_or_else(|e| panic!("{e}")) {
+                got.push(m.payload()[0]);
+            }
+            clock.advance(every);
+            wake.wait(Duration::from_millis(5))
+                .unwrap_or_else(|e| panic!("{e}"));
+        }
+        got
+    }
+
+    /// Under load the reading thread (at a lower priority) can fall behind for longer than
+    /// the supervisor's hang timeout. The source waits for it in slices and beats meanwhile:
+    /// it is behind, not hung. (Waiting on the reader for as long as it took silenced the
+    /// source, and a loaded CI machine's supervisor killed it as hung.)
+    #[test]
+    fn a_source_whose_reader_is_behind_still_beats_and_publishes_once_it_has_the_frame() {
+        let mut config = linetrack_pipeline_config::PipelineConfig::default();
+        config.source.sequence = linetrack_test_data::euroc_dir().unwrap_or_else(|e| panic!("{e}"));
+        config.source.pacing = Pacing::Fastest;
+        config.source.max_frames = 1;
+        config.supervisor.heartbeat_ms = 10;
+        let clock = Clock::manual(1_000_000_000);
+        let mut ctx =
+            StageContext::in_process(StageKind::FrameSource, config, std::path::PathBuf::new());
+        ctx.clock = clock.clone();
+        let every = ctx.heartbeat();
+        let bus = Bus::local();
+        let hub = bus.local_hub().unwrap_or_else(|| panic!("a local bus"));
+        let mut status = bus
+            .inlet::<StatusReport, ()>(Topic::Status)
+            .unwrap_or_else(|e| panic!("{e}"));
+        let mut frames = bus
+            .inlet::<u8, linetrack_msgs::FrameHeader>(Topic::Frames)
+            .unwrap_or_else(|e| panic!("{e}"));
+        // The reading thread is held before its first frame until the test lets it go.
+        let (release, held) = crossbeam_channel::bounded::<()>(0);
+        let shutdown = Shutdown::default();
+        let runner = std::thread::spawn({
+            let shutdown = shutdown.clone();
+            move || {
+                let bus = hub.bus();
+                let source = SequenceSource::open_with(&ctx, Rig::open(&bus)?, move || {
+                    let _ = held.recv();
+                })?;
+                run_source(&ctx, &bus, source, &shutdown)
+            }
+        });
+        let beat = |r: &StatusReport| r.kind.is(StatusKind::Heartbeat) && r.value == 0;
+        let early = reports(&bus, &mut status, &clock, every, beat, 3);
+        assert!(early.iter().all(|r| r.value == 0), "{early:?}");
+        assert!(
+            frames
+                .receive_all()
+                .unwrap_or_else(|e| panic!("{e}"))
+                .is_empty()
+        );
+        release.send(()).unwrap_or_else(|e| panic!("{e}"));
+        let finished = |r: &StatusReport| r.kind.is(StatusKind::SourceFinished);
+        let late = reports(&bus, &mut status, &clock, every, finished, 1);
+        assert_eq!(late.last().map(|r| (r.frame_id, r.value)), Some((0, 1)));
+        let ids: Vec<u64> = frames
+            .receive_all()
+            .unwrap_or_else(|e| panic!("{e}"))
+            .iter()
+            .map(|m| m.header().frame_id)
+            .collect();
+        assert_eq!(ids, [0]);
+        shutdown.request();
+        runner
+            .join()
+            .unwrap_or_else(|_| panic!("source thread"))
+            .unwrap_or_else(|e| panic!("{e}"));
     }
 }

@@ -103,6 +103,8 @@ pub fn run(
     options: &RunOptions,
     shutdown: &Shutdown,
 ) -> anyhow::Result<RunOutcome> {
+    // Records over the file size limit fail as on a full disk instead of killing the run.
+    linetrack_ipc::survive_the_file_size_limit().context("catching SIGXFSZ")?;
     config
         .validate()
         .map_err(|e| anyhow::anyhow!("pipeline config: {e}"))?;

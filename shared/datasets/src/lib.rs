@@ -36,7 +36,8 @@ pub use middlebury::{
     DisparityMap, LoadedPair, MiddleburyPair, list_middlebury, select_middlebury,
 };
 pub use sequence::{
-    FrameEntry, FrameError, StereoFrame, StereoSequence, StereoStream, opencv_on_calling_threads,
+    FrameEntry, FrameError, Next, StereoFrame, StereoSequence, StereoStream,
+    opencv_on_calling_threads,
 };
 pub use writer::EurocWriter;
 

@@ -1,12 +1,13 @@
 //! A stereo sequence (frames, rig, rectification) and its read-ahead stream.
 
 use crate::{DatasetError, Rectifier};
-use crossbeam_channel::{Receiver, bounded};
+use crossbeam_channel::{Receiver, RecvTimeoutError, bounded};
 use linetrack_geometry::StereoRig;
 use linetrack_vision::GrayImage;
 use nalgebra::Isometry3;
 use std::path::{Path, PathBuf};
 use std::thread::JoinHandle;
+use std::time::Duration;
 
 /// One frame as listed by the dataset (nothing loaded yet).
 #[derive(Debug, Clone, PartialEq)]
@@ -242,13 +243,26 @@ impl StereoStream {
     pub fn skipped(&self) -> usize {
         self.skipped
     }
-}
 
-impl Iterator for StereoStream {
-    type Item = Result<StereoFrame, FrameError>;
+    /// The next frame if the reading thread has it within `wait`: a caller that must stay
+    /// responsive (a pipeline stage that reports it is alive while its reader is behind)
+    /// waits in slices instead of for as long as the reading takes.
+    pub fn next_within(&mut self, wait: Duration) -> Next {
+        match self.receiver.recv_timeout(wait) {
+            Ok(item) => self.counted(Some(item)).map_or(Next::End, Next::Frame),
+            Err(RecvTimeoutError::Timeout) => Next::NotYet,
+            Err(RecvTimeoutError::Disconnected) => {
+                self.counted(None);
+                Next::End
+            }
+        }
+    }
 
-    fn next(&mut self) -> Option<Self::Item> {
-        let item = self.receiver.recv().ok();
+    /// Counts a skipped frame; joins the reading thread at the end.
+    fn counted(
+        &mut self,
+        item: Option<Result<StereoFrame, FrameError>>,
+    ) -> Option<Result<StereoFrame, FrameError>> {
         if matches!(item, Some(Err(_))) {
             self.skipped += 1;
         }
@@ -258,5 +272,25 @@ impl Iterator for StereoStream {
             let _ = worker.join();
         }
         item
+    }
+}
+
+/// What [`StereoStream::next_within`] found.
+#[derive(Debug)]
+pub enum Next {
+    /// The next frame, or the error that kept it from loading.
+    Frame(Result<StereoFrame, FrameError>),
+    /// The reading thread did not have it in time.
+    NotYet,
+    /// No more frames.
+    End,
+}
+
+impl Iterator for StereoStream {
+    type Item = Result<StereoFrame, FrameError>;
+
+    fn next(&mut self) -> Option<Self::Item> {
+        let item = self.receiver.recv().ok();
+        self.counted(item)
     }
 }

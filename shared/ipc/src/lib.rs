@@ -96,6 +96,22 @@ impl Shutdown {
     }
 }
 
+/// Makes a write past the file size limit (`RLIMIT_FSIZE`, `ulimit -f`) fail with `EFBIG`
+/// ("File too large") instead of killing the process: SIGXFSZ, whose default ends the
+/// process, is caught and dropped. Every process that writes records calls this as it
+/// starts (the stage runtime's `node_main`, the supervisor's `run`), so that the limit is
+/// met like a full disk: the write's error names the file and the run's records-failed
+/// path takes over.
+pub fn survive_the_file_size_limit() -> Result<(), std::io::Error> {
+    // A handler (not SIG_IGN, which would need `unsafe`) has the same effect on the write:
+    // the kernel returns EFBIG either way; the flag is not read.
+    signal_hook::flag::register(
+        signal_hook::consts::SIGXFSZ,
+        Arc::new(AtomicBool::new(false)),
+    )?;
+    Ok(())
+}
+
 #[cfg(test)]
 mod tests {
     #[test]

@@ -132,7 +132,9 @@ impl Topic {
             Topic::Frames => &[PoseEstimator, LineDetector, Matcher, Recorder],
             Topic::Segments => &[Matcher, Recorder],
             Topic::Tracks => &[PoseEstimator, Recorder],
-            Topic::Poses => &[Supervisor, Recorder],
+            // The frame source waits for poses with `pacing = "fastest"` and
+            // `drop_late = false` (linetrack_stage_runtime's source role).
+            Topic::Poses => &[Supervisor, Recorder, FrameSource],
             Topic::Rig => &[PoseEstimator, Recorder],
             Topic::Status => &[Supervisor, Recorder],
             Topic::Control => &[

@@ -93,9 +93,13 @@ pub(crate) fn render(
         image::ExtendedColorType::Rgb8,
         image::ImageFormat::Png,
     )
-    .map_err(|source| PlotError::Write {
-        path: path.to_path_buf(),
-        source,
+    .map_err(|source| {
+        // A picture cut short (a full disk, the file size limit) is not left behind.
+        let _ = std::fs::remove_file(path);
+        PlotError::Write {
+            path: path.to_path_buf(),
+            source,
+        }
     })
 }
 

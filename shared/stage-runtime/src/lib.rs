@@ -558,6 +558,7 @@ fn start(
     args: StageArgs,
     run: fn(&StageContext, &Bus, &Shutdown) -> anyhow::Result<()>,
 ) -> anyhow::Result<()> {
+    linetrack_ipc::survive_the_file_size_limit().context("catching SIGXFSZ")?;
     let config = PipelineConfig::from_file(&args.config)?;
     // The stage's CPUs and policy first, so that every thread started from here on
     // (telemetry, iceoryx2, OpenCV) inherits them; refusals are logged once logging is up.

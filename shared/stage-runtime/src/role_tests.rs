@@ -257,3 +257,84 @@ fn a_sink_takes_what_comes_counts_it_and_is_closed_on_a_stop_or_a_failure() {
         );
     }
 }
+
+/// With `pacing = "fastest"` and `drop_late = false` a source waits for the pipeline. A
+/// pipeline slower than the supervisor's hang timeout (a loaded machine) holds it that long;
+/// it beats all the while, so the supervisor does not take it for hung, and it goes on when
+/// a pose comes out.
+#[test]
+fn a_source_waiting_for_a_slow_pipeline_beats_past_the_hang_timeout() {
+    let bus = Bus::local();
+    let hub = bus.local_hub().unwrap_or_else(|| panic!("a local bus"));
+    let mut frames = bus
+        .inlet::<u8, FrameHeader>(Topic::Frames)
+        .unwrap_or_else(|e| panic!("{e}"));
+    let mut status = bus
+        .inlet::<StatusReport, ()>(Topic::Status)
+        .unwrap_or_else(|e| panic!("{e}"));
+    let clock = Clock::manual(1_000_000_000);
+    let mut ctx = context(StageKind::FrameSource, &clock, 0);
+    ctx.config.source.pacing = linetrack_pipeline_config::Pacing::Fastest;
+    ctx.config.budget.drop_late = false;
+    ctx.config.supervisor.heartbeat_ms = 10;
+    ctx.config.supervisor.hang_timeout_ms = 100;
+    let (every, hang) = (ctx.heartbeat(), Duration::from_millis(100));
+    let (deliver, delivered) = crossbeam_channel::unbounded::<Delivered>();
+    for id in 0..=crate::source::IN_FLIGHT {
+        deliver
+            .send(Ok((id, id, [0; 4])))
+            .unwrap_or_else(|e| panic!("{e}"));
+    }
+    let shutdown = Shutdown::default();
+    let source = std::thread::spawn({
+        let shutdown = shutdown.clone();
+        move || run_source(&ctx, &hub.bus(), Fed(delivered), &shutdown)
+    });
+    let in_flight = crate::source::IN_FLIGHT;
+    let counted = move |got: &[StatusReport]| got.iter().any(|r| r.value == in_flight);
+    reports_until(&bus, &mut status, counted);
+    // Held: the clock moves past the hang timeout, a heartbeat period at a time; each
+    // period has its heartbeat, still counting the frames out before the wait.
+    let mut held = Duration::ZERO;
+    while held <= hang {
+        clock.advance(every);
+        held += every;
+        let beat = reports_until(&bus, &mut status, |got| {
+            got.iter().any(|r| r.kind.is(StatusKind::Heartbeat))
+        });
+        assert!(beat.iter().all(|r| r.value == in_flight), "{beat:?}");
+    }
+    let out: Vec<u64> = frames
+        .receive_all()
+        .unwrap_or_else(|e| panic!("{e}"))
+        .iter()
+        .map(|m| m.header().frame_id)
+        .collect();
+    assert_eq!(out, (0..in_flight).collect::<Vec<_>>());
+    // A pose for frame 0: the next frame goes out.
+    let mut poses = bus
+        .outlet::<linetrack_msgs::PoseRecord, linetrack_msgs::TracksHeader>(Topic::Poses, 1)
+        .unwrap_or_else(|e| panic!("{e}"));
+    let header = linetrack_msgs::TracksHeader {
+        frame: FrameHeader::new(0, 0, 0),
+        ..Default::default()
+    };
+    poses
+        .publish(&header, &[&[linetrack_msgs::PoseRecord::default()]])
+        .unwrap_or_else(|e| panic!("{e}"));
+    reports_until(&bus, &mut status, move |got| {
+        got.iter().any(|r| r.value == in_flight + 1)
+    });
+    let next: Vec<u64> = frames
+        .receive_all()
+        .unwrap_or_else(|e| panic!("{e}"))
+        .iter()
+        .map(|m| m.header().frame_id)
+        .collect();
+    assert_eq!(next, [in_flight]);
+    shutdown.request();
+    source
+        .join()
+        .unwrap_or_else(|_| panic!("source thread"))
+        .unwrap_or_else(|e| panic!("{e}"));
+}

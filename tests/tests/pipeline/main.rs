@@ -11,12 +11,22 @@ mod swaps;
 
 const FRAMES: usize = 40;
 const RUN_TIMEOUT: Duration = Duration::from_secs(120);
-/// Quick supervision for tests: short backoff, prompt hang detection.
-const SUPERVISION: &str = "[supervisor]\nrestart_backoff_ms = 100\nhang_timeout_ms = 2000\ndrain_timeout_ms = 4000\nstatus_every_ms = 0\n";
+/// Quick supervision for tests: short backoff, prompt hang detection. The drain after the
+/// source's last frame ends as soon as every frame has an outcome; its 30 s are room for a
+/// loaded machine's backlog (at 4 s, two CPU hogs left the last frames `missing`).
+const SUPERVISION: &str = "[supervisor]\nrestart_backoff_ms = 100\nhang_timeout_ms = 2000\ndrain_timeout_ms = 30000\nstatus_every_ms = 0\n";
 /// ... and every frame processed however late, so that a test machine's load cannot turn
 /// a frame the test looks at into a policy drop (the policy has its own tests).
 fn quick() -> String {
     format!("{SUPERVISION}[budget]\ndrop_late = false\n")
+}
+
+/// [`start`] with `--pacing fastest`: with `drop_late = false` the source waits for the
+/// pipeline, so no frame is overwritten in a full queue (`skipped`) however loaded the
+/// machine is. For tests that look at every frame and act on none mid-run (at 10 Hz, two
+/// CPU hogs left LSD behind and frames were skipped).
+fn start_every_frame(dir: &std::path::Path, sequence: &std::path::Path, extra: &str) -> Run {
+    start_with_args(dir, sequence, extra, &["--pacing", "fastest"])
 }
 
 fn ids(records: &Records) -> Vec<u64> {

@@ -10,7 +10,7 @@ fn a_corrupt_frame_is_skipped_and_counted() {
     let victim = &images(&sequence, 0)[12];
     std::fs::write(victim, b"\x89PNG\r\n\x1a\n this is not an image")
         .unwrap_or_else(|e| panic!("{e}"));
-    let (status, out, records) = start(&dir, &sequence, &quick()).finish(RUN_TIMEOUT);
+    let (status, out, records) = start_every_frame(&dir, &sequence, &quick()).finish(RUN_TIMEOUT);
     assert!(status.success(), "{status}\n{out}");
     assert_every_frame_accounted(&records);
     let frame = &records.frames[12];
@@ -67,7 +67,12 @@ fn single_process_mode_is_supervised_the_same_way() {
     // The same supervision core runs thread stages: `linetrack ctl` swaps the detector of
     // a `--single-process` run too, and its records are the same.
     let dir = scratch("threads");
-    let mut run = start_single_process(&dir, &base_sequence(FRAMES), &quick());
+    let mut run = start_with_args(
+        &dir,
+        &base_sequence(FRAMES),
+        &quick(),
+        &["--single-process", "--pacing", "fastest"],
+    );
     let status = run.wait_for("four stages", RUN_TIMEOUT, |s| s.stages.len() == 4);
     assert!(
         status

@@ -414,7 +414,9 @@ pub fn report(run_dir: &Path) -> anyhow::Result<String> {
     let report = Report::new(frames, events);
     let config = PipelineConfig::from_file(&run_dir.join("pipeline.toml")).ok();
     let budget = config.as_ref().map(|c| c.budget.clone());
-    let [distributions, timeline] = latency_plots::write(run_dir, frames, events, budget.as_ref())?;
+    // The pictures are not records: one that cannot be written (a full disk, the file size
+    // limit) is named in the report, which is still printed.
+    let pictures = latency_plots::write(run_dir, frames, events, budget.as_ref());
     let points = config.as_ref().map_or_else(
         || "unknown (no readable pipeline.toml)".to_string(),
         PipelineConfig::points_text,
@@ -435,21 +437,26 @@ pub fn report(run_dir: &Path) -> anyhow::Result<String> {
             e.time_s, e.kind, e.stage, e.detail
         ));
     }
-    let overview = trace_picture::write(run_dir)?;
+    let overview = trace_picture::write(run_dir);
     let trace = run_dir.join("trace.json");
-    text.push_str(&format!(
-        "latency: {}\nlatency per frame: {}\n",
-        distributions.display(),
-        timeline.display()
-    ));
+    match pictures {
+        Ok([distributions, timeline]) => text.push_str(&format!(
+            "latency: {}\nlatency per frame: {}\n",
+            distributions.display(),
+            timeline.display()
+        )),
+        Err(e) => text.push_str(&format!("no latency pictures: {e:#}\n")),
+    }
     if trace.is_file() {
         text.push_str(&format!(
             "trace (open in ui.perfetto.dev or chrome://tracing): {}\n",
             trace.display()
         ));
     }
-    if let Some(path) = overview {
-        text.push_str(&format!("trace overview: {}\n", path.display()));
+    match overview {
+        Ok(Some(path)) => text.push_str(&format!("trace overview: {}\n", path.display())),
+        Ok(None) => {}
+        Err(e) => text.push_str(&format!("no trace overview: {e:#}\n")),
     }
     Ok(text)
 }

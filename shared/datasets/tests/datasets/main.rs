@@ -4,13 +4,14 @@
 
 #![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failure here is a test failure
 
-use linetrack_datasets::StereoSequence;
+use linetrack_datasets::{Next, StereoSequence};
 use linetrack_geometry::MatchCase;
 use linetrack_vision::{
     AppearanceGates, GrayImage, OrbExtractor, OrbOptions, PointFeatures, PointMatcher,
 };
 use nalgebra::{Isometry3, Vector3};
 use std::path::{Path, PathBuf};
+use std::time::Duration;
 
 mod euroc;
 mod kitti;
@@ -130,6 +131,34 @@ fn the_reading_threads_set_up_runs_on_it_first() {
     assert_eq!(receiver.recv().unwrap().as_deref(), Some("frame-reader"));
     assert_eq!(stream.by_ref().count(), 5);
     assert_eq!(stream.skipped(), 0);
+}
+
+/// A reading thread that is behind (held here before its first frame, as a loaded machine
+/// starves it) leaves `next_within` free to return: the frame is not there yet, then it is.
+#[test]
+fn a_frame_the_reader_does_not_have_yet_is_not_waited_for_past_the_wait() {
+    let (release, held) = crossbeam_channel::bounded::<()>(0);
+    let sequence = StereoSequence::open(&euroc_fixture("next-within")).unwrap();
+    let mut stream = sequence.into_stream_with(0, 1, move || {
+        let _ = held.recv();
+    });
+    // The reader cannot have sent anything: it is held before its first read.
+    assert!(matches!(
+        stream.next_within(Duration::from_millis(1)),
+        Next::NotYet
+    ));
+    release.send(()).unwrap();
+    let mut indices = Vec::new();
+    loop {
+        // Long enough for a loaded machine: the test waits for frames, never for time.
+        match stream.next_within(Duration::from_secs(60)) {
+            Next::Frame(frame) => indices.push(frame.unwrap().index),
+            Next::NotYet => panic!("the reader is not held any more: {indices:?}"),
+            Next::End => break,
+        }
+    }
+    assert_eq!(indices, [0, 1, 2]);
+    assert!(matches!(stream.next_within(Duration::ZERO), Next::End));
 }
 
 // ---------------------------------------------------------------- hand-made EuRoC fixture
