@@ -362,6 +362,25 @@ pub fn as_nobody(program: &Path, cwd: &Path) -> Command {
     command
 }
 
+/// `linetrack report` on a cut run folder: it must succeed, list the `frames` recorded and
+/// say the run ended `records-failed`. Returns its output for further checks.
+pub fn assert_reports_a_cut_run(run_dir: &Path, frames: usize) -> String {
+    let report = Command::new(bin_dir().join("linetrack"))
+        .arg("report")
+        .arg(run_dir)
+        .output()
+        .unwrap_or_else(|e| panic!("linetrack report: {e}"));
+    let text = String::from_utf8_lossy(&report.stdout).into_owned();
+    assert!(
+        report.status.success(),
+        "{text}{}",
+        String::from_utf8_lossy(&report.stderr)
+    );
+    assert!(text.contains(&format!("frames {frames}:")), "{text}");
+    assert!(text.contains("run ended records-failed"), "{text}");
+    text
+}
+
 /// Sends `signal` (e.g. "KILL", "TERM") to `pid` with kill(1).
 pub fn signal(pid: u32, signal: &str) {
     let status = Command::new("kill")

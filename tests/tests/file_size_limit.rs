@@ -126,20 +126,5 @@ fn records_over_the_file_size_limit_end_the_run_with_an_error_not_a_signal() {
     .unwrap_or_else(|e| panic!("status.json: {e}"));
     assert_eq!(live.state, RunEnd::RecordsFailed);
 
-    let report = Command::new(bin_dir().join("linetrack"))
-        .arg("report")
-        .arg(&run_dir)
-        .output()
-        .unwrap_or_else(|e| panic!("linetrack report: {e}"));
-    let text = String::from_utf8_lossy(&report.stdout);
-    assert!(
-        report.status.success(),
-        "{text}{}",
-        String::from_utf8_lossy(&report.stderr)
-    );
-    assert!(
-        text.contains(&format!("frames {}:", frames.len())),
-        "{text}"
-    );
-    assert!(text.contains("run ended records-failed"), "{text}");
+    assert_reports_a_cut_run(&run_dir, frames.len());
 }

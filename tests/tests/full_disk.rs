@@ -164,22 +164,7 @@ fn run_on_a_disk_that_fills(name: &str, policy: &str) -> Summary {
     }
 
     // The report reads the folder and says which frames were not recorded.
-    let report = Command::new(bin_dir().join("linetrack"))
-        .arg("report")
-        .arg(&copy)
-        .output()
-        .unwrap_or_else(|e| panic!("linetrack report: {e}"));
-    let text = String::from_utf8_lossy(&report.stdout);
-    assert!(
-        report.status.success(),
-        "{text}{}",
-        String::from_utf8_lossy(&report.stderr)
-    );
-    assert!(
-        text.contains(&format!("frames {}:", frames.len())),
-        "{text}"
-    );
-    assert!(text.contains("run ended records-failed"), "{text}");
+    let text = assert_reports_a_cut_run(&copy, frames.len());
     let expected = summary.report.frames as u64;
     let missing = linetrack_run_record::unrecorded(&frames, expected);
     let missing_count: u64 = missing.iter().map(|r| r.end - r.start).sum();
