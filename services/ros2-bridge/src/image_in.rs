@@ -1,14 +1,14 @@
 //! A `sensor_msgs/Image` as the pipeline's 8-bit grey image, checked against the rig's size.
 //!
 //! `mono8` is taken as it is: its rows go straight from the message into the shared-memory
-//! frame (one copy). `mono16`, `rgb8` and `bgr8` go through the conversion every other input
-//! goes through ([`linetrack_vision::to_gray8_ordered`]: 16 bits scaled over 65535, colour by
-//! luminance). An image that cannot be read is [`Malformed`], saying why.
+//! frame (one copy). `mono16`, `rgb8` and `bgr8` are converted with the arithmetic of the
+//! conversion every other input goes through (`linetrack_vision::to_gray8_ordered`, OpenCV's
+//! `convertTo` and `cvtColor`): 16 bits scaled by 255 / 65535 and rounded to the nearest
+//! level, colour by OpenCV's fixed-point luminance. Written here without OpenCV so that the
+//! bridge does not link it; a test checks it against that conversion pixel for pixel. An image
+//! that cannot be read is [`Malformed`], saying why.
 
 use crate::sensor_msgs::Image;
-use linetrack_vision::{ChannelOrder, VisionError, to_gray8_ordered};
-use opencv::core::Mat;
-use opencv::prelude::*;
 
 /// The encodings read.
 pub const ENCODINGS: &str = "mono8, mono16, rgb8, bgr8";
@@ -86,23 +86,6 @@ pub enum Malformed {
         /// `step × height`.
         expected: usize,
     },
-    /// The conversion to grey failed.
-    #[error("converting to grey")]
-    Convert(#[from] VisionError),
-    /// OpenCV refused the pixels.
-    #[error("{context}")]
-    OpenCv {
-        /// What was being done.
-        context: &'static str,
-        /// OpenCV's error.
-        #[source]
-        reason: opencv::Error,
-    },
-}
-
-/// Maps an OpenCV error to [`Malformed::OpenCv`] saying what was being done.
-fn opencv(context: &'static str) -> impl Fn(opencv::Error) -> Malformed {
-    move |reason| Malformed::OpenCv { context, reason }
 }
 
 /// An image as 8-bit grey of the rig's size.
@@ -120,7 +103,7 @@ pub enum Gray<'a> {
         height: usize,
     },
     /// Converted (continuous, one byte a pixel).
-    Converted(Mat),
+    Converted(Vec<u8>),
 }
 
 impl<'a> Gray<'a> {
@@ -140,10 +123,7 @@ impl<'a> Gray<'a> {
                     parts.extend(data.chunks(*step).take(*height).map(|row| &row[..*width]));
                 }
             }
-            Gray::Converted(mat) => parts.push(
-                mat.data_bytes()
-                    .map_err(opencv("reading the grey pixels"))?,
-            ),
+            Gray::Converted(pixels) => parts.push(pixels.as_slice()),
         }
         Ok(())
     }
@@ -180,7 +160,7 @@ pub fn gray(image: &Image, size: (u32, u32)) -> Result<Gray<'_>, Malformed> {
         });
     }
     let rows = || image.data.chunks(step).map(|r| &r[..row]);
-    let (mat, order) = match encoding {
+    let pixels = match encoding {
         Encoding::Mono8 => {
             return Ok(Gray::Message {
                 data: &image.data,
@@ -191,36 +171,51 @@ pub fn gray(image: &Image, size: (u32, u32)) -> Result<Gray<'_>, Malformed> {
         }
         Encoding::Mono16 => {
             let big = image.is_bigendian != 0;
-            let samples: Vec<u16> = rows()
+            rows()
                 .flat_map(|r| r.chunks_exact(2))
                 .map(|b| {
                     let b = [b[0], b[1]];
-                    if big {
+                    grey_of_16_bits(if big {
                         u16::from_be_bytes(b)
                     } else {
                         u16::from_le_bytes(b)
-                    }
+                    })
                 })
-                .collect();
-            let mat = Mat::from_slice(&samples)
-                .and_then(|flat| flat.reshape(1, image.height as i32)?.try_clone())
-                .map_err(opencv("wrapping mono16 pixels"))?;
-            (mat, ChannelOrder::Bgr)
+                .collect()
         }
         Encoding::Rgb8 | Encoding::Bgr8 => {
-            let bytes: Vec<u8> = rows().flatten().copied().collect();
-            let mat = Mat::from_slice(&bytes)
-                .and_then(|flat| flat.reshape(3, image.height as i32)?.try_clone())
-                .map_err(opencv("wrapping colour pixels"))?;
-            let order = if encoding == Encoding::Rgb8 {
-                ChannelOrder::Rgb
-            } else {
-                ChannelOrder::Bgr
-            };
-            (mat, order)
+            let rgb = encoding == Encoding::Rgb8;
+            rows()
+                .flat_map(|r| r.chunks_exact(3))
+                .map(|p| {
+                    let (r, g, b) = if rgb {
+                        (p[0], p[1], p[2])
+                    } else {
+                        (p[2], p[1], p[0])
+                    };
+                    grey_of_colour(r, g, b)
+                })
+                .collect()
         }
     };
-    Ok(Gray::Converted(to_gray8_ordered(mat, None, order)?))
+    Ok(Gray::Converted(pixels))
+}
+
+/// A 16-bit sample as 8 bits: times 255 / 65535 in single precision, rounded to the nearest
+/// level, ties to even (OpenCV's `convertTo` to `CV_8U`).
+fn grey_of_16_bits(v: u16) -> u8 {
+    (f32::from(v) * (255.0f32 / 65535.0f32)).round_ties_even() as u8
+}
+
+/// Luminance of an 8-bit colour: OpenCV's fixed-point `cvtColor` to grey (4.6), weights
+/// 0.299, 0.587, 0.114 in units of 2⁻¹⁵, rounded.
+fn grey_of_colour(r: u8, g: u8, b: u8) -> u8 {
+    const SHIFT: u32 = 15;
+    const R: u32 = 9798;
+    const G: u32 = 19235;
+    const B: u32 = 3735;
+    let sum = u32::from(r) * R + u32::from(g) * G + u32::from(b) * B + (1 << (SHIFT - 1));
+    (sum >> SHIFT) as u8
 }
 
 #[cfg(test)]
@@ -316,5 +311,50 @@ mod tests {
         );
         let e = refused(image("mono8", 3, 2, 3, vec![0; 7]));
         assert!(e.contains("(too long)"), "{e}");
+    }
+
+    #[test]
+    fn the_conversion_is_that_of_every_other_input_pixel_for_pixel() {
+        use linetrack_vision::{ChannelOrder, to_gray8_ordered};
+        use opencv::core::Mat;
+        use opencv::prelude::*;
+        // Every 16-bit value, and colours on a coarse grid of the cube plus its corners.
+        let all16: Vec<u16> = (0..=u16::MAX).collect();
+        let reference = to_gray8_ordered(
+            Mat::from_slice(&all16).unwrap().try_clone().unwrap(),
+            None,
+            ChannelOrder::Bgr,
+        )
+        .unwrap();
+        let ours: Vec<u8> = all16.iter().map(|&v| grey_of_16_bits(v)).collect();
+        assert_eq!(reference.data_bytes().unwrap(), ours.as_slice());
+        let levels: Vec<u8> = (0..=255u8).step_by(5).chain([1, 254]).collect();
+        let mut colours = Vec::new();
+        for &r in &levels {
+            for &g in &levels {
+                for &b in &levels {
+                    colours.extend([r, g, b]);
+                }
+            }
+        }
+        let n = colours.len() / 3;
+        for (order, rgb) in [(ChannelOrder::Rgb, true), (ChannelOrder::Bgr, false)] {
+            let mat = Mat::from_slice(&colours)
+                .and_then(|flat| flat.reshape(3, 1)?.try_clone())
+                .unwrap();
+            let reference = to_gray8_ordered(mat, None, order).unwrap();
+            let ours: Vec<u8> = colours
+                .chunks_exact(3)
+                .map(|p| {
+                    if rgb {
+                        grey_of_colour(p[0], p[1], p[2])
+                    } else {
+                        grey_of_colour(p[2], p[1], p[0])
+                    }
+                })
+                .collect();
+            assert_eq!(ours.len(), n);
+            assert_eq!(reference.data_bytes().unwrap(), ours.as_slice(), "{rgb}");
+        }
     }
 }
