@@ -1304,6 +1304,7 @@ mod tests {
         config.detector_fallback.enabled = true;
         config.detector_fallback.bad_frames = 3;
         config.detector_fallback.end_to_end = false;
+        config.detector_fallback.to = DetectorKind::Fld;
         let mut run = Run::running(&config);
         let slow = |id: u64| {
             let mut h = TracksHeader::from(FrameHeader::new(id, 0, 1));

@@ -163,6 +163,7 @@ mod tests {
                 recover_frames: 4,
                 recover_budget_fraction: 0.5,
                 min_interval_frames,
+                to: DetectorKind::Fld,
                 ..DetectorFallbackConfig::default()
             },
             50.0,

@@ -61,7 +61,7 @@ fn lsd_missing_a_budget_no_detector_meets_gives_way_to_fld_after_its_streak() {
     // it either, so it never swaps back.
     let config = format!(
         "{SUPERVISION}[budget]\ndrop_late = false\nline_detector_ms = 0.001\n\
-         [detector_fallback]\nenabled = true\nbad_frames = 3\nmin_interval_frames = 0\nend_to_end = false\n"
+         [detector_fallback]\nenabled = true\nto = \"fld\"\nbad_frames = 3\nmin_interval_frames = 0\nend_to_end = false\n"
     );
     let (status, out, records) =
         start_every_frame(&dir, &base_sequence(FRAMES), &config).finish(RUN_TIMEOUT);
@@ -110,7 +110,7 @@ fn both_policies_act_on_frames_that_miss_the_end_to_end_budget_alone() {
     let config = format!(
         "{SUPERVISION}[budget]\ndrop_late = false\nend_to_end_ms = 0.001\nline_detector_ms = 60000.0\n\
          matcher_ms = 60000.0\n[matcher.fallback]\nmin_stereo_matches = 1\nrecover_stereo_matches = 2\n\
-         min_inlier_ratio = 0.0\n[detector_fallback]\nenabled = true\nbad_frames = 3\n"
+         min_inlier_ratio = 0.0\n[detector_fallback]\nenabled = true\nto = \"fld\"\nbad_frames = 3\n"
     );
     let (status, out, records) = start(&dir, &base_sequence(FRAMES), &config).finish(RUN_TIMEOUT);
     assert!(status.success(), "{status}\n{out}");
