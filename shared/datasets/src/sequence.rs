@@ -275,6 +275,21 @@ impl StereoStream {
     }
 }
 
+impl Drop for StereoStream {
+    /// A stream dropped before its end closes its channel, so that the reading thread stops
+    /// at its next frame, and waits for it: a thread left reading (through OpenCV) while the
+    /// process exits can crash it in OpenCV's teardown.
+    fn drop(&mut self) {
+        if let Some(worker) = self.worker.take() {
+            drop(std::mem::replace(
+                &mut self.receiver,
+                crossbeam_channel::never(),
+            ));
+            let _ = worker.join();
+        }
+    }
+}
+
 /// What [`StereoStream::next_within`] found.
 #[derive(Debug)]
 pub enum Next {
