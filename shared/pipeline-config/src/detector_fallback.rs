@@ -15,7 +15,8 @@ pub struct DetectorFallbackConfig {
     /// The faster detector LSD gives way to (not LSD). Edgelines by default: the cheapest
     /// (2.7 ms an image against FLD's 11.8 on EuRoC). `linetrack run` on 1,200 EuRoC frames
     /// at 20 Hz with LSD, `--matcher auto` and two CPU hogs on a 2-core machine dropped 278
-    /// frames (23 %) giving way to FLD and 97 (8.1 %) giving way to edgelines.
+    /// frames (23 %) giving way to FLD, and 97 and 153 (8.1 and 12.8 %) in two runs giving
+    /// way to edgelines.
     pub to: DetectorKind,
     /// Consecutive LSD frames over `budget.line_detector_ms` before the swap.
     pub bad_frames: u32,
