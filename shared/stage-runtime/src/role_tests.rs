@@ -89,20 +89,32 @@ fn stop(bus: &Bus, stage: StageKind) {
         .unwrap_or_else(|e| panic!("{e}"));
 }
 
+/// A local bus for a source under test, its hub (for the source's thread), and inlets on
+/// the frames and the status reports it publishes.
+fn source_bus() -> (
+    Bus,
+    linetrack_ipc::LocalHub,
+    Inlet<u8, FrameHeader>,
+    Inlet<StatusReport, ()>,
+) {
+    let bus = Bus::local();
+    let hub = bus.local_hub().unwrap_or_else(|| panic!("a local bus"));
+    let frames = bus
+        .inlet::<u8, FrameHeader>(Topic::Frames)
+        .unwrap_or_else(|e| panic!("{e}"));
+    let status = bus
+        .inlet::<StatusReport, ()>(Topic::Status)
+        .unwrap_or_else(|e| panic!("{e}"));
+    (bus, hub, frames, status)
+}
+
 fn summary(r: &StatusReport) -> (Option<StatusKind>, u64, u64) {
     (r.kind.get().ok(), r.frame_id, r.value)
 }
 
 #[test]
 fn a_source_fed_by_a_callback_publishes_stamps_counts_finishes_and_stays_until_stopped() {
-    let bus = Bus::local();
-    let hub = bus.local_hub().unwrap_or_else(|| panic!("a local bus"));
-    let mut frames = bus
-        .inlet::<u8, FrameHeader>(Topic::Frames)
-        .unwrap_or_else(|e| panic!("{e}"));
-    let mut status = bus
-        .inlet::<StatusReport, ()>(Topic::Status)
-        .unwrap_or_else(|e| panic!("{e}"));
+    let (bus, hub, mut frames, mut status) = source_bus();
     let clock = Clock::manual(5_000_000_000);
     let ctx = context(StageKind::FrameSource, &clock, 7);
     let (deliver, delivered) = crossbeam_channel::bounded::<Delivered>(1);
@@ -264,14 +276,7 @@ fn a_sink_takes_what_comes_counts_it_and_is_closed_on_a_stop_or_a_failure() {
 /// a pose comes out.
 #[test]
 fn a_source_waiting_for_a_slow_pipeline_beats_past_the_hang_timeout() {
-    let bus = Bus::local();
-    let hub = bus.local_hub().unwrap_or_else(|| panic!("a local bus"));
-    let mut frames = bus
-        .inlet::<u8, FrameHeader>(Topic::Frames)
-        .unwrap_or_else(|e| panic!("{e}"));
-    let mut status = bus
-        .inlet::<StatusReport, ()>(Topic::Status)
-        .unwrap_or_else(|e| panic!("{e}"));
+    let (bus, hub, mut frames, mut status) = source_bus();
     let clock = Clock::manual(1_000_000_000);
     let mut ctx = context(StageKind::FrameSource, &clock, 0);
     ctx.config.source.pacing = linetrack_pipeline_config::Pacing::Fastest;
