@@ -205,6 +205,8 @@ impl Default for OdometryConfig {
 
 /// The most `rematch_passes` accepted: each pass matches the frame's segments once more.
 const MAX_REMATCH_PASSES: usize = 10;
+/// The most `lost.coast_frames` accepted: a constant velocity held longer predicts little.
+const MAX_COAST_FRAMES: u32 = 10;
 
 impl OdometryConfig {
     /// Reads a TOML file of these settings (missing keys take their defaults) and checks it;
@@ -285,6 +287,18 @@ impl OdometryConfig {
                 m.min_relative_eigenvalue
             ));
         }
+        if self.lost.coast_frames > MAX_COAST_FRAMES {
+            return Err(format!(
+                "field `lost.coast_frames` = {}: expected at most {MAX_COAST_FRAMES}",
+                self.lost.coast_frames
+            ));
+        }
+        if !(3..=m.min_inliers).contains(&m.min_inliers_with_prior) {
+            return Err(format!(
+                "field `motion.min_inliers_with_prior` = {}: expected 3 to `motion.min_inliers` ({})",
+                m.min_inliers_with_prior, m.min_inliers
+            ));
+        }
         if m.max_iterations == 0 {
             return Err("field `motion.max_iterations` = 0: expected at least 1".to_string());
         }
@@ -305,6 +319,11 @@ pub struct LostLimits {
     pub departure_fraction: f64,
     /// The estimate's rotation may differ from the prediction's by this much, degrees.
     pub departure_deg: f64,
+    /// After a lost frame, this many more frames are still matched where the last good
+    /// motion puts the features and estimated near it (with the constant-velocity prior and
+    /// the limits above), before the tracker searches the whole window without a prior.
+    /// 0: the frame after a loss is searched without a prediction.
+    pub coast_frames: u32,
 }
 
 impl Default for LostLimits {
@@ -313,6 +332,7 @@ impl Default for LostLimits {
             departure_m: 0.1,
             departure_fraction: 0.25,
             departure_deg: 5.0,
+            coast_frames: 0,
         }
     }
 }

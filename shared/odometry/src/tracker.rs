@@ -225,8 +225,11 @@ pub struct MotionTracker {
     reference: Option<Reference>,
     pose: Isometry3<f64>,
     last_motion: Isometry3<f64>,
-    /// Whether `last_motion` was measured (not the identity of a fresh start).
+    /// Whether `last_motion` was measured (not the identity of a fresh start) and is still
+    /// trusted to predict the next frame.
     motion_known: bool,
+    /// Frames lost in a row since the last estimate that was believed.
+    losses_in_row: u32,
     /// The motion this frame's segments are predicted with when it is not `last_motion`
     /// ([`LinePrediction::PointsFirst`](crate::LinePrediction)): set before the frame's
     /// segments are matched, used up by its update.
@@ -258,6 +261,7 @@ impl MotionTracker {
             pose: Isometry3::identity(),
             last_motion: Isometry3::identity(),
             motion_known: false,
+            losses_in_row: 0,
             segment_motion: None,
             profiles: Default::default(),
             reference_image: None,
@@ -274,6 +278,7 @@ impl MotionTracker {
         self.pose = pose;
         self.last_motion = motion;
         self.motion_known = true;
+        self.losses_in_row = 0;
         self.reference = None;
         self.points_ahead = None;
     }
@@ -513,6 +518,7 @@ impl MotionTracker {
             Ok(e) => {
                 self.last_motion = e.motion;
                 self.motion_known = true;
+                self.losses_in_row = 0;
                 self.pose *= e.motion.inverse();
                 let mut current = self.fresh_reference(self.pose, points_l, fresh);
                 if self.config.landmarks {
@@ -522,11 +528,14 @@ impl MotionTracker {
                 None
             }
             Err(why) => {
-                // Predict with the last good motion; this frame is the new reference. The
-                // next frame is searched over the full window and its estimate is not held
-                // to the prediction, which may be what went wrong.
+                // Predict with the last good motion; this frame is the new reference. For
+                // `lost.coast_frames` frames the next one is still matched and estimated
+                // near that motion (a vehicle does not stop because a frame was lost);
+                // after that it is searched over the full window and its estimate is not
+                // held to the prediction, which may be what went wrong.
                 self.pose *= self.last_motion.inverse();
-                self.motion_known = false;
+                self.losses_in_row = self.losses_in_row.saturating_add(1);
+                self.motion_known &= self.losses_in_row <= self.config.lost.coast_frames;
                 self.reference = Some(self.fresh_reference(self.pose, points_l, fresh));
                 Some(why)
             }
@@ -657,5 +666,43 @@ mod tests {
                 .iter()
                 .all(|v| v.is_finite())
         );
+    }
+
+    /// Frames with nothing to track (no segments, no images) after a known motion: how
+    /// far the next frame is searched after each lost frame, for `coast_frames`.
+    fn search_radii_after_losses(coast_frames: u32) -> Vec<f64> {
+        let mut config = OdometryConfig::default();
+        config.lost.coast_frames = coast_frames;
+        let mut tracker = MotionTracker::new(config, StereoRig::default()).unwrap();
+        tracker.resume_from(
+            Isometry3::identity(),
+            Isometry3::translation(0.0, 0.0, -0.05),
+        );
+        let nothing = |tracked| MatchedLines {
+            left: &[],
+            right: &[],
+            stereo: &[],
+            tracked,
+        };
+        // Not matched against a previous frame: it becomes the reference, not lost.
+        let first = tracker.update(None, nothing(None), FrameStats::default());
+        assert!(!first.unwrap().lost);
+        (0..3)
+            .map(|_| {
+                let result = tracker.update(None, nothing(Some(&[])), FrameStats::default());
+                assert!(result.unwrap().lost);
+                tracker.search_radius_px()
+            })
+            .collect()
+    }
+
+    #[test]
+    fn after_a_loss_the_last_motion_predicts_for_the_coasting_frames_only() {
+        let config = OdometryConfig::default();
+        let (near, wide) = (config.predicted_window_px, config.max_displacement_px);
+        assert!(near < wide);
+        assert_eq!(search_radii_after_losses(0), [wide, wide, wide]);
+        assert_eq!(search_radii_after_losses(1), [near, wide, wide]);
+        assert_eq!(search_radii_after_losses(2), [near, near, wide]);
     }
 }

@@ -84,6 +84,10 @@ pub struct MotionConfig {
     /// lines only) 8 lost 4 frames that had 6–7 good lines (ATE 4.4 cm), 6 lost none
     /// (3.3 cm).
     pub min_inliers: usize,
+    /// The same when the estimate has a constant-velocity prior ([`estimate_motion_near`]):
+    /// the prior holds the directions a few observations leave open, and the estimate must
+    /// still stay near the prediction to be believed. At most `min_inliers`.
+    pub min_inliers_with_prior: usize,
     /// Smallest eigenvalue of the normal matrix relative to the largest below this,
     /// without a prior (the first frame, or the one after a loss): the motion is not
     /// constrained (degenerate), the frame is lost. Translations are
@@ -120,6 +124,7 @@ impl Default for MotionConfig {
             huber_px: 1.0,
             outlier_px: 3.0,
             min_inliers: 6,
+            min_inliers_with_prior: 6,
             min_relative_eigenvalue: 1e-5,
             ransac_draws: 200,
             ransac_threshold_px: 2.0,
@@ -481,11 +486,16 @@ fn estimate(
     prior: Option<&Prior>,
     config: &MotionConfig,
 ) -> Result<MotionEstimate, MotionError> {
+    let min_inliers = if prior.is_some() {
+        config.min_inliers_with_prior.min(config.min_inliers)
+    } else {
+        config.min_inliers
+    };
     let total = points.len() + lines.len();
-    if total < config.min_inliers {
+    if total < min_inliers {
         return Err(MotionError::TooFewInliers {
             inliers: total,
-            needed: config.min_inliers,
+            needed: min_inliers,
         });
     }
     // Where the first pass starts, and on which observations.
@@ -499,10 +509,10 @@ fn estimate(
             config.ransac_threshold_px,
         );
         let inliers = found.inliers.iter().filter(|b| **b).count();
-        if inliers < config.min_inliers {
+        if inliers < min_inliers {
             return Err(MotionError::TooFewInliers {
                 inliers,
-                needed: config.min_inliers,
+                needed: min_inliers,
             });
         }
         let (p, l) = found.inliers.split_at(points.len());
@@ -541,10 +551,10 @@ fn estimate(
         .collect();
     let count = |v: &[bool]| v.iter().filter(|b| **b).count();
     let (n_points, n_lines) = (count(&inlier_points), count(&inlier_lines));
-    if n_points + n_lines < config.min_inliers {
+    if n_points + n_lines < min_inliers {
         return Err(MotionError::TooFewInliers {
             inliers: n_points + n_lines,
-            needed: config.min_inliers,
+            needed: min_inliers,
         });
     }
     let active = Active {

@@ -238,6 +238,16 @@ fn a_malformed_config_fails_naming_the_file_and_field() {
             "lost.departure_m",
         ),
         ("passes.toml", "rematch_passes = 1000\n", "rematch_passes"),
+        (
+            "coast.toml",
+            "[lost]\ncoast_frames = 11\n",
+            "lost.coast_frames",
+        ),
+        (
+            "prior.toml",
+            "[motion]\nmin_inliers_with_prior = 2\n",
+            "motion.min_inliers_with_prior",
+        ),
     ] {
         let config = dir.join(name);
         std::fs::write(&config, text).unwrap();
