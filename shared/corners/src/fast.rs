@@ -237,6 +237,9 @@ fn four_in_a_row([e0, e1, e2, e3, e4, e5, e6, e7]: [u8; 8]) -> u8 {
     (a & b) | (b & c) | (c & d) | (d & a) | (ab & bc) | (bc & cd) | (cd & da) | (da & ab)
 }
 
+#[cfg(test)]
+pub(crate) use whole_circle::corner_score;
+
 /// The FAST test written out for one pixel on its whole circle, the reference the row
 /// detector is tested against.
 #[cfg(test)]
@@ -332,6 +335,3 @@ mod whole_circle {
         nine.into_iter().fold(i16::MIN, i16::max)
     }
 }
-
-#[cfg(test)]
-pub(crate) use whole_circle::corner_score;

@@ -154,13 +154,15 @@ impl Tables {
             #[cfg(not(target_arch = "x86_64"))]
             let _ = avx2;
             let start = group * GROUP;
-            for x in start..start + GROUP {
-                out[x] = blend_pixel(row, self.columns[x], last);
+            let columns = &self.columns[start..start + GROUP];
+            for (o, &column) in out[start..start + GROUP].iter_mut().zip(columns) {
+                *o = blend_pixel(row, column, last);
             }
             group += 1;
         }
-        for x in groups * GROUP..out.len() {
-            out[x] = blend_pixel(row, self.columns[x], last);
+        let tail = groups * GROUP;
+        for (o, &column) in out[tail..].iter_mut().zip(&self.columns[tail..]) {
+            *o = blend_pixel(row, column, last);
         }
     }
 }
