@@ -17,7 +17,8 @@
 //!    then the 8 even ones; a block with a centre left is scored whole, every centre on its
 //!    whole circle in byte lanes. The score of a corner is the largest threshold at which it
 //!    still is one.
-//! 3. **Selection** (`select.rs`): 3×3 non-maximum suppression of the score; then each
+//! 3. **Selection** (`select.rs`): 3×3 non-maximum suppression of the score, a counting
+//!    sort on the 8-bit score (best first, raster order within a score); then each
 //!    level's share of `max_corners` (shares proportional to the levels' widths, as OpenCV's
 //!    ORB) is taken best first; optionally (`cell_px`) from a grid, at most an even share
 //!    per cell on the first pass, then the best of the rest, so textured corners of the
@@ -200,6 +201,8 @@ pub struct CornerExtractor {
     smoother: Smoother,
     scores: Vec<u8>,
     candidates: Vec<Candidate>,
+    /// The candidates' sorting buffer.
+    sorted: Vec<Candidate>,
     grid: select::Grid,
 }
 
@@ -214,6 +217,7 @@ impl CornerExtractor {
             smoother: Smoother::default(),
             scores: Vec::new(),
             candidates: Vec::new(),
+            sorted: Vec::new(),
             grid: select::Grid::default(),
         })
     }
@@ -277,13 +281,7 @@ impl CornerExtractor {
                 &mut self.candidates,
             );
 
-            select::suppress_and_sort(
-                plane,
-                &self.scores,
-                &mut self.candidates,
-                wanted,
-                params.cell_px > 0,
-            );
+            select::suppress_and_sort(plane, &self.scores, &mut self.candidates, &mut self.sorted);
             let kept = self
                 .grid
                 .select(plane, params.cell_px, wanted, &mut self.candidates);

@@ -196,6 +196,7 @@ mod shuffle {
     ///
     /// # Safety
     /// The CPU has AVX2; both groups have a base (their 16 source bytes lie in `row`).
+    #[inline]
     #[target_feature(enable = "avx2")]
     pub(super) unsafe fn two_groups(r: &Tables, row: &[u8], group: usize, out: &mut [u16]) {
         let (low, high) = (r.bases[group] as usize, r.bases[group + 1] as usize);
