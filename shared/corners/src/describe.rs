@@ -1,7 +1,10 @@
 //! Orientation by intensity centroid and the steered binary descriptor, with its sampling
 //! pattern: 256 pixel pairs drawn once, from a fixed seed, by our own generator.
 
-use crate::{BORDER_PX, DESCRIPTOR_BYTES, GrayView};
+#[cfg(doc)]
+use crate::patch::smoothed_patch;
+use crate::patch::{CENTRE, PATCH};
+use crate::{DESCRIPTOR_BYTES, GrayView};
 use std::f64::consts::TAU;
 
 /// Radius of the disc the orientation's centroid is taken over, pixels.
@@ -24,12 +27,10 @@ const PATTERN_SEED: u64 = 0x6c69_6e65_7472_6163;
 /// The sampling pattern, rotated to each of [`ANGLE_STEPS`] orientations: per orientation,
 /// the pairs' points as `(dx, dy)`, first and second point of pair k at 2k and 2k + 1.
 pub(crate) struct Pattern {
+    #[cfg(test)]
     rotated: Vec<[(i8, i8); 2 * PAIRS]>,
-    /// The rotated points as offsets from the corner in an image of rows `stride` bytes
-    /// apart ([`Pattern::prepare`]), shifted by `reach` so that none is negative.
-    offsets: Vec<[usize; 2 * PAIRS]>,
-    stride: usize,
-    reach: usize,
+    /// The rotated points as indices into the corner's smoothed patch (row by row).
+    cells: Vec<[u16; 2 * PAIRS]>,
     /// Per row of the orientation disc (−R..=R), per column of the 32 from −R: 1 inside
     /// the disc, else 0 (the last column is always out).
     inside: [[u16; WINDOW]; DISC_ROWS],
@@ -49,7 +50,7 @@ impl Pattern {
     /// The pattern (the same on every call and every build).
     pub(crate) fn new() -> Self {
         let points = pattern_points();
-        let rotated = (0..ANGLE_STEPS)
+        let rotated: Vec<[(i8, i8); 2 * PAIRS]> = (0..ANGLE_STEPS)
             .map(|step| {
                 let (sin, cos) = (step as f64 * TAU / ANGLE_STEPS as f64).sin_cos();
                 points.map(|(x, y)| {
@@ -75,55 +76,42 @@ impl Pattern {
             })
         };
         let (right, left) = (weighted(1), weighted(-1));
+        let cells = rotated
+            .iter()
+            .map(|points: &[(i8, i8); 2 * PAIRS]| {
+                points.map(|(dx, dy)| {
+                    let at = |d: i8| (CENTRE as i32 + i32::from(d)).clamp(0, PATCH as i32 - 1);
+                    (at(dy) * PATCH as i32 + at(dx)) as u16
+                })
+            })
+            .collect();
         Self {
+            #[cfg(test)]
             rotated,
-            offsets: Vec::new(),
-            stride: 0,
-            reach: 0,
+            cells,
             inside,
             right,
             left,
         }
     }
 
-    /// Readies [`Pattern::describe`] for images of rows `stride` bytes apart.
-    pub(crate) fn prepare(&mut self, stride: usize) {
-        if stride == self.stride && !self.offsets.is_empty() {
-            return;
-        }
-        let reach = BORDER_PX * stride + BORDER_PX;
-        self.offsets.clear();
-        self.offsets.extend(self.rotated.iter().map(|points| {
-            points.map(|(dx, dy)| {
-                let offset = isize::from(dy) * stride as isize + isize::from(dx);
-                (reach as isize + offset) as usize
-            })
-        }));
-        self.stride = stride;
-        self.reach = reach;
-    }
-
-    /// The descriptor of the corner at `(x, y)` of `smooth` oriented at `angle_rad`: bit
-    /// `j` of byte `i` is set when pair `8i + j`'s first point is darker than its second.
-    /// The corner is at least `BORDER_PX` from the borders; [`Pattern::prepare`] was called
-    /// with `smooth`'s stride.
+    /// The descriptor of a corner from its smoothed patch ([`smoothed_patch`]), oriented
+    /// at `angle_rad`: bit `j` of byte `i` is set when pair `8i + j`'s first point is
+    /// darker than its second.
     #[inline(always)]
     pub(crate) fn describe(
         &self,
-        smooth: GrayView<'_>,
-        x: usize,
-        y: usize,
+        patch: &[u8; PATCH * PATCH],
         angle_rad: f32,
     ) -> [u8; DESCRIPTOR_BYTES] {
-        let offsets = &self.offsets[angle_step(angle_rad)];
-        // Everything the pattern can reach, the corner `reach` bytes in.
-        let start = y * smooth.stride() + x - self.reach;
-        let window = &smooth.pixels()[start..start + 2 * self.reach + 1];
+        let cells = &self.cells[angle_step(angle_rad)];
+        // (The masks cannot change a cell, all inside the patch; they spare the reads
+        // their bounds checks.)
+        let at = |cell: u16| patch[usize::from(cell) % (PATCH * PATCH)];
         let mut out = [0; DESCRIPTOR_BYTES];
-        for (byte, pairs) in out.iter_mut().zip(offsets.chunks_exact(16)) {
+        for (byte, pairs) in out.iter_mut().zip(cells.chunks_exact(16)) {
             for (bit, pair) in pairs.chunks_exact(2).enumerate() {
-                let (first, second) = (window[pair[0]], window[pair[1]]);
-                *byte |= u8::from(first < second) << bit;
+                *byte |= u8::from(at(pair[0]) < at(pair[1])) << bit;
             }
         }
         out

@@ -5,29 +5,35 @@
 //! The method is ORB's (Rublee et al. 2011: FAST corners, intensity-centroid orientation, a
 //! steered BRIEF descriptor); the code, and the descriptor's sampling pattern, are ours:
 //!
-//! 1. **Pyramid** (`pyramid.rs`): `levels` images, each `scale_factor` smaller than the one
-//!    before (bilinear, pixel centres aligned); level 0 is the caller's image itself.
+//! 1. **Pyramid** (`pyramid.rs`, `resample.rs`): `levels` images, each `scale_factor`
+//!    smaller than the one before (bilinear, pixel centres aligned, exact 8-bit weights);
+//!    level 0 is the caller's image itself. Each source row is blended horizontally once
+//!    (with AVX2, 16 pixels an instruction by byte shuffles from tables made once a level),
+//!    then two such rows vertically.
 //! 2. **FAST-9** (`fast.rs`): a pixel is a corner when 9 contiguous pixels of the 16 on the
 //!    circle of radius 3 around it are all brighter than it by more than `fast_threshold`,
-//!    or all darker. Rows are screened 32 centres at a time in loops the compiler
+//!    or all darker. Rows are worked 32 centres at a time in loops the compiler
 //!    vectorises: the 4 compass positions first (a block with no centre passing is done),
-//!    then the 8 even ones; the few centres left are tested on the whole circle. The score
-//!    of a corner is the largest threshold at which it still is one.
-//! 3. **Selection** (`select.rs`): 3×3 non-maximum suppression of the score; then each
+//!    then the 8 even ones; a block with a centre left is scored whole, every centre on its
+//!    whole circle in byte lanes. The score of a corner is the largest threshold at which it
+//!    still is one.
+//! 3. **Selection** (`select.rs`): 3×3 non-maximum suppression of the score, a counting
+//!    sort on the 8-bit score (best first, raster order within a score); then each
 //!    level's share of `max_corners` (shares proportional to the levels' widths, as OpenCV's
 //!    ORB) is taken best first; optionally (`cell_px`) from a grid, at most an even share
 //!    per cell on the first pass, then the best of the rest, so textured corners of the
 //!    image do not take every point (off by default: measured, it cost the odometry).
-//! 4. **Orientation and descriptor** (`describe.rs`): the angle from the patch's centre to
-//!    its intensity centroid (radius 15), quantised to 32 steps; 256 intensity comparisons
-//!    of pixel pairs of the smoothed level image, the pairs rotated by that angle. The pairs
-//!    are drawn once from a fixed-seed generator (isotropic Gaussian, BRIEF's G II), so every
+//! 4. **Orientation and descriptor** (`describe.rs`, `patch.rs`): the angle from the
+//!    patch's centre to its intensity centroid (radius 15), quantised to 32 steps; 256
+//!    intensity comparisons of pixel pairs of the smoothed level image (read from the
+//!    corner's 32 × 32 patch, copied out), the pairs rotated by that angle. The pairs are
+//!    drawn once from a fixed-seed generator (isotropic Gaussian, BRIEF's G II), so every
 //!    build compares the same pixels. Bit `j` of byte `i` is pair `8i + j`: "first darker
 //!    than second", the layout of OpenCV's 32-byte ORB descriptors, so the same Hamming
 //!    matching serves both.
 //!
-//! On x86-64 CPUs with AVX2 all of it runs compiled for AVX2 (chosen at run time, so the
-//! binaries stay portable; the same results, tested).
+//! On x86-64 CPUs with AVX2 all of it runs compiled for AVX2, the resampling with its byte
+//! shuffles (chosen at run time, so the binaries stay portable; the same results, tested).
 //!
 //! Positions are in full-resolution pixels (pixel centres at integers); a corner found at
 //! level `l` sits on that level's pixel grid, `scale_factor^l` pixels apart. Corners stay
@@ -40,7 +46,9 @@
 
 mod describe;
 mod fast;
+mod patch;
 mod pyramid;
+mod resample;
 mod select;
 
 #[cfg(test)]
@@ -193,6 +201,8 @@ pub struct CornerExtractor {
     smoother: Smoother,
     scores: Vec<u8>,
     candidates: Vec<Candidate>,
+    /// The candidates' sorting buffer.
+    sorted: Vec<Candidate>,
     grid: select::Grid,
 }
 
@@ -207,6 +217,7 @@ impl CornerExtractor {
             smoother: Smoother::default(),
             scores: Vec::new(),
             candidates: Vec::new(),
+            sorted: Vec::new(),
             grid: select::Grid::default(),
         })
     }
@@ -239,15 +250,21 @@ impl CornerExtractor {
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
     fn extract_with_avx2(&mut self, image: GrayView<'_>, out: &mut Corners) {
-        self.extract_on_any_cpu(image, out);
+        self.extract_for(image, out, true);
     }
 
     /// [`CornerExtractor::extract`] for any CPU.
-    #[inline(always)]
     fn extract_on_any_cpu(&mut self, image: GrayView<'_>, out: &mut Corners) {
+        self.extract_for(image, out, false);
+    }
+
+    /// [`CornerExtractor::extract`], with AVX2's byte shuffles when `avx2` says the CPU has them
+    /// (the caller has checked).
+    #[inline(always)]
+    fn extract_for(&mut self, image: GrayView<'_>, out: &mut Corners, avx2: bool) {
         out.clear();
         let params = self.params;
-        let count = self.pyramid.build(image, &params);
+        let count = self.pyramid.build(image, &params, avx2);
         let shares = select::level_shares(&self.pyramid, count, params.max_corners);
         let mut wanted = 0;
         for (level, share) in shares.into_iter().enumerate().take(count) {
@@ -263,13 +280,8 @@ impl CornerExtractor {
                 &mut self.scores,
                 &mut self.candidates,
             );
-            select::suppress_and_sort(
-                plane,
-                &self.scores,
-                &mut self.candidates,
-                wanted,
-                params.cell_px > 0,
-            );
+
+            select::suppress_and_sort(plane, &self.scores, &mut self.candidates, &mut self.sorted);
             let kept = self
                 .grid
                 .select(plane, params.cell_px, wanted, &mut self.candidates);
@@ -280,13 +292,15 @@ impl CornerExtractor {
             let Some(smooth) = self.smoother.smooth(plane) else {
                 continue;
             };
-            self.pattern.prepare(smooth.stride());
             let scale = self.pyramid.scale(level);
             for candidate in &self.candidates[..kept] {
                 let (x, y) = (candidate.x as usize, candidate.y as usize);
                 let angle_rad = self.pattern.orientation(plane, x, y);
+                let Some(patch) = patch::patch(smooth, x, y) else {
+                    continue;
+                };
                 out.descriptors
-                    .push(self.pattern.describe(smooth, x, y, angle_rad));
+                    .push(self.pattern.describe(&patch, angle_rad));
                 out.corners.push(Corner {
                     x: candidate.x as f32 * scale,
                     y: candidate.y as f32 * scale,

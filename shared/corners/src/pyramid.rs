@@ -1,14 +1,10 @@
-//! The image pyramid (bilinear, pixel centres aligned, each level from the one before as
-//! OpenCV's ORB does) and the smoothing the descriptor reads (a 7-tap Gaussian, σ = 2 cut at ±3, as ORB,
-//! in both directions). Vertical passes run over whole rows in 16-bit integers, which the
-//! compiler vectorises; the resampling's horizontal pass reads a precomputed table.
+//! The image pyramid (bilinear, `resample.rs`, each level from the one before as OpenCV's
+//! ORB does) and the smoothing the descriptor reads (a 7-tap Gaussian, σ = 2 cut at ±3, as
+//! ORB, in both directions), its passes over whole rows in 16-bit integers, which the
+//! compiler vectorises.
 
+use crate::resample::Resampler;
 use crate::{BORDER_PX, GrayView, MAX_LEVELS, Params};
-
-/// Fractional bits of the bilinear weights.
-const WEIGHT_BITS: u32 = 8;
-/// The weight of a whole pixel.
-const WEIGHT_ONE: u16 = 1 << WEIGHT_BITS;
 
 /// Levels 1.. of the pyramid (level 0 is the caller's image) and the resampling buffers.
 #[derive(Default)]
@@ -19,17 +15,16 @@ pub(crate) struct Pyramid {
     sizes: [(usize, usize); MAX_LEVELS],
     /// Full-resolution pixels per pixel of every level.
     scales: [f32; MAX_LEVELS],
-    /// One source row pair blended vertically, weights included.
-    blend: Vec<u16>,
-    /// Per destination column: left source column and the right one's weight.
-    columns: Vec<(u32, u16)>,
+    /// The resampling's tables and rows.
+    resampler: Resampler,
 }
 
 impl Pyramid {
     /// Builds the levels of `image` that are large enough to hold a corner; returns how many
-    /// there are (0 when even `image` is too small).
+    /// there are (0 when even `image` is too small). `avx2`: the CPU has AVX2 (checked by
+    /// the caller), and the resampling uses its byte shuffles.
     #[inline(always)]
-    pub(crate) fn build(&mut self, image: GrayView<'_>, params: &Params) -> usize {
+    pub(crate) fn build(&mut self, image: GrayView<'_>, params: &Params, avx2: bool) -> usize {
         let (width, height) = (image.width(), image.height());
         // The smallest level worth building: room for one corner inside the border.
         let min_side = 2 * params.edge_px.max(BORDER_PX) + 1;
@@ -65,8 +60,7 @@ impl Pyramid {
             let Ok(source) = source else {
                 return level; // cannot happen: the buffer was sized for it
             };
-            let buffers = (&mut self.columns, &mut self.blend);
-            resample(source, pixels, width, buffers);
+            self.resampler.resample(source, pixels, width, avx2);
         }
         count
     }
@@ -87,62 +81,12 @@ impl Pyramid {
     }
 }
 
-/// Bilinear resampling of `source` into `out` (`width` × `height`, packed), pixel
-/// centres aligned: destination pixel `d` samples source position `(d + ½)·s − ½`.
-#[inline(always)]
-fn resample(
-    source: GrayView<'_>,
-    out: &mut [u8],
-    width: usize,
-    (columns, blend): (&mut Vec<(u32, u16)>, &mut Vec<u16>),
-) {
-    let sx = source.width() as f32 / width as f32;
-    let height = out.len() / width.max(1);
-    let sy = source.height() as f32 / height.max(1) as f32;
-    columns.clear();
-    columns.extend((0..width).map(|x| sample_at(x, sx, source.width())));
-    blend.resize(source.width(), 0);
-    for (y, row_out) in out.chunks_exact_mut(width).enumerate() {
-        let (top, w_bottom) = sample_at(y, sy, source.height());
-        let top = top as usize;
-        let bottom = (top + 1).min(source.height() - 1);
-        let (upper, lower) = (source.row(top), source.row(bottom));
-        let w_top = WEIGHT_ONE - w_bottom;
-        for ((b, &u), &l) in blend.iter_mut().zip(upper).zip(lower) {
-            *b = u16::from(u) * w_top + u16::from(l) * w_bottom;
-        }
-        let last = source.width() - 1;
-        for (o, &(left, w_right)) in row_out.iter_mut().zip(columns.iter()) {
-            let left = left as usize;
-            let right = (left + 1).min(last);
-            let sum = u32::from(blend[left]) * u32::from(WEIGHT_ONE - w_right)
-                + u32::from(blend[right]) * u32::from(w_right);
-            *o = ((sum + (1 << (2 * WEIGHT_BITS - 1))) >> (2 * WEIGHT_BITS)) as u8;
-        }
-    }
-}
-
-/// For destination index `d` at `scale` source pixels per destination pixel: the source
-/// index before the sample position and the weight of the one after it.
-fn sample_at(d: usize, scale: f32, source_len: usize) -> (u32, u16) {
-    let position = ((d as f32 + 0.5) * scale - 0.5).max(0.0);
-    let before = (position.floor() as usize).min(source_len - 1);
-    let weight = ((position - before as f32) * f32::from(WEIGHT_ONE)).round() as u16;
-    (before as u32, weight.min(WEIGHT_ONE))
-}
-
 /// The smoothed copy of one level, the image the descriptor compares.
 #[derive(Default)]
 pub(crate) struct Smoother {
     pixels: Vec<u8>,
     column_sums: Vec<u16>,
 }
-
-/// Weights of the 7-tap kernel (sum 64): a Gaussian of σ = 2 cut at ±3, as ORB smooths
-/// before its comparisons.
-const TAPS: [u16; 7] = [4, 9, 12, 14, 12, 9, 4];
-/// log2 of the kernel's sum.
-const TAP_BITS: u32 = 6;
 
 impl Smoother {
     /// `image` smoothed in both directions (edges clamped), packed (`None` never: the
@@ -158,7 +102,7 @@ impl Smoother {
                 std::array::from_fn(|k| image.row((y + k).saturating_sub(3).min(last_row)));
             let sums = &mut self.column_sums[..width];
             // One pass over the seven rows (equal lengths, known to the compiler).
-            let [a, b, c, d, e, f, g] = rows.map(|row| &row[..width]);
+            let [a, b, c, d, e, f, g]: [&[u8]; 7] = std::array::from_fn(|k| &rows[k][..width]);
             for (x, sum) in sums.iter_mut().enumerate() {
                 let pair = |p: &[u8], q: &[u8]| u16::from(p[x]) + u16::from(q[x]);
                 let s = TAPS[0] * pair(a, g)
@@ -172,6 +116,12 @@ impl Smoother {
         GrayView::packed(&self.pixels, width, height).ok()
     }
 }
+
+/// Weights of the 7-tap kernel (sum 64): a Gaussian of σ = 2 cut at ±3, as ORB smooths
+/// before its comparisons.
+const TAPS: [u16; 7] = [4, 9, 12, 14, 12, 9, 4];
+/// log2 of the kernel's sum.
+const TAP_BITS: u32 = 6;
 
 /// One row smoothed horizontally: `out[x]` from `sums[x − 3 ..= x + 3]`, edges clamped.
 #[inline(always)]

@@ -38,45 +38,64 @@ pub(crate) fn level_shares(pyramid: &Pyramid, count: usize, wanted: usize) -> [u
     shares
 }
 
-/// Keeps the candidates whose score is a strict maximum of their 3×3 neighbourhood in
-/// `scores` (ties go to the first in raster order), and orders them best first (then in
-/// raster order): all of them when `whole`, else only the first `wanted` (the rest after
-/// them in no order).
+/// Keeps the candidates (in raster order, as FAST lists them) whose score is a strict
+/// maximum of their 3×3 neighbourhood in `scores` (ties go to the first in raster order),
+/// and orders them best first, then in raster order: a counting sort on the 8-bit score
+/// (stable, so raster order holds within a score), through `scratch`.
 pub(crate) fn suppress_and_sort(
     image: GrayView<'_>,
     scores: &[u8],
     candidates: &mut Vec<Candidate>,
-    wanted: usize,
-    whole: bool,
+    scratch: &mut Vec<Candidate>,
 ) {
     let width = image.width();
-    candidates.retain(|c| {
+    // (A loop rather than `retain`, whose closure is not inlined into the AVX2 build.)
+    let mut kept = 0;
+    for k in 0..candidates.len() {
+        let c = candidates[k];
         let at = c.y as usize * width + c.x as usize;
         let s = c.score;
         let (above, below) = (at - width, at + width);
-        s > scores[above - 1]
+        let maximum = s > scores[above - 1]
             && s > scores[above]
             && s > scores[above + 1]
             && s > scores[at - 1]
             && s >= scores[at + 1]
             && s >= scores[below - 1]
             && s >= scores[below]
-            && s >= scores[below + 1]
-    });
-    let best_first = |a: &Candidate, b: &Candidate| {
-        b.score
-            .cmp(&a.score)
-            .then(a.y.cmp(&b.y))
-            .then(a.x.cmp(&b.x))
-    };
-    // The order is total (no two candidates share a position), so the first `wanted` are
-    // the same whichever way they are found.
-    if !whole && wanted < candidates.len() {
-        candidates.select_nth_unstable_by(wanted, best_first);
-        candidates[..wanted].sort_unstable_by(best_first);
-    } else {
-        candidates.sort_unstable_by(best_first);
+            && s >= scores[below + 1];
+        if maximum {
+            candidates[kept] = c;
+            kept += 1;
+        }
     }
+    candidates.truncate(kept);
+    let mut counts = [0usize; 256];
+    for c in candidates.iter() {
+        counts[usize::from(c.score)] += 1;
+    }
+    // Where each score's run starts, best score first.
+    let mut starts = [0usize; 256];
+    let mut before = 0;
+    for score in (0..256).rev() {
+        starts[score] = before;
+        before += counts[score];
+    }
+    scratch.clear();
+    scratch.resize(
+        candidates.len(),
+        Candidate {
+            x: 0,
+            y: 0,
+            score: 0,
+        },
+    );
+    for &c in candidates.iter() {
+        let start = &mut starts[usize::from(c.score)];
+        scratch[*start] = c;
+        *start += 1;
+    }
+    std::mem::swap(candidates, scratch);
 }
 
 /// The grid's buffers, kept between levels and images.

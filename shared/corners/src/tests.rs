@@ -435,3 +435,56 @@ fn degenerate_images_give_no_corners_and_bad_buffers_errors() {
         assert!(error.to_string().contains("corner parameter"));
     }
 }
+
+#[cfg(target_arch = "x86_64")]
+#[test]
+fn the_resampling_with_byte_shuffles_gives_the_pixels_of_the_plain_one() {
+    // The AVX2 horizontal pass against the pixel-by-pixel one, at scales where every group
+    // of 8 columns fits one shuffle (1.2, 1.44), where some do not (2.1) and none do (3.7),
+    // on widths that leave partial groups; and both against bilinear sampling written out.
+    assert!(
+        std::arch::is_x86_feature_detected!("avx2"),
+        "this test compares the AVX2 build; the CPU has no AVX2"
+    );
+    let mut state = 23;
+    for (width, height) in [(301, 97), (160, 120), (77, 41)] {
+        let pixels: Vec<u8> = (0..width * height)
+            .map(|_| (describe::tests_support::uniform(&mut state) * 256.0) as u8)
+            .collect();
+        let source = view(&pixels, width, height);
+        for scale in [1.2f32, 1.44, 2.1, 3.7] {
+            let (w, h) = (
+                (width as f32 / scale).round() as usize,
+                (height as f32 / scale).round() as usize,
+            );
+            let mut resampler = resample::Resampler::default();
+            let (mut shuffled, mut plain) = (vec![0u8; w * h], vec![0u8; w * h]);
+            resampler.resample(source, &mut shuffled, w, true);
+            resampler.resample(source, &mut plain, w, false);
+            assert_eq!(shuffled, plain, "{width}×{height} at {scale}");
+            // Bilinear with the same 8-bit weights, rounded once.
+            let (sx, sy) = (width as f32 / w as f32, height as f32 / h as f32);
+            let at = |d: usize, s: f32, len: usize| {
+                let p = ((d as f32 + 0.5) * s - 0.5).max(0.0);
+                let before = (p.floor() as usize).min(len - 1);
+                let weight = (((p - before as f32) * 256.0).round() as u32).min(256);
+                (before, (before + 1).min(len - 1), weight)
+            };
+            for y in 0..h {
+                let (t, b, wy) = at(y, sy, height);
+                for x in 0..w {
+                    let (l, r, wx) = at(x, sx, width);
+                    let p = |yy: usize, xx: usize| u32::from(pixels[yy * width + xx]);
+                    let row = |yy| p(yy, l) * (256 - wx) + p(yy, r) * wx;
+                    let sum = row(t) * (256 - wy) + row(b) * wy;
+                    let expected = ((sum + (1 << 15)) >> 16) as u8;
+                    assert_eq!(
+                        plain[y * w + x],
+                        expected,
+                        "({x}, {y}) {width}×{height} at {scale}"
+                    );
+                }
+            }
+        }
+    }
+}
