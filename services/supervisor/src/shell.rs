@@ -14,7 +14,8 @@ use anyhow::{Context, bail};
 use clock::Clock;
 use linetrack_ipc::{Bus, Inlet, LocalHub, Outlet, Scope, Shutdown, Wake};
 use linetrack_msgs::{
-    Command, Control, PoseRecord, StageKind, StatusKind, StatusReport, Topic, TracksHeader,
+    Command, Control, PIPELINE, PoseRecord, StageKind, StatusKind, StatusReport, Topic,
+    TracksHeader,
 };
 use linetrack_pipeline_config::PipelineConfig;
 use linetrack_run_record::RunEnd;
@@ -128,7 +129,7 @@ impl<'m> Supervisor<'m> {
                 ROS2_SOURCE.0
             );
         }
-        for stage in StageKind::PROCESSING {
+        for stage in PIPELINE.iter().filter(|n| n.supervised()).map(|n| n.stage) {
             let bin = bin_dir.join(stage_binary(config, stage));
             if options.mode == Mode::Processes && !bin.is_file() {
                 if ros2_images && stage == StageKind::FrameSource {

@@ -625,6 +625,7 @@ mod role_tests;
 mod tests {
     use super::*;
     use linetrack_msgs::SegmentsHeader;
+    use linetrack_msgs::StampSlot;
 
     #[test]
     fn every_detector_has_its_own_wire_name_and_back() {
@@ -858,7 +859,7 @@ mod tests {
             (first.detection.left_count, got[0].payload()[0]),
             (1, record)
         );
-        let stamp = first.frame.stamps[1];
+        let stamp = first.frame.stamps[StampSlot::LineDetector];
         assert_eq!(stamp.end_ns - stamp.start_ns, 7_000_000, "{stamp:?}");
         // A failed frame publishes the placeholder alone, not what the work left.
         assert_eq!(got[3].payload(), [SegmentRecord::default()]);

@@ -5,7 +5,8 @@ use crate::{Clock, Sink, Source, SourceOut, StageContext, Step, run_sink, run_so
 use crossbeam_channel::{Receiver, RecvTimeoutError};
 use linetrack_ipc::{Bus, Inlet, Shutdown};
 use linetrack_msgs::{
-    Command, Control, FrameHeader, FrameStatus, StageKind, StatusKind, StatusReport, Topic,
+    Command, Control, FrameHeader, FrameStatus, StageKind, StampSlot, StatusKind, StatusReport,
+    Topic,
 };
 use linetrack_pipeline_config::PipelineConfig;
 use std::path::PathBuf;
@@ -149,7 +150,7 @@ fn a_source_fed_by_a_callback_publishes_stamps_counts_finishes_and_stays_until_s
         .iter()
         .map(|m| {
             let h = m.header();
-            let stamp = h.stamps[0];
+            let stamp = h.stamps[StampSlot::FrameSource];
             assert_eq!(
                 (stamp.start_ns, stamp.end_ns),
                 (clock.now_ns(), clock.now_ns())
