@@ -14,8 +14,8 @@ use crate::{LinkError, peer_config};
 use crossbeam_channel::{Receiver, Sender, TrySendError};
 use linetrack_ipc::{Bus, Inlet, Record};
 use linetrack_msgs::{
-    FrameHeader, PoseRecord, SegmentRecord, SegmentsHeader, StageKind, StatusReport, Topic,
-    TopicOf, TrackedLine, TracksHeader, topics,
+    FrameHeader, PoseRecord, SegmentRecord, SegmentsHeader, StageKind, StatusReport, TopicOf,
+    TrackedLine, TracksHeader, topics,
 };
 use linetrack_pipeline_config::LinkConfig;
 use serde::Serialize;

@@ -5,7 +5,7 @@ use linetrack_ipc::{Bus, Inlet, Shutdown};
 use linetrack_mcap::Recording;
 use linetrack_msgs::{
     FrameHeader, PoseRecord, RigRecord, SegmentRecord, SegmentsHeader, StageKind, StatusKind,
-    StatusReport, Topic, TrackedLine, TracksHeader, now_ns, topics,
+    StatusReport, TrackedLine, TracksHeader, now_ns, topics,
 };
 use linetrack_stage_runtime::{GapWatch, Sink, StageContext, run_sink};
 use std::collections::BTreeMap;

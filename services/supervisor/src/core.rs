@@ -961,6 +961,20 @@ mod tests {
             .collect()
     }
 
+    /// The spawns of [`Event::Start`] with [`PIPELINE`] and the test config.
+    fn stages_spawned() -> Vec<(StageKind, Option<DetectorKind>, bool, bool)> {
+        vec![
+            (
+                StageKind::LineDetector,
+                Some(DetectorKind::Lsd),
+                false,
+                false,
+            ),
+            (StageKind::Matcher, None, false, false),
+            (StageKind::PoseEstimator, None, false, false),
+        ]
+    }
+
     fn finish(actions: &[Action]) -> Option<End> {
         actions.iter().find_map(|a| match a {
             Action::Finish(end) => Some(end.clone()),
@@ -972,19 +986,7 @@ mod tests {
     fn the_source_starts_once_the_stages_are_ready_and_the_outputs_settled_or_the_start_fails() {
         let mut run = Run::new(&config());
         let started = spawns(&run.on(Event::Start));
-        assert_eq!(
-            started,
-            [
-                (
-                    StageKind::LineDetector,
-                    Some(DetectorKind::Lsd),
-                    false,
-                    false
-                ),
-                (StageKind::Matcher, None, false, false),
-                (StageKind::PoseEstimator, None, false, false),
-            ]
-        );
+        assert_eq!(started, stages_spawned());
         run.report(run.pid(StageKind::LineDetector), StatusKind::Ready, 0);
         run.report(run.pid(StageKind::Matcher), StatusKind::Ready, 0);
         assert!(
@@ -1095,20 +1097,9 @@ mod tests {
         let observer = StageKind::Link;
         let mut run = Run::of(&config(), with_observer(false));
         let started = spawns(&run.on(Event::Start));
-        assert_eq!(
-            started,
-            [
-                (
-                    StageKind::LineDetector,
-                    Some(DetectorKind::Lsd),
-                    false,
-                    false
-                ),
-                (StageKind::Matcher, None, false, false),
-                (StageKind::PoseEstimator, None, false, false),
-                (observer, None, false, false),
-            ]
-        );
+        let mut expected = stages_spawned();
+        expected.push((observer, None, false, false));
+        assert_eq!(started, expected);
         for stage in declared(Start::WithStages) {
             run.report(run.pid(stage), StatusKind::Ready, 0);
         }
