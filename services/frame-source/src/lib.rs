@@ -249,7 +249,7 @@ fn read_in_background(nice: i32) {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use linetrack_msgs::{StatusKind, StatusReport, Topic};
+    use linetrack_msgs::{StatusKind, StatusReport, topics};
     use linetrack_stage_runtime::Clock;
 
     #[test]
@@ -313,10 +313,10 @@ mod tests {
         let bus = Bus::local();
         let hub = bus.local_hub().unwrap_or_else(|| panic!("a local bus"));
         let mut status = bus
-            .inlet::<StatusReport, ()>(Topic::Status)
+            .inlet::<StatusReport, ()>(topics::STATUS)
             .unwrap_or_else(|e| panic!("{e}"));
         let mut frames = bus
-            .inlet::<u8, linetrack_msgs::FrameHeader>(Topic::Frames)
+            .inlet::<u8, linetrack_msgs::FrameHeader>(topics::FRAMES)
             .unwrap_or_else(|e| panic!("{e}"));
         // The reading thread is held before its first frame until the test lets it go.
         let (release, held) = crossbeam_channel::bounded::<()>(0);

@@ -6,8 +6,10 @@
 //! until the running one hands over; no frame is lost or published twice.
 
 use linetrack_ipc::{Bus, Shutdown};
-use linetrack_msgs::{Detector as WireDetector, FrameHeader, SegmentRecord, SegmentsHeader};
-use linetrack_msgs::{StageKind, Topic};
+use linetrack_msgs::StageKind;
+use linetrack_msgs::{
+    Detector as WireDetector, FrameHeader, SegmentRecord, SegmentsHeader, TopicOf, topics,
+};
 use linetrack_stage_runtime::{
     Images, RightImageWorker, Stage, StageContext, detector_on_wire, run_stage, stereo_views,
     to_record,
@@ -93,8 +95,8 @@ impl Stage for Detector {
     type Output = SegmentRecord;
     type OutputHeader = SegmentsHeader;
     const KIND: StageKind = StageKind::LineDetector;
-    const INPUT: Topic = Topic::Frames;
-    const OUTPUT: Topic = Topic::Segments;
+    const INPUT: TopicOf<Self::Input, Self::InputHeader> = topics::FRAMES;
+    const OUTPUT: TopicOf<Self::Output, Self::OutputHeader> = topics::SEGMENTS;
     const OUTPUT_LEN: usize = 256;
 
     fn joins_images(&self) -> bool {

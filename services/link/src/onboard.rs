@@ -14,8 +14,8 @@ use crate::{LinkError, peer_config};
 use crossbeam_channel::{Receiver, Sender, TrySendError};
 use linetrack_ipc::{Bus, Inlet, Record};
 use linetrack_msgs::{
-    FrameHeader, PoseRecord, SegmentRecord, SegmentsHeader, StageKind, StatusReport, Topic,
-    TrackedLine, TracksHeader,
+    FrameHeader, PoseRecord, SegmentRecord, SegmentsHeader, StageKind, StatusReport, TopicOf,
+    TrackedLine, TracksHeader, topics,
 };
 use linetrack_pipeline_config::LinkConfig;
 use serde::Serialize;
@@ -89,7 +89,7 @@ fn inlet_if<P: Record, H: Record>(
     config: &LinkConfig,
     bus: &Bus,
     name: &str,
-    topic: Topic,
+    topic: TopicOf<P, H>,
 ) -> Result<Option<Inlet<P, H>>, LinkError> {
     Ok(if config.allows(name) {
         Some(bus.inlet(topic)?)
@@ -158,15 +158,15 @@ impl Onboard {
             publishers.insert(topic.clone(), publisher);
         }
         let inlets = Inlets {
-            poses: inlet_if(config, bus, "poses", Topic::Poses)?,
-            status: inlet_if(config, bus, "status", Topic::Status)?,
-            segments: inlet_if(config, bus, "segments", Topic::Segments)?,
-            tracks: inlet_if(config, bus, "tracks", Topic::Tracks)?,
-            frames: inlet_if(config, bus, "images", Topic::Frames)?,
+            poses: inlet_if(config, bus, "poses", topics::POSES)?,
+            status: inlet_if(config, bus, "status", topics::STATUS)?,
+            segments: inlet_if(config, bus, "segments", topics::SEGMENTS)?,
+            tracks: inlet_if(config, bus, "tracks", topics::TRACKS)?,
+            frames: inlet_if(config, bus, "images", topics::FRAMES)?,
         };
         let frame_counter = match inlets.poses {
             Some(_) => None,
-            None => Some(bus.inlet::<PoseRecord, TracksHeader>(Topic::Poses)?),
+            None => Some(bus.inlet::<PoseRecord, TracksHeader>(topics::POSES)?),
         };
         tracing::info!(
             "link: listening on {}, forwarding {:?} under {}/",

@@ -11,8 +11,8 @@
 use linetrack_geometry::MatchCase;
 use linetrack_ipc::{Bus, Received, Shutdown};
 use linetrack_msgs::{
-    Command, Control, MatcherMode, Matching, SegmentRecord, SegmentsHeader, StageKind, Topic,
-    TrackedLine, TracksHeader, decode,
+    Command, Control, MatcherMode, Matching, SegmentRecord, SegmentsHeader, StageKind, TopicOf,
+    TrackedLine, TracksHeader, decode, topics,
 };
 use linetrack_pipeline_config::MatcherPolicy;
 use linetrack_stage_runtime::{
@@ -239,8 +239,8 @@ impl Stage for FrameMatcher {
     type Output = TrackedLine;
     type OutputHeader = TracksHeader;
     const KIND: StageKind = StageKind::Matcher;
-    const INPUT: Topic = Topic::Segments;
-    const OUTPUT: Topic = Topic::Tracks;
+    const INPUT: TopicOf<Self::Input, Self::InputHeader> = topics::SEGMENTS;
+    const OUTPUT: TopicOf<Self::Output, Self::OutputHeader> = topics::TRACKS;
     const OUTPUT_LEN: usize = 128;
 
     fn joins_images(&self) -> bool {

@@ -15,7 +15,8 @@ use anyhow::Context;
 use linetrack_geometry::{Segment, StereoRig};
 use linetrack_ipc::{Bus, Inlet, Received, Shutdown};
 use linetrack_msgs::{
-    FrameHeader, NO_FRAME, PoseRecord, RigRecord, StageKind, Topic, TrackedLine, TracksHeader,
+    FrameHeader, NO_FRAME, PoseRecord, RigRecord, StageKind, Topic, TopicOf, TrackedLine,
+    TracksHeader, topics,
 };
 use linetrack_odometry::{
     Features, FrameStats, MatchedLines, MotionTracker, OdometryConfig, PoseCovariance, Preparation,
@@ -356,7 +357,7 @@ impl PoseStage {
     pub fn new(ctx: &StageContext, bus: &Bus) -> anyhow::Result<Self> {
         Ok(Self {
             tracker: PoseTracker::new(ctx)?,
-            rig: bus.inlet(Topic::Rig)?,
+            rig: bus.inlet(topics::RIG)?,
             points: ctx.config.odometry.features == Features::PointsAndLines,
         })
     }
@@ -368,8 +369,8 @@ impl Stage for PoseStage {
     type Output = PoseRecord;
     type OutputHeader = TracksHeader;
     const KIND: StageKind = StageKind::PoseEstimator;
-    const INPUT: Topic = Topic::Tracks;
-    const OUTPUT: Topic = Topic::Poses;
+    const INPUT: TopicOf<Self::Input, Self::InputHeader> = topics::TRACKS;
+    const OUTPUT: TopicOf<Self::Output, Self::OutputHeader> = topics::POSES;
     const OUTPUT_LEN: usize = 1;
 
     fn joins_images(&self) -> bool {

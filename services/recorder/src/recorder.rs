@@ -5,7 +5,7 @@ use linetrack_ipc::{Bus, Inlet, Shutdown};
 use linetrack_mcap::Recording;
 use linetrack_msgs::{
     FrameHeader, PoseRecord, RigRecord, SegmentRecord, SegmentsHeader, StageKind, StatusKind,
-    StatusReport, Topic, TrackedLine, TracksHeader, now_ns,
+    StatusReport, TrackedLine, TracksHeader, now_ns, topics,
 };
 use linetrack_stage_runtime::{GapWatch, Sink, StageContext, run_sink};
 use std::collections::BTreeMap;
@@ -40,12 +40,12 @@ struct Recorder {
 pub fn run(ctx: &StageContext, bus: &Bus, shutdown: &Shutdown) -> anyhow::Result<()> {
     run_sink(ctx, bus, shutdown, |bus| {
         let inlets = Inlets {
-            frames: bus.inlet(Topic::Frames)?,
-            segments: bus.inlet(Topic::Segments)?,
-            tracks: bus.inlet(Topic::Tracks)?,
-            poses: bus.inlet(Topic::Poses)?,
-            status: bus.inlet(Topic::Status)?,
-            rig: bus.inlet(Topic::Rig)?,
+            frames: bus.inlet(topics::FRAMES)?,
+            segments: bus.inlet(topics::SEGMENTS)?,
+            tracks: bus.inlet(topics::TRACKS)?,
+            poses: bus.inlet(topics::POSES)?,
+            status: bus.inlet(topics::STATUS)?,
+            rig: bus.inlet(topics::RIG)?,
         };
         let record = &ctx.config.record;
         let path = record.file(&ctx.args.run_dir);

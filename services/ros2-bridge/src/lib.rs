@@ -39,7 +39,7 @@ pub mod sensor_msgs;
 use convert::PathWindow;
 use health::Health;
 use linetrack_ipc::{Bus, Shutdown};
-use linetrack_msgs::{PoseRecord, StageKind, StatusKind, StatusReport, Topic, TracksHeader};
+use linetrack_msgs::{PoseRecord, StageKind, StatusKind, StatusReport, TracksHeader, topics};
 use linetrack_pipeline_config::BudgetConfig;
 use linetrack_pipeline_config::Ros2Config;
 use nalgebra::Isometry3;
@@ -248,10 +248,10 @@ pub fn run(
     make_sink: impl FnOnce() -> Result<Box<dyn PoseSink>, BridgeError>,
 ) -> Result<Tally, BridgeError> {
     // Subscribed before ready is said: no pose published after that is missed.
-    let mut poses = bus.inlet::<PoseRecord, TracksHeader>(Topic::Poses)?;
+    let mut poses = bus.inlet::<PoseRecord, TracksHeader>(topics::POSES)?;
     let wake = bus.wake(StageKind::Supervisor)?;
     let mut sink = make_sink()?;
-    let mut status = bus.outlet::<StatusReport, ()>(Topic::Status, 1)?;
+    let mut status = bus.outlet::<StatusReport, ()>(topics::STATUS, 1)?;
     let ready = StatusReport {
         stage: StageKind::Ros2Bridge.into(),
         pid: std::process::id(),

@@ -9,33 +9,29 @@
 //! processes settled) or the start-up has failed; restarts with backoff up to the limit
 //! ([`Backoff`]); which exits end the run (a stage that never got ready, one past its
 //! limit) and which are expected (handed over, finished); hangs ([`Watchdog`]); the hot
-//! swap of a stage of [`HOT_SWAPPABLE`], the detector or the matcher (a standby started,
+//! swap of a node declared `hot_swap`, the detector or the matcher (a standby started,
 //! the running one asked to hand over, the standby told to take over, or abandoned when it
 //! dies); the automatic detector swap
 //! ([`DetectorPolicy`]); the matcher's LBD/ℓ1 mode ([`FallbackController`]); when the run is complete or its drain ran
 //! out; and the ordered stop (every stage asked, killed after the grace, the optional
 //! processes last).
+//!
+//! Which nodes it starts, when, in which order, and which it restarts or may hot-swap, it
+//! reads from the pipeline's declaration ([`PIPELINE`]); a test hands it another one.
 
 use crate::clock::{Backoff, Every, Timeout, Watchdog, restart_backoff};
 use crate::detector_policy::DetectorPolicy;
 use crate::fallback::FallbackController;
+use linetrack_msgs::pipeline::{NodeDecl, PIPELINE, Restart, Start, node_in};
 use linetrack_msgs::{
     Command, MatcherMode, PoseRecord, StageKind, StatusKind, StatusReport, TracksHeader,
 };
 use linetrack_pipeline_config::{MatcherPolicy, OnRecordError, PipelineConfig};
 use linetrack_vision::DetectorKind;
 use std::time::Duration;
-pub use swap::HOT_SWAPPABLE;
 
 /// How often `status.json` is rewritten while the run goes.
 const STATUS_FILE_EVERY: Duration = Duration::from_millis(200);
-
-/// The stages started first; the frame source starts once they are all ready.
-const BEFORE_SOURCE: [StageKind; 3] = [
-    StageKind::LineDetector,
-    StageKind::Matcher,
-    StageKind::PoseEstimator,
-];
 
 /// Something that happened, as the shell saw it.
 #[derive(Debug, Clone, PartialEq)]
@@ -67,8 +63,8 @@ pub enum Event {
     },
     /// `linetrack ctl` asked for a detector swap.
     SwapRequest(DetectorKind),
-    /// `linetrack ctl` asked for a fresh instance of a hot-swappable stage (see
-    /// [`HOT_SWAPPABLE`]) to take over from the running one.
+    /// `linetrack ctl` asked for a fresh instance of a stage declared `hot_swap` to take over
+    /// from the running one.
     SwapStage(StageKind),
     /// An instance ended.
     Exited {
@@ -217,6 +213,8 @@ pub struct Instance {
 /// The supervisor's state.
 #[derive(Debug)]
 pub struct Core {
+    /// The pipeline's declaration: what is started when, restarted and hot-swappable.
+    nodes: &'static [NodeDecl],
     instances: Vec<Instance>,
     /// Each stage's restarts, by stage (a stage not in it has not died yet).
     restarts: Vec<(StageKind, Backoff)>,
@@ -245,11 +243,21 @@ pub struct Core {
 }
 
 impl Core {
-    /// The core of a run of `config`; `live_status`: print the status line.
+    /// The core of a run of `config` of [`PIPELINE`]; `live_status`: print the status line.
     pub fn new(config: &PipelineConfig, live_status: bool) -> Self {
+        Self::declared(config, live_status, PIPELINE)
+    }
+
+    /// The core of a run of `config` of the pipeline `nodes` declares.
+    pub fn declared(
+        config: &PipelineConfig,
+        live_status: bool,
+        nodes: &'static [NodeDecl],
+    ) -> Self {
         let supervisor = &config.supervisor;
         let status_every = Duration::from_millis(supervisor.status_every_ms);
         Self {
+            nodes,
             instances: Vec::new(),
             restarts: Vec::new(),
             first_backoff: restart_backoff(supervisor),
@@ -328,7 +336,7 @@ impl Core {
         let mut actions = Vec::new();
         match event {
             Event::Start => {
-                for stage in BEFORE_SOURCE {
+                for stage in self.started(Start::WithStages) {
                     actions.push(self.spawn(stage, false));
                 }
                 self.waiting.expired(now);
@@ -548,6 +556,13 @@ impl Core {
                 p.pid
             )));
         }
+        if !self.restartable(p.stage) {
+            actions.push(Action::Finish(End::Failed(format!(
+                "{} (pid {}) died and is not declared restartable: {status}{last_words}",
+                p.stage, p.pid
+            ))));
+            return;
+        }
         if let Err(given_up) = self.backoff_of(p.stage).schedule(now) {
             actions.push(Action::Finish(End::Failed(format!(
                 "{} died {} times (restart limit {}): giving up; the last time {status}{last_words}",
@@ -600,8 +615,10 @@ impl Core {
             }
         }
         if !self.source_started {
-            if progress.optional_settled && self.all_ready(&BEFORE_SOURCE) {
-                actions.push(self.spawn(StageKind::FrameSource, false));
+            if progress.optional_settled && self.all_ready(&self.started(Start::WithStages)) {
+                for stage in self.started(Start::AfterStages) {
+                    actions.push(self.spawn(stage, false));
+                }
                 self.source_started = true;
             } else if self.waiting.expired(now) {
                 let not_ready: Vec<&str> = self
@@ -658,7 +675,7 @@ impl Core {
         if self.stopping.is_some() {
             return;
         }
-        for stage in StageKind::PROCESSING {
+        for stage in self.supervised() {
             actions.push(Action::Send {
                 stage,
                 pid: 0,
@@ -695,8 +712,13 @@ impl Core {
         let i = match self.restarts.iter().position(|(s, _)| *s == stage) {
             Some(i) => i,
             None => {
-                // Kept in the pipeline's order: restarts due at once start in that order.
-                let order = |s: StageKind| s.stamp_index().unwrap_or(usize::MAX);
+                // Kept in the declaration's order: restarts due at once start in that order.
+                let order = |s: StageKind| {
+                    self.nodes
+                        .iter()
+                        .position(|n| n.stage == s)
+                        .unwrap_or(usize::MAX)
+                };
                 let at = self
                     .restarts
                     .iter()
@@ -707,6 +729,34 @@ impl Core {
             }
         };
         &mut self.restarts[i].1
+    }
+
+    /// The nodes declared to start at `start`, in the declaration's order.
+    fn started(&self, start: Start) -> Vec<StageKind> {
+        self.nodes
+            .iter()
+            .filter(|n| n.start == start)
+            .map(|n| n.stage)
+            .collect()
+    }
+
+    /// The nodes the supervisor starts and stops, in the declaration's order.
+    fn supervised(&self) -> Vec<StageKind> {
+        self.nodes
+            .iter()
+            .filter(|n| n.supervised())
+            .map(|n| n.stage)
+            .collect()
+    }
+
+    /// Whether `stage` is declared restartable with backoff.
+    fn restartable(&self, stage: StageKind) -> bool {
+        node_in(self.nodes, stage).is_some_and(|n| n.restart == Restart::Backoff)
+    }
+
+    /// Whether `stage` is declared hot-swappable.
+    fn hot_swappable(&self, stage: StageKind) -> bool {
+        node_in(self.nodes, stage).is_some_and(|n| n.hot_swap)
     }
 
     fn all_ready(&self, stages: &[StageKind]) -> bool {
@@ -724,7 +774,9 @@ mod swap;
 mod tests {
     use super::*;
     use crate::clock::Clock;
+    use linetrack_msgs::pipeline::Role;
     use linetrack_msgs::{FrameHeader, FrameStatus};
+    use linetrack_msgs::{StampSlot, Topic};
     use linetrack_pipeline_config::SupervisorConfig;
     use linetrack_stage_runtime::detector_on_wire;
 
@@ -758,10 +810,24 @@ mod tests {
         pids: Vec<(StageKind, u32)>,
     }
 
+    /// The nodes of [`PIPELINE`] started at `start`, in its order.
+    fn declared(start: Start) -> Vec<StageKind> {
+        PIPELINE
+            .iter()
+            .filter(|n| n.start == start)
+            .map(|n| n.stage)
+            .collect()
+    }
+
     impl Run {
         fn new(config: &PipelineConfig) -> Self {
+            Self::of(config, PIPELINE)
+        }
+
+        /// A run of the pipeline `nodes` declares.
+        fn of(config: &PipelineConfig, nodes: &'static [NodeDecl]) -> Self {
             Self {
-                core: Core::new(config, false),
+                core: Core::declared(config, false, nodes),
                 clock: Clock::manual(0),
                 next_pid: 100,
                 pids: Vec::new(),
@@ -841,7 +907,7 @@ mod tests {
         fn running(config: &PipelineConfig) -> Self {
             let mut run = Self::new(config);
             run.on(Event::Start);
-            for stage in BEFORE_SOURCE {
+            for stage in declared(Start::WithStages) {
                 run.report(run.pid(stage), StatusKind::Ready, 0);
             }
             let started = spawns(&run.tick());
@@ -895,6 +961,20 @@ mod tests {
             .collect()
     }
 
+    /// The spawns of [`Event::Start`] with [`PIPELINE`] and the test config.
+    fn stages_spawned() -> Vec<(StageKind, Option<DetectorKind>, bool, bool)> {
+        vec![
+            (
+                StageKind::LineDetector,
+                Some(DetectorKind::Lsd),
+                false,
+                false,
+            ),
+            (StageKind::Matcher, None, false, false),
+            (StageKind::PoseEstimator, None, false, false),
+        ]
+    }
+
     fn finish(actions: &[Action]) -> Option<End> {
         actions.iter().find_map(|a| match a {
             Action::Finish(end) => Some(end.clone()),
@@ -906,19 +986,7 @@ mod tests {
     fn the_source_starts_once_the_stages_are_ready_and_the_outputs_settled_or_the_start_fails() {
         let mut run = Run::new(&config());
         let started = spawns(&run.on(Event::Start));
-        assert_eq!(
-            started,
-            [
-                (
-                    StageKind::LineDetector,
-                    Some(DetectorKind::Lsd),
-                    false,
-                    false
-                ),
-                (StageKind::Matcher, None, false, false),
-                (StageKind::PoseEstimator, None, false, false),
-            ]
-        );
+        assert_eq!(started, stages_spawned());
         run.report(run.pid(StageKind::LineDetector), StatusKind::Ready, 0);
         run.report(run.pid(StageKind::Matcher), StatusKind::Ready, 0);
         assert!(
@@ -941,7 +1009,7 @@ mod tests {
         stuck.report(stuck.pid(StageKind::Matcher), StatusKind::Ready, 0);
         // The watchdog's startup timeout is the same 30 s: reports keep them alive here.
         stuck.clock.advance(30_000 * MS);
-        for stage in BEFORE_SOURCE {
+        for stage in declared(Start::WithStages) {
             stuck.report(stuck.pid(stage), StatusKind::Heartbeat, 0);
         }
         assert_eq!(finish(&stuck.tick()), None);
@@ -1001,9 +1069,48 @@ mod tests {
         }
     }
 
+    /// An observer node the shipped pipeline does not have, woken by the poses, started
+    /// with the stages and restarted with backoff; `hot_swap` as given. (A node needs a
+    /// wire code: the link's kind stands in for a new one.)
+    fn with_observer(hot_swap: bool) -> &'static [NodeDecl] {
+        let observer = NodeDecl {
+            wakes_on: &[Topic::Poses, Topic::Control],
+            start: Start::WithStages,
+            restart: Restart::Backoff,
+            hot_swap,
+            ..NodeDecl::new(StageKind::Link, Role::Observer, "linetrack-observer")
+        };
+        let mut nodes: Vec<NodeDecl> = PIPELINE
+            .iter()
+            .filter(|n| n.stage != observer.stage)
+            .copied()
+            .collect();
+        nodes.push(observer);
+        Vec::leak(nodes)
+    }
+
+    /// Adding a node is one entry in the declaration: the core starts it with the stages,
+    /// waits for it before the source, restarts it on its own backoff (the other stages'
+    /// restarts untouched), hot-swaps it only when declared so, and stops it with the rest.
     #[test]
-    fn each_stage_has_restarts_of_its_own_a_node_beyond_the_four_too() {
-        let mut run = Run::running(&config());
+    fn a_declared_observer_is_started_waited_for_restarted_and_stopped_like_a_stage() {
+        let observer = StageKind::Link;
+        let mut run = Run::of(&config(), with_observer(false));
+        let started = spawns(&run.on(Event::Start));
+        let mut expected = stages_spawned();
+        expected.push((observer, None, false, false));
+        assert_eq!(started, expected);
+        for stage in declared(Start::WithStages) {
+            run.report(run.pid(stage), StatusKind::Ready, 0);
+        }
+        assert!(spawns(&run.tick()).is_empty(), "the observer is not ready");
+        run.report(run.pid(observer), StatusKind::Ready, 0);
+        assert_eq!(
+            spawns(&run.tick()),
+            [(StageKind::FrameSource, None, false, false)]
+        );
+        run.report(run.pid(StageKind::FrameSource), StatusKind::Ready, 0);
+
         // The matcher has used one restart.
         run.exit(run.pid(StageKind::Matcher), false);
         run.clock.advance(200 * MS);
@@ -1012,20 +1119,12 @@ mod tests {
             [("restart", "restart 1 of 2".to_string())]
         );
         run.report(run.pid(StageKind::Matcher), StatusKind::Ready, 0);
-        // A node that is none of the four processing stages, supervised the same way.
-        let extra = 900;
-        run.on(Event::Spawned {
-            stage: StageKind::Recorder,
-            pid: extra,
-            detector: None,
-            standby: false,
-        });
-        run.report(extra, StatusKind::Ready, 0);
-        for pid in [extra, run.pid(StageKind::FrameSource)] {
+        // The observer and the source die at once: both restart after the first backoff,
+        // each its first restart, in the declaration's order.
+        for pid in [run.pid(observer), run.pid(StageKind::FrameSource)] {
             let crashed = run.exit(pid, false);
-            assert_eq!(finish(&crashed), None);
+            assert_eq!(finish(&crashed), None, "{crashed:?}");
         }
-        // Both restart after the first backoff, each its first restart.
         run.clock.advance(199 * MS);
         assert!(spawns(&run.tick()).is_empty());
         run.clock.advance(MS);
@@ -1034,7 +1133,7 @@ mod tests {
             spawns(&restarted),
             [
                 (StageKind::FrameSource, None, false, true),
-                (StageKind::Recorder, None, false, true)
+                (observer, None, false, true)
             ]
         );
         assert_eq!(
@@ -1052,6 +1151,58 @@ mod tests {
         assert_eq!(
             records(&run.tick()),
             [("restart", "restart 2 of 2".to_string())]
+        );
+        run.report(run.pid(StageKind::Matcher), StatusKind::Ready, 0);
+
+        // Not declared hot-swappable: a swap is refused.
+        let refused = run.on(Event::SwapStage(observer));
+        assert!(spawns(&refused).is_empty() && records(&refused).is_empty());
+        // Stopped with the stages, in the declaration's order.
+        let stop = run.on(Event::Stop);
+        assert_eq!(
+            sent(&stop),
+            [
+                StageKind::FrameSource,
+                StageKind::LineDetector,
+                StageKind::Matcher,
+                StageKind::PoseEstimator,
+                observer
+            ]
+            .map(|s| (Command::Shutdown, s, 0, 0))
+        );
+
+        // Declared hot-swappable, it hands over to a standby like the matcher.
+        let mut swappable = Run::of(&config(), with_observer(true));
+        swappable.on(Event::Start);
+        for stage in declared(Start::WithStages).into_iter().chain([observer]) {
+            swappable.report(swappable.pid(stage), StatusKind::Ready, 0);
+        }
+        let old = swappable.pid(observer);
+        let asked = swappable.on(Event::SwapStage(observer));
+        assert_eq!(spawns(&asked), [(observer, None, true, false)]);
+        let standby = swappable.pid(observer);
+        let ready = swappable.report(standby, StatusKind::Ready, 7);
+        assert_eq!(sent(&ready), [(Command::HandOver, observer, old, 7)]);
+        let handed = swappable.report(old, StatusKind::HandedOver, 7);
+        assert_eq!(sent(&handed), [(Command::TakeOver, observer, standby, 7)]);
+        assert!(swappable.core.expects_exit(old, true));
+
+        // A node declared without restarts ends the run when it dies.
+        let mut outputs = Run::running(&config());
+        outputs.on(Event::Spawned {
+            stage: StageKind::Recorder,
+            pid: 900,
+            detector: None,
+            standby: false,
+        });
+        outputs.report(900, StatusKind::Ready, 0);
+        let died = outputs.exit(900, false);
+        assert_eq!(
+            finish(&died),
+            Some(End::Failed(
+                "recorder (pid 900) died and is not declared restartable: exit status: 1"
+                    .to_string()
+            ))
         );
     }
 
@@ -1309,8 +1460,8 @@ mod tests {
         let slow = |id: u64| {
             let mut h = TracksHeader::from(FrameHeader::new(id, 0, 1));
             h.detection.detector = detector_on_wire(DetectorKind::Lsd).into();
-            h.frame.stamps[1].start_ns = 1_000_000_000;
-            h.frame.stamps[1].end_ns = 1_080_000_000;
+            h.frame.stamps[StampSlot::LineDetector].start_ns = 1_000_000_000;
+            h.frame.stamps[StampSlot::LineDetector].end_ns = 1_080_000_000;
             h
         };
         assert!(spawns(&pose(&mut run, slow(0), true)).is_empty());
@@ -1456,7 +1607,7 @@ mod tests {
         assert!(records(&exited).is_empty() && finish(&exited).is_none());
         assert_eq!(finish(&run.tick()), None, "the drain starts");
         run.clock.advance(5000 * MS);
-        for stage in BEFORE_SOURCE {
+        for stage in declared(Start::WithStages) {
             run.report(run.pid(stage), StatusKind::Heartbeat, 0);
         }
         assert_eq!(finish(&run.tick()), None);

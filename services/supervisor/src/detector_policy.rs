@@ -143,6 +143,7 @@ impl DetectorPolicy {
 mod tests {
     use super::*;
     use linetrack_msgs::FrameStatus;
+    use linetrack_msgs::StampSlot;
     use linetrack_stage_runtime::detector_on_wire;
 
     /// Frame `id` detected by `kind` in `ms` milliseconds (from its stamps).
@@ -150,7 +151,7 @@ mod tests {
         let mut h = TracksHeader::default();
         h.frame.frame_id = id;
         h.detection.detector = detector_on_wire(kind).into();
-        let stamp = &mut h.frame.stamps[1];
+        let stamp = &mut h.frame.stamps[StampSlot::LineDetector];
         stamp.start_ns = 5_000_000_000 + id * 50_000_000;
         stamp.end_ns = stamp.start_ns + (ms * 1e6) as u64;
         h
@@ -178,7 +179,7 @@ mod tests {
         let late = |id: u64| {
             let mut h = frame(id, LSD, 30.0);
             h.frame.capture_ns = 5_000_000_000 + id * 50_000_000;
-            h.frame.stamps[3].end_ns = h.frame.capture_ns + 150_000_000;
+            h.frame.stamps[StampSlot::PoseEstimator].end_ns = h.frame.capture_ns + 150_000_000;
             h
         };
         assert!(p.observe(&late(0), LSD).is_none());
@@ -331,7 +332,7 @@ mod tests {
             "not fallen back"
         );
         let mut unprocessed = frame(40, LSD, 90.0);
-        unprocessed.frame.stamps[1].end_ns = 0;
+        unprocessed.frame.stamps[StampSlot::LineDetector].end_ns = 0;
         for _ in 0..10 {
             assert_eq!(p.observe(&unprocessed, LSD), None);
         }

@@ -314,14 +314,15 @@ impl FallbackController {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use linetrack_msgs::StampSlot;
 
     fn frame(mode: MatcherMode, stereo: u32, probe: i32, matcher_ms: u64) -> TracksHeader {
         let mut h = TracksHeader::default();
         h.matching.mode = mode.into();
         h.matching.stereo_matches = stereo;
         h.matching.lbd_probe_matches = probe;
-        h.frame.stamps[2].start_ns = 1_000_000;
-        h.frame.stamps[2].end_ns = 1_000_000 + matcher_ms * 1_000_000;
+        h.frame.stamps[StampSlot::Matcher].start_ns = 1_000_000;
+        h.frame.stamps[StampSlot::Matcher].end_ns = 1_000_000 + matcher_ms * 1_000_000;
         h
     }
 
@@ -350,8 +351,9 @@ mod tests {
     /// `h` captured at 1 s and its pose published `end_to_end_ms` later.
     fn timed(mut h: TracksHeader, end_to_end_ms: u64) -> TracksHeader {
         h.frame.capture_ns = 1_000_000_000;
-        h.frame.stamps[3].start_ns = h.frame.capture_ns;
-        h.frame.stamps[3].end_ns = h.frame.capture_ns + end_to_end_ms * 1_000_000;
+        h.frame.stamps[StampSlot::PoseEstimator].start_ns = h.frame.capture_ns;
+        h.frame.stamps[StampSlot::PoseEstimator].end_ns =
+            h.frame.capture_ns + end_to_end_ms * 1_000_000;
         h
     }
 

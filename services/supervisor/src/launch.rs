@@ -88,12 +88,34 @@ pub(crate) fn stage_code(stage: StageKind) -> Option<StageRun> {
 /// cargo feature.
 pub const ROS2_SOURCE: (&str, &str) = ("linetrack-ros2-source", "linetrack-ros2-bridge/ros2");
 
-/// The binary of `stage` in a run of `config`: `linetrack-<stage>`, but for the frame
-/// source fed by ROS 2 image topics when `[camera.ros2_images]` names them.
+/// The binary of `stage` in a run of `config`: the one the pipeline's declaration names,
+/// but for the frame source fed by ROS 2 image topics when `[camera.ros2_images]` names
+/// them.
 pub(crate) fn stage_binary(config: &PipelineConfig, stage: StageKind) -> String {
     if stage == StageKind::FrameSource && config.camera.ros2_images.enabled() {
         ROS2_SOURCE.0.to_string()
     } else {
-        format!("linetrack-{}", stage.name())
+        stage.decl().map_or_else(
+            || format!("linetrack-{}", stage.name()),
+            |node| node.binary.to_string(),
+        )
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use linetrack_msgs::PIPELINE;
+
+    /// Every node the supervisor starts has its code for single-process mode and a binary
+    /// for processes, both as declared.
+    #[test]
+    fn every_supervised_node_has_its_code_and_its_declared_binary() {
+        let config = PipelineConfig::default();
+        for node in PIPELINE.iter().filter(|n| n.supervised()) {
+            assert!(stage_code(node.stage).is_some(), "{}", node.stage);
+            assert_eq!(stage_binary(&config, node.stage), node.binary);
+            assert_eq!(node.binary, format!("linetrack-{}", node.stage.name()));
+        }
     }
 }

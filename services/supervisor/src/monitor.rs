@@ -109,12 +109,12 @@ pub struct Monitor {
 /// Milliseconds between the stage before `stage` publishing the frame (its capture, for
 /// the source) and `stage` taking it; NaN when either stamp is missing.
 fn wait_ms(header: &FrameHeader, stage: StageKind) -> f64 {
-    let Some(i) = StageKind::PROCESSING.iter().position(|&s| s == stage) else {
+    let Some(slot) = stage.stamp_slot() else {
         return f64::NAN;
     };
-    let ready = match i.checked_sub(1) {
+    let ready = match slot.before() {
         None => header.capture_ns,
-        Some(before) => end_ns(header, StageKind::PROCESSING[before]),
+        Some(before) => header.stamps[before].end_ns,
     };
     let taken = header.stamp(stage).map_or(0, |s| s.start_ns);
     if ready == 0 || taken == 0 || taken < ready {
@@ -623,6 +623,7 @@ impl Monitor {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use linetrack_msgs::StampSlot;
     use linetrack_run_record::files::SpaceReserve;
     use linetrack_run_record::{read_events, read_frames};
 
@@ -653,15 +654,15 @@ mod tests {
             "{waits:?}"
         );
         // A stage that never took the frame, or stamps out of order: no wait.
-        header.stamps[2].start_ns = 0;
+        header.stamps[StampSlot::Matcher].start_ns = 0;
         assert!(wait_ms(&header, StageKind::Matcher).is_nan());
-        header.stamps[3].start_ns = ms(11.0);
+        header.stamps[StampSlot::PoseEstimator].start_ns = ms(11.0);
         assert!(wait_ms(&header, StageKind::PoseEstimator).is_nan());
     }
 
     fn pose_of(monitor: &mut Monitor, frame_id: u64) {
         let mut header = TracksHeader::from(FrameHeader::new(frame_id, frame_id * 50_000_000, 1));
-        header.frame.stamps[3].end_ns = 2_000_001;
+        header.frame.stamps[StampSlot::PoseEstimator].end_ns = 2_000_001;
         header.matching.stereo_matches = 40;
         header.matching.mode = MatcherMode::Lbd.into();
         monitor.on_pose(&header, &PoseRecord::default());
@@ -781,8 +782,8 @@ mod tests {
             Monitor::new(&PipelineConfig::default(), 0, &dir).unwrap_or_else(|e| panic!("{e}"));
         let stamped = |id: u64| {
             let mut h = TracksHeader::from(FrameHeader::new(id, id * 50_000_000, 1));
-            h.frame.stamps[1].start_ns = 1_000_000;
-            h.frame.stamps[1].end_ns = 2_000_000;
+            h.frame.stamps[StampSlot::LineDetector].start_ns = 1_000_000;
+            h.frame.stamps[StampSlot::LineDetector].end_ns = 2_000_000;
             h.detection.detector =
                 linetrack_stage_runtime::detector_on_wire(linetrack_vision::DetectorKind::Fld)
                     .into();

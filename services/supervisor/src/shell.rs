@@ -14,7 +14,8 @@ use anyhow::{Context, bail};
 use clock::Clock;
 use linetrack_ipc::{Bus, Inlet, LocalHub, Outlet, Scope, Shutdown, Wake};
 use linetrack_msgs::{
-    Command, Control, PoseRecord, StageKind, StatusKind, StatusReport, Topic, TracksHeader,
+    Command, Control, PIPELINE, PoseRecord, StageKind, StatusKind, StatusReport, TracksHeader,
+    topics,
 };
 use linetrack_pipeline_config::PipelineConfig;
 use linetrack_run_record::RunEnd;
@@ -43,10 +44,10 @@ impl Ports {
     /// on `requests` (shared memory in both modes).
     fn open(stages: &Bus, requests: &Bus) -> anyhow::Result<Self> {
         Ok(Self {
-            poses: stages.inlet(Topic::Poses)?,
-            status: stages.inlet(Topic::Status)?,
-            control_in: requests.inlet(Topic::Control)?,
-            control: stages.outlet(Topic::Control, 1)?,
+            poses: stages.inlet(topics::POSES)?,
+            status: stages.inlet(topics::STATUS)?,
+            control_in: requests.inlet(topics::CONTROL)?,
+            control: stages.outlet(topics::CONTROL, 1)?,
             wake: stages.wake(StageKind::Supervisor)?,
             forward_poses: None,
             output_status: None,
@@ -128,7 +129,7 @@ impl<'m> Supervisor<'m> {
                 ROS2_SOURCE.0
             );
         }
-        for stage in StageKind::PROCESSING {
+        for stage in PIPELINE.iter().filter(|n| n.supervised()).map(|n| n.stage) {
             let bin = bin_dir.join(stage_binary(config, stage));
             if options.mode == Mode::Processes && !bin.is_file() {
                 if ros2_images && stage == StageKind::FrameSource {
@@ -161,8 +162,8 @@ impl<'m> Supervisor<'m> {
             None => Ports::open(&bus, &bus)?,
         };
         if hub.is_some() && config.ros2.enabled {
-            ports.forward_poses = Some(bus.outlet(Topic::Poses, 1)?);
-            ports.output_status = Some(bus.inlet(Topic::Status)?);
+            ports.forward_poses = Some(bus.outlet(topics::POSES, 1)?);
+            ports.output_status = Some(bus.inlet(topics::STATUS)?);
         }
         if stale > 0 {
             monitor.event(

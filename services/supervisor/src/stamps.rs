@@ -23,8 +23,8 @@ pub fn end_ns(header: &FrameHeader, stage: StageKind) -> u64 {
 /// Whether `detector` (the line detector) detected the frame: not a frame dropped before it
 /// or by it (its stamps then time the drop, not a detection).
 pub fn detected(header: &FrameHeader, detector: StageKind) -> bool {
-    let after = |by: StageKind| match (by.stamp_index(), detector.stamp_index()) {
-        (Some(by), Some(detector)) => by > detector,
+    let after = |by: StageKind| match (by.stamp_slot(), detector.stamp_slot()) {
+        (Some(by), Some(detector)) => by.index() > detector.index(),
         _ => false,
     };
     header.is_ok() || header.status_by.get().ok().is_some_and(after)

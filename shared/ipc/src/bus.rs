@@ -8,7 +8,7 @@ use iceoryx2::node::Node;
 use iceoryx2::prelude::{
     AllocationStrategy, NodeBuilder, NodeName, ServiceName, SignalHandlingMode, ipc,
 };
-use linetrack_msgs::{StageKind, Topic, wake_service_name};
+use linetrack_msgs::{StageKind, Topic, TopicOf, wake_service_name};
 use std::any::Any;
 use std::collections::HashMap;
 use std::fmt::Debug;
@@ -123,13 +123,15 @@ impl Bus {
             .clone()
     }
 
-    /// A publisher on `topic` whose messages hold up to `initial_len` records (more are
+    /// A publisher on `topic` (its types those of its messages: see
+    /// [`linetrack_msgs::topics`]) whose messages hold up to `initial_len` records (more are
     /// allocated when needed), waking the topic's consumers.
     pub fn outlet<P: Record, H: Record>(
         &self,
-        topic: Topic,
+        topic: TopicOf<P, H>,
         initial_len: usize,
     ) -> Result<Outlet<P, H>, IpcError> {
+        let topic = topic.topic();
         match &self.kind {
             BusKind::Shm { node, scope } => {
                 let service_name = topic.service_name(&scope.run_id);
@@ -180,8 +182,12 @@ impl Bus {
         }
     }
 
-    /// A subscriber on `topic`.
-    pub fn inlet<P: Record, H: Record>(&self, topic: Topic) -> Result<Inlet<P, H>, IpcError> {
+    /// A subscriber on `topic` (its types those of its messages).
+    pub fn inlet<P: Record, H: Record>(
+        &self,
+        topic: TopicOf<P, H>,
+    ) -> Result<Inlet<P, H>, IpcError> {
+        let topic = topic.topic();
         match &self.kind {
             BusKind::Shm { node, scope } => {
                 let service_name = topic.service_name(&scope.run_id);

@@ -132,8 +132,8 @@ mod tests {
     use super::*;
     use crate::ports::WakeInner;
     use crate::scope::{SHM_DIR, lock_down_files};
+    use linetrack_msgs::StageKind;
     use linetrack_msgs::{FrameHeader, SegmentRecord, SegmentsHeader};
-    use linetrack_msgs::{StageKind, Topic};
     use std::os::unix::fs::{MetadataExt, PermissionsExt};
     use std::path::Path;
     use std::time::Duration;
@@ -147,10 +147,10 @@ mod tests {
         };
         let bus = Bus::shared_memory(&scope, "private").unwrap_or_else(|e| panic!("{e}"));
         let _outlet = bus
-            .outlet::<SegmentRecord, SegmentsHeader>(Topic::Segments, 4)
+            .outlet::<SegmentRecord, SegmentsHeader>(linetrack_msgs::topics::SEGMENTS, 4)
             .unwrap_or_else(|e| panic!("{e}"));
         let _inlet = bus
-            .inlet::<SegmentRecord, SegmentsHeader>(Topic::Segments)
+            .inlet::<SegmentRecord, SegmentsHeader>(linetrack_msgs::topics::SEGMENTS)
             .unwrap_or_else(|e| panic!("{e}"));
         let mode = |path: &Path| {
             std::fs::symlink_metadata(path)
@@ -274,13 +274,13 @@ mod tests {
 
     fn round_trip(publisher_bus: &Bus, subscriber_bus: &Bus) {
         let mut inlet = subscriber_bus
-            .inlet::<SegmentRecord, SegmentsHeader>(Topic::Segments)
+            .inlet::<SegmentRecord, SegmentsHeader>(linetrack_msgs::topics::SEGMENTS)
             .unwrap_or_else(|e| panic!("{e}"));
         let wake = subscriber_bus
             .wake(StageKind::Matcher)
             .unwrap_or_else(|e| panic!("{e}"));
         let mut outlet = publisher_bus
-            .outlet::<SegmentRecord, SegmentsHeader>(Topic::Segments, 4)
+            .outlet::<SegmentRecord, SegmentsHeader>(linetrack_msgs::topics::SEGMENTS, 4)
             .unwrap_or_else(|e| panic!("{e}"));
         let a = [SegmentRecord {
             endpoints: [1.0, 2.0, 3.0, 4.0],
@@ -346,7 +346,7 @@ mod tests {
         {
             let bus = Bus::shared_memory(&scope, "test-lifetime").unwrap_or_else(|e| panic!("{e}"));
             let _outlet = bus
-                .outlet::<SegmentRecord, SegmentsHeader>(Topic::Segments, 4)
+                .outlet::<SegmentRecord, SegmentsHeader>(linetrack_msgs::topics::SEGMENTS, 4)
                 .unwrap_or_else(|e| panic!("{e}"));
             let during = scope.resources().unwrap_or_else(|e| panic!("{e}"));
             assert!(during.nodes >= 1 && during.services >= 1, "{during:?}");
@@ -380,17 +380,17 @@ mod tests {
             wake(StageKind::Matcher),
         );
         let _images = subscriber_bus
-            .inlet::<u8, FrameHeader>(Topic::Frames)
+            .inlet::<u8, FrameHeader>(linetrack_msgs::topics::FRAMES)
             .unwrap_or_else(|e| panic!("{e}"));
         let mut frames = publisher_bus
-            .outlet::<u8, FrameHeader>(Topic::Frames, 4)
+            .outlet::<u8, FrameHeader>(linetrack_msgs::topics::FRAMES, 4)
             .unwrap_or_else(|e| panic!("{e}"));
         frames
             .publish(&FrameHeader::new(3, 0, 0), &[&[1, 2], &[3, 4]])
             .unwrap_or_else(|e| panic!("{e}"));
         assert!(woken(&pose) && woken(&detector) && woken(&matcher));
         let mut segments = publisher_bus
-            .outlet::<SegmentRecord, SegmentsHeader>(Topic::Segments, 4)
+            .outlet::<SegmentRecord, SegmentsHeader>(linetrack_msgs::topics::SEGMENTS, 4)
             .unwrap_or_else(|e| panic!("{e}"));
         segments
             .publish(&SegmentsHeader::from(FrameHeader::new(3, 0, 0)), &[])

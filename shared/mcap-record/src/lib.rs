@@ -104,6 +104,7 @@ pub use replay::{Replay, ReplayFrame};
 #[cfg(test)]
 mod tests {
     use super::*;
+    use linetrack_msgs::StampSlot;
     use linetrack_msgs::{
         FrameHeader, PoseRecord, RigRecord, SegmentRecord, SegmentsHeader, TrackedLine,
     };
@@ -244,11 +245,11 @@ mod tests {
     fn latencies_are_each_stage_s_publish_minus_take() {
         let mut h = header(4);
         h.capture_ns = 1_000_000;
-        h.stamps[0] = linetrack_msgs::StageStamp {
+        h.stamps[StampSlot::FrameSource] = linetrack_msgs::StageStamp {
             start_ns: 1_000_000,
             end_ns: 1_500_000,
         };
-        h.stamps[3] = linetrack_msgs::StageStamp {
+        h.stamps[StampSlot::PoseEstimator] = linetrack_msgs::StageStamp {
             start_ns: 2_000_000,
             end_ns: 5_000_000,
         };

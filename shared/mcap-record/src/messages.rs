@@ -24,8 +24,8 @@ impl FrameLatency {
     pub fn of(header: &FrameHeader) -> Self {
         let mut stages_ms = BTreeMap::new();
         for stage in StageKind::PROCESSING {
-            if let Some(i) = stage.stamp_index() {
-                let s = header.stamps[i];
+            if let Some(slot) = stage.stamp_slot() {
+                let s = header.stamps[slot];
                 if s.end_ns >= s.start_ns && s.start_ns > 0 {
                     stages_ms.insert(
                         stage.name().to_string(),

@@ -7,8 +7,9 @@
 //! results of the stages upstream, each in its own record: images by a [`FrameHeader`],
 //! segments by a [`SegmentsHeader`] (with the [`Detection`]), tracks and poses by a
 //! [`TracksHeader`] (with the [`Detection`] and the [`Matching`]); status reports and
-//! commands have no header. The topology is static: [`Topic::consumers`] says which stages
-//! read a topic, and so which stages a publisher wakes.
+//! commands have no header. The topology is declared once, in [`PIPELINE`]:
+//! [`Topic::consumers`] (which stages read a topic, and so which stages a publisher wakes)
+//! and the named [`StampSlot`]s of a frame are derived from it.
 //!
 //! Codes (a stage, a status, a mode) travel as [`Code`]s: a `u32` that another, possibly
 //! older or crashed, process wrote, read back only through a checked conversion, so no
@@ -173,10 +174,12 @@ pub fn decode<E: WireEnum>(raw: u32) -> Result<E, UnknownCode> {
 }
 
 mod clock;
+pub mod pipeline;
 mod records;
 mod topology;
 
 pub use clock::now_ns;
+pub use pipeline::{NodeDecl, PIPELINE, StampSlot, TopicOf, topics};
 pub use records::*;
 pub use topology::{StageKind, Topic, wake_service_name};
 

@@ -2,7 +2,7 @@
 //! detection and matching results, segments, tracks, poses, the rig, status reports and
 //! commands.
 
-use crate::{Code, StageKind, WireEnum};
+use crate::{Code, StageKind, StampSlot, WireEnum};
 use iceoryx2::prelude::ZeroCopySend;
 use num_enum::{IntoPrimitive, TryFromPrimitive};
 
@@ -108,8 +108,8 @@ pub struct FrameHeader {
     pub sequence_ns: u64,
     /// When the frame source started reading it (UNIX ns): the start of end-to-end latency.
     pub capture_ns: u64,
-    /// Per stage, in [`StageKind::PROCESSING`] order.
-    pub stamps: [StageStamp; 4],
+    /// Per stage, indexed by its [`StampSlot`] (`stamps[StampSlot::Matcher]`).
+    pub stamps: [StageStamp; StampSlot::COUNT],
     /// What happened to the frame.
     pub status: Code<FrameStatus>,
     /// The stage that set [`FrameHeader::status`]: the one that dropped or failed the frame
@@ -145,12 +145,12 @@ impl FrameHeader {
 
     /// The stamp of `stage` (none for a stage that stamps no frame).
     pub fn stamp(&self, stage: StageKind) -> Option<&StageStamp> {
-        stage.stamp_index().and_then(|i| self.stamps.get(i))
+        stage.stamp_slot().map(|slot| &self.stamps[slot])
     }
 
     /// The stamp of `stage`.
     pub fn stamp_mut(&mut self, stage: StageKind) -> Option<&mut StageStamp> {
-        stage.stamp_index().map(|i| &mut self.stamps[i])
+        stage.stamp_slot().map(|slot| &mut self.stamps[slot])
     }
 
     /// Milliseconds from capture to `end_ns`.

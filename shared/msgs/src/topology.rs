@@ -2,6 +2,7 @@
 //! and the names of the services that carry them.
 
 use crate::WireEnum;
+use crate::pipeline::{self, NodeDecl, PIPELINE, StampSlot};
 use num_enum::{IntoPrimitive, TryFromPrimitive};
 use std::fmt;
 
@@ -29,13 +30,9 @@ wire_enum! {
 }
 
 impl StageKind {
-    /// The four processing stages, upstream first.
-    pub const PROCESSING: [StageKind; 4] = [
-        StageKind::FrameSource,
-        StageKind::LineDetector,
-        StageKind::Matcher,
-        StageKind::PoseEstimator,
-    ];
+    /// The processing stages, upstream first: the nodes [`PIPELINE`] declares to fill the
+    /// stamp slots, in slot order.
+    pub const PROCESSING: [StageKind; StampSlot::COUNT] = pipeline::slot_stages(PIPELINE);
 
     /// The stage's name: also its binary's suffix (`linetrack-<name>`) and its config key.
     pub fn name(self) -> &'static str {
@@ -51,9 +48,15 @@ impl StageKind {
         }
     }
 
-    /// Index into [`FrameHeader::stamps`]; the supervisor has none.
-    pub fn stamp_index(self) -> Option<usize> {
-        Self::PROCESSING.iter().position(|&k| k == self)
+    /// The slot of [`crate::FrameHeader::stamps`] it fills, as [`PIPELINE`] declares
+    /// (none for a node that times no frame: the supervisor, the outputs).
+    pub fn stamp_slot(self) -> Option<StampSlot> {
+        pipeline::stamp_slot(self)
+    }
+
+    /// Its declaration in [`PIPELINE`].
+    pub fn decl(self) -> Option<&'static NodeDecl> {
+        pipeline::node(self)
     }
 
     /// The stage named `name` (see [`StageKind::name`]).
@@ -114,38 +117,11 @@ impl Topic {
         }
     }
 
-    /// The stages that subscribe, and so are woken when a message is published, in the
-    /// order they are woken.
-    ///
-    /// A frame wakes the pose estimator first, then the detector: they start on it at once,
-    /// and the pose estimator's corners are the longer path. The matcher, which needs a
-    /// frame's images only with its segments, is woken last. Woken before the pose
-    /// estimator, it took the idle core for nothing at that moment, and the kernel queued
-    /// the pose estimator behind the busy one: in `perf sched timehist` of `linetrack run`
-    /// on the EuRoC excerpt, the pose estimator then waited 4 ms (one timer tick) to start
-    /// on 30–38 of 95 frames; in this order, on 4–11.
+    /// The nodes that subscribe, and so are woken when a message is published, in the
+    /// order they are woken: derived from [`PIPELINE`] (each node's `wakes_on`, by its
+    /// `wake_rank`).
     pub fn consumers(self) -> &'static [StageKind] {
-        use StageKind::*;
-        // The recorder reads every topic but control's commands to others; it is woken like
-        // a stage (a notification costs the publisher no wait) and sleeps otherwise.
-        match self {
-            Topic::Frames => &[PoseEstimator, LineDetector, Matcher, Recorder],
-            Topic::Segments => &[Matcher, Recorder],
-            Topic::Tracks => &[PoseEstimator, Recorder],
-            // The frame source waits for poses with `pacing = "fastest"` and
-            // `drop_late = false` (linetrack_stage_runtime's source role).
-            Topic::Poses => &[Supervisor, Recorder, FrameSource],
-            Topic::Rig => &[PoseEstimator, Recorder],
-            Topic::Status => &[Supervisor, Recorder],
-            Topic::Control => &[
-                FrameSource,
-                LineDetector,
-                Matcher,
-                PoseEstimator,
-                Supervisor,
-                Recorder,
-            ],
-        }
+        pipeline::consumers(self)
     }
 
     /// How many messages a subscriber queues before the oldest is overwritten. Images are

@@ -552,8 +552,12 @@ mod tests {
         assert_eq!(detector.cpus, Some(vec![1]));
         assert_eq!(detector.policy, Some(Policy::Fifo));
         assert_eq!(detector.priority, Some(20));
-        assert_eq!(config.stages.pose_estimator.nice, Some(5));
-        assert!(config.stages.matcher.is_empty());
+        let of = |stage| config.stages.of(stage).cloned().unwrap_or_default();
+        assert_eq!(of(StageKind::PoseEstimator).nice, Some(5));
+        assert!(of(StageKind::Matcher).is_empty());
+        // Every node the declaration schedules has a section, in its order.
+        let sections: Vec<StageKind> = config.stages.all().iter().map(|(s, _)| *s).collect();
+        assert_eq!(sections, StageKind::PROCESSING);
         assert_eq!(config.stages.of(StageKind::Supervisor), None);
         assert_eq!(
             config.ipc.root.as_deref(),
@@ -569,6 +573,10 @@ mod tests {
     fn unknown_stages_and_bad_stage_settings_are_refused_by_name() {
         let err = refusal("[stages.line-dectector]\ncpus = [1]\n");
         assert!(err.contains("line-dectector"), "{err}");
+        assert!(
+            err.contains("expected one of frame-source, line-detector, matcher, pose-estimator"),
+            "{err}"
+        );
         let err = refusal("[stages.supervisor]\ncpus = [1]\n");
         assert!(err.contains("supervisor"), "{err}");
         let err = refusal("[stages.matcher]\npolicy = \"fifo\"\npriority = 120\n");

@@ -25,7 +25,7 @@ mod source;
 pub mod time;
 #[cfg(feature = "images")]
 pub use images::{stereo_frame, stereo_views};
-use linetrack_msgs::{Command, Control, RigRecord, SegmentRecord};
+use linetrack_msgs::{Command, Control, RigRecord, SegmentRecord, topics};
 use linetrack_msgs::{
     Detector, FrameHeader, FrameMessage, FrameStatus, StageKind, StatusKind, StatusReport, Topic,
 };
@@ -138,7 +138,7 @@ impl Reporter {
     /// A reporter for `ctx`'s stage; `detail` travels in every report (the detector kind).
     pub fn new(bus: &Bus, ctx: &StageContext, detail: u32) -> Result<Self, IpcError> {
         Ok(Self {
-            outlet: bus.outlet(Topic::Status, 1)?,
+            outlet: bus.outlet(topics::STATUS, 1)?,
             stage: ctx.stage,
             pid: ctx.pid,
             detail,
@@ -625,6 +625,7 @@ mod role_tests;
 mod tests {
     use super::*;
     use linetrack_msgs::SegmentsHeader;
+    use linetrack_msgs::StampSlot;
 
     #[test]
     fn every_detector_has_its_own_wire_name_and_back() {
@@ -648,10 +649,10 @@ mod tests {
         let bus = Bus::shared_memory(&scope, &format!("hold-{}", std::process::id()))
             .unwrap_or_else(|e| panic!("{e}"));
         let mut inlet = bus
-            .inlet::<u8, FrameHeader>(Topic::Frames)
+            .inlet::<u8, FrameHeader>(topics::FRAMES)
             .unwrap_or_else(|e| panic!("{e}"));
         let mut outlet = bus
-            .outlet::<u8, FrameHeader>(Topic::Frames, 4)
+            .outlet::<u8, FrameHeader>(topics::FRAMES, 4)
             .unwrap_or_else(|e| panic!("{e}"));
         let mut publish = |from: u64, to: u64| {
             for id in from..to {
@@ -767,10 +768,10 @@ mod tests {
     fn a_frame_is_processed_dropped_or_failed_and_always_published() {
         let bus = Bus::local();
         let mut inlet = bus
-            .inlet::<SegmentRecord, SegmentsHeader>(Topic::Segments)
+            .inlet::<SegmentRecord, SegmentsHeader>(topics::SEGMENTS)
             .unwrap_or_else(|e| panic!("{e}"));
         let mut out = bus
-            .outlet::<SegmentRecord, SegmentsHeader>(Topic::Segments, 4)
+            .outlet::<SegmentRecord, SegmentsHeader>(topics::SEGMENTS, 4)
             .unwrap_or_else(|e| panic!("{e}"));
         let budget = BudgetConfig {
             end_to_end_ms: 100.0,
@@ -858,7 +859,7 @@ mod tests {
             (first.detection.left_count, got[0].payload()[0]),
             (1, record)
         );
-        let stamp = first.frame.stamps[1];
+        let stamp = first.frame.stamps[StampSlot::LineDetector];
         assert_eq!(stamp.end_ns - stamp.start_ns, 7_000_000, "{stamp:?}");
         // A failed frame publishes the placeholder alone, not what the work left.
         assert_eq!(got[3].payload(), [SegmentRecord::default()]);
@@ -880,7 +881,7 @@ mod tests {
         ctx.clock = Clock::manual(1_000_000_000);
         let every = ctx.heartbeat();
         let mut inlet = bus
-            .inlet::<StatusReport, ()>(Topic::Status)
+            .inlet::<StatusReport, ()>(topics::STATUS)
             .unwrap_or_else(|e| panic!("{e}"));
         let mut reporter = Reporter::new(&bus, &ctx, 0).unwrap_or_else(|e| panic!("{e}"));
         let beats = |inlet: &mut Inlet<StatusReport, ()>| -> Vec<u64> {

@@ -5,7 +5,8 @@ use crate::{Clock, Sink, Source, SourceOut, StageContext, Step, run_sink, run_so
 use crossbeam_channel::{Receiver, RecvTimeoutError};
 use linetrack_ipc::{Bus, Inlet, Shutdown};
 use linetrack_msgs::{
-    Command, Control, FrameHeader, FrameStatus, StageKind, StatusKind, StatusReport, Topic,
+    Command, Control, FrameHeader, FrameStatus, StageKind, StampSlot, StatusKind, StatusReport,
+    topics,
 };
 use linetrack_pipeline_config::PipelineConfig;
 use std::path::PathBuf;
@@ -81,7 +82,7 @@ fn reports_until(
 
 fn stop(bus: &Bus, stage: StageKind) {
     let mut control = bus
-        .outlet::<Control, ()>(Topic::Control, 1)
+        .outlet::<Control, ()>(topics::CONTROL, 1)
         .unwrap_or_else(|e| panic!("{e}"));
     let command = Control::new(Command::Shutdown, stage, 0, 0, 0);
     control
@@ -100,10 +101,10 @@ fn source_bus() -> (
     let bus = Bus::local();
     let hub = bus.local_hub().unwrap_or_else(|| panic!("a local bus"));
     let frames = bus
-        .inlet::<u8, FrameHeader>(Topic::Frames)
+        .inlet::<u8, FrameHeader>(topics::FRAMES)
         .unwrap_or_else(|e| panic!("{e}"));
     let status = bus
-        .inlet::<StatusReport, ()>(Topic::Status)
+        .inlet::<StatusReport, ()>(topics::STATUS)
         .unwrap_or_else(|e| panic!("{e}"));
     (bus, hub, frames, status)
 }
@@ -149,7 +150,7 @@ fn a_source_fed_by_a_callback_publishes_stamps_counts_finishes_and_stays_until_s
         .iter()
         .map(|m| {
             let h = m.header();
-            let stamp = h.stamps[0];
+            let stamp = h.stamps[StampSlot::FrameSource];
             assert_eq!(
                 (stamp.start_ns, stamp.end_ns),
                 (clock.now_ns(), clock.now_ns())
@@ -219,7 +220,7 @@ fn a_sink_takes_what_comes_counts_it_and_is_closed_on_a_stop_or_a_failure() {
         let bus = Bus::local();
         let hub = bus.local_hub().unwrap_or_else(|| panic!("a local bus"));
         let mut status = bus
-            .inlet::<StatusReport, ()>(Topic::Status)
+            .inlet::<StatusReport, ()>(topics::STATUS)
             .unwrap_or_else(|e| panic!("{e}"));
         let clock = Clock::manual(1_000_000_000);
         let ctx = context(StageKind::Recorder, &clock, 0);
@@ -227,7 +228,7 @@ fn a_sink_takes_what_comes_counts_it_and_is_closed_on_a_stop_or_a_failure() {
         let sink = std::thread::spawn(move || {
             run_sink(&ctx, &hub.bus(), &Shutdown::default(), |bus| {
                 Ok(Counter {
-                    frames: bus.inlet(Topic::Frames)?,
+                    frames: bus.inlet(topics::FRAMES)?,
                     taken: Vec::new(),
                     fail_at,
                     closed,
@@ -237,7 +238,7 @@ fn a_sink_takes_what_comes_counts_it_and_is_closed_on_a_stop_or_a_failure() {
         let ready = |got: &[StatusReport]| got.iter().any(|r| r.kind.is(StatusKind::Ready));
         reports_until(&bus, &mut status, ready);
         let mut out = bus
-            .outlet::<u8, FrameHeader>(Topic::Frames, 1)
+            .outlet::<u8, FrameHeader>(topics::FRAMES, 1)
             .unwrap_or_else(|e| panic!("{e}"));
         for id in 0..4 {
             out.publish(&FrameHeader::new(id, 0, 0), &[&[0]])
@@ -318,7 +319,7 @@ fn a_source_waiting_for_a_slow_pipeline_beats_past_the_hang_timeout() {
     assert_eq!(out, (0..in_flight).collect::<Vec<_>>());
     // A pose for frame 0: the next frame goes out.
     let mut poses = bus
-        .outlet::<linetrack_msgs::PoseRecord, linetrack_msgs::TracksHeader>(Topic::Poses, 1)
+        .outlet::<linetrack_msgs::PoseRecord, linetrack_msgs::TracksHeader>(topics::POSES, 1)
         .unwrap_or_else(|e| panic!("{e}"));
     let header = linetrack_msgs::TracksHeader {
         frame: FrameHeader::new(0, 0, 0),

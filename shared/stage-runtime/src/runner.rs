@@ -13,7 +13,9 @@
 
 use crate::{FramePolicy, GapWatch, Held, Images, Reporter, StageContext, process_frame};
 use linetrack_ipc::{Bus, Inlet, Outlet, Received, Record, Shutdown, Wake};
-use linetrack_msgs::{Command, Control, FrameHeader, FrameMessage, StageKind, StatusKind, Topic};
+use linetrack_msgs::{
+    Command, Control, FrameHeader, FrameMessage, StageKind, StatusKind, Topic, TopicOf, topics,
+};
 use std::time::Duration;
 use tracing::info_span;
 
@@ -32,10 +34,10 @@ pub trait Stage {
     type OutputHeader: Record + FrameMessage + From<Self::InputHeader>;
     /// Which stage it is.
     const KIND: StageKind;
-    /// Where its input comes from.
-    const INPUT: Topic;
-    /// Where its output goes.
-    const OUTPUT: Topic;
+    /// Where its input comes from (a topic of its input's types: another does not compile).
+    const INPUT: TopicOf<Self::Input, Self::InputHeader>;
+    /// Where its output goes (a topic of its output's types).
+    const OUTPUT: TopicOf<Self::Output, Self::OutputHeader>;
     /// Records an output message holds before more are allocated.
     const OUTPUT_LEN: usize;
 
@@ -155,11 +157,11 @@ pub fn run_stage<S: Stage>(
         input: bus.inlet(S::INPUT)?,
         output: bus.outlet(S::OUTPUT, S::OUTPUT_LEN)?,
         frames: if stage.joins_images() {
-            Some(bus.inlet(Topic::Frames)?)
+            Some(bus.inlet(topics::FRAMES)?)
         } else {
             None
         },
-        control: bus.inlet(Topic::Control)?,
+        control: bus.inlet(topics::CONTROL)?,
         wake: bus.wake(S::KIND)?,
         reporter: Reporter::new(bus, ctx, stage.detail())?,
     };
@@ -172,7 +174,7 @@ pub fn run_stage<S: Stage>(
         ctx,
         stage,
         role,
-        waiting: Held::new(S::INPUT),
+        waiting: Held::new(S::INPUT.topic()),
         images: Held::new(Topic::Frames),
         gaps: GapWatch::default(),
         next_unpublished: 0,
@@ -425,8 +427,8 @@ mod tests {
         type Output = SegmentRecord;
         type OutputHeader = SegmentsHeader;
         const KIND: StageKind = StageKind::LineDetector;
-        const INPUT: Topic = Topic::Frames;
-        const OUTPUT: Topic = Topic::Segments;
+        const INPUT: TopicOf<Self::Input, Self::InputHeader> = topics::FRAMES;
+        const OUTPUT: TopicOf<Self::Output, Self::OutputHeader> = topics::SEGMENTS;
         const OUTPUT_LEN: usize = 1;
 
         fn joins_images(&self) -> bool {
@@ -495,16 +497,16 @@ mod tests {
         let hub = linetrack_ipc::LocalHub::default();
         let bus = hub.bus();
         let mut frames = bus
-            .outlet::<u8, FrameHeader>(Topic::Frames, 4)
+            .outlet::<u8, FrameHeader>(topics::FRAMES, 4)
             .unwrap_or_else(|e| panic!("{e}"));
         let mut control = bus
-            .outlet::<Control, ()>(Topic::Control, 1)
+            .outlet::<Control, ()>(topics::CONTROL, 1)
             .unwrap_or_else(|e| panic!("{e}"));
         let mut out = bus
-            .inlet::<SegmentRecord, SegmentsHeader>(Topic::Segments)
+            .inlet::<SegmentRecord, SegmentsHeader>(topics::SEGMENTS)
             .unwrap_or_else(|e| panic!("{e}"));
         let mut status = bus
-            .inlet::<StatusReport, ()>(Topic::Status)
+            .inlet::<StatusReport, ()>(topics::STATUS)
             .unwrap_or_else(|e| panic!("{e}"));
         let start = |pid: u32, standby: bool, instance: f32| {
             let hub = hub.clone();
@@ -622,8 +624,8 @@ mod tests {
         type Output = linetrack_msgs::TrackedLine;
         type OutputHeader = TracksHeader;
         const KIND: StageKind = StageKind::Matcher;
-        const INPUT: Topic = Topic::Segments;
-        const OUTPUT: Topic = Topic::Tracks;
+        const INPUT: TopicOf<Self::Input, Self::InputHeader> = topics::SEGMENTS;
+        const OUTPUT: TopicOf<Self::Output, Self::OutputHeader> = topics::TRACKS;
         const OUTPUT_LEN: usize = 1;
 
         fn joins_images(&self) -> bool {
@@ -669,19 +671,19 @@ mod tests {
         let hub = linetrack_ipc::LocalHub::default();
         let bus = hub.bus();
         let mut frames = bus
-            .outlet::<u8, FrameHeader>(Topic::Frames, 4)
+            .outlet::<u8, FrameHeader>(topics::FRAMES, 4)
             .unwrap_or_else(|e| panic!("{e}"));
         let mut segments = bus
-            .outlet::<SegmentRecord, SegmentsHeader>(Topic::Segments, 1)
+            .outlet::<SegmentRecord, SegmentsHeader>(topics::SEGMENTS, 1)
             .unwrap_or_else(|e| panic!("{e}"));
         let mut control = bus
-            .outlet::<Control, ()>(Topic::Control, 1)
+            .outlet::<Control, ()>(topics::CONTROL, 1)
             .unwrap_or_else(|e| panic!("{e}"));
         let mut out = bus
-            .inlet::<linetrack_msgs::TrackedLine, TracksHeader>(Topic::Tracks)
+            .inlet::<linetrack_msgs::TrackedLine, TracksHeader>(topics::TRACKS)
             .unwrap_or_else(|e| panic!("{e}"));
         let mut status = bus
-            .inlet::<StatusReport, ()>(Topic::Status)
+            .inlet::<StatusReport, ()>(topics::STATUS)
             .unwrap_or_else(|e| panic!("{e}"));
         let prepared = std::sync::Arc::new(std::sync::Mutex::new(Vec::new()));
         let stage = Ahead {

@@ -9,7 +9,7 @@
 
 use crate::{Reporter, StageContext, shutdown_ordered};
 use linetrack_ipc::{Bus, Inlet, Shutdown};
-use linetrack_msgs::{Control, StageKind, StatusKind, Topic};
+use linetrack_msgs::{Control, StageKind, StatusKind, topics};
 use std::time::Duration;
 
 /// One sink's work.
@@ -47,7 +47,7 @@ pub fn run_sink<S: Sink>(
 ) -> anyhow::Result<()> {
     // Listening before subscribing: no message comes without its wake-up.
     let wake = bus.wake(S::WAKES_WITH)?;
-    let mut control: Inlet<Control, ()> = bus.inlet(Topic::Control)?;
+    let mut control: Inlet<Control, ()> = bus.inlet(topics::CONTROL)?;
     let mut sink = open(bus)?;
     let mut reporter = Reporter::new(bus, ctx, 0)?;
     // Subscribed: the supervisor may start what it waits for.

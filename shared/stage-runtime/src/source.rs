@@ -20,7 +20,7 @@ use crate::{Reporter, StageContext, shutdown_ordered, stamp_end};
 use linetrack_ipc::{Bus, Inlet, Outlet, Shutdown};
 use linetrack_msgs::{
     Control, FrameHeader, FrameStatus, PoseRecord, RigRecord, StageKind, StatusKind, StatusReport,
-    Topic, TracksHeader,
+    TracksHeader, topics,
 };
 use linetrack_pipeline_config::{Pacing, PipelineConfig};
 use std::time::Duration;
@@ -156,7 +156,7 @@ pub struct RigOutlet(Outlet<RigRecord, ()>);
 impl RigOutlet {
     /// The rig's outlet on `bus`.
     pub fn open(bus: &Bus) -> anyhow::Result<Self> {
-        Ok(Self(bus.outlet(Topic::Rig, 1)?))
+        Ok(Self(bus.outlet(topics::RIG, 1)?))
     }
 
     /// Publishes `rig` (the pose estimator needs it before the first frame's tracks).
@@ -180,7 +180,7 @@ pub fn run_source<S: Source>(
     shutdown: &Shutdown,
 ) -> anyhow::Result<()> {
     let mut out = SourceOut {
-        frames: bus.outlet(Topic::Frames, S::FRAME_BYTES)?,
+        frames: bus.outlet(topics::FRAMES, S::FRAME_BYTES)?,
         reporter: Reporter::new(bus, ctx, 0)?,
         kind: S::KIND,
         clock: ctx.clock.clone(),
@@ -188,7 +188,7 @@ pub fn run_source<S: Source>(
         published: 0,
         last_id: 0,
     };
-    let mut control: Inlet<Control, ()> = bus.inlet(Topic::Control)?;
+    let mut control: Inlet<Control, ()> = bus.inlet(topics::CONTROL)?;
     let wake = bus.wake(S::KIND)?;
     let stop = |control: &mut Inlet<Control, ()>| -> anyhow::Result<bool> {
         Ok(shutdown.requested() || shutdown_ordered(control, S::KIND, ctx.pid)?)
@@ -282,8 +282,8 @@ impl BackPressure {
 
     fn open(bus: &Bus, ctx: &StageContext) -> anyhow::Result<Self> {
         Ok(Self {
-            poses: bus.inlet(Topic::Poses)?,
-            status: bus.inlet(Topic::Status)?,
+            poses: bus.inlet(topics::POSES)?,
+            status: bus.inlet(topics::STATUS)?,
             stage: ctx.stage,
             clock: ctx.clock.clone(),
             done: None,
@@ -352,8 +352,8 @@ mod tests {
 
     fn pressure(bus: &Bus, clock: &Clock, patience: Duration) -> BackPressure {
         BackPressure {
-            poses: bus.inlet(Topic::Poses).unwrap_or_else(|e| panic!("{e}")),
-            status: bus.inlet(Topic::Status).unwrap_or_else(|e| panic!("{e}")),
+            poses: bus.inlet(topics::POSES).unwrap_or_else(|e| panic!("{e}")),
+            status: bus.inlet(topics::STATUS).unwrap_or_else(|e| panic!("{e}")),
             stage: StageKind::FrameSource,
             clock: clock.clone(),
             done: None,
@@ -395,7 +395,7 @@ mod tests {
     fn the_source_waits_with_in_flight_frames_out_and_goes_on_as_poses_come() {
         let bus = Bus::local();
         let mut poses = bus
-            .outlet::<PoseRecord, TracksHeader>(Topic::Poses, 1)
+            .outlet::<PoseRecord, TracksHeader>(topics::POSES, 1)
             .unwrap_or_else(|e| panic!("{e}"));
         let mut p = pressure(&bus, &Clock::manual(0), Duration::from_secs(3600));
         // A source restarted at frame 10: its first IN_FLIGHT frames go out unasked.
@@ -456,7 +456,7 @@ mod tests {
     fn a_restarted_stage_releases_the_wait_at_once() {
         let bus = Bus::local();
         let mut status = bus
-            .outlet::<StatusReport, ()>(Topic::Status, 1)
+            .outlet::<StatusReport, ()>(topics::STATUS, 1)
             .unwrap_or_else(|e| panic!("{e}"));
         let mut p = pressure(&bus, &Clock::manual(0), Duration::from_secs(3600));
         for k in 0..IN_FLIGHT {

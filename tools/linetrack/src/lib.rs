@@ -19,7 +19,7 @@ pub mod watch;
 use anyhow::{Context, bail};
 use clap::{Parser, Subcommand};
 use linetrack_ipc::{Bus, Scope, Shutdown};
-use linetrack_msgs::{Command, Control, StageKind, Topic};
+use linetrack_msgs::{Command, Control, StageKind, topics};
 use linetrack_pipeline_config::{MatcherPolicy, Pacing, PipelineConfig};
 use linetrack_run_record::Report;
 use linetrack_scene_render::Preset;
@@ -528,7 +528,7 @@ fn request(
         scope = scope.with_root(root.clone());
     }
     let bus = Bus::shared_memory(&scope, &format!("ctl-{}", std::process::id()))?;
-    let mut control = bus.outlet::<Control, ()>(Topic::Control, 1)?;
+    let mut control = bus.outlet::<Control, ()>(topics::CONTROL, 1)?;
     let request = Control::new(
         command,
         StageKind::Supervisor,

@@ -7,7 +7,7 @@
 use anyhow::{Context, bail};
 use clap::Parser;
 use linetrack_ipc::{Bus, Scope, Shutdown};
-use linetrack_msgs::{FrameHeader, PoseRecord, StageKind, Topic, TracksHeader, now_ns};
+use linetrack_msgs::{FrameHeader, PoseRecord, StageKind, TracksHeader, now_ns, topics};
 use linetrack_odometry::Features;
 use linetrack_pipeline_config::{MatcherPolicy, Pacing, PipelineConfig};
 use linetrack_run_record::{FrameRecord, Percentiles, read_frames};
@@ -78,8 +78,8 @@ fn echo(run_id: &str, hub: Option<linetrack_ipc::LocalHub>, count: usize) -> any
         Some(h) => h.bus(),
         None => Bus::shared_memory(&Scope::new(run_id), "bench-echo")?,
     };
-    let mut frames = bus.inlet::<u8, FrameHeader>(Topic::Frames)?;
-    let mut pongs = bus.outlet::<PoseRecord, TracksHeader>(Topic::Poses, 1)?;
+    let mut frames = bus.inlet::<u8, FrameHeader>(topics::FRAMES)?;
+    let mut pongs = bus.outlet::<PoseRecord, TracksHeader>(topics::POSES, 1)?;
     let wake = bus.wake(StageKind::LineDetector)?;
     pongs.publish(
         &TracksHeader::from(FrameHeader::new(u64::MAX, 0, 0)),
@@ -116,8 +116,8 @@ struct Pinger {
 impl Pinger {
     fn new(bus: &Bus) -> anyhow::Result<Self> {
         Ok(Self {
-            frames: bus.outlet::<u8, FrameHeader>(Topic::Frames, 2 * WIDTH * HEIGHT)?,
-            pongs: bus.inlet::<PoseRecord, TracksHeader>(Topic::Poses)?,
+            frames: bus.outlet::<u8, FrameHeader>(topics::FRAMES, 2 * WIDTH * HEIGHT)?,
+            pongs: bus.inlet::<PoseRecord, TracksHeader>(topics::POSES)?,
             wake: bus.wake(StageKind::Supervisor)?,
         })
     }

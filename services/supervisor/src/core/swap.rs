@@ -5,9 +5,6 @@ use super::{Action, Core, Log};
 use linetrack_msgs::{Command, StageKind, StatusReport};
 use linetrack_vision::DetectorKind;
 
-/// The stages a standby instance can take over from while the run goes on.
-pub const HOT_SWAPPABLE: [StageKind; 2] = [StageKind::LineDetector, StageKind::Matcher];
-
 /// Frames a standby of `stage` must have seen before the frame it takes over at: the
 /// matcher matches each frame with the one before, so its standby first processes (without
 /// publishing) the frame before the hand-over.
@@ -147,7 +144,7 @@ impl Core {
             actions.push(Action::Log(Log::Warn(format!(
                 "swap of the {stage} refused: a swap of the {swapping} is in progress"
             ))));
-        } else if !HOT_SWAPPABLE.contains(&stage) {
+        } else if !self.hot_swappable(stage) {
             actions.push(Action::Log(Log::Warn(format!(
                 "swap of the {stage} refused: it cannot be hot-swapped"
             ))));
