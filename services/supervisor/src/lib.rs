@@ -39,6 +39,7 @@ mod shell;
 pub mod stage_runner;
 pub mod stamps;
 mod status;
+mod status_writer;
 pub mod stderr_tail;
 
 pub use launch::THREAD_IDS;

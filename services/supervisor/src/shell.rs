@@ -9,6 +9,7 @@ use crate::monitor::Monitor;
 use crate::optional::{self, OptionalProcess, StopBy};
 use crate::stage_runner::StageRunner;
 use crate::status::{LiveStatus, StageEntry};
+use crate::status_writer::StatusWriter;
 use crate::{Mode, RunOptions, clock, stderr_tail};
 use anyhow::{Context, bail};
 use clock::Clock;
@@ -100,6 +101,8 @@ pub(crate) struct Supervisor<'m> {
     core: Core,
     /// What every timer reads.
     clock: Clock,
+    /// Writes `status.json` off the loop.
+    status: StatusWriter,
 }
 
 impl<'m> Supervisor<'m> {
@@ -165,6 +168,8 @@ impl<'m> Supervisor<'m> {
             ports.forward_poses = Some(bus.outlet(topics::POSES, 1)?);
             ports.output_status = Some(bus.inlet(topics::STATUS)?);
         }
+        let status = StatusWriter::start(run_dir.to_path_buf())
+            .context("starting the status.json writer")?;
         if stale > 0 {
             monitor.event(
                 "stale-cleanup",
@@ -190,6 +195,7 @@ impl<'m> Supervisor<'m> {
             optional,
             core: Core::new(config, options.live_status),
             clock: Clock::System,
+            status,
         })
     }
 
@@ -402,7 +408,7 @@ impl<'m> Supervisor<'m> {
     }
 
     fn write_status(&mut self) {
-        let written = LiveStatus {
+        self.status.offer(LiveStatus {
             run_id: self.run_id.clone(),
             ipc_prefix: self.scope.prefix.clone(),
             ipc_root: Some(self.scope.root.clone()),
@@ -422,9 +428,13 @@ impl<'m> Supervisor<'m> {
             frames: self.monitor.accounted(),
             state: RunEnd::Running,
             reason: None,
-        }
-        .write(&self.run_dir);
-        if let Err(e) = written {
+        });
+        self.status_failed();
+    }
+
+    /// A write of `status.json` that failed (on the writer's thread) fails the records.
+    fn status_failed(&mut self) {
+        if let Some(e) = self.status.take_error() {
             self.monitor.file_failed(e);
         }
     }
@@ -434,6 +444,10 @@ impl<'m> Supervisor<'m> {
     pub(crate) fn run(mut self, shutdown: &Shutdown) -> anyhow::Result<bool> {
         let result = self.supervise(shutdown);
         self.stop_all();
+        // The last live status on disk before the run's end replaces it.
+        if let Some(e) = self.status.close() {
+            self.monitor.file_failed(e);
+        }
         if self.config.output.trace {
             match linetrack_telemetry::merge_traces(&self.run_dir) {
                 Ok(n) => tracing::info!(
@@ -484,6 +498,7 @@ impl<'m> Supervisor<'m> {
             return Ok(Some(end));
         }
         self.supervise_optional();
+        self.status_failed();
         let now = self.clock.monotonic();
         let optional_settled = if self.core.awaiting_source() {
             let mut settled = true;

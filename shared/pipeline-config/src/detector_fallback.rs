@@ -14,9 +14,11 @@ pub struct DetectorFallbackConfig {
     pub enabled: bool,
     /// The faster detector LSD gives way to (not LSD). Edgelines by default: the cheapest
     /// (2.7 ms an image against FLD's 11.8 on EuRoC). `linetrack run` on 1,200 EuRoC frames
-    /// at 20 Hz with LSD, `--matcher auto` and two CPU hogs on a 2-core machine dropped 278
-    /// frames (23 %) giving way to FLD, and 97 and 153 (8.1 and 12.8 %) in two runs giving
-    /// way to edgelines.
+    /// with LSD, `--matcher auto` and two CPU hogs on a 2-core machine dropped 23 % giving
+    /// way to FLD and 8.1 and 12.8 % (two runs) giving way to edgelines, but those runs went
+    /// at 7-8 frames a second, not 20 (the reader at `source.reader_nice = 10` starved by the
+    /// hogs); at a real 20 Hz (`reader_nice = 0`) 47.9 % were dropped, 29.8 % with OpenCV on
+    /// one thread (docs/pipeline.md).
     pub to: DetectorKind,
     /// Consecutive LSD frames over `budget.line_detector_ms` before the swap.
     pub bad_frames: u32,
