@@ -381,6 +381,17 @@ pub fn assert_reports_a_cut_run(run_dir: &Path, frames: usize) -> String {
     text
 }
 
+/// The pid of `stage`'s running process (not a standby detector) in `status`; panics
+/// naming the stage and the stages listed when there is none.
+pub fn stage_pid(status: &LiveStatus, stage: &str) -> u32 {
+    status
+        .stages
+        .iter()
+        .find(|s| s.stage == stage && !s.standby)
+        .unwrap_or_else(|| panic!("no {stage} in {:?}", status.stages))
+        .pid
+}
+
 /// Sends `signal` (e.g. "KILL", "TERM") to `pid` with kill(1).
 pub fn signal(pid: u32, signal: &str) {
     let status = Command::new("kill")

@@ -27,12 +27,7 @@ fn a_crash_loop_before_ready_uses_every_restart_and_shows_the_stages_last_words(
     );
     let mut run = start_through_runner(&dir, &base_sequence(FRAMES), &config, &runner);
     let status = run.wait_for("5 frames", RUN_TIMEOUT, |s| s.frames >= 5);
-    let victim = status
-        .stages
-        .iter()
-        .find(|s| s.stage == "matcher")
-        .unwrap_or_else(|| panic!("no matcher in {:?}", status.stages))
-        .pid;
+    let victim = stage_pid(&status, "matcher");
     signal(victim, "KILL");
     let run_dir = run.run_dir.clone();
     let (exit, out, records) = run.finish(RUN_TIMEOUT);

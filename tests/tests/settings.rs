@@ -66,25 +66,23 @@ fn a_stage_pinned_to_cpu_0_runs_there_and_the_ipc_root_comes_from_the_config() {
     );
     let mut run = start(&dir, &base_sequence(FRAMES), &extra);
     let status = run.wait_for("3 frames", RUN_TIMEOUT, |s| s.frames >= 3);
-    let pid_of = |stage: &str| {
-        status
-            .stages
-            .iter()
-            .find(|s| s.stage == stage && !s.standby)
-            .unwrap_or_else(|| panic!("no {stage} in {:?}", status.stages))
-            .pid
-    };
     let supervisor_cpus = cpus_allowed(&proc_status(status.supervisor_pid));
-    assert_eq!(cpus_allowed(&proc_status(pid_of("line-detector"))), "0");
+    assert_eq!(
+        cpus_allowed(&proc_status(stage_pid(&status, "line-detector"))),
+        "0"
+    );
     // Every thread of the pinned stage (iceoryx2's, OpenCV's) inherited it.
-    let tasks = std::fs::read_dir(format!("/proc/{}/task", pid_of("line-detector")))
-        .unwrap_or_else(|e| panic!("{e}"));
+    let tasks = std::fs::read_dir(format!(
+        "/proc/{}/task",
+        stage_pid(&status, "line-detector")
+    ))
+    .unwrap_or_else(|e| panic!("{e}"));
     for task in tasks.flatten() {
         assert_eq!(cpus_allowed(&task.path().join("status")), "0");
     }
     // The source reads ahead at `source.reader_nice` (10), and publishes at the nice value
     // it inherited from the supervisor.
-    let source = pid_of("frame-source");
+    let source = stage_pid(&status, "frame-source");
     let reader = thread_status(source, "frame-reader")
         .unwrap_or_else(|| panic!("no thread named frame-reader in process {source}"));
     let stat = |pid: u32| PathBuf::from(format!("/proc/{pid}/stat"));
@@ -95,7 +93,7 @@ fn a_stage_pinned_to_cpu_0_runs_there_and_the_ipc_root_comes_from_the_config() {
     );
     for unpinned in ["frame-source", "matcher", "pose-estimator"] {
         assert_eq!(
-            cpus_allowed(&proc_status(pid_of(unpinned))),
+            cpus_allowed(&proc_status(stage_pid(&status, unpinned))),
             supervisor_cpus,
             "{unpinned}"
         );

@@ -9,12 +9,7 @@ fn kill_and_recover(stage: &str) {
     // flight, not a loaded machine's backlog (at 10 Hz, two CPU hogs and LSD: 23 of 40).
     let mut run = start_every_frame(&dir, &base_sequence(FRAMES), &quick());
     let status = run.wait_for("10 frames", RUN_TIMEOUT, |s| s.frames >= 10);
-    let victim = status
-        .stages
-        .iter()
-        .find(|s| s.stage == stage)
-        .unwrap_or_else(|| panic!("no {stage} in {:?}", status.stages))
-        .pid;
+    let victim = stage_pid(&status, stage);
     signal(victim, "KILL");
     let (exit, out, records) = run.finish(RUN_TIMEOUT);
     assert!(exit.success(), "{exit}\n{out}");
@@ -119,12 +114,7 @@ fn a_hung_pose_estimator_is_replaced_and_the_frames_lost_with_it_carry_an_event(
     let dir = scratch("hang-pose-estimator");
     let mut run = start(&dir, &base_sequence(FRAMES), &quick());
     let status = run.wait_for("5 frames", RUN_TIMEOUT, |s| s.frames >= 5);
-    let victim = status
-        .stages
-        .iter()
-        .find(|s| s.stage == "pose-estimator")
-        .unwrap_or_else(|| panic!("no pose estimator in {:?}", status.stages))
-        .pid;
+    let victim = stage_pid(&status, "pose-estimator");
     // Stopped for good: the supervisor finds the silence (hang_timeout_ms 2000), kills it
     // and starts another.
     signal(victim, "STOP");
@@ -221,12 +211,7 @@ fn a_killed_supervisor_takes_its_stages_with_it() {
 
 /// Stops `stage` (SIGSTOP) for a while shorter than the hang timeout, then resumes it.
 fn stall(status: &linetrack_supervisor::LiveStatus, stage: &str, for_how_long: Duration) -> u32 {
-    let pid = status
-        .stages
-        .iter()
-        .find(|s| s.stage == stage)
-        .unwrap_or_else(|| panic!("no {stage} in {:?}", status.stages))
-        .pid;
+    let pid = stage_pid(status, stage);
     signal(pid, "STOP");
     std::thread::sleep(for_how_long);
     signal(pid, "CONT");
@@ -298,12 +283,7 @@ fn the_restart_limit_ends_the_run_with_its_records_and_the_reason() {
     let extra = quick().replace("[supervisor]\n", "[supervisor]\nmax_restarts = 0\n");
     let mut run = start(&dir, &base_sequence(FRAMES), &extra);
     let status = run.wait_for("5 frames", RUN_TIMEOUT, |s| s.frames >= 5);
-    let victim = status
-        .stages
-        .iter()
-        .find(|s| s.stage == "matcher")
-        .unwrap_or_else(|| panic!("no matcher in {:?}", status.stages))
-        .pid;
+    let victim = stage_pid(&status, "matcher");
     signal(victim, "KILL");
     let run_dir = run.run_dir.clone();
     let (exit, out, records) = run.finish(RUN_TIMEOUT);
