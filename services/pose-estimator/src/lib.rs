@@ -15,18 +15,20 @@ use anyhow::Context;
 use linetrack_geometry::{Segment, StereoRig};
 use linetrack_ipc::{Bus, Inlet, Received, Shutdown};
 use linetrack_msgs::{
-    FrameHeader, NO_FRAME, PoseRecord, RigRecord, StageKind, Topic, TopicOf, TrackedLine,
-    TracksHeader, topics,
+    FrameHeader, MatcherMode, NO_FRAME, PoseRecord, RigRecord, StageKind, Topic, TopicOf,
+    TrackedLine, TracksHeader, topics,
 };
 use linetrack_odometry::{
-    Features, FrameStats, MatchedLines, MotionTracker, OdometryConfig, PoseCovariance, Preparation,
-    PreparedImages,
+    Features, FrameStats, LinePrediction, MatchedLines, MotionTracker, OdometryConfig,
+    PoseCovariance, Preparation, PreparedImages, SegmentTracking,
 };
 use linetrack_stage_runtime::{
     Images, Stage, StageContext, held_capacity, rig_from_record, run_stage, stereo_views,
     to_segment,
 };
-use linetrack_vision::FeatureMatch;
+use linetrack_vision::{
+    FeatureMatch, LineFeatures, MatcherKind, SegmentMatcher, create_segment_matcher,
+};
 use nalgebra::{Isometry3, Matrix6, Quaternion, Translation3, UnitQuaternion};
 use std::collections::VecDeque;
 
@@ -129,6 +131,63 @@ pub struct PoseTracker {
     buffers: FrameBuffers,
     /// The pose's covariance, chained over the frames (a resumed pose starts exact).
     covariance: PoseCovariance,
+    /// Frames the matcher matched with ℓ1 are matched to the last frame again here, where
+    /// the motion predicts the last frame's segments (the matcher stage does not know the
+    /// motion): the odometry's own front end does the same for every frame.
+    relink: Relink,
+}
+
+/// What matching ℓ1 frames again at their predicted positions keeps between frames.
+struct Relink {
+    l1: Box<dyn SegmentMatcher>,
+    segments: SegmentTracking,
+    /// The last tracked frame's left segments (as the tracker was given them) with the ℓ1
+    /// matcher's description of its left image, and that frame's id.
+    previous: Option<(u64, LineFeatures)>,
+    /// The current frame's, refilled in place.
+    current: LineFeatures,
+}
+
+impl Relink {
+    /// Replaces `tracked` (the matcher's matches of `previous_frame_id`'s left segments
+    /// with this frame's, made around their old positions) by ℓ1 matches at the positions
+    /// the tracker predicts for them, or where the frame's own segment motion puts them
+    /// (`rematch_passes`), when this frame was matched with ℓ1, `previous_frame_id` is the
+    /// frame described last, and the config matches predicted positions. Then keeps this
+    /// frame's left segments, described from `left`, for the next frame.
+    fn relink(
+        &mut self,
+        tracker: &mut MotionTracker,
+        (frame_id, matching, continues): (u64, &linetrack_msgs::Matching, bool),
+        left_segments: &[Segment],
+        left: Option<&linetrack_vision::GrayImage>,
+        tracked: &mut Vec<FeatureMatch>,
+    ) -> anyhow::Result<()> {
+        let current = &mut self.current;
+        current.clear();
+        current.segments.extend_from_slice(left_segments);
+        let Some(left) = left else {
+            self.previous = None;
+            return Ok(());
+        };
+        self.l1.describe(left, current)?;
+        let l1_frame = matching.mode.is(MatcherMode::L1);
+        if let Some((id, previous)) = &mut self.previous
+            && l1_frame
+            && continues
+            && *id == matching.previous_frame_id
+            && !self
+                .segments
+                .match_predicted(self.l1.as_mut(), tracker, previous, current, tracked)
+        {
+            self.segments
+                .rematch(self.l1.as_mut(), tracker, previous, current, tracked);
+        }
+        let done = self.previous.take().map(|(_, p)| p).unwrap_or_default();
+        let kept = std::mem::replace(&mut self.current, done);
+        self.previous = Some((frame_id, kept));
+        Ok(())
+    }
 }
 
 /// A frame's segments and matches as the back end takes them.
@@ -160,6 +219,12 @@ impl PoseTracker {
             prepared: VecDeque::new(),
             buffers: FrameBuffers::default(),
             covariance: PoseCovariance::default(),
+            relink: Relink {
+                l1: create_segment_matcher(MatcherKind::L1, &ctx.config.odometry.frontend)?,
+                segments: SegmentTracking::default(),
+                previous: None,
+                current: LineFeatures::default(),
+            },
         })
     }
 
@@ -255,6 +320,7 @@ impl PoseTracker {
         frame: Option<&Images>,
     ) -> anyhow::Result<PoseRecord> {
         let previous_frame_id = header.matching.previous_frame_id;
+        let tracks_matching = header.matching;
         let header = &header.frame;
         let prepared = self.take_prepared(header.frame_id);
         // The frame's segments and matches, in buffers kept from frame to frame.
@@ -291,12 +357,6 @@ impl PoseTracker {
             }
         }
         let continues = previous_frame_id != NO_FRAME && previous_frame_id == self.last_frame;
-        let matched = MatchedLines {
-            left: &self.buffers.left,
-            right: &self.buffers.right,
-            stereo: &self.buffers.stereo,
-            tracked: continues.then_some(self.buffers.tracked.as_slice()),
-        };
         let views = match frame.map(stereo_views) {
             Some(Ok(v)) => Some(v),
             Some(Err(e)) => {
@@ -317,6 +377,26 @@ impl PoseTracker {
         if let Some(frame) = resumed {
             tracker.predict_frames(header.frame_id.saturating_sub(frame));
         }
+        if continues
+            && self.config.line_prediction == LinePrediction::PointsFirst
+            && let Some(prepared) = &prepared
+        {
+            tracker.predict_from_points(prepared);
+        }
+        let matching = (header.frame_id, &tracks_matching, continues);
+        self.relink.relink(
+            tracker,
+            matching,
+            &self.buffers.left,
+            images.map(|(left, _)| left),
+            &mut self.buffers.tracked,
+        )?;
+        let matched = MatchedLines {
+            left: &self.buffers.left,
+            right: &self.buffers.right,
+            stereo: &self.buffers.stereo,
+            tracked: continues.then_some(self.buffers.tracked.as_slice()),
+        };
         let result = match (images, prepared) {
             (Some(images), Some(prepared)) => {
                 tracker.update_prepared(Some((images, prepared)), matched, FrameStats::default())?
@@ -350,6 +430,9 @@ pub struct PoseStage {
     tracker: PoseTracker,
     rig: Inlet<RigRecord, ()>,
     points: bool,
+    /// Whether ℓ1 frames are matched again at their predicted positions (which reads the
+    /// left image, for the ℓ1 matcher's photometric check).
+    relinks: bool,
 }
 
 impl PoseStage {
@@ -359,6 +442,7 @@ impl PoseStage {
             tracker: PoseTracker::new(ctx)?,
             rig: bus.inlet(topics::RIG)?,
             points: ctx.config.odometry.features == Features::PointsAndLines,
+            relinks: ctx.config.odometry.predicted_matching,
         })
     }
 }
@@ -374,8 +458,8 @@ impl Stage for PoseStage {
     const OUTPUT_LEN: usize = 1;
 
     fn joins_images(&self) -> bool {
-        // ORB points are found in the images.
-        self.points
+        // ORB points are found in the images, and ℓ1 frames matched again read the left.
+        self.points || self.relinks
     }
 
     fn poll(&mut self) -> anyhow::Result<()> {

@@ -20,10 +20,7 @@ pub struct Odometry {
     detector: Box<dyn LineDetector>,
     matcher: Box<dyn SegmentMatcher>,
     previous_lines: Option<LineFeatures>,
-    /// Where the last motion moves the previous frame's segments (kept between frames).
-    predicted: Vec<Segment>,
-    /// Which of `predicted` were moved by the motion (the others have no landmark).
-    moved: Vec<bool>,
+    segments: SegmentTracking,
     tracker: MotionTracker,
 }
 
@@ -34,8 +31,7 @@ impl Odometry {
             detector: create_detector(config.detector, &config.frontend)?,
             matcher: create_segment_matcher(config.matcher, &config.frontend)?,
             previous_lines: None,
-            predicted: Vec::new(),
-            moved: Vec::new(),
+            segments: SegmentTracking::default(),
             tracker: MotionTracker::new(config, rig)?,
         })
     }
@@ -89,32 +85,14 @@ impl Odometry {
         let started = Instant::now();
         let mut tracked = Vec::new();
         if let Some(previous) = &mut self.previous_lines {
-            // Matched where the last motion puts them, when it is known.
-            let (predicted, moved) = (&mut self.predicted, &mut self.moved);
-            let predicting = self.tracker.config().predicted_matching
-                && self.matcher.matches_predicted_positions()
-                && self
-                    .tracker
-                    .predict_segments(&previous.segments, predicted, moved);
-            if predicting {
-                std::mem::swap(&mut previous.segments, predicted);
-                self.matcher
-                    .match_predicted(previous, moved, &lines_l, &mut tracked);
-                std::mem::swap(&mut previous.segments, predicted);
-            } else {
-                self.matcher
-                    .match_lines(MatchCase::FrameToFrame, previous, &lines_l, &mut tracked);
-                if self.tracker.config().predicted_matching
-                    && self.matcher.matches_predicted_positions()
-                {
-                    let guide = Guide {
-                        matcher: self.matcher.as_mut(),
-                        tracker: &mut self.tracker,
-                        predicted,
-                        moved,
-                    };
-                    guide.rematch(previous, &lines_l, &mut tracked);
-                }
+            let (matcher, tracker) = (self.matcher.as_mut(), &mut self.tracker);
+            if !self
+                .segments
+                .match_predicted(matcher, tracker, previous, &lines_l, &mut tracked)
+            {
+                matcher.match_lines(MatchCase::FrameToFrame, previous, &lines_l, &mut tracked);
+                self.segments
+                    .rematch(matcher, tracker, previous, &lines_l, &mut tracked);
             }
         }
         stats.frame_to_frame_ms = since(started);
@@ -134,55 +112,89 @@ impl Odometry {
     }
 }
 
-/// Matches a frame's segments again where the motion of their own matches puts them
-/// (`rematch_passes`), for a frame matched without a prediction.
-struct Guide<'a> {
-    matcher: &'a mut dyn SegmentMatcher,
-    tracker: &'a mut MotionTracker,
-    predicted: &'a mut Vec<Segment>,
-    moved: &'a mut Vec<bool>,
+/// Frame-to-frame segment matching guided by the motion: the last frame's segments looked
+/// for where the predicted motion puts them, and a frame matched without a prediction
+/// matched again where its own segments' motion puts them (`rematch_passes`). Both front
+/// ends use it: [`Odometry`] for every frame, the pipeline's pose estimator for the frames
+/// the matcher stage matched with the ℓ1 matcher (it alone knows the motion).
+#[derive(Debug, Default)]
+pub struct SegmentTracking {
+    /// Where the motion moves the previous frame's segments (kept between frames).
+    predicted: Vec<Segment>,
+    /// Which of `predicted` were moved by the motion (the others have no landmark).
+    moved: Vec<bool>,
 }
 
-impl Guide<'_> {
+impl SegmentTracking {
+    /// Replaces `tracked` by the matches of `previous`'s segments (the frame the tracker
+    /// tracked last) to `current`'s at the positions the predicted motion gives them, and
+    /// returns true; returns false, leaving `tracked` alone, when the config or the
+    /// matcher does not match predicted positions or no motion is known yet.
+    pub fn match_predicted(
+        &mut self,
+        matcher: &mut dyn SegmentMatcher,
+        tracker: &MotionTracker,
+        previous: &mut LineFeatures,
+        current: &LineFeatures,
+        tracked: &mut Vec<FeatureMatch>,
+    ) -> bool {
+        let predicting = tracker.config().predicted_matching
+            && matcher.matches_predicted_positions()
+            && tracker.predict_segments(&previous.segments, &mut self.predicted, &mut self.moved);
+        if predicting {
+            std::mem::swap(&mut previous.segments, &mut self.predicted);
+            matcher.match_predicted(previous, &self.moved, current, tracked);
+            std::mem::swap(&mut previous.segments, &mut self.predicted);
+        }
+        predicting
+    }
+
     /// Replaces `tracked` (`previous` → `current` matches made around the old positions)
     /// by the pass whose motion has the most inlying segments, and predicts the frame's
-    /// segments with that motion; leaves both as they were when no pass gives a motion.
-    fn rematch(
-        self,
+    /// segments with that motion; leaves both as they were when no pass gives a motion,
+    /// and does nothing with `rematch_passes = 0` or a matcher that does not match
+    /// predicted positions.
+    pub fn rematch(
+        &mut self,
+        matcher: &mut dyn SegmentMatcher,
+        tracker: &mut MotionTracker,
         previous: &mut LineFeatures,
         current: &LineFeatures,
         tracked: &mut Vec<FeatureMatch>,
     ) {
-        let passes = self.tracker.config().rematch_passes;
-        if passes == 0 {
+        let passes = tracker.config().rematch_passes;
+        if passes == 0
+            || !tracker.config().predicted_matching
+            || !matcher.matches_predicted_positions()
+        {
             return;
         }
         let mut best: Option<(usize, Isometry3<f64>, Vec<FeatureMatch>)> = None;
         let mut pass = tracked.clone();
         for done in 0..=passes {
-            let Some((motion, inliers)) = self.tracker.segments_motion(&current.segments, &pass)
-            else {
+            let Some((motion, inliers)) = tracker.segments_motion(&current.segments, &pass) else {
                 break;
             };
             if best.as_ref().is_none_or(|(most, ..)| inliers >= *most) {
                 best = Some((inliers, motion, pass.clone()));
             }
-            self.tracker.predict_segments_with(motion);
+            tracker.predict_segments_with(motion);
             if done == passes
-                || !self
-                    .tracker
-                    .predict_segments(&previous.segments, self.predicted, self.moved)
+                || !tracker.predict_segments(
+                    &previous.segments,
+                    &mut self.predicted,
+                    &mut self.moved,
+                )
             {
                 break;
             }
-            std::mem::swap(&mut previous.segments, self.predicted);
+            std::mem::swap(&mut previous.segments, &mut self.predicted);
             pass.clear();
-            self.matcher
-                .match_predicted(previous, self.moved, current, &mut pass);
-            std::mem::swap(&mut previous.segments, self.predicted);
+            matcher.match_predicted(previous, &self.moved, current, &mut pass);
+            std::mem::swap(&mut previous.segments, &mut self.predicted);
         }
         if let Some((_, motion, matches)) = best {
-            self.tracker.predict_segments_with(motion);
+            tracker.predict_segments_with(motion);
             *tracked = matches;
         }
     }

@@ -255,3 +255,21 @@ fn a_second_run_into_a_busy_run_folder_is_refused_naming_the_first() {
     assert!(exit.success(), "{exit}\n{out}");
     assert_every_frame_accounted(&records);
 }
+
+#[test]
+fn l1_lines_only_at_road_speed_tracks_every_frame_as_the_odometry_does() {
+    // KITTI raw moves ~1.3 m a frame: around their old positions the ℓ1 matcher finds the
+    // segments that move least, and lines only lost frames 1 and 2 of the drive. The
+    // pose estimator matches ℓ1 frames again where the motion predicts the last frame's
+    // segments, as `linetrack-vo`'s own front end does, and every frame is tracked.
+    let dir = scratch("l1-road");
+    let drive = linetrack_test_data::kitti_raw_dir().unwrap_or_else(|e| panic!("{e}"));
+    let extra = format!("{}[odometry]\nfeatures = \"lines-only\"\n", quick());
+    let args = ["--pacing", "fastest", "--matcher", "l1", "--frames", "12"];
+    let (status, out, records) = start_with_args(&dir, &drive, &extra, &args).finish(RUN_TIMEOUT);
+    assert!(status.success(), "{status}\n{out}");
+    assert_ids_accounted(&records, 12, &[]);
+    let outcomes: Vec<&str> = records.frames.iter().map(|f| f.outcome.as_str()).collect();
+    assert!(outcomes.iter().all(|o| *o == "pose"), "{outcomes:?}");
+    assert!(records.frames.iter().all(|f| f.matcher == "l1"));
+}
