@@ -176,7 +176,6 @@ pub fn run_pipeline(
             config,
             options,
             pipeline,
-            &run_id,
             &scope,
             &run_dir,
             config_path,

@@ -6,8 +6,12 @@
 //! What the rest of the system knows about the graph is derived from it: which nodes a
 //! publish wakes and in which order ([`Topic::consumers`]), the named stamp slots of a
 //! frame ([`StampSlot`], [`StageKind::stamp_slot`]), the supervisor's spawn table, restarts
-//! and hot swap (`linetrack_supervisor`), and the nodes that take `[stages.<name>]`
-//! (`linetrack_pipeline_config`). Adding a node is one entry here plus its `Stage` impl.
+//! and hot swap (`linetrack_supervisor`), each stage's `[budget]` key and the nodes that
+//! take `[stages.<name>]` (`linetrack_pipeline_config`), whether an output is restarted.
+//! Adding a node is one entry here plus its `Stage` impl, its wire code ([`StageKind`]) and
+//! its thread code (`linetrack_supervisor::Pipeline`); an observer added by a test or an
+//! experiment needs neither (`StageKind::Observer`, `Pipeline::with_node`). How:
+//! docs/pipeline.md, "Adding a node".
 
 use crate::{
     Control, FrameHeader, PoseRecord, RigRecord, SegmentRecord, SegmentsHeader, StageKind,
