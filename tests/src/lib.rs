@@ -2,6 +2,8 @@
 //! altered), a pipeline run started as a user would (`linetrack run` in its own process,
 //! with its own shared-memory prefix), and its records.
 
+pub mod pose_counter;
+
 use linetrack_ipc::{Resources, Scope};
 use linetrack_run_record::{EventRecord, FrameRecord, read_events, read_frames};
 use linetrack_scene_render::Preset;

@@ -1071,14 +1071,14 @@ mod tests {
 
     /// An observer node the shipped pipeline does not have, woken by the poses, started
     /// with the stages and restarted with backoff; `hot_swap` as given. (A node needs a
-    /// wire code: the link's kind stands in for a new one.)
+    /// wire code: [`StageKind::Observer`], the kind for nodes added besides the shipped ones.)
     fn with_observer(hot_swap: bool) -> &'static [NodeDecl] {
         let observer = NodeDecl {
             wakes_on: &[Topic::Poses, Topic::Control],
             start: Start::WithStages,
             restart: Restart::Backoff,
             hot_swap,
-            ..NodeDecl::new(StageKind::Link, Role::Observer, "linetrack-observer")
+            ..NodeDecl::new(StageKind::Observer, Role::Observer, "linetrack-observer")
         };
         let mut nodes: Vec<NodeDecl> = PIPELINE
             .iter()
@@ -1094,7 +1094,7 @@ mod tests {
     /// restarts untouched), hot-swaps it only when declared so, and stops it with the rest.
     #[test]
     fn a_declared_observer_is_started_waited_for_restarted_and_stopped_like_a_stage() {
-        let observer = StageKind::Link;
+        let observer = StageKind::Observer;
         let mut run = Run::of(&config(), with_observer(false));
         let started = spawns(&run.on(Event::Start));
         let mut expected = stages_spawned();

@@ -1,10 +1,7 @@
 //! How a stage instance runs: a child process, or (single-process mode) a thread of the
 //! supervisor's process running the same code its process's `main` runs.
 
-use linetrack_ipc::{Bus, Shutdown};
-use linetrack_msgs::StageKind;
-use linetrack_pipeline_config::PipelineConfig;
-use linetrack_stage_runtime::StageContext;
+use linetrack_ipc::Shutdown;
 use std::process::Child;
 
 /// Ids of thread stages start here (above any Linux pid), so that commands and status
@@ -64,58 +61,6 @@ impl Launch {
                 }
                 *handle = None;
             }
-        }
-    }
-}
-
-/// A stage's code, as a thread runs it.
-pub(crate) type StageRun = fn(&StageContext, &Bus, &Shutdown) -> anyhow::Result<()>;
-
-/// The code of `stage` (the same function its process's `main` runs).
-pub(crate) fn stage_code(stage: StageKind) -> Option<StageRun> {
-    match stage {
-        StageKind::FrameSource => Some(linetrack_frame_source::run),
-        StageKind::LineDetector => Some(linetrack_line_detector::run),
-        StageKind::Matcher => Some(linetrack_matcher::run),
-        StageKind::PoseEstimator => Some(linetrack_pose_estimator::run),
-        StageKind::Supervisor | StageKind::Recorder | StageKind::Ros2Bridge | StageKind::Link => {
-            None
-        }
-    }
-}
-
-/// The frame source fed by ROS 2 image topics (`[camera.ros2_images]`), built with this
-/// cargo feature.
-pub const ROS2_SOURCE: (&str, &str) = ("linetrack-ros2-source", "linetrack-ros2-bridge/ros2");
-
-/// The binary of `stage` in a run of `config`: the one the pipeline's declaration names,
-/// but for the frame source fed by ROS 2 image topics when `[camera.ros2_images]` names
-/// them.
-pub(crate) fn stage_binary(config: &PipelineConfig, stage: StageKind) -> String {
-    if stage == StageKind::FrameSource && config.camera.ros2_images.enabled() {
-        ROS2_SOURCE.0.to_string()
-    } else {
-        stage.decl().map_or_else(
-            || format!("linetrack-{}", stage.name()),
-            |node| node.binary.to_string(),
-        )
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use linetrack_msgs::PIPELINE;
-
-    /// Every node the supervisor starts has its code for single-process mode and a binary
-    /// for processes, both as declared.
-    #[test]
-    fn every_supervised_node_has_its_code_and_its_declared_binary() {
-        let config = PipelineConfig::default();
-        for node in PIPELINE.iter().filter(|n| n.supervised()) {
-            assert!(stage_code(node.stage).is_some(), "{}", node.stage);
-            assert_eq!(stage_binary(&config, node.stage), node.binary);
-            assert_eq!(node.binary, format!("linetrack-{}", node.stage.name()));
         }
     }
 }

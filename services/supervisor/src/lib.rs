@@ -34,6 +34,7 @@ pub mod fallback;
 mod launch;
 pub mod monitor;
 pub mod optional;
+pub mod pipeline;
 pub mod run_dir;
 mod shell;
 pub mod stage_runner;
@@ -43,6 +44,7 @@ mod status_writer;
 pub mod stderr_tail;
 
 pub use launch::THREAD_IDS;
+pub use pipeline::Pipeline;
 pub use status::{LiveStatus, StageEntry};
 
 use anyhow::Context;
@@ -104,6 +106,17 @@ pub fn run(
     options: &RunOptions,
     shutdown: &Shutdown,
 ) -> anyhow::Result<RunOutcome> {
+    run_pipeline(config, options, &Pipeline::default(), shutdown)
+}
+
+/// [`run`] of the nodes `pipeline` declares (the shipped ones and those a test or an
+/// experiment added, [`Pipeline::with_node`]).
+pub fn run_pipeline(
+    config: &PipelineConfig,
+    options: &RunOptions,
+    pipeline: &Pipeline,
+    shutdown: &Shutdown,
+) -> anyhow::Result<RunOutcome> {
     // Records over the file size limit fail as on a full disk instead of killing the run.
     linetrack_ipc::survive_the_file_size_limit().context("catching SIGXFSZ")?;
     config
@@ -162,7 +175,7 @@ pub fn run(
         Mode::Processes | Mode::Threads => Supervisor::new(
             config,
             options,
-            &run_id,
+            pipeline,
             &scope,
             &run_dir,
             config_path,

@@ -14,6 +14,7 @@ use crate::Mode;
 use crate::clock::{Backoff, Clock, restart_backoff};
 use crate::monitor::Monitor;
 use linetrack_msgs::StageKind;
+use linetrack_msgs::pipeline::{Restart, declared};
 use linetrack_pipeline_config::{PipelineConfig, SupervisorConfig};
 use std::ffi::OsString;
 use std::path::{Path, PathBuf};
@@ -37,10 +38,11 @@ pub struct Rule {
     pub name: &'static str,
     /// The first word of its events' kinds.
     pub prefix: &'static str,
-    /// Its binary.
+    /// Its binary, as the pipeline's declaration names it.
     pub binary: &'static str,
-    /// Restarted with the stages' backoff when it exits (else the run goes on without it).
-    pub restart: bool,
+    /// What happens when it exits, as the declaration says: [`Restart::Output`], restarted
+    /// with the stages' backoff up to their limit; anything else, the run goes on without it.
+    pub restart: Restart,
     /// Whether the frame source waits for it to report ready.
     pub gates_source: bool,
     /// How it is asked to stop.
@@ -56,8 +58,8 @@ pub struct Rule {
 pub const ROS2: Rule = Rule {
     name: "ros2",
     prefix: "output",
-    binary: "linetrack-ros2",
-    restart: false,
+    binary: declared(StageKind::Ros2Bridge).binary,
+    restart: declared(StageKind::Ros2Bridge).restart,
     gates_source: true,
     stop: StopBy::Signal,
     without: "the run goes on without it",
@@ -69,8 +71,8 @@ pub const ROS2: Rule = Rule {
 pub const RECORDER: Rule = Rule {
     name: "recorder",
     prefix: "recorder",
-    binary: "linetrack-recorder",
-    restart: false,
+    binary: declared(StageKind::Recorder).binary,
+    restart: declared(StageKind::Recorder).restart,
     gates_source: true,
     stop: StopBy::Command(StageKind::Recorder),
     without: "the run goes on without a recording",
@@ -81,8 +83,8 @@ pub const RECORDER: Rule = Rule {
 pub const LINK: Rule = Rule {
     name: "link",
     prefix: "link",
-    binary: "linetrack-link",
-    restart: true,
+    binary: declared(StageKind::Link).binary,
+    restart: declared(StageKind::Link).restart,
     gates_source: false,
     stop: StopBy::Signal,
     without: "the pipeline goes on",
@@ -142,6 +144,11 @@ impl OptionalProcess {
     /// Its rule.
     pub fn rule(&self) -> &Rule {
         &self.rule
+    }
+
+    /// Whether it is restarted when it exits.
+    fn restarts(&self) -> bool {
+        self.rule.restart == Restart::Output
     }
 
     /// Its binary.
@@ -271,7 +278,7 @@ impl OptionalProcess {
     /// After an exit or a failed start: schedules the restart or leaves it; what happens
     /// next, in words.
     fn after_failure(&mut self, now: Duration) -> String {
-        if !self.rule.restart {
+        if !self.restarts() {
             self.done = true;
             return self.rule.without.to_string();
         }
@@ -291,7 +298,7 @@ impl OptionalProcess {
 
     /// Records a restarting process that has just passed its limit.
     fn give_up_note(&self, monitor: &mut Monitor) {
-        if self.rule.restart && self.done {
+        if self.restarts() && self.done {
             monitor.event(
                 &self.kind("given-up"),
                 self.rule.name,
@@ -527,6 +534,42 @@ mod tests {
         assert!(events.contains("restart 1 of 2 in 100ms"), "{events}");
         assert!(events.contains("restart 2 of 2 in 150ms"), "{events}");
         assert!(events.contains("exit status: 3"), "{events}");
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    /// The rules say what the declaration says: the link restarted, the others left.
+    #[test]
+    fn the_rules_restart_and_binary_are_the_declarations() {
+        for (rule, stage) in [
+            (ROS2, StageKind::Ros2Bridge),
+            (RECORDER, StageKind::Recorder),
+            (LINK, StageKind::Link),
+        ] {
+            let node = declared(stage);
+            assert_eq!((rule.binary, rule.restart), (node.binary, node.restart));
+        }
+        assert_eq!(LINK.restart, Restart::Output);
+        assert_eq!(RECORDER.restart, Restart::Never);
+        assert_eq!(ROS2.restart, Restart::Never);
+    }
+
+    /// The link declared without restarts is left at its first exit.
+    #[test]
+    fn a_process_declared_without_restarts_is_left_at_its_first_exit() {
+        let (dir, mut monitor, clock) = setup("optional-never");
+        let rule = Rule {
+            restart: Restart::Never,
+            ..LINK
+        };
+        let mut link = OptionalProcess::new(rule, settings(&dir), &SupervisorConfig::default());
+        assert!(link.wants_start(clock.monotonic()));
+        link.supervise(Some(sh("exit 3")), clock.monotonic(), &mut monitor);
+        reap(&mut link, &clock, &mut monitor);
+        clock.advance(Duration::from_secs(60));
+        assert!(!link.wants_start(clock.monotonic()), "left");
+        let events = events_of(&dir);
+        assert_eq!(events.matches("link-exit").count(), 1, "{events}");
+        assert!(!events.contains("restart 1"), "{events}");
         let _ = std::fs::remove_dir_all(&dir);
     }
 

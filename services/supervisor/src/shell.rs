@@ -4,9 +4,10 @@
 //! recording, writing `status.json`). Every decision is the core's.
 
 use crate::core::{Action, Core, End, Event, Log, Progress};
-use crate::launch::{Launch, ROS2_SOURCE, THREAD_IDS, stage_binary, stage_code};
+use crate::launch::{Launch, THREAD_IDS};
 use crate::monitor::Monitor;
 use crate::optional::{self, OptionalProcess, StopBy};
+use crate::pipeline::{Pipeline, ROS2_SOURCE};
 use crate::stage_runner::StageRunner;
 use crate::status::{LiveStatus, StageEntry};
 use crate::status_writer::StatusWriter;
@@ -15,8 +16,7 @@ use anyhow::{Context, bail};
 use clock::Clock;
 use linetrack_ipc::{Bus, Inlet, LocalHub, Outlet, Scope, Shutdown, Wake};
 use linetrack_msgs::{
-    Command, Control, PIPELINE, PoseRecord, StageKind, StatusKind, StatusReport, TracksHeader,
-    topics,
+    Command, Control, PoseRecord, StageKind, StatusKind, StatusReport, TracksHeader, topics,
 };
 use linetrack_pipeline_config::PipelineConfig;
 use linetrack_run_record::RunEnd;
@@ -90,6 +90,8 @@ pub(crate) struct Supervisor<'m> {
     bin_dir: PathBuf,
     /// What the stage binaries are started through (`LINETRACK_STAGE_RUNNER`).
     stage_runner: StageRunner,
+    /// The nodes and their code.
+    pipeline: Pipeline,
     bus: Bus,
     ports: Ports,
     monitor: &'m mut Monitor,
@@ -109,7 +111,7 @@ impl<'m> Supervisor<'m> {
     pub(crate) fn new(
         config: &PipelineConfig,
         options: &RunOptions,
-        run_id: &str,
+        pipeline: &Pipeline,
         scope: &Scope,
         run_dir: &Path,
         config_path: PathBuf,
@@ -132,8 +134,9 @@ impl<'m> Supervisor<'m> {
                 ROS2_SOURCE.0
             );
         }
-        for stage in PIPELINE.iter().filter(|n| n.supervised()).map(|n| n.stage) {
-            let bin = bin_dir.join(stage_binary(config, stage));
+        for stage in pipeline.nodes().iter().filter(|n| n.supervised()) {
+            let stage = stage.stage;
+            let bin = bin_dir.join(pipeline.binary(config, stage));
             if options.mode == Mode::Processes && !bin.is_file() {
                 if ros2_images && stage == StageKind::FrameSource {
                     bail!(
@@ -182,18 +185,19 @@ impl<'m> Supervisor<'m> {
             hub,
             next_thread_id: THREAD_IDS,
             config: config.clone(),
-            run_id: run_id.to_string(),
+            run_id: scope.run_id.clone(),
             scope,
             run_dir: run_dir.to_path_buf(),
             config_path,
             bin_dir: bin_dir.clone(),
             stage_runner,
+            pipeline: pipeline.clone(),
             bus,
             ports,
             monitor,
             processes: Vec::new(),
             optional,
-            core: Core::new(config, options.live_status),
+            core: Core::declared(config, options.live_status, pipeline.nodes()),
             clock: Clock::System,
             status,
         })
@@ -227,7 +231,10 @@ impl<'m> Supervisor<'m> {
                 ctx.args.standby = standby;
                 ctx.args.resume_pose = resume_pose;
                 ctx.args.start_frame = usize::try_from(start_frame).unwrap_or(usize::MAX);
-                let code = stage_code(stage).context("the supervisor is no stage")?;
+                let code = self
+                    .pipeline
+                    .code(stage)
+                    .with_context(|| format!("{stage} has no code to run on a thread"))?;
                 let stop = Shutdown::default();
                 let (hub, flag) = (hub.clone(), stop.clone());
                 let settings = self.config.stages.of(stage).cloned().unwrap_or_default();
@@ -294,7 +301,7 @@ impl<'m> Supervisor<'m> {
         resume_pose: Option<String>,
         start_frame: u64,
     ) -> anyhow::Result<(Launch, u32, Option<stderr_tail::StderrTail>)> {
-        let bin = self.bin_dir.join(stage_binary(&self.config, stage));
+        let bin = self.bin_dir.join(self.pipeline.binary(&self.config, stage));
         let mut command = self.child_command(&bin);
         command.arg("--run-dir").arg(&self.run_dir);
         if let Some(kind) = detector {

@@ -6,8 +6,12 @@
 //! What the rest of the system knows about the graph is derived from it: which nodes a
 //! publish wakes and in which order ([`Topic::consumers`]), the named stamp slots of a
 //! frame ([`StampSlot`], [`StageKind::stamp_slot`]), the supervisor's spawn table, restarts
-//! and hot swap (`linetrack_supervisor`), and the nodes that take `[stages.<name>]`
-//! (`linetrack_pipeline_config`). Adding a node is one entry here plus its `Stage` impl.
+//! and hot swap (`linetrack_supervisor`), each stage's `[budget]` key and the nodes that
+//! take `[stages.<name>]` (`linetrack_pipeline_config`), whether an output is restarted.
+//! Adding a node is one entry here plus its `Stage` impl, its wire code ([`StageKind`]) and
+//! its thread code (`linetrack_supervisor::Pipeline`); an observer added by a test or an
+//! experiment needs neither (`StageKind::Observer`, `Pipeline::with_node`). How:
+//! docs/pipeline.md, "Adding a node".
 
 use crate::{
     Control, FrameHeader, PoseRecord, RigRecord, SegmentRecord, SegmentsHeader, StageKind,
@@ -160,9 +164,11 @@ pub enum Restart {
     /// Restarted after a doubling backoff, up to `supervisor.max_restarts`; past it the run
     /// fails.
     Backoff,
-    /// An output: restarted by its own policy while the run goes on without it.
+    /// An output: restarted after the same doubling backoff, up to the same limit; past
+    /// it the run goes on without it.
     Output,
-    /// Not restarted.
+    /// Not restarted (an output that dies is recorded and left: the run goes on without
+    /// it).
     Never,
 }
 
@@ -315,13 +321,11 @@ pub const PIPELINE: &[NodeDecl] = &[
         wakes_on: &[Frames, Segments, Tracks, Poses, Rig, Status, CONTROL],
         wake_rank: 4,
         start: Start::WhenConfigured,
-        restart: Restart::Output,
         ..NodeDecl::new(StageKind::Recorder, Role::Sink, "linetrack-recorder")
     },
     NodeDecl {
         reads: &[Poses],
         start: Start::WhenConfigured,
-        restart: Restart::Output,
         ..NodeDecl::new(StageKind::Ros2Bridge, Role::Sink, "linetrack-ros2")
     },
     NodeDecl {
@@ -336,6 +340,19 @@ pub const PIPELINE: &[NodeDecl] = &[
 /// The declaration of `stage` in `nodes`.
 pub fn node_in(nodes: &[NodeDecl], stage: StageKind) -> Option<&NodeDecl> {
     nodes.iter().find(|n| n.stage == stage)
+}
+
+/// The declaration of `stage` in [`PIPELINE`], when the crate using it is built (a stage
+/// [`PIPELINE`] does not declare does not build).
+pub const fn declared(stage: StageKind) -> &'static NodeDecl {
+    let mut i = 0;
+    while i < PIPELINE.len() {
+        if PIPELINE[i].stage as u32 == stage as u32 {
+            return &PIPELINE[i];
+        }
+        i += 1;
+    }
+    panic!("a node PIPELINE does not declare")
 }
 
 /// The declaration of `stage` in [`PIPELINE`].
@@ -442,7 +459,9 @@ mod tests {
     fn every_node_is_declared_once_and_every_stamp_slot_filled_once() {
         for &stage in StageKind::ALL {
             let declared = PIPELINE.iter().filter(|n| n.stage == stage).count();
-            assert_eq!(declared, 1, "{stage} declared {declared} times");
+            // The observer is for nodes added besides the shipped ones.
+            let expected = usize::from(stage != StageKind::Observer);
+            assert_eq!(declared, expected, "{stage} declared {declared} times");
         }
         for slot in StampSlot::ALL {
             let filled: Vec<_> = PIPELINE.iter().filter(|n| n.stamp == Some(slot)).collect();
@@ -502,10 +521,9 @@ mod tests {
             wake_rank: 5,
             start: Start::WithStages,
             restart: Restart::Backoff,
-            ..NodeDecl::new(StageKind::Link, Role::Observer, "linetrack-observer")
+            ..NodeDecl::new(StageKind::Observer, Role::Observer, "linetrack-observer")
         };
         let mut nodes = PIPELINE.to_vec();
-        nodes.retain(|n| n.stage != StageKind::Link);
         nodes.push(observer);
         let poses = consumers_in(&nodes, Topic::Poses);
         assert_eq!(
@@ -513,13 +531,13 @@ mod tests {
             [
                 StageKind::Supervisor,
                 StageKind::Recorder,
-                StageKind::Link,
+                StageKind::Observer,
                 StageKind::FrameSource
             ]
         );
         let frames = consumers_in(&nodes, Topic::Frames);
-        assert!(!frames.stages[..frames.len].contains(&StageKind::Link));
-        assert!(node_in(&nodes, StageKind::Link).is_some_and(NodeDecl::supervised));
+        assert!(!frames.stages[..frames.len].contains(&StageKind::Observer));
+        assert!(node_in(&nodes, StageKind::Observer).is_some_and(NodeDecl::supervised));
     }
 
     #[test]

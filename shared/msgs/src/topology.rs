@@ -26,6 +26,10 @@ wire_enum! {
         Ros2Bridge = 6,
         /// Forwards the run to a ground station over zenoh (`[link]`); no processing stage.
         Link = 7,
+        /// A node added to the pipeline's declaration besides [`PIPELINE`]'s (a test's or an
+        /// experiment's observer, `linetrack_supervisor::Pipeline::with_node`): its identity
+        /// on the wire, so that adding one needs no new variant. [`PIPELINE`] declares none.
+        Observer = 8,
     }
 }
 
@@ -45,6 +49,7 @@ impl StageKind {
             StageKind::Recorder => "recorder",
             StageKind::Ros2Bridge => "ros2-bridge",
             StageKind::Link => "link",
+            StageKind::Observer => "observer",
         }
     }
 

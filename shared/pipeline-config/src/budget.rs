@@ -37,17 +37,21 @@ impl Default for BudgetConfig {
 }
 
 impl BudgetConfig {
-    /// The budget of `stage` (`None` for a stage without one: supervisor, recorder, ...).
+    /// The budget of `stage`: the one under the `[budget]` key the pipeline's declaration
+    /// gives it (`None` for a node declared without one: supervisor, recorder, ...).
     pub fn stage_ms(&self, stage: StageKind) -> Option<f64> {
-        match stage {
-            StageKind::FrameSource => Some(self.frame_source_ms),
-            StageKind::LineDetector => Some(self.line_detector_ms),
-            StageKind::Matcher => Some(self.matcher_ms),
-            StageKind::PoseEstimator => Some(self.pose_estimator_ms),
-            StageKind::Supervisor
-            | StageKind::Recorder
-            | StageKind::Ros2Bridge
-            | StageKind::Link => None,
+        stage.decl()?.budget.and_then(|key| self.by_key(key))
+    }
+
+    /// The budget under `[budget]` named `key` (`None` for a key it does not have).
+    pub fn by_key(&self, key: &str) -> Option<f64> {
+        match key {
+            "end_to_end_ms" => Some(self.end_to_end_ms),
+            "frame_source_ms" => Some(self.frame_source_ms),
+            "line_detector_ms" => Some(self.line_detector_ms),
+            "matcher_ms" => Some(self.matcher_ms),
+            "pose_estimator_ms" => Some(self.pose_estimator_ms),
+            _ => None,
         }
     }
 }
@@ -65,5 +69,47 @@ impl BudgetConfig {
             in_range(key, ms, BUDGET_MS)?;
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use linetrack_msgs::PIPELINE;
+
+    /// A stage's budget is the `[budget]` key its declaration names: each declared key is a
+    /// field, and a stage reads its own (distinct values, so a swapped key shows).
+    #[test]
+    fn a_stage_reads_the_budget_its_declaration_names() {
+        let budget = BudgetConfig {
+            end_to_end_ms: 1.0,
+            frame_source_ms: 2.0,
+            line_detector_ms: 3.0,
+            matcher_ms: 4.0,
+            pose_estimator_ms: 5.0,
+            drop_late: true,
+        };
+        for node in PIPELINE {
+            if let Some(key) = node.budget {
+                assert!(
+                    budget.by_key(key).is_some(),
+                    "{}: [budget] {key}",
+                    node.stage
+                );
+            }
+        }
+        assert_eq!(budget.stage_ms(StageKind::FrameSource), Some(2.0));
+        assert_eq!(budget.stage_ms(StageKind::LineDetector), Some(3.0));
+        assert_eq!(budget.stage_ms(StageKind::Matcher), Some(4.0));
+        assert_eq!(budget.stage_ms(StageKind::PoseEstimator), Some(5.0));
+        for stage in [
+            StageKind::Supervisor,
+            StageKind::Recorder,
+            StageKind::Link,
+            StageKind::Observer,
+        ] {
+            assert_eq!(budget.stage_ms(stage), None, "{stage}");
+        }
+        assert_eq!(budget.by_key("drop_late"), None);
     }
 }
