@@ -16,7 +16,7 @@ use anyhow::Context;
 use linetrack_datasets::{Next, StereoSequence, StereoStream};
 use linetrack_ipc::{Bus, Shutdown};
 use linetrack_msgs::{FrameStatus, RigRecord, StageKind};
-use linetrack_pipeline_config::{Pacing, SourceConfig};
+use linetrack_pipeline_config::{BudgetConfig, Pacing, SourceConfig};
 use linetrack_stage_runtime::{
     RigOutlet as Rig, Source, SourceOut, StageContext, Step, rig_record, run_source,
 };
@@ -57,6 +57,51 @@ pub(crate) fn due_offset(
 pub(crate) fn not_yet(out: &SourceOut, began: Duration, due: Duration) -> Option<Duration> {
     let wait = (began + due).saturating_sub(out.clock().monotonic());
     (!wait.is_zero()).then_some(wait)
+}
+
+/// A frame's capture stamp under `pacing`, read on `clock` as it is published.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) struct Capture {
+    /// UNIX-epoch nanoseconds: when the frame was due (realtime pacing; the sequence's
+    /// clock mapped to the run's start), or now (`fastest`: nothing is due).
+    pub(crate) capture_ns: u64,
+    /// How far behind its time the source publishes it.
+    pub(crate) behind: Duration,
+}
+
+impl Capture {
+    /// The stamp of a frame due at `due` from the start `began` (monotonic, on `clock`). A
+    /// source that falls behind its schedule (its reading starved of CPU) stamps the frame
+    /// with the time it was due, not the time it has it: as a camera's frame carries the
+    /// time it was taken, so the end-to-end latency and the budget policies downstream see
+    /// the source's delay.
+    pub(crate) fn at(
+        clock: &linetrack_stage_runtime::Clock,
+        pacing: Pacing,
+        began: Duration,
+        due: Duration,
+    ) -> Self {
+        let now_ns = clock.now_ns();
+        if pacing == Pacing::Fastest {
+            return Self {
+                capture_ns: now_ns,
+                behind: Duration::ZERO,
+            };
+        }
+        let behind = clock.monotonic().saturating_sub(began + due);
+        let behind_ns = u64::try_from(behind.as_nanos()).unwrap_or(u64::MAX);
+        Self {
+            capture_ns: now_ns.saturating_sub(behind_ns),
+            behind,
+        }
+    }
+
+    /// Whether the frame is already over `budget`'s end-to-end budget as it would leave the
+    /// source (with `budget.drop_late`): it is published as a `capture-late` marker, no
+    /// pixels, as a camera's frame that waited too long is.
+    pub(crate) fn too_late(&self, budget: &BudgetConfig) -> bool {
+        budget.drop_late && self.behind.as_secs_f64() * 1e3 > budget.end_to_end_ms
+    }
 }
 
 /// [`run`] as a process of its own (`linetrack-frame-source`): OpenCV is first set to one
@@ -101,6 +146,7 @@ struct SequenceSource {
     /// Frames to publish, from the frame to start at.
     count: usize,
     source: SourceConfig,
+    budget: BudgetConfig,
     first_ns: u64,
     gain_jumps: Option<gain_jumps::GainJumps>,
     /// When the first frame was due, on the source's monotonic clock.
@@ -151,6 +197,7 @@ impl SequenceSource {
             stream,
             count: end.saturating_sub(start),
             source,
+            budget: ctx.config.budget.clone(),
             first_ns,
             gain_jumps,
             began: Duration::ZERO,
@@ -203,9 +250,13 @@ impl Source for SequenceSource {
         if let Some(wait) = not_yet(out, self.began, due) {
             return Ok(Step::Idle(wait));
         }
-        let capture_ns = out.now_ns();
+        let capture = Capture::at(out.clock(), self.source.pacing, self.began, due);
+        let capture_ns = capture.capture_ns;
         let (id, item) = (index as u64, self.pending.take());
         match item {
+            Some(Ok(_)) if capture.too_late(&self.budget) => {
+                out.marker(id, timestamp_ns, capture_ns, FrameStatus::CaptureLate)?;
+            }
             Some(Ok(frame)) => {
                 let size = (frame.left.width() as u32, frame.left.height() as u32);
                 let (Some(left), Some(right)) = (frame.left.pixels(), frame.right.pixels()) else {
@@ -263,6 +314,43 @@ mod tests {
             Duration::from_millis(200)
         );
         assert_eq!(due_offset(Pacing::Fastest, 20.0, 0, 999, 4), Duration::ZERO);
+    }
+
+    #[test]
+    fn a_late_frame_is_stamped_when_it_was_due_and_dropped_over_the_budget() {
+        let clock = Clock::manual(5_000_000_000);
+        let began = clock.monotonic();
+        let due = Duration::from_millis(50);
+        clock.advance(due);
+        let on_time = Capture::at(&clock, Pacing::Realtime, began, due);
+        assert_eq!(
+            on_time,
+            Capture {
+                capture_ns: 5_050_000_000,
+                behind: Duration::ZERO
+            }
+        );
+        // The reader starved for 150 ms: the frame keeps the time it was due.
+        clock.advance(Duration::from_millis(150));
+        let late = Capture::at(&clock, Pacing::Realtime, began, due);
+        assert_eq!(late.capture_ns, 5_050_000_000);
+        assert_eq!(late.behind, Duration::from_millis(150));
+        let mut budget = BudgetConfig::default();
+        budget.end_to_end_ms = 150.0;
+        assert!(!late.too_late(&budget), "at the budget, not over it");
+        budget.end_to_end_ms = 149.0;
+        assert!(late.too_late(&budget));
+        budget.drop_late = false;
+        assert!(
+            !late.too_late(&budget),
+            "drop_late = false keeps every frame"
+        );
+        // `fastest`: nothing is due, a frame is stamped as it goes.
+        let fastest = Capture::at(&clock, Pacing::Fastest, began, Duration::ZERO);
+        assert_eq!(
+            (fastest.capture_ns, fastest.behind),
+            (5_200_000_000, Duration::ZERO)
+        );
     }
 
     /// Status reports of `status` until `count` of them hold `wanted`; the clock moves one
@@ -356,5 +444,99 @@ mod tests {
             .join()
             .unwrap_or_else(|_| panic!("source thread"))
             .unwrap_or_else(|e| panic!("{e}"));
+    }
+
+    /// Runs a 20 Hz realtime source over 3 frames whose reader is held until the clock has
+    /// moved 10 s past the start; returns the frames' headers as published.
+    fn held_realtime_frames(drop_late: bool) -> Vec<linetrack_msgs::FrameHeader> {
+        let mut config = linetrack_pipeline_config::PipelineConfig::default();
+        config.source.sequence = linetrack_test_data::euroc_dir().unwrap_or_else(|e| panic!("{e}"));
+        config.source.pacing = Pacing::Realtime;
+        config.source.rate_hz = 20.0;
+        config.source.max_frames = 3;
+        config.budget.drop_late = drop_late;
+        config.supervisor.heartbeat_ms = 10;
+        let clock = Clock::manual(1_000_000_000);
+        let mut ctx =
+            StageContext::in_process(StageKind::FrameSource, config, std::path::PathBuf::new());
+        ctx.clock = clock.clone();
+        let every = ctx.heartbeat();
+        let bus = Bus::local();
+        let hub = bus.local_hub().unwrap_or_else(|| panic!("a local bus"));
+        let mut status = bus
+            .inlet::<StatusReport, ()>(topics::STATUS)
+            .unwrap_or_else(|e| panic!("{e}"));
+        let mut frames = bus
+            .inlet::<u8, linetrack_msgs::FrameHeader>(topics::FRAMES)
+            .unwrap_or_else(|e| panic!("{e}"));
+        let (release, held) = crossbeam_channel::bounded::<()>(0);
+        let shutdown = Shutdown::default();
+        let runner = std::thread::spawn({
+            let shutdown = shutdown.clone();
+            move || {
+                let bus = hub.bus();
+                let source = SequenceSource::open_with(&ctx, Rig::open(&bus)?, move || {
+                    let _ = held.recv();
+                })?;
+                run_source(&ctx, &bus, source, &shutdown)
+            }
+        });
+        // Ready: the source has started its clock; then it starves for 10 s.
+        let ready = |r: &StatusReport| r.kind.is(StatusKind::Ready);
+        reports(&bus, &mut status, &clock, every, ready, 1);
+        clock.advance(Duration::from_secs(10));
+        release.send(()).unwrap_or_else(|e| panic!("{e}"));
+        let finished = |r: &StatusReport| r.kind.is(StatusKind::SourceFinished);
+        reports(&bus, &mut status, &clock, every, finished, 1);
+        let headers = frames
+            .receive_all()
+            .unwrap_or_else(|e| panic!("{e}"))
+            .iter()
+            .map(|m| *m.header())
+            .collect();
+        shutdown.request();
+        runner
+            .join()
+            .unwrap_or_else(|_| panic!("source thread"))
+            .unwrap_or_else(|e| panic!("{e}"));
+        headers
+    }
+
+    /// The source's delay is in the frames' stamps: each frame carries the time it was due
+    /// (50 ms apart at 20 Hz), and the source's own stamp spans the 10 s it was behind.
+    /// With `drop_late`, frames already over the end-to-end budget leave as `capture-late`.
+    #[test]
+    fn a_starved_realtime_source_shows_its_delay_in_the_stamps_and_drops_what_is_over_budget() {
+        for drop_late in [false, true] {
+            let headers = held_realtime_frames(drop_late);
+            assert_eq!(
+                headers.iter().map(|h| h.frame_id).collect::<Vec<_>>(),
+                [0, 1, 2]
+            );
+            let gaps: Vec<u64> = headers
+                .windows(2)
+                .map(|w| w[1].capture_ns - w[0].capture_ns)
+                .collect();
+            assert_eq!(gaps, [50_000_000, 50_000_000], "drop_late {drop_late}");
+            for h in &headers {
+                let own = h
+                    .stamp(StageKind::FrameSource)
+                    .unwrap_or_else(|| panic!("no source stamp"));
+                assert_eq!(own.start_ns, h.capture_ns);
+                assert!(
+                    own.end_ns - own.start_ns >= 9_900_000_000,
+                    "frame {}: behind {} ns",
+                    h.frame_id,
+                    own.end_ns - own.start_ns
+                );
+                let want = if drop_late {
+                    FrameStatus::CaptureLate
+                } else {
+                    FrameStatus::Ok
+                };
+                assert_eq!(h.status.get(), Ok(want), "frame {}", h.frame_id);
+                assert_eq!(h.width > 0, !drop_late, "pixels only when kept");
+            }
+        }
     }
 }

@@ -6,12 +6,12 @@
 //! frames over through a short queue: the source is driven by what arrives on it, as a
 //! source fed by another system's callbacks is.
 
-use crate::{Rig, due_offset, not_yet};
+use crate::{Capture, Rig, due_offset, not_yet};
 use anyhow::Context;
 use crossbeam_channel::{Receiver, RecvTimeoutError};
 use linetrack_mcap::{Replay, ReplayFrame};
-use linetrack_msgs::{RigRecord, StageKind};
-use linetrack_pipeline_config::SourceConfig;
+use linetrack_msgs::{FrameStatus, RigRecord, StageKind};
+use linetrack_pipeline_config::{BudgetConfig, SourceConfig};
 use linetrack_stage_runtime::{Source, SourceOut, StageContext, Step};
 use std::path::{Path, PathBuf};
 use std::time::Duration;
@@ -29,6 +29,7 @@ pub(crate) struct ReplaySource {
     replay: Option<Replay>,
     file: PathBuf,
     source: SourceConfig,
+    budget: BudgetConfig,
     range: (usize, usize),
     frames: Option<Receiver<Read>>,
     /// When the first frame was due, on the source's monotonic clock, and its timestamp.
@@ -61,6 +62,7 @@ impl ReplaySource {
             replay: Some(replay),
             file: file.to_path_buf(),
             source,
+            budget: ctx.config.budget.clone(),
             range: (start, end),
             frames: None,
             began: Duration::ZERO,
@@ -139,14 +141,23 @@ impl Source for ReplaySource {
         if let Some(wait) = not_yet(out, self.began, due) {
             return Ok(Step::Idle(wait));
         }
-        let capture_ns = out.now_ns();
-        out.frame(
-            *k as u64,
-            frame.timestamp_ns,
-            capture_ns,
-            (frame.width, frame.height),
-            &[&frame.pixels],
-        )?;
+        let capture = Capture::at(out.clock(), self.source.pacing, self.began, due);
+        if capture.too_late(&self.budget) {
+            out.marker(
+                *k as u64,
+                frame.timestamp_ns,
+                capture.capture_ns,
+                FrameStatus::CaptureLate,
+            )?;
+        } else {
+            out.frame(
+                *k as u64,
+                frame.timestamp_ns,
+                capture.capture_ns,
+                (frame.width, frame.height),
+                &[&frame.pixels],
+            )?;
+        }
         self.pending = None;
         Ok(Step::Again)
     }
