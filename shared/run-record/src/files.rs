@@ -106,11 +106,6 @@ impl RowFile {
         }
     }
 
-    /// The file.
-    pub(crate) fn path(&self) -> &Path {
-        &self.path
-    }
-
     /// Syncs the file to the disk.
     pub(crate) fn sync(&self) -> Result<(), RecordError> {
         self.file.sync_data().map_err(io(&self.path))
