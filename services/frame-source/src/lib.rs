@@ -2,6 +2,10 @@
 //! and publishes each frame's two images into one shared-memory message, paced at the
 //! sequence's rate or as fast as it can. A frame that cannot be read is published as a
 //! `corrupt` marker (no pixels) so that downstream stages and the records count it.
+//! Paced in real time, a frame is stamped with the time it was due, however late the
+//! source has it (`Capture`): a source that falls behind shows its delay in the
+//! end-to-end latency, and a frame already over the end-to-end budget leaves as a
+//! `capture-late` marker.
 //! With `[camera]` set, it reads a live stereo camera instead ([`camera`]); with
 //! `source.replay`, an MCAP recording. Each of the three is a
 //! [`linetrack_stage_runtime::Source`]: the stage runtime publishes, stamps, beats, stops
@@ -149,8 +153,9 @@ struct SequenceSource {
     budget: BudgetConfig,
     first_ns: u64,
     gain_jumps: Option<gain_jumps::GainJumps>,
-    /// When the first frame was due, on the source's monotonic clock.
-    began: Duration,
+    /// When the source had its first frame, on its monotonic clock: the schedule starts
+    /// there (the time the first frame takes to read is no lateness).
+    began: Option<Duration>,
     /// Frames taken from the stream.
     taken: usize,
     /// The frame taken and waiting for its time.
@@ -200,7 +205,7 @@ impl SequenceSource {
             budget: ctx.config.budget.clone(),
             first_ns,
             gain_jumps,
-            began: Duration::ZERO,
+            began: None,
             taken: 0,
             pending: None,
         })
@@ -211,9 +216,8 @@ impl Source for SequenceSource {
     const KIND: StageKind = StageKind::FrameSource;
     const FRAME_BYTES: usize = FRAME_BYTES;
 
-    fn start(&mut self, out: &mut SourceOut) -> anyhow::Result<()> {
+    fn start(&mut self, _out: &mut SourceOut) -> anyhow::Result<()> {
         self.rig.publish(self.rig_record)?;
-        self.began = out.clock().monotonic();
         Ok(())
     }
 
@@ -239,6 +243,7 @@ impl Source for SequenceSource {
             Ok(frame) => (frame.index, frame.timestamp_ns),
             Err(e) => (e.index, e.timestamp_ns),
         };
+        let began = *self.began.get_or_insert_with(|| out.clock().monotonic());
         let rate = self.source.rate_hz.max(0.0);
         let due = due_offset(
             self.source.pacing,
@@ -247,10 +252,10 @@ impl Source for SequenceSource {
             timestamp_ns,
             self.taken - 1,
         );
-        if let Some(wait) = not_yet(out, self.began, due) {
+        if let Some(wait) = not_yet(out, began, due) {
             return Ok(Step::Idle(wait));
         }
-        let capture = Capture::at(out.clock(), self.source.pacing, self.began, due);
+        let capture = Capture::at(out.clock(), self.source.pacing, began, due);
         let capture_ns = capture.capture_ns;
         let (id, item) = (index as u64, self.pending.take());
         match item {
@@ -446,9 +451,10 @@ mod tests {
             .unwrap_or_else(|e| panic!("{e}"));
     }
 
-    /// Runs a 20 Hz realtime source over 3 frames whose reader is held until the clock has
-    /// moved 10 s past the start; returns the frames' headers as published.
-    fn held_realtime_frames(drop_late: bool) -> Vec<linetrack_msgs::FrameHeader> {
+    /// Runs a 20 Hz realtime source over 3 frames; once it has published the first, its
+    /// clock jumps 10 s (the source starved of CPU); returns the frames' headers.
+    fn starved_realtime_frames(drop_late: bool) -> Vec<linetrack_msgs::FrameHeader> {
+        const PATIENCE: Duration = Duration::from_secs(60);
         let mut config = linetrack_pipeline_config::PipelineConfig::default();
         config.source.sequence = linetrack_test_data::euroc_dir().unwrap_or_else(|e| panic!("{e}"));
         config.source.pacing = Pacing::Realtime;
@@ -469,31 +475,35 @@ mod tests {
         let mut frames = bus
             .inlet::<u8, linetrack_msgs::FrameHeader>(topics::FRAMES)
             .unwrap_or_else(|e| panic!("{e}"));
-        let (release, held) = crossbeam_channel::bounded::<()>(0);
+        let wake = bus
+            .wake(StageKind::Supervisor)
+            .unwrap_or_else(|e| panic!("{e}"));
         let shutdown = Shutdown::default();
         let runner = std::thread::spawn({
             let shutdown = shutdown.clone();
             move || {
                 let bus = hub.bus();
-                let source = SequenceSource::open_with(&ctx, Rig::open(&bus)?, move || {
-                    let _ = held.recv();
-                })?;
+                let source = SequenceSource::open_with(&ctx, Rig::open(&bus)?, || {})?;
                 run_source(&ctx, &bus, source, &shutdown)
             }
         });
-        // Ready: the source has started its clock; then it starves for 10 s.
-        let ready = |r: &StatusReport| r.kind.is(StatusKind::Ready);
-        reports(&bus, &mut status, &clock, every, ready, 1);
+        // The first frame, on a clock that stands still: the next is not due yet.
+        let mut headers = Vec::new();
+        let waiting = std::time::Instant::now();
+        while headers.is_empty() {
+            assert!(waiting.elapsed() < PATIENCE, "no first frame");
+            for m in frames.receive_all().unwrap_or_else(|e| panic!("{e}")) {
+                headers.push(*m.header());
+            }
+            wake.wait(Duration::from_millis(5))
+                .unwrap_or_else(|e| panic!("{e}"));
+        }
         clock.advance(Duration::from_secs(10));
-        release.send(()).unwrap_or_else(|e| panic!("{e}"));
         let finished = |r: &StatusReport| r.kind.is(StatusKind::SourceFinished);
         reports(&bus, &mut status, &clock, every, finished, 1);
-        let headers = frames
-            .receive_all()
-            .unwrap_or_else(|e| panic!("{e}"))
-            .iter()
-            .map(|m| *m.header())
-            .collect();
+        for m in frames.receive_all().unwrap_or_else(|e| panic!("{e}")) {
+            headers.push(*m.header());
+        }
         shutdown.request();
         runner
             .join()
@@ -503,12 +513,13 @@ mod tests {
     }
 
     /// The source's delay is in the frames' stamps: each frame carries the time it was due
-    /// (50 ms apart at 20 Hz), and the source's own stamp spans the 10 s it was behind.
-    /// With `drop_late`, frames already over the end-to-end budget leave as `capture-late`.
+    /// (50 ms apart at 20 Hz, from the first frame), and the source's own stamp spans the
+    /// 10 s it was behind. With `drop_late`, frames already over the end-to-end budget
+    /// leave as `capture-late`, without pixels.
     #[test]
     fn a_starved_realtime_source_shows_its_delay_in_the_stamps_and_drops_what_is_over_budget() {
         for drop_late in [false, true] {
-            let headers = held_realtime_frames(drop_late);
+            let headers = starved_realtime_frames(drop_late);
             assert_eq!(
                 headers.iter().map(|h| h.frame_id).collect::<Vec<_>>(),
                 [0, 1, 2]
@@ -518,16 +529,23 @@ mod tests {
                 .map(|w| w[1].capture_ns - w[0].capture_ns)
                 .collect();
             assert_eq!(gaps, [50_000_000, 50_000_000], "drop_late {drop_late}");
-            for h in &headers {
+            let behind = |h: &linetrack_msgs::FrameHeader| {
                 let own = h
                     .stamp(StageKind::FrameSource)
                     .unwrap_or_else(|| panic!("no source stamp"));
                 assert_eq!(own.start_ns, h.capture_ns);
+                own.end_ns - own.start_ns
+            };
+            // The first frame starts the schedule: on time, whatever reading it took.
+            assert_eq!(behind(&headers[0]), 0);
+            assert_eq!(headers[0].status.get(), Ok(FrameStatus::Ok));
+            assert!(headers[0].width > 0);
+            for h in &headers[1..] {
                 assert!(
-                    own.end_ns - own.start_ns >= 9_900_000_000,
+                    behind(h) >= 9_900_000_000,
                     "frame {}: behind {} ns",
                     h.frame_id,
-                    own.end_ns - own.start_ns
+                    behind(h)
                 );
                 let want = if drop_late {
                     FrameStatus::CaptureLate

@@ -32,8 +32,9 @@ pub(crate) struct ReplaySource {
     budget: BudgetConfig,
     range: (usize, usize),
     frames: Option<Receiver<Read>>,
-    /// When the first frame was due, on the source's monotonic clock, and its timestamp.
-    began: Duration,
+    /// When the source had its first frame, on its monotonic clock (the schedule starts
+    /// there), and that frame's timestamp.
+    began: Option<Duration>,
     first_ns: Option<u64>,
     pending: Option<(usize, ReplayFrame)>,
 }
@@ -65,7 +66,7 @@ impl ReplaySource {
             budget: ctx.config.budget.clone(),
             range: (start, end),
             frames: None,
-            began: Duration::ZERO,
+            began: None,
             first_ns: None,
             pending: None,
         })
@@ -99,7 +100,7 @@ impl Source for ReplaySource {
     const KIND: StageKind = StageKind::FrameSource;
     const FRAME_BYTES: usize = crate::FRAME_BYTES;
 
-    fn start(&mut self, out: &mut SourceOut) -> anyhow::Result<()> {
+    fn start(&mut self, _out: &mut SourceOut) -> anyhow::Result<()> {
         self.rig.publish(self.recorded_rig)?;
         let (tx, rx) = crossbeam_channel::bounded(READ_AHEAD);
         let (replay, file, range) = (self.replay.take(), self.file.clone(), self.range);
@@ -112,7 +113,6 @@ impl Source for ReplaySource {
             })
             .context("starting the recording's reader thread")?;
         self.frames = Some(rx);
-        self.began = out.clock().monotonic();
         Ok(())
     }
 
@@ -131,6 +131,7 @@ impl Source for ReplaySource {
             return Ok(Step::Finished);
         };
         let first = *self.first_ns.get_or_insert(frame.timestamp_ns);
+        let began = *self.began.get_or_insert_with(|| out.clock().monotonic());
         let due = due_offset(
             self.source.pacing,
             self.source.rate_hz,
@@ -138,10 +139,10 @@ impl Source for ReplaySource {
             frame.timestamp_ns,
             k - self.range.0,
         );
-        if let Some(wait) = not_yet(out, self.began, due) {
+        if let Some(wait) = not_yet(out, began, due) {
             return Ok(Step::Idle(wait));
         }
-        let capture = Capture::at(out.clock(), self.source.pacing, self.began, due);
+        let capture = Capture::at(out.clock(), self.source.pacing, began, due);
         if capture.too_late(&self.budget) {
             out.marker(
                 *k as u64,
