@@ -340,8 +340,10 @@ mod tests {
         let late = Capture::at(&clock, Pacing::Realtime, began, due);
         assert_eq!(late.capture_ns, 5_050_000_000);
         assert_eq!(late.behind, Duration::from_millis(150));
-        let mut budget = BudgetConfig::default();
-        budget.end_to_end_ms = 150.0;
+        let mut budget = BudgetConfig {
+            end_to_end_ms: 150.0,
+            ..Default::default()
+        };
         assert!(!late.too_late(&budget), "at the budget, not over it");
         budget.end_to_end_ms = 149.0;
         assert!(late.too_late(&budget));
