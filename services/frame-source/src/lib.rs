@@ -360,6 +360,95 @@ mod tests {
         );
     }
 
+    /// A sequence source running on a thread on a manual clock (heartbeats every 10 ms)
+    /// over the EuRoC excerpt, on a local bus, and the inlets a test watches it through.
+    struct Running {
+        clock: Clock,
+        every: Duration,
+        bus: Bus,
+        status: linetrack_ipc::Inlet<StatusReport, ()>,
+        frames: linetrack_ipc::Inlet<u8, linetrack_msgs::FrameHeader>,
+        shutdown: Shutdown,
+        runner: std::thread::JoinHandle<anyhow::Result<()>>,
+    }
+
+    impl Running {
+        /// Starts the source of the config `set` leaves; `on_start` runs on its reading
+        /// thread before the first frame.
+        fn start(
+            set: impl FnOnce(&mut linetrack_pipeline_config::PipelineConfig),
+            on_start: impl FnOnce() + Send + 'static,
+        ) -> Self {
+            let mut config = linetrack_pipeline_config::PipelineConfig::default();
+            config.source.sequence =
+                linetrack_test_data::euroc_dir().unwrap_or_else(|e| panic!("{e}"));
+            config.supervisor.heartbeat_ms = 10;
+            set(&mut config);
+            let clock = Clock::manual(1_000_000_000);
+            let mut ctx =
+                StageContext::in_process(StageKind::FrameSource, config, std::path::PathBuf::new());
+            ctx.clock = clock.clone();
+            let every = ctx.heartbeat();
+            let bus = Bus::local();
+            let hub = bus.local_hub().unwrap_or_else(|| panic!("a local bus"));
+            let status = bus
+                .inlet::<StatusReport, ()>(topics::STATUS)
+                .unwrap_or_else(|e| panic!("{e}"));
+            let frames = bus
+                .inlet::<u8, linetrack_msgs::FrameHeader>(topics::FRAMES)
+                .unwrap_or_else(|e| panic!("{e}"));
+            let shutdown = Shutdown::default();
+            let runner = std::thread::spawn({
+                let shutdown = shutdown.clone();
+                move || {
+                    let bus = hub.bus();
+                    let source = SequenceSource::open_with(&ctx, Rig::open(&bus)?, on_start)?;
+                    run_source(&ctx, &bus, source, &shutdown)
+                }
+            });
+            Self {
+                clock,
+                every,
+                bus,
+                status,
+                frames,
+                shutdown,
+                runner,
+            }
+        }
+
+        /// Status reports until `count` of them hold `wanted` ([`reports`]).
+        fn reports(
+            &mut self,
+            wanted: impl Fn(&StatusReport) -> bool,
+            count: usize,
+        ) -> Vec<StatusReport> {
+            reports(
+                &self.bus,
+                &mut self.status,
+                &self.clock,
+                self.every,
+                wanted,
+                count,
+            )
+        }
+
+        /// The frames published since the last look.
+        fn frames(&mut self) -> Vec<linetrack_msgs::FrameHeader> {
+            let got = self.frames.receive_all().unwrap_or_else(|e| panic!("{e}"));
+            got.iter().map(|m| *m.header()).collect()
+        }
+
+        /// Stops the source and checks it ended without an error.
+        fn stop(self) {
+            self.shutdown.request();
+            self.runner
+                .join()
+                .unwrap_or_else(|_| panic!("source thread"))
+                .unwrap_or_else(|e| panic!("{e}"));
+        }
+    }
+
     /// Status reports of `status` until `count` of them hold `wanted`; the clock moves one
     /// heartbeat period per look, so that the source's heartbeats fall due.
     fn reports(
@@ -395,122 +484,61 @@ mod tests {
     /// source, and a loaded CI machine's supervisor killed it as hung.)
     #[test]
     fn a_source_whose_reader_is_behind_still_beats_and_publishes_once_it_has_the_frame() {
-        let mut config = linetrack_pipeline_config::PipelineConfig::default();
-        config.source.sequence = linetrack_test_data::euroc_dir().unwrap_or_else(|e| panic!("{e}"));
-        config.source.pacing = Pacing::Fastest;
-        config.source.max_frames = 1;
-        config.supervisor.heartbeat_ms = 10;
-        let clock = Clock::manual(1_000_000_000);
-        let mut ctx =
-            StageContext::in_process(StageKind::FrameSource, config, std::path::PathBuf::new());
-        ctx.clock = clock.clone();
-        let every = ctx.heartbeat();
-        let bus = Bus::local();
-        let hub = bus.local_hub().unwrap_or_else(|| panic!("a local bus"));
-        let mut status = bus
-            .inlet::<StatusReport, ()>(topics::STATUS)
-            .unwrap_or_else(|e| panic!("{e}"));
-        let mut frames = bus
-            .inlet::<u8, linetrack_msgs::FrameHeader>(topics::FRAMES)
-            .unwrap_or_else(|e| panic!("{e}"));
         // The reading thread is held before its first frame until the test lets it go.
         let (release, held) = crossbeam_channel::bounded::<()>(0);
-        let shutdown = Shutdown::default();
-        let runner = std::thread::spawn({
-            let shutdown = shutdown.clone();
+        let mut source = Running::start(
+            |config| {
+                config.source.pacing = Pacing::Fastest;
+                config.source.max_frames = 1;
+            },
             move || {
-                let bus = hub.bus();
-                let source = SequenceSource::open_with(&ctx, Rig::open(&bus)?, move || {
-                    let _ = held.recv();
-                })?;
-                run_source(&ctx, &bus, source, &shutdown)
-            }
-        });
-        let beat = |r: &StatusReport| r.kind.is(StatusKind::Heartbeat) && r.value == 0;
-        let early = reports(&bus, &mut status, &clock, every, beat, 3);
-        assert!(early.iter().all(|r| r.value == 0), "{early:?}");
-        assert!(
-            frames
-                .receive_all()
-                .unwrap_or_else(|e| panic!("{e}"))
-                .is_empty()
+                let _ = held.recv();
+            },
         );
+        let beat = |r: &StatusReport| r.kind.is(StatusKind::Heartbeat) && r.value == 0;
+        let early = source.reports(beat, 3);
+        assert!(early.iter().all(|r| r.value == 0), "{early:?}");
+        assert!(source.frames().is_empty());
         release.send(()).unwrap_or_else(|e| panic!("{e}"));
         let finished = |r: &StatusReport| r.kind.is(StatusKind::SourceFinished);
-        let late = reports(&bus, &mut status, &clock, every, finished, 1);
+        let late = source.reports(finished, 1);
         assert_eq!(late.last().map(|r| (r.frame_id, r.value)), Some((0, 1)));
-        let ids: Vec<u64> = frames
-            .receive_all()
-            .unwrap_or_else(|e| panic!("{e}"))
-            .iter()
-            .map(|m| m.header().frame_id)
-            .collect();
+        let ids: Vec<u64> = source.frames().iter().map(|h| h.frame_id).collect();
         assert_eq!(ids, [0]);
-        shutdown.request();
-        runner
-            .join()
-            .unwrap_or_else(|_| panic!("source thread"))
-            .unwrap_or_else(|e| panic!("{e}"));
+        source.stop();
     }
 
     /// Runs a 20 Hz realtime source over 3 frames; once it has published the first, its
     /// clock jumps 10 s (the source starved of CPU); returns the frames' headers.
     fn starved_realtime_frames(drop_late: bool) -> Vec<linetrack_msgs::FrameHeader> {
         const PATIENCE: Duration = Duration::from_secs(60);
-        let mut config = linetrack_pipeline_config::PipelineConfig::default();
-        config.source.sequence = linetrack_test_data::euroc_dir().unwrap_or_else(|e| panic!("{e}"));
-        config.source.pacing = Pacing::Realtime;
-        config.source.rate_hz = 20.0;
-        config.source.max_frames = 3;
-        config.budget.drop_late = drop_late;
-        config.supervisor.heartbeat_ms = 10;
-        let clock = Clock::manual(1_000_000_000);
-        let mut ctx =
-            StageContext::in_process(StageKind::FrameSource, config, std::path::PathBuf::new());
-        ctx.clock = clock.clone();
-        let every = ctx.heartbeat();
-        let bus = Bus::local();
-        let hub = bus.local_hub().unwrap_or_else(|| panic!("a local bus"));
-        let mut status = bus
-            .inlet::<StatusReport, ()>(topics::STATUS)
-            .unwrap_or_else(|e| panic!("{e}"));
-        let mut frames = bus
-            .inlet::<u8, linetrack_msgs::FrameHeader>(topics::FRAMES)
-            .unwrap_or_else(|e| panic!("{e}"));
-        let wake = bus
+        let mut source = Running::start(
+            |config| {
+                config.source.pacing = Pacing::Realtime;
+                config.source.rate_hz = 20.0;
+                config.source.max_frames = 3;
+                config.budget.drop_late = drop_late;
+            },
+            || {},
+        );
+        let wake = source
+            .bus
             .wake(StageKind::Supervisor)
             .unwrap_or_else(|e| panic!("{e}"));
-        let shutdown = Shutdown::default();
-        let runner = std::thread::spawn({
-            let shutdown = shutdown.clone();
-            move || {
-                let bus = hub.bus();
-                let source = SequenceSource::open_with(&ctx, Rig::open(&bus)?, || {})?;
-                run_source(&ctx, &bus, source, &shutdown)
-            }
-        });
         // The first frame, on a clock that stands still: the next is not due yet.
         let mut headers = Vec::new();
         let waiting = std::time::Instant::now();
         while headers.is_empty() {
             assert!(waiting.elapsed() < PATIENCE, "no first frame");
-            for m in frames.receive_all().unwrap_or_else(|e| panic!("{e}")) {
-                headers.push(*m.header());
-            }
+            headers.extend(source.frames());
             wake.wait(Duration::from_millis(5))
                 .unwrap_or_else(|e| panic!("{e}"));
         }
-        clock.advance(Duration::from_secs(10));
+        source.clock.advance(Duration::from_secs(10));
         let finished = |r: &StatusReport| r.kind.is(StatusKind::SourceFinished);
-        reports(&bus, &mut status, &clock, every, finished, 1);
-        for m in frames.receive_all().unwrap_or_else(|e| panic!("{e}")) {
-            headers.push(*m.header());
-        }
-        shutdown.request();
-        runner
-            .join()
-            .unwrap_or_else(|_| panic!("source thread"))
-            .unwrap_or_else(|e| panic!("{e}"));
+        source.reports(finished, 1);
+        headers.extend(source.frames());
+        source.stop();
         headers
     }
 
