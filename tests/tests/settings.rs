@@ -80,13 +80,14 @@ fn a_stage_pinned_to_cpu_0_runs_there_and_the_ipc_root_comes_from_the_config() {
     for task in tasks.flatten() {
         assert_eq!(cpus_allowed(&task.path().join("status")), "0");
     }
-    // The source reads ahead at `source.reader_nice` (10), and publishes at the nice value
-    // it inherited from the supervisor.
+    // The source reads ahead at `source.reader_nice` (0 by default: set, not inherited, so
+    // under a niced supervisor the two differ), and publishes at the nice value it
+    // inherited from the supervisor.
     let source = stage_pid(&status, "frame-source");
     let reader = thread_status(source, "frame-reader")
         .unwrap_or_else(|| panic!("no thread named frame-reader in process {source}"));
     let stat = |pid: u32| PathBuf::from(format!("/proc/{pid}/stat"));
-    assert_eq!(nice_of(&reader.with_file_name("stat")), 10);
+    assert_eq!(nice_of(&reader.with_file_name("stat")), 0);
     assert_eq!(
         nice_of(&stat(source)),
         nice_of(&stat(status.supervisor_pid))

@@ -2,6 +2,10 @@
 //! and publishes each frame's two images into one shared-memory message, paced at the
 //! sequence's rate or as fast as it can. A frame that cannot be read is published as a
 //! `corrupt` marker (no pixels) so that downstream stages and the records count it.
+//! Paced in real time, a frame is stamped with the time it was due, however late the
+//! source has it (`Capture`): a source that falls behind shows its delay in the
+//! end-to-end latency, and a frame already over the end-to-end budget leaves as a
+//! `capture-late` marker.
 //! With `[camera]` set, it reads a live stereo camera instead ([`camera`]); with
 //! `source.replay`, an MCAP recording. Each of the three is a
 //! [`linetrack_stage_runtime::Source`]: the stage runtime publishes, stamps, beats, stops
@@ -16,7 +20,7 @@ use anyhow::Context;
 use linetrack_datasets::{Next, StereoSequence, StereoStream};
 use linetrack_ipc::{Bus, Shutdown};
 use linetrack_msgs::{FrameStatus, RigRecord, StageKind};
-use linetrack_pipeline_config::{Pacing, SourceConfig};
+use linetrack_pipeline_config::{BudgetConfig, Pacing, SourceConfig};
 use linetrack_stage_runtime::{
     RigOutlet as Rig, Source, SourceOut, StageContext, Step, rig_record, run_source,
 };
@@ -57,6 +61,51 @@ pub(crate) fn due_offset(
 pub(crate) fn not_yet(out: &SourceOut, began: Duration, due: Duration) -> Option<Duration> {
     let wait = (began + due).saturating_sub(out.clock().monotonic());
     (!wait.is_zero()).then_some(wait)
+}
+
+/// A frame's capture stamp under `pacing`, read on `clock` as it is published.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) struct Capture {
+    /// UNIX-epoch nanoseconds: when the frame was due (realtime pacing; the sequence's
+    /// clock mapped to the run's start), or now (`fastest`: nothing is due).
+    pub(crate) capture_ns: u64,
+    /// How far behind its time the source publishes it.
+    pub(crate) behind: Duration,
+}
+
+impl Capture {
+    /// The stamp of a frame due at `due` from the start `began` (monotonic, on `clock`). A
+    /// source that falls behind its schedule (its reading starved of CPU) stamps the frame
+    /// with the time it was due, not the time it has it: as a camera's frame carries the
+    /// time it was taken, so the end-to-end latency and the budget policies downstream see
+    /// the source's delay.
+    pub(crate) fn at(
+        clock: &linetrack_stage_runtime::Clock,
+        pacing: Pacing,
+        began: Duration,
+        due: Duration,
+    ) -> Self {
+        let now_ns = clock.now_ns();
+        if pacing == Pacing::Fastest {
+            return Self {
+                capture_ns: now_ns,
+                behind: Duration::ZERO,
+            };
+        }
+        let behind = clock.monotonic().saturating_sub(began + due);
+        let behind_ns = u64::try_from(behind.as_nanos()).unwrap_or(u64::MAX);
+        Self {
+            capture_ns: now_ns.saturating_sub(behind_ns),
+            behind,
+        }
+    }
+
+    /// Whether the frame is already over `budget`'s end-to-end budget as it would leave the
+    /// source (with `budget.drop_late`): it is published as a `capture-late` marker, no
+    /// pixels, as a camera's frame that waited too long is.
+    pub(crate) fn too_late(&self, budget: &BudgetConfig) -> bool {
+        budget.drop_late && self.behind.as_secs_f64() * 1e3 > budget.end_to_end_ms
+    }
 }
 
 /// [`run`] as a process of its own (`linetrack-frame-source`): OpenCV is first set to one
@@ -101,10 +150,12 @@ struct SequenceSource {
     /// Frames to publish, from the frame to start at.
     count: usize,
     source: SourceConfig,
+    budget: BudgetConfig,
     first_ns: u64,
     gain_jumps: Option<gain_jumps::GainJumps>,
-    /// When the first frame was due, on the source's monotonic clock.
-    began: Duration,
+    /// When the source had its first frame, on its monotonic clock: the schedule starts
+    /// there (the time the first frame takes to read is no lateness).
+    began: Option<Duration>,
     /// Frames taken from the stream.
     taken: usize,
     /// The frame taken and waiting for its time.
@@ -151,9 +202,10 @@ impl SequenceSource {
             stream,
             count: end.saturating_sub(start),
             source,
+            budget: ctx.config.budget.clone(),
             first_ns,
             gain_jumps,
-            began: Duration::ZERO,
+            began: None,
             taken: 0,
             pending: None,
         })
@@ -164,9 +216,8 @@ impl Source for SequenceSource {
     const KIND: StageKind = StageKind::FrameSource;
     const FRAME_BYTES: usize = FRAME_BYTES;
 
-    fn start(&mut self, out: &mut SourceOut) -> anyhow::Result<()> {
+    fn start(&mut self, _out: &mut SourceOut) -> anyhow::Result<()> {
         self.rig.publish(self.rig_record)?;
-        self.began = out.clock().monotonic();
         Ok(())
     }
 
@@ -192,6 +243,7 @@ impl Source for SequenceSource {
             Ok(frame) => (frame.index, frame.timestamp_ns),
             Err(e) => (e.index, e.timestamp_ns),
         };
+        let began = *self.began.get_or_insert_with(|| out.clock().monotonic());
         let rate = self.source.rate_hz.max(0.0);
         let due = due_offset(
             self.source.pacing,
@@ -200,12 +252,16 @@ impl Source for SequenceSource {
             timestamp_ns,
             self.taken - 1,
         );
-        if let Some(wait) = not_yet(out, self.began, due) {
+        if let Some(wait) = not_yet(out, began, due) {
             return Ok(Step::Idle(wait));
         }
-        let capture_ns = out.now_ns();
+        let capture = Capture::at(out.clock(), self.source.pacing, began, due);
+        let capture_ns = capture.capture_ns;
         let (id, item) = (index as u64, self.pending.take());
         match item {
+            Some(Ok(_)) if capture.too_late(&self.budget) => {
+                out.marker(id, timestamp_ns, capture_ns, FrameStatus::CaptureLate)?;
+            }
             Some(Ok(frame)) => {
                 let size = (frame.left.width() as u32, frame.left.height() as u32);
                 let (Some(left), Some(right)) = (frame.left.pixels(), frame.right.pixels()) else {
@@ -265,6 +321,134 @@ mod tests {
         assert_eq!(due_offset(Pacing::Fastest, 20.0, 0, 999, 4), Duration::ZERO);
     }
 
+    #[test]
+    fn a_late_frame_is_stamped_when_it_was_due_and_dropped_over_the_budget() {
+        let clock = Clock::manual(5_000_000_000);
+        let began = clock.monotonic();
+        let due = Duration::from_millis(50);
+        clock.advance(due);
+        let on_time = Capture::at(&clock, Pacing::Realtime, began, due);
+        assert_eq!(
+            on_time,
+            Capture {
+                capture_ns: 5_050_000_000,
+                behind: Duration::ZERO
+            }
+        );
+        // The reader starved for 150 ms: the frame keeps the time it was due.
+        clock.advance(Duration::from_millis(150));
+        let late = Capture::at(&clock, Pacing::Realtime, began, due);
+        assert_eq!(late.capture_ns, 5_050_000_000);
+        assert_eq!(late.behind, Duration::from_millis(150));
+        let mut budget = BudgetConfig {
+            end_to_end_ms: 150.0,
+            ..Default::default()
+        };
+        assert!(!late.too_late(&budget), "at the budget, not over it");
+        budget.end_to_end_ms = 149.0;
+        assert!(late.too_late(&budget));
+        budget.drop_late = false;
+        assert!(
+            !late.too_late(&budget),
+            "drop_late = false keeps every frame"
+        );
+        // `fastest`: nothing is due, a frame is stamped as it goes.
+        let fastest = Capture::at(&clock, Pacing::Fastest, began, Duration::ZERO);
+        assert_eq!(
+            (fastest.capture_ns, fastest.behind),
+            (5_200_000_000, Duration::ZERO)
+        );
+    }
+
+    /// A sequence source running on a thread on a manual clock (heartbeats every 10 ms)
+    /// over the EuRoC excerpt, on a local bus, and the inlets a test watches it through.
+    struct Running {
+        clock: Clock,
+        every: Duration,
+        bus: Bus,
+        status: linetrack_ipc::Inlet<StatusReport, ()>,
+        frames: linetrack_ipc::Inlet<u8, linetrack_msgs::FrameHeader>,
+        shutdown: Shutdown,
+        runner: std::thread::JoinHandle<anyhow::Result<()>>,
+    }
+
+    impl Running {
+        /// Starts the source of the config `set` leaves; `on_start` runs on its reading
+        /// thread before the first frame.
+        fn start(
+            set: impl FnOnce(&mut linetrack_pipeline_config::PipelineConfig),
+            on_start: impl FnOnce() + Send + 'static,
+        ) -> Self {
+            let mut config = linetrack_pipeline_config::PipelineConfig::default();
+            config.source.sequence =
+                linetrack_test_data::euroc_dir().unwrap_or_else(|e| panic!("{e}"));
+            config.supervisor.heartbeat_ms = 10;
+            set(&mut config);
+            let clock = Clock::manual(1_000_000_000);
+            let mut ctx =
+                StageContext::in_process(StageKind::FrameSource, config, std::path::PathBuf::new());
+            ctx.clock = clock.clone();
+            let every = ctx.heartbeat();
+            let bus = Bus::local();
+            let hub = bus.local_hub().unwrap_or_else(|| panic!("a local bus"));
+            let status = bus
+                .inlet::<StatusReport, ()>(topics::STATUS)
+                .unwrap_or_else(|e| panic!("{e}"));
+            let frames = bus
+                .inlet::<u8, linetrack_msgs::FrameHeader>(topics::FRAMES)
+                .unwrap_or_else(|e| panic!("{e}"));
+            let shutdown = Shutdown::default();
+            let runner = std::thread::spawn({
+                let shutdown = shutdown.clone();
+                move || {
+                    let bus = hub.bus();
+                    let source = SequenceSource::open_with(&ctx, Rig::open(&bus)?, on_start)?;
+                    run_source(&ctx, &bus, source, &shutdown)
+                }
+            });
+            Self {
+                clock,
+                every,
+                bus,
+                status,
+                frames,
+                shutdown,
+                runner,
+            }
+        }
+
+        /// Status reports until `count` of them hold `wanted` ([`reports`]).
+        fn reports(
+            &mut self,
+            wanted: impl Fn(&StatusReport) -> bool,
+            count: usize,
+        ) -> Vec<StatusReport> {
+            reports(
+                &self.bus,
+                &mut self.status,
+                &self.clock,
+                self.every,
+                wanted,
+                count,
+            )
+        }
+
+        /// The frames published since the last look.
+        fn frames(&mut self) -> Vec<linetrack_msgs::FrameHeader> {
+            let got = self.frames.receive_all().unwrap_or_else(|e| panic!("{e}"));
+            got.iter().map(|m| *m.header()).collect()
+        }
+
+        /// Stops the source and checks it ended without an error.
+        fn stop(self) {
+            self.shutdown.request();
+            self.runner
+                .join()
+                .unwrap_or_else(|_| panic!("source thread"))
+                .unwrap_or_else(|e| panic!("{e}"));
+        }
+    }
+
     /// Status reports of `status` until `count` of them hold `wanted`; the clock moves one
     /// heartbeat period per look, so that the source's heartbeats fall due.
     fn reports(
@@ -300,61 +484,107 @@ mod tests {
     /// source, and a loaded CI machine's supervisor killed it as hung.)
     #[test]
     fn a_source_whose_reader_is_behind_still_beats_and_publishes_once_it_has_the_frame() {
-        let mut config = linetrack_pipeline_config::PipelineConfig::default();
-        config.source.sequence = linetrack_test_data::euroc_dir().unwrap_or_else(|e| panic!("{e}"));
-        config.source.pacing = Pacing::Fastest;
-        config.source.max_frames = 1;
-        config.supervisor.heartbeat_ms = 10;
-        let clock = Clock::manual(1_000_000_000);
-        let mut ctx =
-            StageContext::in_process(StageKind::FrameSource, config, std::path::PathBuf::new());
-        ctx.clock = clock.clone();
-        let every = ctx.heartbeat();
-        let bus = Bus::local();
-        let hub = bus.local_hub().unwrap_or_else(|| panic!("a local bus"));
-        let mut status = bus
-            .inlet::<StatusReport, ()>(topics::STATUS)
-            .unwrap_or_else(|e| panic!("{e}"));
-        let mut frames = bus
-            .inlet::<u8, linetrack_msgs::FrameHeader>(topics::FRAMES)
-            .unwrap_or_else(|e| panic!("{e}"));
         // The reading thread is held before its first frame until the test lets it go.
         let (release, held) = crossbeam_channel::bounded::<()>(0);
-        let shutdown = Shutdown::default();
-        let runner = std::thread::spawn({
-            let shutdown = shutdown.clone();
+        let mut source = Running::start(
+            |config| {
+                config.source.pacing = Pacing::Fastest;
+                config.source.max_frames = 1;
+            },
             move || {
-                let bus = hub.bus();
-                let source = SequenceSource::open_with(&ctx, Rig::open(&bus)?, move || {
-                    let _ = held.recv();
-                })?;
-                run_source(&ctx, &bus, source, &shutdown)
-            }
-        });
-        let beat = |r: &StatusReport| r.kind.is(StatusKind::Heartbeat) && r.value == 0;
-        let early = reports(&bus, &mut status, &clock, every, beat, 3);
-        assert!(early.iter().all(|r| r.value == 0), "{early:?}");
-        assert!(
-            frames
-                .receive_all()
-                .unwrap_or_else(|e| panic!("{e}"))
-                .is_empty()
+                let _ = held.recv();
+            },
         );
+        let beat = |r: &StatusReport| r.kind.is(StatusKind::Heartbeat) && r.value == 0;
+        let early = source.reports(beat, 3);
+        assert!(early.iter().all(|r| r.value == 0), "{early:?}");
+        assert!(source.frames().is_empty());
         release.send(()).unwrap_or_else(|e| panic!("{e}"));
         let finished = |r: &StatusReport| r.kind.is(StatusKind::SourceFinished);
-        let late = reports(&bus, &mut status, &clock, every, finished, 1);
+        let late = source.reports(finished, 1);
         assert_eq!(late.last().map(|r| (r.frame_id, r.value)), Some((0, 1)));
-        let ids: Vec<u64> = frames
-            .receive_all()
-            .unwrap_or_else(|e| panic!("{e}"))
-            .iter()
-            .map(|m| m.header().frame_id)
-            .collect();
+        let ids: Vec<u64> = source.frames().iter().map(|h| h.frame_id).collect();
         assert_eq!(ids, [0]);
-        shutdown.request();
-        runner
-            .join()
-            .unwrap_or_else(|_| panic!("source thread"))
+        source.stop();
+    }
+
+    /// Runs a 20 Hz realtime source over 3 frames; once it has published the first, its
+    /// clock jumps 10 s (the source starved of CPU); returns the frames' headers.
+    fn starved_realtime_frames(drop_late: bool) -> Vec<linetrack_msgs::FrameHeader> {
+        const PATIENCE: Duration = Duration::from_secs(60);
+        let mut source = Running::start(
+            |config| {
+                config.source.pacing = Pacing::Realtime;
+                config.source.rate_hz = 20.0;
+                config.source.max_frames = 3;
+                config.budget.drop_late = drop_late;
+            },
+            || {},
+        );
+        let wake = source
+            .bus
+            .wake(StageKind::Supervisor)
             .unwrap_or_else(|e| panic!("{e}"));
+        // The first frame, on a clock that stands still: the next is not due yet.
+        let mut headers = Vec::new();
+        let waiting = std::time::Instant::now();
+        while headers.is_empty() {
+            assert!(waiting.elapsed() < PATIENCE, "no first frame");
+            headers.extend(source.frames());
+            wake.wait(Duration::from_millis(5))
+                .unwrap_or_else(|e| panic!("{e}"));
+        }
+        source.clock.advance(Duration::from_secs(10));
+        let finished = |r: &StatusReport| r.kind.is(StatusKind::SourceFinished);
+        source.reports(finished, 1);
+        headers.extend(source.frames());
+        source.stop();
+        headers
+    }
+
+    /// The source's delay is in the frames' stamps: each frame carries the time it was due
+    /// (50 ms apart at 20 Hz, from the first frame), and the source's own stamp spans the
+    /// 10 s it was behind. With `drop_late`, frames already over the end-to-end budget
+    /// leave as `capture-late`, without pixels.
+    #[test]
+    fn a_starved_realtime_source_shows_its_delay_in_the_stamps_and_drops_what_is_over_budget() {
+        for drop_late in [false, true] {
+            let headers = starved_realtime_frames(drop_late);
+            assert_eq!(
+                headers.iter().map(|h| h.frame_id).collect::<Vec<_>>(),
+                [0, 1, 2]
+            );
+            let gaps: Vec<u64> = headers
+                .windows(2)
+                .map(|w| w[1].capture_ns - w[0].capture_ns)
+                .collect();
+            assert_eq!(gaps, [50_000_000, 50_000_000], "drop_late {drop_late}");
+            let behind = |h: &linetrack_msgs::FrameHeader| {
+                let own = h
+                    .stamp(StageKind::FrameSource)
+                    .unwrap_or_else(|| panic!("no source stamp"));
+                assert_eq!(own.start_ns, h.capture_ns);
+                own.end_ns - own.start_ns
+            };
+            // The first frame starts the schedule: on time, whatever reading it took.
+            assert_eq!(behind(&headers[0]), 0);
+            assert_eq!(headers[0].status.get(), Ok(FrameStatus::Ok));
+            assert!(headers[0].width > 0);
+            for h in &headers[1..] {
+                assert!(
+                    behind(h) >= 9_900_000_000,
+                    "frame {}: behind {} ns",
+                    h.frame_id,
+                    behind(h)
+                );
+                let want = if drop_late {
+                    FrameStatus::CaptureLate
+                } else {
+                    FrameStatus::Ok
+                };
+                assert_eq!(h.status.get(), Ok(want), "frame {}", h.frame_id);
+                assert_eq!(h.width > 0, !drop_late, "pixels only when kept");
+            }
+        }
     }
 }

@@ -6,12 +6,12 @@
 //! frames over through a short queue: the source is driven by what arrives on it, as a
 //! source fed by another system's callbacks is.
 
-use crate::{Rig, due_offset, not_yet};
+use crate::{Capture, Rig, due_offset, not_yet};
 use anyhow::Context;
 use crossbeam_channel::{Receiver, RecvTimeoutError};
 use linetrack_mcap::{Replay, ReplayFrame};
-use linetrack_msgs::{RigRecord, StageKind};
-use linetrack_pipeline_config::SourceConfig;
+use linetrack_msgs::{FrameStatus, RigRecord, StageKind};
+use linetrack_pipeline_config::{BudgetConfig, SourceConfig};
 use linetrack_stage_runtime::{Source, SourceOut, StageContext, Step};
 use std::path::{Path, PathBuf};
 use std::time::Duration;
@@ -29,10 +29,12 @@ pub(crate) struct ReplaySource {
     replay: Option<Replay>,
     file: PathBuf,
     source: SourceConfig,
+    budget: BudgetConfig,
     range: (usize, usize),
     frames: Option<Receiver<Read>>,
-    /// When the first frame was due, on the source's monotonic clock, and its timestamp.
-    began: Duration,
+    /// When the source had its first frame, on its monotonic clock (the schedule starts
+    /// there), and that frame's timestamp.
+    began: Option<Duration>,
     first_ns: Option<u64>,
     pending: Option<(usize, ReplayFrame)>,
 }
@@ -61,9 +63,10 @@ impl ReplaySource {
             replay: Some(replay),
             file: file.to_path_buf(),
             source,
+            budget: ctx.config.budget.clone(),
             range: (start, end),
             frames: None,
-            began: Duration::ZERO,
+            began: None,
             first_ns: None,
             pending: None,
         })
@@ -97,7 +100,7 @@ impl Source for ReplaySource {
     const KIND: StageKind = StageKind::FrameSource;
     const FRAME_BYTES: usize = crate::FRAME_BYTES;
 
-    fn start(&mut self, out: &mut SourceOut) -> anyhow::Result<()> {
+    fn start(&mut self, _out: &mut SourceOut) -> anyhow::Result<()> {
         self.rig.publish(self.recorded_rig)?;
         let (tx, rx) = crossbeam_channel::bounded(READ_AHEAD);
         let (replay, file, range) = (self.replay.take(), self.file.clone(), self.range);
@@ -110,7 +113,6 @@ impl Source for ReplaySource {
             })
             .context("starting the recording's reader thread")?;
         self.frames = Some(rx);
-        self.began = out.clock().monotonic();
         Ok(())
     }
 
@@ -129,6 +131,7 @@ impl Source for ReplaySource {
             return Ok(Step::Finished);
         };
         let first = *self.first_ns.get_or_insert(frame.timestamp_ns);
+        let began = *self.began.get_or_insert_with(|| out.clock().monotonic());
         let due = due_offset(
             self.source.pacing,
             self.source.rate_hz,
@@ -136,17 +139,26 @@ impl Source for ReplaySource {
             frame.timestamp_ns,
             k - self.range.0,
         );
-        if let Some(wait) = not_yet(out, self.began, due) {
+        if let Some(wait) = not_yet(out, began, due) {
             return Ok(Step::Idle(wait));
         }
-        let capture_ns = out.now_ns();
-        out.frame(
-            *k as u64,
-            frame.timestamp_ns,
-            capture_ns,
-            (frame.width, frame.height),
-            &[&frame.pixels],
-        )?;
+        let capture = Capture::at(out.clock(), self.source.pacing, began, due);
+        if capture.too_late(&self.budget) {
+            out.marker(
+                *k as u64,
+                frame.timestamp_ns,
+                capture.capture_ns,
+                FrameStatus::CaptureLate,
+            )?;
+        } else {
+            out.frame(
+                *k as u64,
+                frame.timestamp_ns,
+                capture.capture_ns,
+                (frame.width, frame.height),
+                &[&frame.pixels],
+            )?;
+        }
         self.pending = None;
         Ok(Step::Again)
     }

@@ -184,10 +184,13 @@ impl Monitor {
     }
 
     /// The first record that could not be written (the file and the OS error), if any.
+    /// A row the writer's thread failed to write counts as soon as it failed, before the
+    /// loop takes the error with its next row.
     pub fn records_failed(&self) -> Option<String> {
         self.write_error
             .as_ref()
             .map(|e| linetrack_run_record::full_message(e))
+            .or_else(|| self.writer.failure())
     }
 
     /// Appends a frame's record and counts it.
@@ -503,6 +506,13 @@ impl Monitor {
         self.accounted.window()
     }
 
+    /// Waits until the writer's thread has written every record added so far (tests that
+    /// read the files back while the run goes on).
+    #[cfg(test)]
+    pub(crate) fn flush_records(&self) {
+        self.writer.flush();
+    }
+
     /// The one-line live status; `auto_mode`: the mode the matcher's policy chose
     /// (`matcher.mode = "auto"`).
     pub fn status_line(&self, auto_mode: Option<MatcherMode>) -> String {
@@ -528,10 +538,14 @@ impl Monitor {
             None => line.push_str("e2e -  "),
         }
         let restarts = self.tally.events_of("restart");
-        let _ = write!(
-            line,
-            "matcher {mode}  drops {drops}  misses {misses}  restarts {restarts}"
-        );
+        let _ = write!(line, "matcher {mode}  drops {drops}");
+        // Frames the source was already too late with (a realtime source starved of CPU,
+        // a camera's stale buffer): the pipeline never saw them.
+        let late_at_source = self.tally.dropped_as(FrameStatus::CaptureLate.name());
+        if late_at_source > 0 {
+            let _ = write!(line, " ({late_at_source} late at the source)");
+        }
+        let _ = write!(line, "  misses {misses}  restarts {restarts}");
         line
     }
 
@@ -687,7 +701,9 @@ mod tests {
             most_remembered <= 3,
             "{most_remembered} frame ids held one by one"
         );
-        // Everything so far is in the files before the run ends.
+        // Everything so far is in the files before the run ends, once the writer's thread
+        // has written what the loop handed it (it never waited for the disk).
+        monitor.flush_records();
         let frames = read_frames(&dir.join("frames.csv")).unwrap_or_else(|e| panic!("{e}"));
         assert_eq!(frames.len(), FRAMES as usize);
         assert_eq!(frames.last().map(|f| f.frame_id), Some(FRAMES - 1));
@@ -749,6 +765,7 @@ mod tests {
             failed.contains("status.json") && failed.contains("No space left on device"),
             "{failed}"
         );
+        monitor.flush_records();
         assert!(
             !dir.join(SpaceReserve::FILE).exists(),
             "the reserve is given up"
@@ -805,6 +822,45 @@ mod tests {
         let frames = read_frames(&dir.join("frames.csv")).unwrap_or_else(|e| panic!("{e}"));
         let labels: Vec<&str> = frames.iter().map(|f| f.detector.as_str()).collect();
         assert_eq!(labels, ["", "fld"]);
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    /// A frame the source was over the budget with (a starved realtime source) is a drop
+    /// of its own: `capture-late` by the frame source in `frames.csv`, the report and the
+    /// live line; the frames it kept carry the source's delay in its stage's time.
+    #[test]
+    fn frames_late_at_the_source_are_their_own_drop_in_the_records_and_the_live_line() {
+        let dir = scratch("monitor-late-at-source");
+        let mut monitor =
+            Monitor::new(&PipelineConfig::default(), 0, &dir).unwrap_or_else(|e| panic!("{e}"));
+        let mut late = TracksHeader::from(FrameHeader::new(0, 0, 1_000_000));
+        late.frame.stamps[StampSlot::FrameSource].start_ns = 1_000_000;
+        late.frame.stamps[StampSlot::FrameSource].end_ns = 151_000_000;
+        late.frame
+            .mark(FrameStatus::CaptureLate, StageKind::FrameSource);
+        monitor.on_pose(&late, &PoseRecord::default());
+        assert!(
+            monitor
+                .status_line(None)
+                .contains("drops 1 (1 late at the source)"),
+            "{}",
+            monitor.status_line(None)
+        );
+        pose_of(&mut monitor, 1);
+        monitor.source_finished(1);
+        let report = monitor
+            .finish(RunEnd::Completed, None)
+            .unwrap_or_else(|e| panic!("{e}"));
+        assert!(
+            report.to_text().contains("dropped capture-late: 1"),
+            "{}",
+            report.to_text()
+        );
+        let frames = read_frames(&dir.join("frames.csv")).unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(
+            (frames[0].outcome.as_str(), frames[0].dropped_by.as_str()),
+            ("capture-late", "frame-source")
+        );
         let _ = std::fs::remove_dir_all(&dir);
     }
 

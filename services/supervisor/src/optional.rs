@@ -483,7 +483,9 @@ mod tests {
         p
     }
 
-    fn events_of(dir: &Path) -> String {
+    /// `events.csv` once the monitor's writer has written every event recorded so far.
+    fn events_of(monitor: &Monitor, dir: &Path) -> String {
+        monitor.flush_records();
         std::fs::read_to_string(dir.join("events.csv")).unwrap_or_default()
     }
 
@@ -528,7 +530,7 @@ mod tests {
         }
         assert_eq!(starts, 3);
         assert!(!link.wants_start(clock.monotonic()), "given up");
-        let events = events_of(&dir);
+        let events = events_of(&monitor, &dir);
         assert_eq!(events.matches("link-exit").count(), 3, "{events}");
         assert_eq!(events.matches("link-given-up").count(), 1, "{events}");
         assert!(events.contains("restart 1 of 2 in 100ms"), "{events}");
@@ -588,7 +590,7 @@ mod tests {
             recorder.settled(clock.monotonic(), &mut monitor),
             "gone: no wait"
         );
-        let events = events_of(&dir);
+        let events = events_of(&monitor, &dir);
         assert!(
             events.contains("recorder-exit")
                 && events.contains("exit status: 9")
@@ -600,9 +602,9 @@ mod tests {
         let mut ros2 = started(ROS2, no_binary, &dir, &clock, &mut monitor);
         assert!(!ros2.wants_start(clock.monotonic()));
         assert!(
-            events_of(&dir).contains("output-failed"),
+            events_of(&monitor, &dir).contains("output-failed"),
             "{}",
-            events_of(&dir)
+            events_of(&monitor, &dir)
         );
         let _ = std::fs::remove_dir_all(&dir);
     }
@@ -615,7 +617,7 @@ mod tests {
         assert!(!ros2.settled(clock.monotonic(), &mut monitor));
         clock.advance(Duration::from_millis(1));
         assert!(ros2.settled(clock.monotonic(), &mut monitor));
-        assert!(events_of(&dir).contains("output-not-ready"));
+        assert!(events_of(&monitor, &dir).contains("output-not-ready"));
         // The link does not gate the source at all.
         let link = OptionalProcess::new(LINK, settings(&dir), &SupervisorConfig::default());
         assert!(link.settled);
@@ -668,7 +670,7 @@ mod tests {
             waited >= Duration::from_secs(3) && waited <= Duration::from_millis(3020),
             "{waited:?}"
         );
-        let events = events_of(&dir);
+        let events = events_of(&monitor, &dir);
         assert!(
             events.contains("output-killed") && events.contains("did not stop within 3s"),
             "{events}"

@@ -28,7 +28,10 @@ pub struct SourceConfig {
     pub max_frames: usize,
     /// The nice value of the thread that decodes (and rectifies) the next frames ahead of
     /// their time, under the `other` policy whatever the stage's: it works in the CPU time
-    /// the stages leave instead of taking it from a frame in flight.
+    /// the stages leave instead of taking it from a frame in flight. 0 by default: a
+    /// realtime source whose reader starves falls behind its schedule, and its frames then
+    /// leave late (`capture-late`); beside two CPU hogs nice 10 starved it to 9.7 frames a
+    /// second and every frame of 1,200 left late (docs/pipeline.md).
     pub reader_nice: i32,
     /// An MCAP recording (`[record]`, `linetrack replay FILE`) whose stereo frames and rig
     /// are published instead of `sequence`'s; empty: the sequence.
@@ -61,7 +64,7 @@ impl Default for SourceConfig {
             pacing: Pacing::Realtime,
             rate_hz: 0.0,
             max_frames: 0,
-            reader_nice: 10,
+            reader_nice: 0,
             replay: PathBuf::new(),
             gain_jumps_s: 0.0,
             gain_jumps_seed: 0,

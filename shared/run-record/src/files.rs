@@ -12,8 +12,9 @@
 //! - [`SpaceReserve`] holds some space on the run folder's file system from the start; it is
 //!   given up when a record cannot be written, so that the run can still say how it ended.
 //!
-//! Durability: rows reach the kernel one at a time as they are added (a killed run keeps
-//! every row it wrote); the record files are synced to the disk when the run ends, and
+//! Durability: rows reach the kernel one at a time, in the order added, as the record
+//! writer's thread writes them ([`crate::RecordWriter`]; a killed run keeps every row it
+//! wrote); the record files are synced to the disk when the run ends, and
 //! `summary.json` before it is renamed into place. A power cut may lose the rows the kernel
 //! had not written back yet; a row it cuts is left out by the readers
 //! ([`crate::read_frames_to_cut`]).
@@ -104,11 +105,6 @@ impl RowFile {
                 Err(io(&self.path)(e))
             }
         }
-    }
-
-    /// The file.
-    pub(crate) fn path(&self) -> &Path {
-        &self.path
     }
 
     /// Syncs the file to the disk.

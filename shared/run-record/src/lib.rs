@@ -165,7 +165,9 @@ mod tests {
                 writer.frame(f).unwrap_or_else(|e| panic!("{e}"));
             }
             writer.event(&events[0]).unwrap_or_else(|e| panic!("{e}"));
-            // Every row is on disk while the writer is still open (no flush at the end).
+            // Every row is on disk while the writer is still open, once its thread has
+            // written what was added (no flush of a buffer at the end).
+            writer.flush();
             let now = read_frames(&dir.join("frames.csv")).unwrap_or_else(|e| panic!("{e}"));
             assert_eq!(now.len(), 5);
             assert_eq!(

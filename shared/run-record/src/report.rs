@@ -53,6 +53,11 @@ impl Tally {
         self.events.get(kind).copied().unwrap_or(0)
     }
 
+    /// Frames dropped as `outcome` (`capture-late`, `dropped-late`, ...) so far.
+    pub fn dropped_as(&self, outcome: &str) -> usize {
+        self.drops.get(outcome).copied().unwrap_or(0)
+    }
+
     /// Frames counted so far.
     pub fn frames(&self) -> usize {
         self.frames
