@@ -35,6 +35,9 @@ struct Previous {
 struct Describe {
     lbd: Box<dyn SegmentMatcher>,
     features: LineFeatures,
+    /// The frame's left segments: only right segments that could match one are described
+    /// (the right features serve stereo matching alone).
+    left: Vec<linetrack_geometry::Segment>,
 }
 
 /// Matching state across frames.
@@ -69,12 +72,15 @@ impl FrameMatcher {
         let right = Describe {
             lbd: create_segment_matcher(MatcherKind::Lbd, frontend)?,
             features: LineFeatures::default(),
+            left: Vec::new(),
         };
         let describe_right = RightImageWorker::new(
             "describe-right",
             ctx.config.detect_sides_in_parallel,
             right,
-            |d: &mut Describe, image: &GrayImage| d.lbd.describe(image, &mut d.features),
+            |d: &mut Describe, image: &GrayImage| {
+                d.lbd.describe_stereo_right(image, &d.left, &mut d.features)
+            },
         )?;
         Ok(Self {
             lbd: create_segment_matcher(MatcherKind::Lbd, frontend)?,
@@ -153,7 +159,9 @@ impl FrameMatcher {
             let span = info_span!("describe");
             let _entered = span.enter();
             if mode == MatcherMode::Lbd || probe {
-                std::mem::swap(&mut self.describe_right.state()?.features, &mut right);
+                let describe = self.describe_right.state()?;
+                std::mem::swap(&mut describe.features, &mut right);
+                describe.left.clone_from(&left.segments);
                 let lbd = &mut self.lbd;
                 let (described_right, right_done, left_done) = self
                     .describe_right

@@ -87,16 +87,7 @@ impl Drawing {
                     & u16::from(m >= before.saturating_add(rise))
                     & u16::from(m >= after.saturating_add(rise))) as u8;
             }
-            for (chunk_index, chunk) in mask.chunks(8).enumerate() {
-                if chunk.iter().all(|&b| b == 0) {
-                    continue;
-                }
-                for (k, &hit) in chunk.iter().enumerate() {
-                    if hit != 0 {
-                        self.found.push((row + 1 + chunk_index * 8 + k) as u32);
-                    }
-                }
-            }
+            collect_hits(mask, row + 1, &mut self.found);
         }
         // Counting sort by magnitude (8-bit Sobel units), strongest first.
         self.counts.clear();
@@ -166,6 +157,28 @@ impl Drawing {
             self.chain.push(anchor as u32);
             self.chain.extend(&self.forward);
             fit(planes, &self.chain);
+        }
+    }
+}
+
+/// Appends `first + x` for every `x` where `mask[x]` (each 0 or 1) is 1, in increasing
+/// order: eight mask bytes tested as one word, so the mostly empty row costs a compare per
+/// eight pixels.
+fn collect_hits(mask: &[u8], first: usize, found: &mut Vec<u32>) {
+    let (words, rest) = mask.as_chunks::<8>();
+    for (k, word) in words.iter().enumerate() {
+        // Little-endian: byte j is bits 8j..8j + 8, and a hit is its lowest bit.
+        let mut bits = u64::from_le_bytes(*word);
+        while bits != 0 {
+            let j = (bits.trailing_zeros() / 8) as usize;
+            found.push((first + k * 8 + j) as u32);
+            bits &= bits - 1;
+        }
+    }
+    let tail = words.len() * 8;
+    for (j, &hit) in rest.iter().enumerate() {
+        if hit != 0 {
+            found.push((first + tail + j) as u32);
         }
     }
 }

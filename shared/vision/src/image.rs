@@ -89,6 +89,9 @@ impl GrayImage {
                 what: format!("{width}×{height} pixels, more than {MAX_PIXELS}"),
             });
         }
+        if let Some(mat) = crate::png_gray::decode_gray8_png(bytes, origin)? {
+            return Self::from_mat(mat, origin);
+        }
         let buffer = Vector::<u8>::from_slice(bytes);
         // OpenCV reports some corrupt inputs as exceptions and others as an empty Mat.
         let mat = imgcodecs::imdecode(&buffer, imgcodecs::IMREAD_UNCHANGED).map_err(|_| {

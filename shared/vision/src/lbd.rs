@@ -35,10 +35,26 @@ impl LbdExtractor {
         segments: &[Segment],
         out: &mut BinaryDescriptors,
     ) -> Result<(), VisionError> {
+        self.compute_some(image, segments, |_| true, out)
+    }
+
+    /// [`LbdExtractor::compute`] for the segments `k` where `wanted(k)`; the others get no
+    /// descriptor. A segment's descriptor depends on the image and that segment alone, so
+    /// each one computed is the one [`LbdExtractor::compute`] gives (tested).
+    pub fn compute_some(
+        &mut self,
+        image: &GrayImage,
+        segments: &[Segment],
+        wanted: impl Fn(usize) -> bool,
+        out: &mut BinaryDescriptors,
+    ) -> Result<(), VisionError> {
         out.reset(segments.len(), LBD_BYTES);
         self.keylines.clear();
         let (w, h) = (image.width() as f32, image.height() as f32);
         for (k, segment) in segments.iter().enumerate() {
+            if !wanted(k) {
+                continue;
+            }
             if let Some(keyline) = keyline_for(segment, k, w, h) {
                 self.keylines.push(keyline);
             }

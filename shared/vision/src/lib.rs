@@ -31,6 +31,7 @@ mod lbd;
 mod matchers;
 mod orb;
 mod pair;
+mod png_gray;
 mod worker;
 
 pub use detect::{

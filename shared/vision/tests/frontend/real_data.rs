@@ -172,3 +172,43 @@ fn real_data_the_worker_matches_stereo_points_as_the_caller_does() {
         assert_eq!(from_worker, from_here, "frame {frame}");
     }
 }
+
+#[test]
+fn real_data_lbd_describing_only_right_segments_with_a_partner_gives_the_same_stereo_matches() {
+    // The matcher stage describes only the right segments that pass the stereo gates with
+    // some left one; the others' descriptors are never compared. Same matches, same
+    // descriptors for the segments described, fewer described.
+    let config = FrontendConfig::default();
+    let (mut all_right, mut described_right) = (0, 0);
+    for frame in 0..6 {
+        let (left_image, right_image) = euroc_images(frame);
+        for detector in [DetectorKind::EdgeLines, DetectorKind::Fld] {
+            let mut lbd = create_segment_matcher(MatcherKind::Lbd, &config).unwrap();
+            let features = |image: &GrayImage| LineFeatures {
+                segments: detect_all(detector, image),
+                ..LineFeatures::default()
+            };
+            let (mut left, mut right) = (features(&left_image), features(&right_image));
+            let mut right_some = right.clone();
+            lbd.describe(&left_image, &mut left).unwrap();
+            lbd.describe(&right_image, &mut right).unwrap();
+            lbd.describe_stereo_right(&right_image, &left.segments, &mut right_some)
+                .unwrap();
+            let (mut every, mut some) = (Vec::new(), Vec::new());
+            lbd.match_lines(MatchCase::Stereo, &left, &right, &mut every);
+            lbd.match_lines(MatchCase::Stereo, &left, &right_some, &mut some);
+            let label = format!("frame {frame}, {}", detector.name());
+            assert!(every.len() >= 20, "{label}: {} matches", every.len());
+            assert_eq!(some, every, "{label}");
+            for k in 0..right.segments.len() {
+                if let Some(row) = right_some.descriptors.row(k) {
+                    assert_eq!(Some(row), right.descriptors.row(k), "{label}: segment {k}");
+                }
+            }
+            all_right += right.descriptors.count_present();
+            described_right += right_some.descriptors.count_present();
+        }
+    }
+    eprintln!("right segments described: {described_right} of {all_right}");
+    assert!(described_right < all_right);
+}
