@@ -22,7 +22,7 @@ use linetrack_stereo_vo::{
     estimate_motion_near,
 };
 use linetrack_vision::{
-    FeatureMatch, GrayImage, OrbWorker, PointExtractor, PointFeatures, PointMatcher,
+    FeatureMatch, GrayImage, OrbWorker, PointExtractor, PointFeatures, PointMatcher, RowSearch,
 };
 use nalgebra::{Isometry3, Point3};
 use points::{PointTracking, PointWorkMs, search_radius_px};
@@ -49,7 +49,8 @@ pub struct MatchedLines<'a> {
 struct SeenImages<'a> {
     /// Left and right.
     images: (&'a GrayImage, &'a GrayImage),
-    /// ORB points of the left and right image.
+    /// ORB points of the left and right image (with `[orb] stereo = "row-search"`, the
+    /// right ones are the left points' partners, found with the stereo matches).
     points: [PointFeatures; 2],
     /// The left image's stretch gain (1: not stretched).
     left_gain: f64,
@@ -218,8 +219,10 @@ pub struct MotionTracker {
     /// thread of its own.
     orb_left: PointExtractor,
     orb_right: OrbWorker,
-    /// Stereo matching of the points.
+    /// Stereo matching of the points by descriptor (`[orb] stereo = "descriptors"`)…
     point_matcher: PointMatcher,
+    /// …or along the right image's rows (`"row-search"`: the right image is not extracted).
+    row_search: RowSearch,
     /// Frame-to-frame matching of the points.
     tracking: PointTracking,
     reference: Option<Reference>,
@@ -256,6 +259,7 @@ impl MotionTracker {
             orb_left: PointExtractor::new(&config.frontend.orb)?,
             orb_right: OrbWorker::new(&config.frontend.orb)?,
             point_matcher: PointMatcher::new(),
+            row_search: RowSearch::new(),
             tracking: PointTracking::default(),
             reference: None,
             pose: Isometry3::identity(),

@@ -176,6 +176,39 @@ pub struct OrbOptions {
     /// wide (at most an even share per cell first); 0, the default, for none (measured on
     /// the KITTI raw drive, the grid cost the odometry's frame-to-frame matches).
     pub grid_cell_px: usize,
+    /// How each left point finds its stereo partner: `descriptors` (the default: the
+    /// right image's points are extracted too and matched by descriptor) or `row-search`
+    /// (the right image is not extracted: each left point's window is searched for along
+    /// its row of the rectified right image, see `row_search_min_correlation`).
+    pub stereo: PointStereo,
+    /// `row-search` only: the smallest zero-mean normalised correlation (in (0, 1]) at
+    /// which the best window along the row is believed.
+    pub row_search_min_correlation: f64,
+    /// `row-search` only: the best window's cost (1 − correlation) must be under this
+    /// fraction (in (0, 1)) of the runner-up's, another dip of the cost along the row;
+    /// a repeated pattern, whose dips are alike, is refused.
+    pub row_search_uniqueness: f64,
+}
+
+/// How the odometry's left points find their stereo partners.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum PointStereo {
+    /// Both images' points extracted and matched by descriptor.
+    Descriptors,
+    /// Only the left image's points extracted; each one's window searched for along its
+    /// row of the rectified right image.
+    RowSearch,
+}
+
+impl PointStereo {
+    /// The name used in configs and on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            PointStereo::Descriptors => "descriptors",
+            PointStereo::RowSearch => "row-search",
+        }
+    }
 }
 
 impl Default for OrbOptions {
@@ -189,6 +222,9 @@ impl Default for OrbOptions {
             fast_threshold: 20,
             min_distance_ratio: 2.0,
             grid_cell_px: 0,
+            stereo: PointStereo::Descriptors,
+            row_search_min_correlation: 0.8,
+            row_search_uniqueness: 0.3,
         }
     }
 }
@@ -367,6 +403,22 @@ impl FrontendConfig {
                 "orb",
                 format!("{:?}", self.orb),
                 "features >= 1, levels >= 1, scale_factor > 1",
+            );
+        }
+        let correlation = self.orb.row_search_min_correlation;
+        if !(correlation > 0.0 && correlation <= 1.0) {
+            return bad(
+                "orb.row_search_min_correlation",
+                correlation.to_string(),
+                "in (0, 1]",
+            );
+        }
+        let uniqueness = self.orb.row_search_uniqueness;
+        if !(uniqueness > 0.0 && uniqueness < 1.0) {
+            return bad(
+                "orb.row_search_uniqueness",
+                uniqueness.to_string(),
+                "in (0, 1)",
             );
         }
         let g = &self.appearance_gates;

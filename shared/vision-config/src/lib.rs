@@ -13,7 +13,7 @@ mod kinds;
 
 pub use frontend::{
     AppearanceGates, FldOptions, FrontendConfig, LbdOptions, LsdOptions, LsdRefine, OrbOptions,
-    PointExtractorKind,
+    PointExtractorKind, PointStereo,
 };
 pub use kinds::{DetectorKind, MatcherKind};
 pub use linetrack_frontend_core::{EdgeLinesOptions, LineOptions};

@@ -28,6 +28,10 @@
 //!   with each point extractor: both images' segments (edgelines), ℓ1 profiles and stereo
 //!   match; both images' 1500 points (8 levels of 1.2), their stereo match and every
 //!   partner's sub-pixel column (the 8 ms bar; the contrast stretch, `stretch`, apart);
+//!   `…/row-search`: the same with `[orb] stereo = "row-search"`: the left image's points
+//!   only, their partners searched along the right image's rows, then refined;
+//! - `stereo-partners/{descriptors,row-search}`: the points' stereo step alone, given the
+//!   left image's 1500 points: the right image's extracted and matched, or the row search;
 //! - `stretch`: the contrast stretch of one image (the odometry's default gain limit, 4).
 //!
 //! Monocular tracking of a frame = detect + describe + frame-to-frame match; stereo =
@@ -41,8 +45,8 @@ use linetrack_geometry::MatchCase;
 use linetrack_vision::{
     AppearanceGates, DetectorKind, FrontendConfig, GrayImage, HammingMatcher, LineFeatures,
     MatcherKind, OrbExtractor, OrbOptions, PointExtractor, PointExtractorKind, PointFeatures,
-    PointMatcher, create_detector, create_segment_matcher, points_may_match, refine_stereo_column,
-    refine_track,
+    PointMatcher, PointStereo, RowSearch, RowSearchSettings, create_detector,
+    create_segment_matcher, points_may_match, refine_stereo_column, refine_track,
 };
 use opencv::core::{Vec4f, Vector};
 use opencv::ximgproc::{self, EdgeDrawingTrait};
@@ -252,14 +256,56 @@ fn bench_frontend(c: &mut Criterion) {
     let mut line_matcher = create_segment_matcher(MatcherKind::L1, &config).expect("l1");
     let (mut lines_l, mut lines_r) = (LineFeatures::default(), LineFeatures::default());
     let mut line_matches = Vec::new();
-    for extractor in PointExtractorKind::ALL {
+    let mut row_search = RowSearch::new();
+    let row_settings = RowSearchSettings::of(&odometry_orb, &config.appearance_gates);
+    // The points' stereo step alone, given the left image's 1500 points (OpenCV's ORB):
+    // the right image's points extracted and matched by descriptor, against the left
+    // points searched for along the right image's rows.
+    let mut right_extractor = PointExtractor::new(&odometry_orb).expect("extractor");
+    let (mut left_points, mut right_points) = (PointFeatures::default(), PointFeatures::default());
+    right_extractor
+        .extract(&left, &mut left_points)
+        .expect("left points");
+    group.bench_function("stereo-partners/descriptors", |b| {
+        b.iter(|| {
+            right_extractor.extract(black_box(&right), &mut right_points)?;
+            point_matcher.match_points(
+                MatchCase::Stereo,
+                &left_points,
+                &right_points,
+                &config.appearance_gates,
+                odometry_orb.min_distance_ratio,
+                &mut out,
+            );
+            Ok::<_, linetrack_vision::VisionError>(out.len())
+        })
+    });
+    group.bench_function("stereo-partners/row-search", |b| {
+        b.iter(|| {
+            row_search.find_partners(
+                [&left, black_box(&right)],
+                &left_points,
+                &row_settings,
+                &mut right_points,
+                &mut out,
+            );
+            out.len()
+        })
+    });
+    for (extractor, stereo) in PointExtractorKind::ALL
+        .into_iter()
+        .flat_map(|e| [(e, PointStereo::Descriptors), (e, PointStereo::RowSearch)])
+    {
         let options = OrbOptions {
             extractor,
             ..odometry_orb
         };
         let mut points_extractor = PointExtractor::new(&options).expect("extractor");
         let (mut points_l, mut points_r) = (PointFeatures::default(), PointFeatures::default());
-        let name = format!("stereo-frontend/{}", extractor.name());
+        let name = match stereo {
+            PointStereo::Descriptors => format!("stereo-frontend/{}", extractor.name()),
+            PointStereo::RowSearch => format!("stereo-frontend/{}/row-search", extractor.name()),
+        };
         group.bench_function(name, |b| {
             b.iter(|| {
                 line_detector.detect(black_box(&left), &mut lines_l.segments)?;
@@ -268,15 +314,26 @@ fn bench_frontend(c: &mut Criterion) {
                 line_matcher.describe(&right, &mut lines_r)?;
                 line_matcher.match_lines(MatchCase::Stereo, &lines_l, &lines_r, &mut line_matches);
                 points_extractor.extract(black_box(&left), &mut points_l)?;
-                points_extractor.extract(black_box(&right), &mut points_r)?;
-                point_matcher.match_points(
-                    MatchCase::Stereo,
-                    &points_l,
-                    &points_r,
-                    &config.appearance_gates,
-                    odometry_orb.min_distance_ratio,
-                    &mut out,
-                );
+                match stereo {
+                    PointStereo::Descriptors => {
+                        points_extractor.extract(black_box(&right), &mut points_r)?;
+                        point_matcher.match_points(
+                            MatchCase::Stereo,
+                            &points_l,
+                            &points_r,
+                            &config.appearance_gates,
+                            odometry_orb.min_distance_ratio,
+                            &mut out,
+                        );
+                    }
+                    PointStereo::RowSearch => row_search.find_partners(
+                        [&left, black_box(&right)],
+                        &points_l,
+                        &row_settings,
+                        &mut points_r,
+                        &mut out,
+                    ),
+                }
                 let refined = out
                     .iter()
                     .filter_map(|m| {

@@ -49,7 +49,8 @@ pub use matchers::{
 };
 pub use orb::{
     FastBriefExtractor, MIN_TRACK_CORRELATION, OrbExtractor, OrbWorker, PointExtractor,
-    PointFeatures, PointMatcher, points_may_match, refine_stereo_column, refine_track,
+    PointFeatures, PointMatcher, RowSearch, RowSearchSettings, points_may_match,
+    refine_stereo_column, refine_track,
 };
 pub use pair::{LinePairMatcher, PairResult, PairTimings};
 pub use worker::{SideWorker, copy_image_into};
@@ -59,7 +60,7 @@ pub use worker::{SideWorker, copy_image_into};
 pub use linetrack_vision_config::{
     AppearanceGates, DetectorKind, EdgeLinesOptions, FldOptions, FrontendConfig,
     FrontendConfigError, LbdOptions, LineOptions, LsdOptions, LsdRefine, MatcherKind, OrbOptions,
-    PointExtractorKind,
+    PointExtractorKind, PointStereo,
 };
 
 use std::path::PathBuf;

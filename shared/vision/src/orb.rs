@@ -14,10 +14,12 @@ use opencv::features2d::{Feature2DTrait, ORB, ORB_ScoreType};
 mod matching;
 mod native;
 mod refine;
+mod row_search;
 
 pub use matching::{PointMatcher, points_may_match};
 pub use native::{FastBriefExtractor, PointExtractor};
 pub use refine::{MIN_TRACK_CORRELATION, refine_stereo_column, refine_track};
+pub use row_search::{RowSearch, RowSearchSettings};
 
 /// Points of one image with their descriptors (row k for `points[k]`).
 #[derive(Debug, Clone, Default)]

@@ -24,6 +24,8 @@ use std::process::ExitCode;
     linetrack-disparity-check                         # every pair, LBD and l1
     linetrack-disparity-check --matcher l1 --pair Cones
     linetrack-disparity-check --config configs/odometry.toml
+    linetrack-disparity-check --config rows.toml      # rows.toml: configs/odometry.toml with
+                                                      # [frontend.orb] stereo = \"row-search\"
     linetrack-disparity-check --generated highway --generated normal --seed 2   # exact truth
     linetrack-disparity-check --repeatability --levels 1 --levels 8   # point extractors
 

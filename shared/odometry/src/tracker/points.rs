@@ -12,8 +12,8 @@ use linetrack_stereo_vo::{
     PointObservation, TriangulationLimits, disparity_weight, triangulate_point,
 };
 use linetrack_vision::{
-    AppearanceGates, FeatureMatch, GrayImage, PointFeatures, PointMatcher, copy_image_into,
-    refine_stereo_column, refine_track,
+    AppearanceGates, FeatureMatch, GrayImage, PointFeatures, PointMatcher, PointStereo,
+    RowSearchSettings, copy_image_into, refine_stereo_column, refine_track,
 };
 use nalgebra::Isometry3;
 use std::time::Instant;
@@ -49,19 +49,22 @@ impl MotionTracker {
         stats: &mut FrameStats,
     ) -> (Option<(&'a GrayImage, &'a GrayImage)>, [PointFeatures; 2]) {
         match images {
-            Some(seen) if self.config.features == Features::PointsAndLines => {
+            Some(mut seen) if self.config.features == Features::PointsAndLines => {
                 // Stereo partners, and observations of the reference's landmarks when this
                 // frame continues from it, unless done ahead (points are triangulated once
                 // they are where they were tracked).
                 let ms = match seen.points_ahead {
                     Some(ms) => ms,
-                    None => self.track_points(
-                        lists,
-                        [&seen.points[0], &seen.points[1]],
-                        seen.images.0,
-                        seen.left_gain,
-                        continues,
-                    ),
+                    None => {
+                        let [points_l, points_r] = &mut seen.points;
+                        self.track_points(
+                            lists,
+                            (&*points_l, points_r),
+                            seen.images,
+                            seen.left_gain,
+                            continues,
+                        )
+                    }
                 };
                 stats.stereo_ms += ms.stereo_ms;
                 stats.frame_to_frame_ms += ms.frame_to_frame_ms;
@@ -77,18 +80,19 @@ impl MotionTracker {
     }
 
     /// A frame's point work that needs no segments, into `lists` and the tracker's
-    /// per-frame state: the stereo partners of `points_l` among `points_r` and, when there
-    /// is a reference frame and `observe` says so, their observations of its landmarks.
-    /// Returns its milliseconds.
+    /// per-frame state: the stereo partners of `points_l` ([`MotionTracker::match_stereo`]
+    /// in `images`) and, when there is a reference frame and `observe` says so, their
+    /// observations of its landmarks. Returns its milliseconds.
     fn track_points(
         &mut self,
         lists: &mut FrameLists,
-        [points_l, points_r]: [&PointFeatures; 2],
-        left_image: &GrayImage,
+        (points_l, points_r): (&PointFeatures, &mut PointFeatures),
+        images: (&GrayImage, &GrayImage),
         left_gain: f64,
         observe: bool,
     ) -> PointWorkMs {
-        let stereo_ms = self.match_stereo(lists, [points_l, points_r]);
+        let left_image = images.0;
+        let stereo_ms = self.match_stereo(lists, images, (points_l, points_r));
         let started = Instant::now();
         let search = PointSearch::of(
             self.reference.as_ref().filter(|_| observe),
@@ -109,21 +113,35 @@ impl MotionTracker {
         }
     }
 
-    /// The stereo partners of `points_l` among `points_r`; returns its milliseconds.
-    fn match_stereo(
+    /// The stereo partners of `points_l`: among `points_r` by descriptor, or with
+    /// `[orb] stereo = "row-search"` along the rows of `images`' right one (`points_r`
+    /// then replaced by the partners found); returns its milliseconds.
+    pub(super) fn match_stereo(
         &mut self,
         lists: &mut FrameLists,
-        [points_l, points_r]: [&PointFeatures; 2],
+        (left_image, right_image): (&GrayImage, &GrayImage),
+        (points_l, points_r): (&PointFeatures, &mut PointFeatures),
     ) -> f64 {
         let started = Instant::now();
-        self.point_matcher.match_points(
-            MatchCase::Stereo,
-            points_l,
-            points_r,
-            &self.config.frontend.appearance_gates,
-            self.config.frontend.orb.min_distance_ratio,
-            &mut lists.stereo_matches,
-        );
+        let orb = &self.config.frontend.orb;
+        let gates = &self.config.frontend.appearance_gates;
+        match orb.stereo {
+            PointStereo::Descriptors => self.point_matcher.match_points(
+                MatchCase::Stereo,
+                points_l,
+                points_r,
+                gates,
+                orb.min_distance_ratio,
+                &mut lists.stereo_matches,
+            ),
+            PointStereo::RowSearch => self.row_search.find_partners(
+                [left_image, right_image],
+                points_l,
+                &RowSearchSettings::of(orb, gates),
+                points_r,
+                &mut lists.stereo_matches,
+            ),
+        }
         self.set_stereo_partners(&lists.stereo_matches, [points_l, points_r]);
         since(started)
     }

@@ -7,7 +7,9 @@ use super::{MatchedLines, MotionTracker, SeenImages, departure, keep_spare};
 use crate::stats::since;
 use crate::{Features, FrameResult, FrameStats, OdometryError};
 use linetrack_stereo_vo::{estimate_motion, estimate_motion_near};
-use linetrack_vision::{GrayImage, PointFeatures, VisionError, stretch_contrast_into};
+use linetrack_vision::{
+    GrayImage, PointFeatures, PointStereo, RowSearchSettings, VisionError, stretch_contrast_into,
+};
 use std::time::Instant;
 
 /// What [`MotionTracker::prepare`] made of a frame's images before its segments arrived.
@@ -137,45 +139,78 @@ impl MotionTracker {
                 (self.last_motion, self.motion_known),
                 left_gain,
             );
-            let tracking = &mut self.tracking;
-            let (right_side, left_side) = self.orb_right.extract_while(image_r, points_r, || {
-                orb_left.extract(image_l, points_l)?;
-                let started = Instant::now();
+            if self.config.frontend.orb.stereo == PointStereo::RowSearch {
+                // Only the left image's corners; the right image is searched along their
+                // rows, here, between finding and refining the landmarks' matches.
+                self.orb_left.extract(image_l, points_l)?;
+                points_r.points.clear();
+                points_r.levels.clear();
                 if ahead {
-                    tracking.find(search.as_ref(), points_l);
+                    let started = Instant::now();
+                    self.tracking.find(search.as_ref(), points_l);
+                    tracking_ms = since(started);
+                    let lists = &mut self.spares.lists;
+                    let started = Instant::now();
+                    let frontend = &self.config.frontend;
+                    self.row_search.find_partners(
+                        [image_l, image_r],
+                        points_l,
+                        &RowSearchSettings::of(&frontend.orb, &frontend.appearance_gates),
+                        points_r,
+                        &mut lists.stereo_matches,
+                    );
+                    stereo_ms = since(started);
+                    let started = Instant::now();
+                    self.tracking.observe_found(
+                        search.as_ref(),
+                        points_l,
+                        image_l,
+                        &mut lists.observations,
+                    );
+                    tracking_ms += since(started);
                 }
-                Ok::<_, VisionError>(since(started))
-            });
-            tracking_ms = left_side?;
-            right_side?;
-            if ahead {
-                // Then the stereo matches are found on the worker while the landmarks'
-                // matches are refined here.
-                let lists = &mut self.spares.lists;
-                let gates = &self.config.frontend.appearance_gates;
-                let ratio = self.config.frontend.orb.min_distance_ratio;
-                let both_started = Instant::now();
-                let (stereo, refine_ms) = self.orb_right.match_stereo_while(
-                    [points_l, points_r],
-                    gates,
-                    ratio,
-                    &mut lists.stereo_matches,
-                    || {
+            } else {
+                let tracking = &mut self.tracking;
+                let (right_side, left_side) =
+                    self.orb_right.extract_while(image_r, points_r, || {
+                        orb_left.extract(image_l, points_l)?;
                         let started = Instant::now();
-                        tracking.observe_found(
-                            search.as_ref(),
-                            points_l,
-                            image_l,
-                            &mut lists.observations,
-                        );
-                        since(started)
-                    },
-                );
-                stereo?;
-                // The stereo matching's share is the time waited beyond the refinement (its
-                // own time on the worker overlaps the refinement's).
-                stereo_ms = (since(both_started) - refine_ms).max(0.0);
-                tracking_ms += refine_ms;
+                        if ahead {
+                            tracking.find(search.as_ref(), points_l);
+                        }
+                        Ok::<_, VisionError>(since(started))
+                    });
+                tracking_ms = left_side?;
+                right_side?;
+                if ahead {
+                    // Then the stereo matches are found on the worker while the landmarks'
+                    // matches are refined here.
+                    let lists = &mut self.spares.lists;
+                    let gates = &self.config.frontend.appearance_gates;
+                    let ratio = self.config.frontend.orb.min_distance_ratio;
+                    let both_started = Instant::now();
+                    let (stereo, refine_ms) = self.orb_right.match_stereo_while(
+                        [points_l, points_r],
+                        gates,
+                        ratio,
+                        &mut lists.stereo_matches,
+                        || {
+                            let started = Instant::now();
+                            tracking.observe_found(
+                                search.as_ref(),
+                                points_l,
+                                image_l,
+                                &mut lists.observations,
+                            );
+                            since(started)
+                        },
+                    );
+                    stereo?;
+                    // The stereo matching's share is the time waited beyond the refinement (its
+                    // own time on the worker overlaps the refinement's).
+                    stereo_ms = (since(both_started) - refine_ms).max(0.0);
+                    tracking_ms += refine_ms;
+                }
             }
         }
         let prepared = PreparedImages {
@@ -379,10 +414,17 @@ mod tests {
     fn point_work_done_ahead_tracks_a_frame_as_it_does_with_the_segments() {
         let (frames, rig) = euroc_frames(&[0, 4, 8, 12, 16]);
         // The frames as they are, and darkened to a quarter: those are stretched first,
-        // and their points weighted by the gain.
+        // and their points weighted by the gain. Stereo partners by descriptor and, with
+        // the right image not extracted, along its rows.
         let dark: Vec<_> = frames.iter().map(darkened).collect();
         let new = || MotionTracker::new(OdometryConfig::default(), rig).unwrap();
-        for frames in [&frames, &dark] {
+        let new_row_search = || MotionTracker::new(row_search_config(), rig).unwrap();
+        for (frames, new) in [
+            (&frames, &new as &dyn Fn() -> MotionTracker),
+            (&dark, &new),
+            (&frames, &new_row_search),
+            (&dark, &new_row_search),
+        ] {
             let (mut ahead, mut along) = (new(), new());
             for frame in frames {
                 let a = track_prepared(&mut ahead, frame, Preparation::CornersAndPoints);
@@ -422,6 +464,37 @@ mod tests {
         assert!(ahead.points_ahead.is_some());
         ahead.resume_from(ahead.pose(), ahead.last_motion());
         assert!(ahead.points_ahead.is_none());
+    }
+
+    /// The default configuration with `[orb] stereo = "row-search"`.
+    fn row_search_config() -> OdometryConfig {
+        let mut config = OdometryConfig::default();
+        config.frontend.orb.stereo = linetrack_vision::PointStereo::RowSearch;
+        config
+    }
+
+    #[test]
+    fn the_row_search_extracts_no_right_points_and_triangulates_as_many() {
+        let (frames, rig) = euroc_frames(&[0, 4]);
+        let mut row_search = MotionTracker::new(row_search_config(), rig).unwrap();
+        let mut descriptors = MotionTracker::new(OdometryConfig::default(), rig).unwrap();
+        for frame in &frames {
+            let a = track_prepared(&mut row_search, frame, Preparation::CornersAndPoints);
+            let b = track_prepared(&mut descriptors, frame, Preparation::CornersAndPoints);
+            // The right "points" are the partners the search found, no more than the
+            // left points; the descriptor matching extracted the right image's own.
+            assert!(a.stats.points[1] <= a.stats.points[0], "{:?}", a.stats);
+            assert!(a.stats.points[1] > a.stats.points[0] / 2, "{:?}", a.stats);
+            assert!(
+                a.stats.triangulated[0] * 10 >= b.stats.triangulated[0] * 8,
+                "{:?} against {:?}",
+                a.stats,
+                b.stats
+            );
+            if frame.index > 0 {
+                assert!(a.stats.observations[0] > 100, "{:?}", a.stats);
+            }
+        }
     }
 
     /// `frame` with its pixels divided by 4.

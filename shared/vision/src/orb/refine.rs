@@ -6,13 +6,13 @@ use crate::cpu::with_avx2;
 use linetrack_geometry::Point;
 
 /// Half the side of the windows the sub-pixel refinements compare (11 × 11).
-const HALF: i64 = 5;
-const SIDE: usize = (2 * HALF + 1) as usize;
+pub(super) const HALF: i64 = 5;
+pub(super) const SIDE: usize = (2 * HALF + 1) as usize;
 
 /// The window of `pixels` (an image `width` wide) centred on pixel `(u, v)`, which the caller
 /// has checked lies at least [`HALF`] pixels inside the image (on the stack: this runs for
 /// every point match of every frame).
-fn window<T: From<u8> + Copy + Default>(
+pub(super) fn window<T: From<u8> + Copy + Default>(
     pixels: &[u8],
     width: i64,
     u: i64,
@@ -27,7 +27,7 @@ fn window<T: From<u8> + Copy + Default>(
 }
 
 /// `pixels` into `values` as integers.
-fn widen<T: From<u8>>(pixels: &[u8], values: &mut [T]) {
+pub(super) fn widen<T: From<u8>>(pixels: &[u8], values: &mut [T]) {
     for (value, &p) in values.iter_mut().zip(pixels) {
         *value = T::from(p);
     }
@@ -38,7 +38,7 @@ fn widen<T: From<u8>>(pixels: &[u8], values: &mut [T]) {
 /// which cannot wrap here, so that the sum is vectorised in builds with overflow checks
 /// too, such as the tests'.)
 #[inline(always)]
-fn sum_of_products(a: &[i16], b: &[i16]) -> i32 {
+pub(super) fn sum_of_products(a: &[i16], b: &[i16]) -> i32 {
     a.iter().zip(b).fold(0i32, |sum, (&a, &b)| {
         sum.wrapping_add(i32::from(a).wrapping_mul(i32::from(b)))
     })
@@ -46,7 +46,7 @@ fn sum_of_products(a: &[i16], b: &[i16]) -> i32 {
 
 /// The sum of `values` (exact for a window of pixels, see [`sum_of_products`]).
 #[inline(always)]
-fn sum_of(values: &[i16]) -> i32 {
+pub(super) fn sum_of(values: &[i16]) -> i32 {
     values
         .iter()
         .fold(0i32, |sum, &v| sum.wrapping_add(i32::from(v)))
@@ -54,7 +54,12 @@ fn sum_of(values: &[i16]) -> i32 {
 
 /// Whether the windows centred on pixel `(u, v)` and shifted by up to `reach` (columns,
 /// rows) either way all lie inside an image of `size` (width, height).
-fn windows_inside(u: i64, v: i64, reach: (i64, i64), (width, height): (i64, i64)) -> bool {
+pub(super) fn windows_inside(
+    u: i64,
+    v: i64,
+    reach: (i64, i64),
+    (width, height): (i64, i64),
+) -> bool {
     // (Compared so that no sum overflows: a point at infinity rounds to i64::MAX.)
     u >= HALF + reach.0
         && u < width - HALF - reach.0
@@ -75,7 +80,7 @@ fn parabola_minimum(before: f64, at: f64, after: f64) -> f64 {
 
 /// The two images' pixels and their common size, or `None` when they differ in size or are
 /// not stored in one block.
-fn pixels_of_pair<'a>(
+pub(super) fn pixels_of_pair<'a>(
     first: &'a GrayImage,
     second: &'a GrayImage,
 ) -> Option<(&'a [u8], &'a [u8], i64, i64)> {

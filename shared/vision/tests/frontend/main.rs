@@ -239,6 +239,23 @@ fn shipped_frontend_config_matches_the_defaults_and_names_are_checked() {
         .unwrap_err()
         .to_string();
     assert!(err.contains("lambda"), "{err}");
+    let config = FrontendConfig::from_toml_str("[orb]\nstereo = \"row-search\"").unwrap();
+    assert_eq!(config.orb.stereo, PointStereo::RowSearch);
+    let err = FrontendConfig::from_toml_str("[orb]\nstereo = \"rows\"")
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("rows"), "{err}");
+    for (key, value) in [
+        ("row_search_min_correlation", "0.0"),
+        ("row_search_min_correlation", "1.5"),
+        ("row_search_uniqueness", "1.0"),
+        ("row_search_uniqueness", "nan"),
+    ] {
+        let err = FrontendConfig::from_toml_str(&format!("[orb]\n{key} = {value}"))
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains(&format!("orb.{key}")), "{err}");
+    }
     assert_eq!("FLD".parse::<DetectorKind>(), Ok(DetectorKind::Fld));
     assert!(
         "sift"
