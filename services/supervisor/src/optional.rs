@@ -569,7 +569,7 @@ mod tests {
         reap(&mut link, &clock, &mut monitor);
         clock.advance(Duration::from_secs(60));
         assert!(!link.wants_start(clock.monotonic()), "left");
-        let events = events_of(&dir);
+        let events = events_of(&monitor, &dir);
         assert_eq!(events.matches("link-exit").count(), 1, "{events}");
         assert!(!events.contains("restart 1"), "{events}");
         let _ = std::fs::remove_dir_all(&dir);
