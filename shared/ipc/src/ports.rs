@@ -119,8 +119,9 @@ impl<P: Record, H: Record> Outlet<P, H> {
         }
     }
 
-    /// Hands the topic's history (see [`Topic::history`]) to subscribers that connected
-    /// since the last message: a publisher with nothing new to send calls it now and then.
+    /// Hands the topic's history (see [`Topic::history`](linetrack_msgs::Topic::history)) to
+    /// subscribers that connected since the last message: a publisher with nothing new to
+    /// send calls it now and then.
     /// (A local subscriber gets the history when it is created.)
     pub fn update_connections(&self) -> Result<(), IpcError> {
         use iceoryx2::port::update_connections::UpdateConnections;
