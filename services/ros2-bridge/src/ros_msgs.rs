@@ -272,6 +272,4 @@ mod message_impls {
     impl Message for super::Odometry {}
     impl Message for super::TfMessage {}
     impl Message for super::DiagnosticArray {}
-    impl Message for crate::sensor_msgs::Image {}
-    impl Message for crate::sensor_msgs::CameraInfo {}
 }

@@ -70,3 +70,10 @@ pub struct CameraInfo {
 pub const IMAGE_TYPE: (&str, &str) = ("sensor_msgs", "Image");
 /// `sensor_msgs/msg/CameraInfo`'s package and name.
 pub const CAMERA_INFO_TYPE: (&str, &str) = ("sensor_msgs", "CameraInfo");
+
+#[cfg(feature = "ros2")]
+mod message_impls {
+    use ros2_client::Message;
+    impl Message for super::Image {}
+    impl Message for super::CameraInfo {}
+}

@@ -1,7 +1,7 @@
 //! [`Bus`]: the transport's two implementations (iceoryx2 shared memory, crossbeam
 //! channels in one process) and the services it opens ports on.
 
-use crate::ports::{InletInner, OutletInner, WakeInner};
+use crate::ports::{InletInner, LocalTopic, OutletInner, WakeInner};
 use crate::{Inlet, IpcError, Outlet, Record, Scope, Wake, setup};
 use crossbeam_channel::{Receiver, Sender};
 use iceoryx2::node::Node;
@@ -9,27 +9,8 @@ use iceoryx2::prelude::{
     AllocationStrategy, NodeBuilder, NodeName, ServiceName, SignalHandlingMode, ipc,
 };
 use linetrack_msgs::{StageKind, Topic, TopicOf, wake_service_name};
-use std::any::Any;
 use std::collections::HashMap;
-use std::fmt::Debug;
 use std::sync::{Arc, Mutex};
-
-pub(crate) type LocalMessage = Arc<dyn Any + Send + Sync>;
-
-/// A message in the local transport.
-#[derive(Debug)]
-pub struct LocalPayload<P, H> {
-    pub(crate) header: H,
-    pub(crate) payload: Vec<P>,
-}
-
-/// A local topic: its subscribers' queues and, for a topic with history, the last message
-/// (handed to a subscriber that comes later, as iceoryx2's history does).
-#[derive(Default)]
-pub(crate) struct LocalTopic {
-    pub(crate) subscribers: Vec<Sender<LocalMessage>>,
-    pub(crate) last: Option<LocalMessage>,
-}
 
 #[derive(Default)]
 pub(crate) struct LocalRegistry {

@@ -16,8 +16,8 @@ mod bus;
 mod ports;
 mod scope;
 
-pub use bus::{Bus, LocalHub, LocalPayload};
-pub use ports::{Inlet, Outlet, Received, Wake};
+pub use bus::{Bus, LocalHub};
+pub use ports::{Inlet, LocalPayload, Outlet, Received, Wake};
 pub use scope::{Resources, Scope};
 
 use iceoryx2::prelude::ZeroCopySend;

@@ -1,8 +1,6 @@
 //! The ports a [`Bus`](crate::Bus) opens: [`Outlet`] publishes a topic, [`Inlet`] receives
 //! it, [`Wake`] blocks a stage until a topic it consumes has news.
 
-use crate::bus::LocalPayload;
-use crate::bus::{LocalMessage, LocalTopic};
 use crate::{IpcError, Record, transfer};
 use crossbeam_channel::{Receiver, Sender, TrySendError};
 use iceoryx2::port::listener::Listener;
@@ -11,8 +9,27 @@ use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::ipc;
 use iceoryx2::sample::Sample;
+use std::any::Any;
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
+
+/// A message in the local transport, its types erased (see [`LocalPayload`]).
+pub(crate) type LocalMessage = Arc<dyn Any + Send + Sync>;
+
+/// A message in the local transport.
+#[derive(Debug)]
+pub struct LocalPayload<P, H> {
+    pub(crate) header: H,
+    pub(crate) payload: Vec<P>,
+}
+
+/// A local topic: its subscribers' queues and, for a topic with history, the last message
+/// (handed to a subscriber that comes later, as iceoryx2's history does).
+#[derive(Default)]
+pub(crate) struct LocalTopic {
+    pub(crate) subscribers: Vec<Sender<LocalMessage>>,
+    pub(crate) last: Option<LocalMessage>,
+}
 
 pub(crate) enum OutletInner<P: Record, H: Record> {
     Shm {
@@ -102,8 +119,9 @@ impl<P: Record, H: Record> Outlet<P, H> {
         }
     }
 
-    /// Hands the topic's history (see [`Topic::history`]) to subscribers that connected
-    /// since the last message: a publisher with nothing new to send calls it now and then.
+    /// Hands the topic's history (see [`Topic::history`](linetrack_msgs::Topic::history)) to
+    /// subscribers that connected since the last message: a publisher with nothing new to
+    /// send calls it now and then.
     /// (A local subscriber gets the history when it is created.)
     pub fn update_connections(&self) -> Result<(), IpcError> {
         use iceoryx2::port::update_connections::UpdateConnections;

@@ -16,7 +16,7 @@ use crate::stats::since;
 use crate::{FrameResult, FrameStats, OdometryConfig, OdometryError};
 use linetrack_geometry::{Point, Segment, SegmentFeatures, StereoRig};
 use linetrack_l1_matcher::SegmentProfiles;
-use linetrack_stereo_vo::motion::{line_residual, normalised_line, point_residual};
+use linetrack_stereo_vo::observation::{line_residual, normalised_line, point_residual};
 use linetrack_stereo_vo::{
     LineObservation, MotionEstimate, PointObservation, TriangulationLimits, estimate_motion,
     estimate_motion_near,

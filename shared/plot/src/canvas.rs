@@ -1,9 +1,8 @@
 //! What every chart shares: the embedded font, the palette, the sizes, the PNG canvas, the
-//! axes' builders, the legend and the value labels.
+//! axes' builders, the point markers, the legend and the value labels.
 
 use crate::PlotError;
 use crate::axis::{self, Axis};
-use crate::chart::Marker;
 use plotters::coord::Shift;
 use plotters::prelude::*;
 use std::path::Path;
@@ -162,6 +161,17 @@ pub(crate) fn rows_chart<'a, 'b>(
         .light_line_style(RGBColor(240, 240, 240))
         .draw()?;
     Ok(chart)
+}
+
+/// A point marker.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Marker {
+    /// Filled circle.
+    Circle,
+    /// Diagonal cross.
+    Cross,
+    /// Filled triangle, point up.
+    Triangle,
 }
 
 /// What a legend entry shows beside its text.

@@ -7,17 +7,6 @@ use crate::canvas::*;
 use plotters::prelude::*;
 use std::path::Path;
 
-/// A point marker.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Marker {
-    /// Filled circle.
-    Circle,
-    /// Diagonal cross.
-    Cross,
-    /// Filled triangle, point up.
-    Triangle,
-}
-
 /// How a series is drawn.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Style {

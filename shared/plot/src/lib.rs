@@ -27,8 +27,8 @@ mod chart;
 mod distributions;
 mod tracks;
 
-pub use canvas::PALETTE;
-pub use chart::{Chart, EventLine, Marker, Reference, Series, Style, lines, scatter};
+pub use canvas::{Marker, PALETTE};
+pub use chart::{Chart, EventLine, Reference, Series, Style, lines, scatter};
 pub use distributions::{Distribution, Distributions};
 pub use tracks::{Bar, Link, Tracks};
 

@@ -11,13 +11,14 @@
 
 pub mod motion;
 pub mod nees;
+pub mod observation;
 pub mod robust;
 pub mod triangulate;
 
 pub use motion::{
-    LineObservation, MotionConfig, MotionError, MotionEstimate, PointObservation, estimate_motion,
-    estimate_motion_near,
+    MotionConfig, MotionError, MotionEstimate, estimate_motion, estimate_motion_near,
 };
+pub use observation::{LineObservation, PointObservation};
 pub use triangulate::{Triangulated, TriangulationLimits, triangulate_point, triangulate_segment};
 
 /// Weight of an observation triangulated from disparity `d` pixels: `d² / (d² + d_ref²)`

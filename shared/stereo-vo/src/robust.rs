@@ -10,9 +10,11 @@
 //! number of draws adapts to the inlier ratio found so far (99 % confidence of one clean
 //! draw), up to a cap; draws come from a seeded generator, so a run is reproducible.
 
-use crate::motion::{LineObservation, PointObservation, line_residual, point_residual};
+use crate::observation::{
+    LineObservation, PointObservation, apply_update, line_residual, point_residual,
+};
 use linetrack_geometry::StereoRig;
-use nalgebra::{Isometry3, Matrix6, SMatrix, Translation3, UnitQuaternion, Vector2, Vector6};
+use nalgebra::{Isometry3, Matrix6, SMatrix, Vector2, Vector6};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
@@ -44,14 +46,6 @@ pub(crate) fn weighted_error2(
         None => lines.get(k - points.len()).map_or(0.0, |l| l.weight),
     };
     residual(rig, t, points, lines, k).map_or(f64::INFINITY, |(r, _)| weight * r.norm_squared())
-}
-
-/// Applies the left-multiplied update `δ = (ρ, φ)`.
-pub(crate) fn apply_update(step: &Vector6<f64>, t: Isometry3<f64>) -> Isometry3<f64> {
-    Isometry3::from_parts(
-        Translation3::from(step.fixed_rows::<3>(0).into_owned()),
-        UnitQuaternion::from_scaled_axis(step.fixed_rows::<3>(3).into_owned()),
-    ) * t
 }
 
 /// Gauss–Newton on exactly the observations `set`, unweighted, from `t`; `None` when they

@@ -55,20 +55,20 @@ proptest! {
     ) {
         let t = pose(rx, ry, rz, tx, ty, tz);
         let point = PointObservation { position: Point3::new(x, y, z), pixel: Point::new(300.0, 200.0), right_x: None, weight: 1.0 };
-        let (_, analytic) = motion::point_residual(&rig(), &t, &point).unwrap();
-        let numeric = numeric_jacobian(&t, |t| motion::point_residual(&rig(), t, &point).unwrap().0);
+        let (_, analytic) = observation::point_residual(&rig(), &t, &point).unwrap();
+        let numeric = numeric_jacobian(&t, |t| observation::point_residual(&rig(), t, &point).unwrap().0);
         prop_assert!((analytic - numeric).amax() <= 1e-4 * (1.0 + analytic.amax()), "point:\n{analytic}\n{numeric}");
         let stereo_point = PointObservation { right_x: Some(280.0), ..point };
-        let (_, analytic) = motion::point_right_residual(&rig(), &t, &stereo_point).unwrap();
+        let (_, analytic) = observation::point_right_residual(&rig(), &t, &stereo_point).unwrap();
         let numeric = numeric_jacobian(&t, |t| {
-            Vector2::new(motion::point_right_residual(&rig(), t, &stereo_point).unwrap().0, 0.0)
+            Vector2::new(observation::point_right_residual(&rig(), t, &stereo_point).unwrap().0, 0.0)
         });
         prop_assert!((analytic - numeric.fixed_rows::<1>(0)).amax() <= 1e-4 * (1.0 + analytic.amax()), "right point:\n{analytic}\n{numeric}");
 
         let seen = Segment::from_coords(100.0, 50.0, 400.0, 300.0);
         let line = LineObservation::new([Point3::new(x, y, z), Point3::new(x + dx, y + dy, z + dz)], &seen, 1.0).unwrap();
-        let (_, analytic) = motion::line_residual(&rig(), &t, &line).unwrap();
-        let numeric = numeric_jacobian(&t, |t| motion::line_residual(&rig(), t, &line).unwrap().0);
+        let (_, analytic) = observation::line_residual(&rig(), &t, &line).unwrap();
+        let numeric = numeric_jacobian(&t, |t| observation::line_residual(&rig(), t, &line).unwrap().0);
         prop_assert!((analytic - numeric).amax() <= 1e-4 * (1.0 + analytic.amax()), "line:\n{analytic}\n{numeric}");
     }
 }
@@ -87,7 +87,7 @@ fn line_residuals_are_signed_pixel_distances() {
         endpoints: [endpoint, endpoint],
         ..line
     };
-    let (r, _) = motion::line_residual(&rig(), &Isometry3::identity(), &line).unwrap();
+    let (r, _) = observation::line_residual(&rig(), &Isometry3::identity(), &line).unwrap();
     assert!((r[0].abs() - 3.0).abs() < 1e-9);
 }
 
@@ -402,10 +402,10 @@ fn right_line_jacobian_matches_finite_differences() {
         1.0,
     )
     .unwrap();
-    obs.right_line = motion::normalised_line(&right);
-    let (_, analytic) = motion::line_right_residual(&rig(), &t, &obs).unwrap();
+    obs.right_line = observation::normalised_line(&right);
+    let (_, analytic) = observation::line_right_residual(&rig(), &t, &obs).unwrap();
     let numeric = numeric_jacobian(&t, |t| {
-        motion::line_right_residual(&rig(), t, &obs).unwrap().0
+        observation::line_right_residual(&rig(), t, &obs).unwrap().0
     });
     assert!(
         (analytic - numeric).amax() <= 1e-4 * (1.0 + analytic.amax()),
