@@ -26,7 +26,10 @@ pub struct DetectorFallbackConfig {
     /// budget before the swap back to LSD.
     pub recover_frames: u32,
     /// The fraction (< 1: the hysteresis band) of `budget.line_detector_ms` the faster
-    /// detector must stay within for the swap back.
+    /// detector must stay within for the swap back: about its share of LSD's time, so that
+    /// LSD would fit again. 0.075 for edgelines (2.7 against 36 ms an image); about 0.25
+    /// for FLD. With 0.25 and edgelines, LSD came back beside two CPU hogs and missed its
+    /// budget again (docs/pipeline.md).
     pub recover_budget_fraction: f64,
     /// Frames between two swaps of this policy, at least.
     pub min_interval_frames: u64,
@@ -42,7 +45,7 @@ impl Default for DetectorFallbackConfig {
             to: DetectorKind::EdgeLines,
             bad_frames: 5,
             recover_frames: 40,
-            recover_budget_fraction: 0.25,
+            recover_budget_fraction: 0.075,
             min_interval_frames: 200,
             end_to_end: true,
         }
