@@ -293,6 +293,21 @@ impl OdometryConfig {
                 self.lost.coast_frames
             ));
         }
+        let rescue = &self.lost;
+        if !(rescue.rescue_window_px.is_finite() && rescue.rescue_window_px >= 0.0) {
+            return Err(format!(
+                "field `lost.rescue_window_px` = {}: expected a finite number ≥ 0 (0: off)",
+                rescue.rescue_window_px
+            ));
+        }
+        if rescue.rescue_min_inliers != 0
+            && !(3..=m.min_inliers).contains(&rescue.rescue_min_inliers)
+        {
+            return Err(format!(
+                "field `lost.rescue_min_inliers` = {}: expected 0 (off) or 3 to `motion.min_inliers` ({})",
+                rescue.rescue_min_inliers, m.min_inliers
+            ));
+        }
         if !(3..=m.min_inliers).contains(&m.min_inliers_with_prior) {
             return Err(format!(
                 "field `motion.min_inliers_with_prior` = {}: expected 3 to `motion.min_inliers` ({})",
@@ -324,6 +339,17 @@ pub struct LostLimits {
     /// the limits above), before the tracker searches the whole window without a prior.
     /// 0: the frame after a loss is searched without a prediction.
     pub coast_frames: u32,
+    /// Lines only, a frame matched around the prediction whose segments would be lost
+    /// (too few inliers, or an estimate far from the prediction) is matched again with the
+    /// frame-to-frame gate around each predicted segment widened to this many pixels (ℓ1:
+    /// `[frontend.l1.predicted] max_displacement_px`; LBD: its displacement gate), and
+    /// those matches are kept if they give a believed estimate. 0: never. A frame that
+    /// would not be lost is tracked exactly as without it.
+    pub rescue_window_px: f64,
+    /// Lines only, a frame still lost after the rescue above is accepted with this many
+    /// inlying segments under the constant-velocity prior (3 to `motion.min_inliers`; 0:
+    /// never). Unlike `motion.min_inliers_with_prior` it acts on such frames alone.
+    pub rescue_min_inliers: usize,
 }
 
 impl Default for LostLimits {
@@ -333,6 +359,8 @@ impl Default for LostLimits {
             departure_fraction: 0.25,
             departure_deg: 5.0,
             coast_frames: 0,
+            rescue_window_px: 0.0,
+            rescue_min_inliers: 0,
         }
     }
 }
@@ -347,5 +375,27 @@ mod tests {
             std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../configs/odometry.toml");
         let config = OdometryConfig::from_file(&path).unwrap_or_else(|e| panic!("{e}"));
         assert_eq!(config, OdometryConfig::default());
+    }
+
+    #[test]
+    fn the_rescue_settings_are_checked() {
+        let with = |window: f64, inliers: usize| {
+            let mut config = OdometryConfig::default();
+            config.lost.rescue_window_px = window;
+            config.lost.rescue_min_inliers = inliers;
+            config.validate()
+        };
+        assert!(with(0.0, 0).is_ok());
+        assert!(with(30.0, 4).is_ok());
+        assert!(with(30.0, 6).is_ok());
+        for (window, inliers, field) in [
+            (-1.0, 0, "rescue_window_px"),
+            (f64::NAN, 0, "rescue_window_px"),
+            (30.0, 2, "rescue_min_inliers"),
+            (30.0, 7, "rescue_min_inliers"),
+        ] {
+            let error = with(window, inliers).unwrap_err();
+            assert!(error.contains(field), "{error}");
+        }
     }
 }

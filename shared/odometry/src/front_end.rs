@@ -4,7 +4,7 @@
 
 use crate::stats::since;
 use crate::{
-    FrameResult, FrameStats, LinePrediction, MatchedLines, MotionTracker, OdometryConfig,
+    Features, FrameResult, FrameStats, LinePrediction, MatchedLines, MotionTracker, OdometryConfig,
     OdometryError, Preparation,
 };
 use linetrack_geometry::{MatchCase, Segment, StereoRig};
@@ -19,6 +19,9 @@ use std::time::Instant;
 pub struct Odometry {
     detector: Box<dyn LineDetector>,
     matcher: Box<dyn SegmentMatcher>,
+    /// The same matcher with the frame-to-frame gate around predicted segments widened to
+    /// `lost.rescue_window_px`, for frames that would be lost (lines only; `None`: off).
+    rescue_matcher: Option<Box<dyn SegmentMatcher>>,
     previous_lines: Option<LineFeatures>,
     segments: SegmentTracking,
     tracker: MotionTracker,
@@ -30,6 +33,7 @@ impl Odometry {
         Ok(Self {
             detector: create_detector(config.detector, &config.frontend)?,
             matcher: create_segment_matcher(config.matcher, &config.frontend)?,
+            rescue_matcher: rescue_matcher(&config)?,
             previous_lines: None,
             segments: SegmentTracking::default(),
             tracker: MotionTracker::new(config, rig)?,
@@ -86,10 +90,18 @@ impl Odometry {
         let mut tracked = Vec::new();
         if let Some(previous) = &mut self.previous_lines {
             let (matcher, tracker) = (self.matcher.as_mut(), &mut self.tracker);
-            if !self
+            if self
                 .segments
                 .match_predicted(matcher, tracker, previous, &lines_l, &mut tracked)
             {
+                if tracker.config().features == Features::LinesOnly {
+                    let wider = (self.rescue_matcher.as_mut())
+                        .map(|m| -> &mut dyn SegmentMatcher { m.as_mut() });
+                    stats.rescued =
+                        self.segments
+                            .rescue(wider, tracker, previous, &lines_l, &mut tracked);
+                }
+            } else {
                 matcher.match_lines(MatchCase::FrameToFrame, previous, &lines_l, &mut tracked);
                 self.segments
                     .rematch(matcher, tracker, previous, &lines_l, &mut tracked);
@@ -110,6 +122,21 @@ impl Odometry {
         self.previous_lines = Some(lines_l);
         result
     }
+}
+
+/// The matcher of `lost.rescue_window_px` (lines only), if it is on: `config`'s, its
+/// frame-to-frame gate around a predicted segment widened to that many pixels.
+fn rescue_matcher(
+    config: &OdometryConfig,
+) -> Result<Option<Box<dyn SegmentMatcher>>, OdometryError> {
+    let window = config.lost.rescue_window_px;
+    if window <= 0.0 || config.features != Features::LinesOnly {
+        return Ok(None);
+    }
+    let mut frontend = config.frontend.clone();
+    frontend.l1.predicted.max_displacement_px = window;
+    frontend.appearance_gates.max_displacement_px = window;
+    Ok(Some(create_segment_matcher(config.matcher, &frontend)?))
 }
 
 /// Frame-to-frame segment matching guided by the motion: the last frame's segments looked
@@ -147,6 +174,58 @@ impl SegmentTracking {
             std::mem::swap(&mut previous.segments, &mut self.predicted);
         }
         predicting
+    }
+
+    /// After [`SegmentTracking::match_predicted`] (lines only): when the frame would be lost
+    /// with `tracked`, replaces it by `wider`'s matches at the same predicted positions if
+    /// those give a believed estimate; failing that, with `lost.rescue_min_inliers`, by
+    /// the first of the two match sets (`wider`'s, then `tracked`) believed with that many
+    /// inliers, and lets the update accept it so. Leaves `tracked` and the tracker alone
+    /// when the frame would not be lost or nothing rescues it; returns whether it rescued.
+    pub fn rescue(
+        &mut self,
+        wider: Option<&mut dyn SegmentMatcher>,
+        tracker: &mut MotionTracker,
+        previous: &mut LineFeatures,
+        current: &LineFeatures,
+        tracked: &mut Vec<FeatureMatch>,
+    ) -> bool {
+        let min_inliers = tracker.config().lost.rescue_min_inliers;
+        if (wider.is_none() && min_inliers == 0)
+            || tracker
+                .loss_on_lines(&current.segments, tracked, None)
+                .is_none()
+        {
+            return false;
+        }
+        let mut widened = Vec::new();
+        if let Some(matcher) = wider {
+            std::mem::swap(&mut previous.segments, &mut self.predicted);
+            matcher.match_predicted(previous, &self.moved, current, &mut widened);
+            std::mem::swap(&mut previous.segments, &mut self.predicted);
+            if tracker
+                .loss_on_lines(&current.segments, &widened, None)
+                .is_none()
+            {
+                *tracked = widened;
+                return true;
+            }
+        }
+        if min_inliers == 0 {
+            return false;
+        }
+        let believed = |matches: &[FeatureMatch]| {
+            tracker
+                .loss_on_lines(&current.segments, matches, Some(min_inliers))
+                .is_none()
+        };
+        if !widened.is_empty() && believed(&widened) {
+            *tracked = widened;
+        } else if !believed(tracked) {
+            return false;
+        }
+        tracker.accept_with_inliers(min_inliers);
+        true
     }
 
     /// Replaces `tracked` (`previous` → `current` matches made around the old positions)

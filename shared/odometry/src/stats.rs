@@ -27,6 +27,9 @@ pub struct FrameStats {
     /// How far the estimate departs from the prediction (the last motion): translation,
     /// metres, and rotation, degrees.
     pub departure: [f64; 2],
+    /// Whether the frame would have been lost and `lost.rescue_window_px` or
+    /// `lost.rescue_min_inliers` rescued it (lines only).
+    pub rescued: bool,
     /// Milliseconds detecting: the images stretched, their corners found (less the point
     /// work done ahead, counted in `stereo_ms` and `frame_to_frame_ms`) and, by
     /// [`Odometry`](crate::Odometry), their segments.

@@ -237,6 +237,10 @@ pub struct MotionTracker {
     /// ([`LinePrediction::PointsFirst`](crate::LinePrediction)): set before the frame's
     /// segments are matched, used up by its update.
     segment_motion: Option<Isometry3<f64>>,
+    /// How many inliers this frame's estimate needs under the prior when it is not
+    /// `motion.min_inliers_with_prior` (a rescued frame, `lost.rescue_min_inliers`): set
+    /// before the frame is tracked, used up by its update.
+    min_inliers_now: Option<usize>,
     /// Row profiles across this frame's left and right segments (photometric check).
     profiles: [SegmentProfiles; 2],
     /// The reference frame's left image as its points were found in (stretched or not),
@@ -267,6 +271,7 @@ impl MotionTracker {
             motion_known: false,
             losses_in_row: 0,
             segment_motion: None,
+            min_inliers_now: None,
             profiles: Default::default(),
             reference_image: None,
             points_ahead: None,
@@ -371,6 +376,7 @@ impl MotionTracker {
         let result = self.track_frame(&mut lists, images, lines, stats);
         self.spares.lists = lists;
         self.segment_motion = None;
+        self.min_inliers_now = None;
         // Point work done ahead for another frame is stale now.
         self.points_ahead = None;
         result
@@ -419,7 +425,7 @@ impl MotionTracker {
             self.observe_right_columns(&mut lists.observations, &lists.fresh);
             observe_right_lines(&mut lists.observations, &lists.fresh, &lines);
         }
-        let verdict = self.estimate(&lists.observations, &mut stats);
+        let verdict = self.estimate(&lists.observations, self.min_inliers_now, &mut stats);
         Ok(self.conclude(verdict, previous, points_l, lists, stats))
     }
 
@@ -475,15 +481,21 @@ impl MotionTracker {
     }
 
     /// The motion from `observations` (the constant-velocity prior only once a motion was
-    /// measured), its figures written to `stats`; `Err` says why there is none or why it
-    /// is not believed.
+    /// measured; under it `min_inliers` inliers are enough when given, else
+    /// `motion.min_inliers_with_prior`), its figures written to `stats`; `Err` says why
+    /// there is none or why it is not believed.
     fn estimate(
         &self,
         observations: &Observations,
+        min_inliers: Option<usize>,
         stats: &mut FrameStats,
     ) -> Result<MotionEstimate, String> {
         let started = Instant::now();
-        let (rig, config) = (&self.rig, &self.config.motion);
+        let mut config = self.config.motion;
+        if let Some(n) = min_inliers {
+            config.min_inliers_with_prior = n;
+        }
+        let (rig, config) = (&self.rig, &config);
         let (points, lines) = (&observations.points, &observations.lines);
         let estimate = if self.motion_known {
             estimate_motion_near(rig, points, lines, &self.last_motion, config)

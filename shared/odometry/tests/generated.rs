@@ -60,6 +60,8 @@ struct Run {
     estimate: Vec<Isometry3<f64>>,
     truth: Vec<Isometry3<f64>>,
     lost: Vec<bool>,
+    /// Which frames `lost.rescue_*` rescued.
+    rescued: Vec<bool>,
 }
 
 impl Run {
@@ -92,12 +94,14 @@ fn run(config: OdometryConfig, rig: StereoRig, frames: &[Frame]) -> Run {
         estimate: Vec::new(),
         truth: Vec::new(),
         lost: Vec::new(),
+        rescued: Vec::new(),
     };
     for frame in frames {
         let result = vo.track(&frame.left, &frame.right).unwrap();
         out.estimate.push(result.pose);
         out.truth.push(frame.truth);
         out.lost.push(result.lost);
+        out.rescued.push(result.stats.rescued);
     }
     out
 }
@@ -166,6 +170,30 @@ fn predicting_segments_from_the_points_first_tracks_as_well() {
             .any(|(a, b)| (a.translation.vector - b.translation.vector).norm() > 1e-9),
         "the option changed no pose: the points' motion predicted nothing"
     );
+}
+
+#[test]
+fn the_rescue_leaves_frames_that_are_not_lost_as_they_were() {
+    // Lines only, ℓ1: no frame of these is lost, so the rescue (a wider predicted window,
+    // then fewer inliers) must not act on any, and every pose must be bit for bit the same.
+    let (rig, frames) = rendered(3, 0..20, &[]);
+    let lines_only = OdometryConfig {
+        features: Features::LinesOnly,
+        matcher: MatcherKind::L1,
+        ..OdometryConfig::default()
+    };
+    let mut rescuing = lines_only.clone();
+    rescuing.lost.rescue_window_px = 30.0;
+    rescuing.lost.rescue_min_inliers = 4;
+    let plain = run(lines_only, rig, &frames);
+    let rescued = run(rescuing, rig, &frames);
+    assert!(
+        plain.lost.iter().all(|l| !l),
+        "lost frames: {:?}",
+        plain.lost
+    );
+    assert!(rescued.rescued.iter().all(|r| !r), "{:?}", rescued.rescued);
+    assert_eq!(plain.estimate, rescued.estimate);
 }
 
 /// Frames 154–163 of `normal`, seed 1: the camera comes up to the striped radiator, where

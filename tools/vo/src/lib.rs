@@ -32,9 +32,9 @@ use std::time::Instant;
 OUTPUT (<output>/): trajectory.txt (TUM: t tx ty tz qx qy qz qw, left camera, world = first
 camera), groundtruth.txt (the same frame, when the dataset has ground truth), frames.csv (one
 row per frame: lost, features, matches, inliers, iterations, conditioning, departure from the
-prediction, milliseconds per step), metrics.json (the run's settings, lost frames and, with
-ground truth, under `metrics`: poses, path_m, rpe_m, ate_m, ate_aligned_m, drift_percent,
-step_ratio {steps, skipped, overall, median, p10, p90} (estimated over true step length, steps
+prediction, milliseconds per step, whether `[lost] rescue_*` rescued it), metrics.json (the
+run's settings, lost frames and, with ground truth, under `metrics`: poses, path_m, rpe_m,
+ate_m, ate_aligned_m, drift_percent, step_ratio {steps, skipped, overall, median, p10, p90} (estimated over true step length, steps
 under 1 cm left out), zero_motion_ate_m — the names `linetrack run` writes to summary.json; and
 step_nees {steps, mean, median, ratio}: each tracked step's error against the truth in units of
 its covariance (NEES; consistent: mean 6, ratio 1)).\n\n", linetrack_progress::progress_help!("frames"), "\n\n", linetrack_vision::images_help!())
@@ -104,6 +104,7 @@ struct FrameRow {
     stereo_ms: f64,
     f2f_ms: f64,
     motion_ms: f64,
+    rescued: u8,
     reason: String,
 }
 
@@ -134,6 +135,7 @@ impl FrameRow {
             stereo_ms: s.stereo_ms,
             f2f_ms: s.frame_to_frame_ms,
             motion_ms: s.motion_ms,
+            rescued: u8::from(s.rescued),
             reason: result.reason.clone().unwrap_or_default(),
         }
     }

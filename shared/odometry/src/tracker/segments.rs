@@ -79,6 +79,30 @@ impl MotionTracker {
         estimate.ok().map(|e| (e.motion, e.inlier_lines))
     }
 
+    /// Why this frame would be lost if it were tracked on its segments alone with `tracked`
+    /// (previous segment → this frame's `left` segment), `min_inliers` being enough under
+    /// the prior when given: the update's own observations, estimate and judgement, so on
+    /// lines only its own verdict. `None` when it would not be lost, or without a
+    /// reference frame.
+    pub fn loss_on_lines(
+        &self,
+        left: &[Segment],
+        tracked: &[FeatureMatch],
+        min_inliers: Option<usize>,
+    ) -> Option<String> {
+        let reference = self.reference.as_ref()?;
+        let mut observations = Observations::default();
+        self.observe_lines(reference, left, tracked, &mut observations);
+        self.estimate(&observations, min_inliers, &mut FrameStats::default())
+            .err()
+    }
+
+    /// This frame's estimate is believed with `min_inliers` inliers under the prior (a
+    /// rescued frame's, `lost.rescue_min_inliers`); the next update uses it up.
+    pub fn accept_with_inliers(&mut self, min_inliers: usize) {
+        self.min_inliers_now = Some(min_inliers);
+    }
+
     /// Predicts this frame's segments with `motion` from now on (as
     /// [`MotionTracker::predict_from_points`] does with the points').
     pub fn predict_segments_with(&mut self, motion: Isometry3<f64>) {
