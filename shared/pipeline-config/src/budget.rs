@@ -19,8 +19,26 @@ pub struct BudgetConfig {
     /// Pose estimator.
     pub pose_estimator_ms: f64,
     /// Drop a frame that is already over the end-to-end budget when a stage takes it, and
-    /// any frame with a newer one queued behind it; otherwise process every frame.
+    /// a frame with a newer one queued behind it as [`BudgetConfig::behind`] says; otherwise
+    /// process every frame.
     pub drop_late: bool,
+    /// With `drop_late`, which frame with a newer one queued behind it a stage drops.
+    pub behind: BehindRule,
+}
+
+/// What a stage does, with `drop_late`, with a frame that has a newer one queued behind it
+/// (`[budget] behind`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum BehindRule {
+    /// Drops it only when it cannot make the end-to-end budget: its age plus what the
+    /// pipeline still needs for it (the stage's recent time a frame times the stages left,
+    /// itself included) is over `end_to_end_ms`. Before the stage has timed a frame, as
+    /// `Newest`.
+    #[default]
+    Deadline,
+    /// Always drops it: the newest frame wins, however young the older one is.
+    Newest,
 }
 
 impl Default for BudgetConfig {
@@ -32,6 +50,7 @@ impl Default for BudgetConfig {
             matcher_ms: 50.0,
             pose_estimator_ms: 50.0,
             drop_late: true,
+            behind: BehindRule::Deadline,
         }
     }
 }
@@ -88,6 +107,7 @@ mod tests {
             matcher_ms: 4.0,
             pose_estimator_ms: 5.0,
             drop_late: true,
+            behind: BehindRule::Newest,
         };
         for node in PIPELINE {
             if let Some(key) = node.budget {
@@ -111,5 +131,30 @@ mod tests {
             assert_eq!(budget.stage_ms(stage), None, "{stage}");
         }
         assert_eq!(budget.by_key("drop_late"), None);
+        assert_eq!(budget.by_key("behind"), None);
+    }
+
+    #[test]
+    fn the_behind_rule_is_read_by_name_and_a_wrong_one_is_refused() {
+        let read = |text: &str| {
+            crate::PipelineConfig::from_toml_str(text, "p.toml").map(|c| c.budget.behind)
+        };
+        assert_eq!(read("").ok(), Some(BehindRule::Deadline), "the default");
+        assert_eq!(
+            read("[budget]\nbehind = \"newest\"\n").ok(),
+            Some(BehindRule::Newest)
+        );
+        assert_eq!(
+            read("[budget]\nbehind = \"deadline\"\n").ok(),
+            Some(BehindRule::Deadline)
+        );
+        let err = read("[budget]\nbehind = \"oldest\"\n")
+            .err()
+            .map(|e| e.to_string())
+            .unwrap_or_default();
+        assert!(
+            err.contains("p.toml: line 2") && err.contains("oldest") && err.contains("newest"),
+            "{err}"
+        );
     }
 }

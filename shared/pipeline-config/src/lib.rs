@@ -22,7 +22,7 @@ mod source;
 mod stages;
 mod supervisor;
 
-pub use budget::BudgetConfig;
+pub use budget::{BehindRule, BudgetConfig};
 pub use camera::CameraConfig;
 pub use detector_fallback::DetectorFallbackConfig;
 pub use ipc::IpcConfig;

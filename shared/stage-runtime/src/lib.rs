@@ -15,6 +15,7 @@ use clap::Parser;
 use linetrack_geometry::{Point, Segment, StereoRig};
 use linetrack_ipc::{Bus, Inlet, IpcError, Outlet, Received, Record, Scope, Shutdown};
 
+mod drop_rule;
 #[cfg(feature = "images")]
 mod images;
 mod runner;
@@ -23,6 +24,7 @@ mod side;
 mod sink;
 mod source;
 pub mod time;
+pub use drop_rule::{WorkTime, late_drop, stages_left};
 #[cfg(feature = "images")]
 pub use images::{stereo_frame, stereo_views};
 use linetrack_msgs::{Command, Control, RigRecord, SegmentRecord, topics};
@@ -214,25 +216,8 @@ impl Reporter {
     }
 }
 
-/// The budget policy for a frame a stage is about to take: `Some(status)` when it must be
-/// dropped instead. `newer_waiting` says whether a newer frame is already queued behind it;
-/// `now_ns` is the stage's clock.
-pub fn late_drop(
-    header: &FrameHeader,
-    newer_waiting: bool,
-    budget: &BudgetConfig,
-    now_ns: u64,
-) -> Option<FrameStatus> {
-    if !budget.drop_late {
-        return None;
-    }
-    if newer_waiting {
-        return Some(FrameStatus::DroppedBehind);
-    }
-    (header.age_ms(now_ns) > budget.end_to_end_ms).then_some(FrameStatus::DroppedLate)
-}
-
-/// What a stage applies to every frame it takes: who it is, its budget, its clock.
+/// What a stage applies to every frame it takes: who it is, its budget, its clock, its
+/// recent time a frame (for the drop rule, [`late_drop`]).
 #[derive(Debug, Clone, Copy)]
 pub struct FramePolicy<'a> {
     /// The stage.
@@ -241,6 +226,8 @@ pub struct FramePolicy<'a> {
     pub budget: &'a BudgetConfig,
     /// The stage's clock.
     pub clock: &'a Clock,
+    /// The stage's recent time a frame.
+    pub work: &'a WorkTime,
 }
 
 /// Takes one frame through a stage: stamps when it took it, applies the drop policy
@@ -248,7 +235,9 @@ pub struct FramePolicy<'a> {
 /// still to be processed — it fills the stage's own results in the header and its records
 /// in `records` (emptied first; the caller keeps it from frame to frame); an error marks
 /// the frame failed by this stage and is logged — and publishes the records, or those of
-/// `placeholder` for a dropped or failed frame, under the stamped header.
+/// `placeholder` for a dropped or failed frame, under the stamped header. Returns how long
+/// `work` took, milliseconds of the stage's clock (`None` for a frame not processed), for
+/// the stage's [`WorkTime`].
 #[allow(clippy::too_many_arguments)] // the frame, where it goes, and the stage's two answers
 pub fn process_frame<S, O: Record, H: Record + FrameMessage>(
     policy: FramePolicy<'_>,
@@ -259,18 +248,26 @@ pub fn process_frame<S, O: Record, H: Record + FrameMessage>(
     stage: &mut S,
     work: impl FnOnce(&mut S, &mut H, &mut Vec<O>) -> anyhow::Result<()>,
     placeholder: impl FnOnce(&S, &mut Vec<O>),
-) -> anyhow::Result<()> {
+) -> anyhow::Result<Option<f64>> {
     let kind = policy.stage;
     let taken_ns = policy.clock.now_ns();
     let frame = header.frame_mut();
     stamp_start(frame, kind, taken_ns);
     if frame.is_ok()
-        && let Some(status) = late_drop(frame, newer_waiting, policy.budget, taken_ns)
+        && let Some(status) = late_drop(
+            frame,
+            newer_waiting,
+            policy.budget,
+            kind,
+            policy.work,
+            taken_ns,
+        )
     {
         frame.mark(status, kind);
     }
     records.clear();
-    if header.frame().is_ok() {
+    let worked = header.frame().is_ok();
+    if worked {
         if let Err(e) = work(stage, &mut header, records) {
             tracing::warn!("frame {}: {e:#}", header.frame().frame_id);
             header.frame_mut().mark(FrameStatus::StageError, kind);
@@ -280,9 +277,10 @@ pub fn process_frame<S, O: Record, H: Record + FrameMessage>(
     } else {
         placeholder(stage, records);
     }
-    stamp_end(header.frame_mut(), kind, policy.clock.now_ns());
+    let end_ns = policy.clock.now_ns();
+    stamp_end(header.frame_mut(), kind, end_ns);
     out.publish(&header, &[records])?;
-    Ok(())
+    Ok(worked.then(|| end_ns.saturating_sub(taken_ns) as f64 / 1e6))
 }
 
 /// Marks `header` as taken by `stage` at `now_ns`.
@@ -740,31 +738,6 @@ mod tests {
     }
 
     #[test]
-    fn late_frames_are_dropped_only_under_the_policy() {
-        let budget = BudgetConfig {
-            end_to_end_ms: 100.0,
-            ..BudgetConfig::default()
-        };
-        let now = 10_000_000_000;
-        let fresh = FrameHeader::new(1, 0, now - 99_000_000);
-        let stale = FrameHeader::new(2, 0, now - 101_000_000);
-        assert_eq!(late_drop(&fresh, false, &budget, now), None);
-        assert_eq!(
-            late_drop(&fresh, true, &budget, now),
-            Some(FrameStatus::DroppedBehind)
-        );
-        assert_eq!(
-            late_drop(&stale, false, &budget, now),
-            Some(FrameStatus::DroppedLate)
-        );
-        let keep_all = BudgetConfig {
-            drop_late: false,
-            ..budget
-        };
-        assert_eq!(late_drop(&stale, true, &keep_all, now), None);
-    }
-
-    #[test]
     fn a_frame_is_processed_dropped_or_failed_and_always_published() {
         let bus = Bus::local();
         let mut inlet = bus
@@ -778,10 +751,13 @@ mod tests {
             ..BudgetConfig::default()
         };
         let clock = Clock::manual(10_000_000_000);
+        // Untimed yet: the frame with a newer one behind is dropped whatever the rule.
+        let work = WorkTime::default();
         let policy = FramePolicy {
             stage: StageKind::LineDetector,
             budget: &budget,
             clock: &clock,
+            work: &work,
         };
         let record = SegmentRecord {
             endpoints: [1.0, 2.0, 3.0, 4.0],
@@ -799,7 +775,7 @@ mod tests {
         let mut records = vec![record; 3];
         let nothing = |_: &(), _: &mut Vec<SegmentRecord>| {};
         let records = &mut records;
-        process_frame(
+        let took = process_frame(
             policy,
             fresh,
             false,
@@ -810,11 +786,12 @@ mod tests {
             nothing,
         )
         .unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(took, Some(7.0), "the work's time, for the stage's estimate");
         for (header, newer_waiting, which) in [(stale, false, "late"), (fresh, true, "behind")] {
             let not_processed = |_: &mut (), _: &mut SegmentsHeader, _: &mut Vec<_>| {
                 panic!("a frame {which} is not processed")
             };
-            process_frame(
+            let took = process_frame(
                 policy,
                 header,
                 newer_waiting,
@@ -825,6 +802,7 @@ mod tests {
                 nothing,
             )
             .unwrap_or_else(|e| panic!("{e}"));
+            assert_eq!(took, None, "a frame {which} takes no time");
         }
         process_frame(
             policy,

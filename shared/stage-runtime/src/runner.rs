@@ -11,7 +11,7 @@
 //! `HandedOver(F)` and exits; the standby, told F, publishes from F on. Frames below F come
 //! only from the old instance and frames from F on only from the new one.
 
-use crate::{FramePolicy, GapWatch, Held, Images, Reporter, StageContext, process_frame};
+use crate::{FramePolicy, GapWatch, Held, Images, Reporter, StageContext, WorkTime, process_frame};
 use linetrack_ipc::{Bus, Inlet, Outlet, Received, Record, Shutdown, Wake};
 use linetrack_msgs::{
     Command, Control, FrameHeader, FrameMessage, StageKind, StatusKind, Topic, TopicOf, topics,
@@ -135,6 +135,8 @@ struct Runner<'a, S: Stage> {
     /// Frames below this were prepared (or processed) already.
     next_unprepared: u64,
     processed: u64,
+    /// The stage's recent time a frame, for the drop rule.
+    work: WorkTime,
     /// The records of the frame being published, kept from frame to frame.
     records: Vec<S::Output>,
 }
@@ -180,6 +182,7 @@ pub fn run_stage<S: Stage>(
         next_unpublished: 0,
         next_unprepared: 0,
         processed: 0,
+        work: WorkTime::default(),
         records: Vec::with_capacity(S::OUTPUT_LEN),
     };
     let mut ready_sent = false;
@@ -387,8 +390,9 @@ impl<S: Stage> Runner<'_, S> {
             stage: S::KIND,
             budget: &self.ctx.config.budget,
             clock: &self.ctx.clock,
+            work: &self.work,
         };
-        process_frame(
+        let took = process_frame(
             policy,
             header,
             newer_waiting,
@@ -398,6 +402,9 @@ impl<S: Stage> Runner<'_, S> {
             |stage, h, out| stage.process(h, input, images.as_ref(), out),
             |stage, out| stage.placeholder(out),
         )?;
+        if let Some(ms) = took {
+            self.work.observe(ms);
+        }
         self.next_unpublished = frame_id + 1;
         self.processed += 1;
         Ok(())
@@ -407,7 +414,7 @@ impl<S: Stage> Runner<'_, S> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use linetrack_msgs::{SegmentRecord, SegmentsHeader, StatusReport, TracksHeader};
+    use linetrack_msgs::{FrameStatus, SegmentRecord, SegmentsHeader, StatusReport, TracksHeader};
     use linetrack_pipeline_config::PipelineConfig;
     use std::path::PathBuf;
     use std::time::Instant;
@@ -770,5 +777,122 @@ mod tests {
             .collect();
         let three = u32::from(ids.contains(&3));
         assert_eq!(seen, vec![(0, 1, 1), (1, 0, 1), (2, 1, 1), (3, three, 1)]);
+    }
+
+    /// A line detector whose work takes `ms` of a manual clock a frame.
+    struct Timed {
+        clock: crate::Clock,
+        ms: u64,
+    }
+
+    impl Stage for Timed {
+        type Input = u8;
+        type InputHeader = FrameHeader;
+        type Output = SegmentRecord;
+        type OutputHeader = SegmentsHeader;
+        const KIND: StageKind = StageKind::LineDetector;
+        const INPUT: TopicOf<Self::Input, Self::InputHeader> = topics::FRAMES;
+        const OUTPUT: TopicOf<Self::Output, Self::OutputHeader> = topics::SEGMENTS;
+        const OUTPUT_LEN: usize = 1;
+
+        fn joins_images(&self) -> bool {
+            false
+        }
+
+        fn process(
+            &mut self,
+            _header: &mut SegmentsHeader,
+            _input: &Images,
+            _images: Option<&Images>,
+            _out: &mut Vec<SegmentRecord>,
+        ) -> anyhow::Result<()> {
+            self.clock.advance(Duration::from_millis(self.ms));
+            Ok(())
+        }
+    }
+
+    /// The runner times the frames its stage works on and the drop rule reads that time.
+    /// A line detector at 10 ms a frame (3 stages left: 30 ms still needed) gets frame 0,
+    /// then frames 1 (80 ms old), 2 (5 ms) and 3 (new) queued together, driven by hand (no
+    /// thread, no timing luck). `deadline` drops only frame 1 (80 + 30 > 100 ms) behind;
+    /// `newest` drops 1 and 2.
+    #[test]
+    fn an_older_frame_queued_with_newer_ones_is_kept_while_it_can_make_the_budget() {
+        use linetrack_msgs::FrameStatus::{DroppedBehind, Ok as Done};
+        use linetrack_pipeline_config::BehindRule;
+        for (rule, expected) in [
+            (BehindRule::Deadline, [Done, DroppedBehind, Done, Done]),
+            (
+                BehindRule::Newest,
+                [Done, DroppedBehind, DroppedBehind, Done],
+            ),
+        ] {
+            let bus = Bus::local();
+            let mut ctx = context(1, false);
+            ctx.config.budget.drop_late = true;
+            ctx.config.budget.behind = rule;
+            let clock = ctx.clock.clone();
+            clock.advance(Duration::from_secs(10));
+            let mut frames = bus
+                .outlet::<u8, FrameHeader>(topics::FRAMES, 1)
+                .unwrap_or_else(|e| panic!("{e}"));
+            let mut out = bus
+                .inlet::<SegmentRecord, SegmentsHeader>(topics::SEGMENTS)
+                .unwrap_or_else(|e| panic!("{e}"));
+            let mut ports = Ports::<Timed> {
+                input: bus.inlet(Timed::INPUT).unwrap_or_else(|e| panic!("{e}")),
+                output: bus
+                    .outlet(Timed::OUTPUT, 1)
+                    .unwrap_or_else(|e| panic!("{e}")),
+                frames: None,
+                control: bus.inlet(topics::CONTROL).unwrap_or_else(|e| panic!("{e}")),
+                wake: bus.wake(Timed::KIND).unwrap_or_else(|e| panic!("{e}")),
+                reporter: Reporter::new(&bus, &ctx, 0).unwrap_or_else(|e| panic!("{e}")),
+            };
+            let mut runner = Runner {
+                ctx: &ctx,
+                stage: Timed {
+                    clock: clock.clone(),
+                    ms: 10,
+                },
+                role: Role::Active,
+                waiting: Held::new(Timed::INPUT.topic()),
+                images: Held::new(Topic::Frames),
+                gaps: GapWatch::default(),
+                next_unpublished: 0,
+                next_unprepared: 0,
+                processed: 0,
+                work: WorkTime::default(),
+                records: Vec::new(),
+            };
+            let mut publish = |id: u64, age_ms: u64| {
+                let captured = clock.now_ns() - age_ms * 1_000_000;
+                frames
+                    .publish(&FrameHeader::new(id, 0, captured), &[&[1]])
+                    .unwrap_or_else(|e| panic!("{e}"));
+            };
+            publish(0, 0);
+            runner
+                .process_waiting(&mut ports)
+                .unwrap_or_else(|e| panic!("{e}"));
+            publish(1, 80);
+            publish(2, 5);
+            publish(3, 0);
+            runner
+                .process_waiting(&mut ports)
+                .unwrap_or_else(|e| panic!("{e}"));
+            let got: Vec<(u64, FrameStatus)> = out
+                .receive_all()
+                .unwrap_or_else(|e| panic!("{e}"))
+                .iter()
+                .map(|m| {
+                    let frame = m.header().frame;
+                    (frame.frame_id, frame.status.get().unwrap_or(Done))
+                })
+                .collect();
+            let want: Vec<(u64, FrameStatus)> = (0..4).zip(expected).collect();
+            assert_eq!(got, want, "{rule:?}");
+            assert_eq!(runner.work.mean_ms(), Some(10.0), "{rule:?}");
+        }
     }
 }
