@@ -112,23 +112,26 @@ impl Pattern {
     pub(crate) fn orientation(&self, image: GrayView<'_>, x: usize, y: usize) -> f32 {
         let start = x - ORIENTATION_RADIUS as usize;
         let mut columns = [0u16; WINDOW];
-        let (mut below, mut above) = ([0u16; WINDOW], [0u16; WINDOW]);
-        for (k, inside) in self.inside.iter().enumerate() {
-            let dy = k as i32 - ORIENTATION_RADIUS;
-            let row = &image.row(y.wrapping_add_signed(dy as isize))[start..start + WINDOW];
-            let mut disc = [0u16; WINDOW];
-            for ((d, &p), &w) in disc.iter_mut().zip(row).zip(inside) {
-                *d = w * u16::from(p);
+        // The rows `rows` of the disc: their pixels added to `columns`, and returned
+        // weighted by |dy| (in an array of its own, so the row loop keeps it in registers).
+        let mut weighted_rows = |rows: std::ops::Range<usize>| {
+            let mut side = [0u16; WINDOW];
+            for k in rows {
+                let dy = k as i32 - ORIENTATION_RADIUS;
+                let row = &image.row(y.wrapping_add_signed(dy as isize))[start..start + WINDOW];
+                let weight = dy.unsigned_abs() as u16;
+                let inside = &self.inside[k];
+                for i in 0..WINDOW {
+                    let d = inside[i] * u16::from(row[i]);
+                    columns[i] += d;
+                    side[i] += weight * d;
+                }
             }
-            for (c, &d) in columns.iter_mut().zip(&disc) {
-                *c += d;
-            }
-            let weight = dy.unsigned_abs() as u16;
-            let side = if dy < 0 { &mut above } else { &mut below };
-            for (s, &d) in side.iter_mut().zip(&disc) {
-                *s += weight * d;
-            }
-        }
+            side
+        };
+        let radius = ORIENTATION_RADIUS as usize;
+        let above = weighted_rows(0..radius);
+        let below = weighted_rows(radius..DISC_ROWS);
         let mut m10 = 0i64;
         for (c, &sum) in columns.iter().enumerate() {
             m10 += (c as i64 - i64::from(ORIENTATION_RADIUS)) * i64::from(sum);
