@@ -34,11 +34,6 @@ pub(crate) struct Pattern {
     /// Per row of the orientation disc (−R..=R), per column of the 32 from −R: 1 inside
     /// the disc, else 0 (the last column is always out).
     inside: [[u16; WINDOW]; DISC_ROWS],
-    /// The same, times the column's offset from the centre, right of it (left of it: 0);
-    /// 16-bit sums cannot overflow (Σ 1..=15 × 255 < 2¹⁶), so the row loops vectorise.
-    right: [[u16; WINDOW]; DISC_ROWS],
-    /// The same left of the centre, times minus the offset.
-    left: [[u16; WINDOW]; DISC_ROWS],
 }
 
 /// Rows of the orientation disc.
@@ -66,16 +61,6 @@ impl Pattern {
             let half = (r * r - dy * dy).sqrt().round() as i32;
             std::array::from_fn(|c| u16::from((c as i32 - ORIENTATION_RADIUS).abs() <= half))
         });
-        let weighted = |sign: i32| {
-            inside.map(|row| {
-                let mut out = row;
-                for (c, w) in out.iter_mut().enumerate() {
-                    *w *= (sign * (c as i32 - ORIENTATION_RADIUS)).max(0) as u16;
-                }
-                out
-            })
-        };
-        let (right, left) = (weighted(1), weighted(-1));
         let cells = rotated
             .iter()
             .map(|points: &[(i8, i8); 2 * PAIRS]| {
@@ -90,8 +75,6 @@ impl Pattern {
             rotated,
             cells,
             inside,
-            right,
-            left,
         }
     }
 
@@ -119,28 +102,42 @@ impl Pattern {
 
     /// Direction from `(x, y)` to the intensity centroid of the disc of radius 15 around it
     /// in `image`, radians, image axes. The point is at least `BORDER_PX` from the borders.
+    ///
+    /// The moments are summed lane by lane over the disc's rows and reduced once at the
+    /// end: per column, the sum of its pixels inside the disc (for m10 = Σ dx·column), and
+    /// per column the rows' pixels times |dy|, below the centre and above it apart (for
+    /// m01). Each fits 16 bits (31 × 255, and 255 × Σ 1..=15 = 30 600), so the row loops
+    /// vectorise on 16-bit lanes; integer sums, so the result does not depend on the order.
     #[inline(always)]
     pub(crate) fn orientation(&self, image: GrayView<'_>, x: usize, y: usize) -> f32 {
-        let (mut m10, mut m01) = (0i64, 0i64);
-        for k in 0..DISC_ROWS {
-            let dy = k as i32 - ORIENTATION_RADIUS;
-            let row = image.row(y.wrapping_add_signed(dy as isize));
-            let start = x - ORIENTATION_RADIUS as usize;
-            let mut window = [0u16; WINDOW];
-            for (w, &p) in window.iter_mut().zip(&row[start..start + WINDOW]) {
-                *w = u16::from(p);
-            }
-            let dot = |weights: &[u16; WINDOW]| -> u16 {
-                let mut lanes = [0u16; WINDOW];
-                for ((l, &w), &p) in lanes.iter_mut().zip(weights).zip(&window) {
-                    *l = w * p;
+        let start = x - ORIENTATION_RADIUS as usize;
+        let mut columns = [0u16; WINDOW];
+        // The rows `rows` of the disc: their pixels added to `columns`, and returned
+        // weighted by |dy| (in an array of its own, so the row loop keeps it in registers).
+        let mut weighted_rows = |rows: std::ops::Range<usize>| {
+            let mut side = [0u16; WINDOW];
+            for k in rows {
+                let dy = k as i32 - ORIENTATION_RADIUS;
+                let row = &image.row(y.wrapping_add_signed(dy as isize))[start..start + WINDOW];
+                let weight = dy.unsigned_abs() as u16;
+                let inside = &self.inside[k];
+                for i in 0..WINDOW {
+                    let d = inside[i] * u16::from(row[i]);
+                    columns[i] += d;
+                    side[i] += weight * d;
                 }
-                lanes.iter().sum::<u16>()
-            };
-            let sum = dot(&self.inside[k]);
-            m10 += i64::from(dot(&self.right[k])) - i64::from(dot(&self.left[k]));
-            m01 += i64::from(dy) * i64::from(sum);
+            }
+            side
+        };
+        let radius = ORIENTATION_RADIUS as usize;
+        let above = weighted_rows(0..radius);
+        let below = weighted_rows(radius..DISC_ROWS);
+        let mut m10 = 0i64;
+        for (c, &sum) in columns.iter().enumerate() {
+            m10 += (c as i64 - i64::from(ORIENTATION_RADIUS)) * i64::from(sum);
         }
+        let total = |lanes: &[u16; WINDOW]| lanes.iter().map(|&v| i64::from(v)).sum::<i64>();
+        let m01 = total(&below) - total(&above);
         (m01 as f64).atan2(m10 as f64) as f32
     }
 }
@@ -148,7 +145,7 @@ impl Pattern {
 #[cfg(test)]
 impl PartialEq for Pattern {
     fn eq(&self, other: &Self) -> bool {
-        self.rotated == other.rotated && self.inside == other.inside && self.right == other.right
+        self.rotated == other.rotated && self.inside == other.inside
     }
 }
 

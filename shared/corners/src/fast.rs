@@ -173,8 +173,10 @@ const LANES: usize = 32;
 /// `row[start..start + LANES]`, zero-padded past the row's end.
 #[inline(always)]
 fn lane(row: &[u8], start: usize) -> [u8; LANES] {
-    match row.get(start..start + LANES) {
-        Some(whole) => std::array::from_fn(|i| whole[i]),
+    // (`first_chunk`, not `from_fn`, whose `try_from_fn` was not inlined into the AVX2
+    // build.)
+    match row.get(start..).and_then(<[u8]>::first_chunk::<LANES>) {
+        Some(&whole) => whole,
         None => partial_lane(row, start),
     }
 }

@@ -42,6 +42,7 @@ pub(crate) fn level_shares(pyramid: &Pyramid, count: usize, wanted: usize) -> [u
 /// maximum of their 3×3 neighbourhood in `scores` (ties go to the first in raster order),
 /// and orders them best first, then in raster order: a counting sort on the 8-bit score
 /// (stable, so raster order holds within a score), through `scratch`.
+#[inline(always)]
 pub(crate) fn suppress_and_sort(
     image: GrayView<'_>,
     scores: &[u8],

@@ -128,26 +128,31 @@ impl<'a> GrayView<'a> {
     }
 
     /// Width, pixels.
+    #[inline]
     pub fn width(&self) -> usize {
         self.width
     }
 
     /// Height, pixels.
+    #[inline]
     pub fn height(&self) -> usize {
         self.height
     }
 
     /// Bytes from one row to the next.
+    #[inline]
     pub fn stride(&self) -> usize {
         self.stride
     }
 
     /// The pixels: `height` rows `stride` bytes apart (the last one `width` long at least).
+    #[inline]
     pub fn pixels(&self) -> &'a [u8] {
         self.pixels
     }
 
     /// Row `y` (its `width` pixels). Panics unless `y < height`.
+    #[inline]
     pub fn row(&self, y: usize) -> &'a [u8] {
         &self.pixels[y * self.stride..y * self.stride + self.width]
     }
