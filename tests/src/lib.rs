@@ -49,7 +49,10 @@ fn tmp_root() -> PathBuf {
         .join("e2e-tmp")
 }
 
-/// A scratch folder for one test, emptied.
+/// A scratch folder for one test, emptied, under the build folder (not the system temp
+/// folder). Kept after the test on purpose: the run folders in it (records, status, logs)
+/// are what one reads after a failing end-to-end run, and each test's fixed name means a
+/// rerun replaces them instead of piling up.
 pub fn scratch(name: &str) -> PathBuf {
     let dir = tmp_root().join("runs").join(name);
     let _ = std::fs::remove_dir_all(&dir);

@@ -8,6 +8,7 @@
 
 use linetrack_e2e::*;
 use linetrack_run_record::{RunEnd, Summary, read_events, read_frames};
+use linetrack_test_data::Scratch;
 use std::path::Path;
 use std::process::{Command, Stdio};
 
@@ -71,9 +72,9 @@ fn run_on_a_disk_that_fills(name: &str, policy: &str) -> Summary {
     text.push_str(&format!("on_record_error = {policy:?}\n"));
     std::fs::write(&config, text).unwrap_or_else(|e| panic!("{e}"));
     let prefix = format!("lte2e{}_{}_", std::process::id(), name.replace('-', ""));
-    // Short enough for iceoryx2's socket paths.
-    let ipc_root = std::env::temp_dir().join(format!("lte2e{}-{policy}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&ipc_root);
+    // Short enough for iceoryx2's socket paths; the run's processes are all waited for
+    // (`status()` below) before the guard drops.
+    let ipc_root = Scratch::new("e2e", "ipc");
     let status = Command::new("unshare")
         .args([
             "--user",
@@ -181,10 +182,9 @@ fn run_on_a_disk_that_fills(name: &str, policy: &str) -> Summary {
     if policy == "continue" {
         assert!(missing_count > 0, "the frames after the failure: {text}");
     }
-    let scope = linetrack_ipc::Scope::with_prefix(&prefix, "").with_root(ipc_root.clone());
+    let scope = linetrack_ipc::Scope::with_prefix(&prefix, "").with_root(ipc_root.to_path_buf());
     let leftovers = scope.resources().unwrap_or_else(|e| panic!("{e}"));
     assert_eq!(leftovers, linetrack_ipc::Resources::default());
-    let _ = std::fs::remove_dir_all(&ipc_root);
     summary
 }
 

@@ -8,6 +8,7 @@
 //! Starting a process as another user needs root (CI runs the suite as root).
 
 use linetrack_e2e::*;
+use linetrack_test_data::Scratch;
 use std::os::unix::fs::{MetadataExt as _, PermissionsExt as _};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
@@ -78,9 +79,7 @@ fn folders_and_links_another_user_prepared_are_refused_naming_them_and_nothing_c
     let sequence = base_sequence(FRAMES);
     // Their world lies outside the build folder, which may sit in a private home where user
     // nobody cannot enter (CI's work tree does): a folder of root's everyone may enter.
-    let world = std::env::temp_dir().join(format!("linetrack-e2e-planted-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&world);
-    std::fs::create_dir(&world).unwrap_or_else(|e| panic!("{}: {e}", world.display()));
+    let world = Scratch::new("e2e", "planted");
     std::fs::set_permissions(&world, std::fs::Permissions::from_mode(0o755))
         .unwrap_or_else(|e| panic!("{e}"));
     // Root's files the other user aims at, and a shared sticky folder like /tmp.
@@ -150,9 +149,13 @@ fn folders_and_links_another_user_prepared_are_refused_naming_them_and_nothing_c
     assert!(!victims.join("created-by-root").exists());
     assert!(!victims.join("runs").exists());
 
-    // The shared-memory root's parent made by them (`/tmp/linetrack-<uid>` squatted).
-    let squatted = PathBuf::from(format!("/tmp/lte2e{}-squat", std::process::id()));
-    let _ = std::fs::remove_dir_all(&squatted);
+    // The shared-memory root's parent made by them (`/tmp/linetrack-<uid>` squatted), in a
+    // sticky folder like /tmp: one of its own, short (the root must leave room for
+    // iceoryx2's socket names), removed with everything in it when its guard drops.
+    let sticky = Scratch::new("e2e", "squat");
+    std::fs::set_permissions(&sticky, std::fs::Permissions::from_mode(0o1777))
+        .unwrap_or_else(|e| panic!("{e}"));
+    let squatted = sticky.join("s");
     as_nobody_sh(&world, r#"mkdir -m 755 "$1""#, &[&squatted]);
     let run_dir = dir.join("ours");
     let config = dir.join("pipeline.toml");
@@ -173,9 +176,7 @@ fn folders_and_links_another_user_prepared_are_refused_naming_them_and_nothing_c
         "{stderr}"
     );
     assert!(!ipc_root.exists(), "made a folder in theirs");
-    let _ = std::fs::remove_dir_all(&squatted);
     // Our own run folder, made by the refused run, is ours and owner-only.
     let meta = std::fs::metadata(&run_dir).unwrap_or_else(|e| panic!("{e}"));
     assert_eq!((meta.uid(), meta.mode() & 0o777), (0, 0o700));
-    let _ = std::fs::remove_dir_all(&world);
 }

@@ -7,6 +7,7 @@
 //! shared memory's bookkeeping goes to the config's `[ipc] root`.
 
 use linetrack_e2e::*;
+use linetrack_test_data::Scratch;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::Duration;
@@ -58,8 +59,8 @@ fn thread_status(pid: u32, name: &str) -> Option<PathBuf> {
 fn a_stage_pinned_to_cpu_0_runs_there_and_the_ipc_root_comes_from_the_config() {
     let dir = scratch("pinned");
     // Short: iceoryx2's event sockets live under it, and a socket path holds 107 bytes.
-    let ipc_root = std::env::temp_dir().join(format!("lte2e{}-ipc", std::process::id()));
-    let _ = std::fs::remove_dir_all(&ipc_root);
+    // Declared before the run, so the run is finished before the guard drops.
+    let ipc_root = Scratch::new("e2e", "ipc");
     let extra = format!(
         "{QUICK}[stages.line-detector]\ncpus = [0]\n[ipc]\nroot = {:?}\n",
         ipc_root.display().to_string()
@@ -100,7 +101,7 @@ fn a_stage_pinned_to_cpu_0_runs_there_and_the_ipc_root_comes_from_the_config() {
         );
     }
     if std::env::var_os(linetrack_ipc::Scope::ROOT_VAR).is_none() {
-        assert_eq!(status.ipc_root.as_deref(), Some(ipc_root.as_path()));
+        assert_eq!(status.ipc_root.as_deref(), Some(ipc_root.path()));
         let entries = std::fs::read_dir(&ipc_root)
             .map(|d| d.count())
             .unwrap_or_else(|e| panic!("{}: {e}", ipc_root.display()));
@@ -114,7 +115,6 @@ fn a_stage_pinned_to_cpu_0_runs_there_and_the_ipc_root_comes_from_the_config() {
         "{:?}",
         records.events
     );
-    let _ = std::fs::remove_dir_all(&ipc_root);
 }
 
 #[test]

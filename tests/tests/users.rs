@@ -7,6 +7,7 @@
 //! Starting a process as another user needs root (CI runs the suite as root).
 
 use linetrack_e2e::*;
+use linetrack_test_data::Scratch;
 use std::os::unix::fs::{MetadataExt, PermissionsExt};
 use std::path::{Path, PathBuf};
 use std::process::Stdio;
@@ -99,9 +100,7 @@ fn another_users_run_beside_ours_completes_and_cannot_write_into_ours() {
     ours.wait_for("3 frames", RUN_TIMEOUT, |s| s.frames >= 3);
 
     // The other user's world, outside the build folder (which may sit in a private home).
-    let theirs_dir =
-        std::env::temp_dir().join(format!("linetrack-e2e-users-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&theirs_dir);
+    let theirs_dir = Scratch::new("e2e", "users");
     open_dir(&theirs_dir);
     let bin = theirs_dir.join("bin");
     open_dir(&bin);
@@ -184,5 +183,4 @@ fn another_users_run_beside_ours_completes_and_cannot_write_into_ours() {
     // What stays (iceoryx2's management segment, kept for the user's next run) stays theirs
     // alone: iceoryx2 creates it world-writable.
     assert_private(&shared_memory_files(&their_prefix), NOBODY);
-    let _ = std::fs::remove_dir_all(&theirs_dir);
 }

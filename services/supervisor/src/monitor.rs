@@ -640,10 +640,7 @@ mod tests {
     use linetrack_msgs::StampSlot;
     use linetrack_run_record::files::SpaceReserve;
     use linetrack_run_record::{read_events, read_frames};
-
-    fn scratch(name: &str) -> PathBuf {
-        linetrack_test_data::scratch_dir("supervisor", name).unwrap_or_else(|e| panic!("{e}"))
-    }
+    use linetrack_test_data::Scratch;
 
     #[test]
     fn each_stage_waits_from_the_stage_before_publishing_to_taking_the_frame() {
@@ -684,7 +681,7 @@ mod tests {
 
     #[test]
     fn records_are_on_disk_as_frames_complete_and_memory_stays_bounded() {
-        let dir = scratch("monitor-stream");
+        let dir = Scratch::new("supervisor", "monitor-stream");
         let config = PipelineConfig::default();
         let mut monitor = Monitor::new(&config, 0, &dir).unwrap_or_else(|e| panic!("{e}"));
         // 20 000 frames arriving up to 3 out of order (a restarted stage, a hot swap).
@@ -743,12 +740,11 @@ mod tests {
                     .any(|e| e.kind == "failed" && e.detail == "matcher died"),
             "{events:?}"
         );
-        let _ = std::fs::remove_dir_all(&dir);
     }
 
     #[test]
     fn a_file_that_cannot_be_written_ends_the_records_at_a_whole_row_and_the_run_says_so() {
-        let dir = scratch("monitor-records-failed");
+        let dir = Scratch::new("supervisor", "monitor-records-failed");
         let mut monitor =
             Monitor::new(&PipelineConfig::default(), 0, &dir).unwrap_or_else(|e| panic!("{e}"));
         assert!(dir.join(SpaceReserve::FILE).is_file(), "no space held");
@@ -789,12 +785,11 @@ mod tests {
         );
         let poses = std::fs::read_to_string(dir.join("poses.tum")).unwrap_or_default();
         assert_eq!(poses.lines().count(), 4, "the header and 3 poses");
-        let _ = std::fs::remove_dir_all(&dir);
     }
 
     #[test]
     fn only_a_detected_frame_names_its_detector() {
-        let dir = scratch("monitor-detector-label");
+        let dir = Scratch::new("supervisor", "monitor-detector-label");
         let mut monitor =
             Monitor::new(&PipelineConfig::default(), 0, &dir).unwrap_or_else(|e| panic!("{e}"));
         let stamped = |id: u64| {
@@ -822,7 +817,6 @@ mod tests {
         let frames = read_frames(&dir.join("frames.csv")).unwrap_or_else(|e| panic!("{e}"));
         let labels: Vec<&str> = frames.iter().map(|f| f.detector.as_str()).collect();
         assert_eq!(labels, ["", "fld"]);
-        let _ = std::fs::remove_dir_all(&dir);
     }
 
     /// A frame the source was over the budget with (a starved realtime source) is a drop
@@ -830,7 +824,7 @@ mod tests {
     /// live line; the frames it kept carry the source's delay in its stage's time.
     #[test]
     fn frames_late_at_the_source_are_their_own_drop_in_the_records_and_the_live_line() {
-        let dir = scratch("monitor-late-at-source");
+        let dir = Scratch::new("supervisor", "monitor-late-at-source");
         let mut monitor =
             Monitor::new(&PipelineConfig::default(), 0, &dir).unwrap_or_else(|e| panic!("{e}"));
         let mut late = TracksHeader::from(FrameHeader::new(0, 0, 1_000_000));
@@ -861,12 +855,11 @@ mod tests {
             (frames[0].outcome.as_str(), frames[0].dropped_by.as_str()),
             ("capture-late", "frame-source")
         );
-        let _ = std::fs::remove_dir_all(&dir);
     }
 
     #[test]
     fn frames_skipped_on_a_stage_input_are_drops_unless_they_still_arrive() {
-        let dir = scratch("monitor-skipped");
+        let dir = Scratch::new("supervisor", "monitor-skipped");
         let mut monitor =
             Monitor::new(&PipelineConfig::default(), 0, &dir).unwrap_or_else(|e| panic!("{e}"));
         for f in [0, 1, 5, 6] {
@@ -889,12 +882,11 @@ mod tests {
             .map(|f| (f.frame_id, f.dropped_by.as_str()))
             .collect();
         assert_eq!(skipped, [(2, "pose-estimator"), (4, "pose-estimator")]);
-        let _ = std::fs::remove_dir_all(&dir);
     }
 
     #[test]
     fn frames_that_died_with_the_pose_estimator_are_drops_once_its_successor_publishes() {
-        let dir = scratch("monitor-pose-estimator-died");
+        let dir = Scratch::new("supervisor", "monitor-pose-estimator-died");
         let mut monitor =
             Monitor::new(&PipelineConfig::default(), 0, &dir).unwrap_or_else(|e| panic!("{e}"));
         for f in [0, 1] {
@@ -946,12 +938,11 @@ mod tests {
                 "frames 2..4 died with the pose estimator (pid 7 crash: signal: 9 (SIGKILL)): its successor's first frame is 4"
             )]
         );
-        let _ = std::fs::remove_dir_all(&dir);
     }
 
     #[test]
     fn frames_that_died_with_a_pose_estimator_whose_successor_never_published_carry_an_event() {
-        let dir = scratch("monitor-pose-estimator-died-last");
+        let dir = Scratch::new("supervisor", "monitor-pose-estimator-died-last");
         let mut monitor =
             Monitor::new(&PipelineConfig::default(), 0, &dir).unwrap_or_else(|e| panic!("{e}"));
         for f in [0, 1] {
@@ -985,6 +976,5 @@ mod tests {
                 .all(|f| f.outcome == "skipped" && f.dropped_by == "pose-estimator"),
             "{frames:?}"
         );
-        let _ = std::fs::remove_dir_all(&dir);
     }
 }

@@ -440,13 +440,7 @@ pub(crate) fn processes(
 mod tests {
     use super::*;
     use crate::clock::Clock;
-
-    fn scratch(name: &str) -> PathBuf {
-        let dir = std::env::temp_dir().join(format!("ltsup-{name}-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
-        std::fs::create_dir_all(&dir).unwrap_or_else(|e| panic!("{e}"));
-        dir
-    }
+    use linetrack_test_data::Scratch;
 
     fn monitor(dir: &Path) -> Monitor {
         let config = linetrack_pipeline_config::PipelineConfig::default();
@@ -462,9 +456,10 @@ mod tests {
         }
     }
 
-    /// A scratch folder, a monitor recording into it and a manual clock.
-    fn setup(name: &str) -> (PathBuf, Monitor, Clock) {
-        let dir = scratch(name);
+    /// A scratch folder, a monitor recording into it and a manual clock. The folder comes
+    /// first so that it is dropped last, after the monitor and the processes.
+    fn setup(name: &str) -> (Scratch, Monitor, Clock) {
+        let dir = Scratch::new("supervisor", name);
         let monitor = monitor(&dir);
         (dir, monitor, Clock::manual(0))
     }
@@ -536,7 +531,6 @@ mod tests {
         assert!(events.contains("restart 1 of 2 in 100ms"), "{events}");
         assert!(events.contains("restart 2 of 2 in 150ms"), "{events}");
         assert!(events.contains("exit status: 3"), "{events}");
-        let _ = std::fs::remove_dir_all(&dir);
     }
 
     /// The rules say what the declaration says: the link restarted, the others left.
@@ -572,7 +566,6 @@ mod tests {
         let events = events_of(&monitor, &dir);
         assert_eq!(events.matches("link-exit").count(), 1, "{events}");
         assert!(!events.contains("restart 1"), "{events}");
-        let _ = std::fs::remove_dir_all(&dir);
     }
 
     #[test]
@@ -606,7 +599,6 @@ mod tests {
             "{}",
             events_of(&monitor, &dir)
         );
-        let _ = std::fs::remove_dir_all(&dir);
     }
 
     #[test]
@@ -622,12 +614,11 @@ mod tests {
         let link = OptionalProcess::new(LINK, settings(&dir), &SupervisorConfig::default());
         assert!(link.settled);
         ros2.stop(&clock, &mut monitor);
-        let _ = std::fs::remove_dir_all(&dir);
     }
 
     #[test]
     fn a_missing_binary_is_refused_saying_how_to_build_it() {
-        let dir = scratch("optional-binary");
+        let dir = Scratch::new("supervisor", "optional-binary");
         let err = require_binary(&ROS2, &dir, "ros2.enabled = true")
             .err()
             .map(|e| e.to_string())
@@ -643,7 +634,6 @@ mod tests {
             require_binary(&ROS2, &dir, "ros2.enabled = true").ok(),
             Some(dir.join(ROS2.binary))
         );
-        let _ = std::fs::remove_dir_all(&dir);
     }
 
     #[test]
@@ -675,6 +665,5 @@ mod tests {
             events.contains("output-killed") && events.contains("did not stop within 3s"),
             "{events}"
         );
-        let _ = std::fs::remove_dir_all(&dir);
     }
 }

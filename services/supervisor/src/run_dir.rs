@@ -141,15 +141,12 @@ pub fn lock(run_dir: &Path) -> anyhow::Result<File> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use linetrack_test_data::Scratch;
     use std::time::Duration;
-
-    fn scratch(name: &str) -> PathBuf {
-        linetrack_test_data::scratch_dir("supervisor", name).unwrap_or_else(|e| panic!("{e}"))
-    }
 
     #[test]
     fn a_locked_run_folder_is_refused_naming_the_holder_until_it_is_released() {
-        let dir = scratch("run-lock");
+        let dir = Scratch::new("supervisor", "run-lock");
         let held = lock(&dir).unwrap_or_else(|e| panic!("{e:#}"));
         // flock locks belong to the open file: a second open, even here, is refused.
         let err = lock(&dir)
@@ -164,17 +161,16 @@ mod tests {
         drop(held);
         let again = lock(&dir);
         assert!(again.is_ok(), "the lock outlived its holder");
-        let _ = std::fs::remove_dir_all(&dir);
     }
 
     #[test]
     fn each_run_gets_a_dated_folder_and_latest_follows() {
-        let runs = scratch("runs-dated");
+        let runs = Scratch::new("supervisor", "runs-dated");
         // An old-style `latest` folder is moved aside, not lost.
         std::fs::create_dir_all(runs.join("latest")).unwrap_or_else(|e| panic!("{e}"));
         std::fs::write(runs.join("latest/frames.csv"), "old").unwrap_or_else(|e| panic!("{e}"));
         let output = OutputConfig {
-            runs_dir: Some(runs.clone()),
+            runs_dir: Some(runs.to_path_buf()),
             ..OutputConfig::default()
         };
         let t = SystemTime::UNIX_EPOCH + Duration::from_secs(1_795_435_200);
@@ -202,6 +198,5 @@ mod tests {
             std::fs::read_link(runs.join("latest")).ok(),
             Some(PathBuf::from("2026-11-23T12-00-00-2"))
         );
-        let _ = std::fs::remove_dir_all(&runs);
     }
 }

@@ -139,6 +139,7 @@ impl Drop for StatusWriter {
 mod tests {
     use super::*;
     use linetrack_run_record::RunEnd;
+    use linetrack_test_data::Scratch;
     use std::sync::mpsc;
 
     fn status(frames: usize) -> LiveStatus {
@@ -155,10 +156,6 @@ mod tests {
         }
     }
 
-    fn scratch(name: &str) -> PathBuf {
-        linetrack_test_data::scratch_dir("supervisor", name).unwrap_or_else(|e| panic!("{e}"))
-    }
-
     fn read(dir: &std::path::Path) -> LiveStatus {
         let text = std::fs::read_to_string(dir.join("status.json")).unwrap();
         serde_json::from_str(&text).unwrap()
@@ -166,8 +163,8 @@ mod tests {
 
     #[test]
     fn the_last_status_is_on_disk_after_close() {
-        let dir = scratch("status-writer-close");
-        let mut writer = StatusWriter::start(dir.clone()).unwrap();
+        let dir = Scratch::new("supervisor", "status-writer-close");
+        let mut writer = StatusWriter::start(dir.to_path_buf()).unwrap();
         for frames in 0..50 {
             writer.offer(status(frames));
         }
@@ -227,7 +224,8 @@ mod tests {
     #[test]
     fn a_failed_write_comes_back_naming_the_file() {
         // A run folder that is a file: every write fails (whoever runs the test).
-        let not_a_dir = scratch("status-writer-error").join("plain-file");
+        let dir = Scratch::new("supervisor", "status-writer-error");
+        let not_a_dir = dir.join("plain-file");
         std::fs::write(&not_a_dir, b"x").unwrap();
         let mut writer = StatusWriter::start(not_a_dir.clone()).unwrap();
         writer.offer(status(1));

@@ -347,8 +347,8 @@ mod tests {
             .map(|e| e.to_string())
             .unwrap_or_default();
         assert!(err.contains("/nonexistent/camchain.yaml"), "{err}");
-        let empty = std::env::temp_dir();
-        let err = read_calibration(&empty)
+        let empty = linetrack_test_data::Scratch::new("camera", "empty");
+        let err = read_calibration(empty.path())
             .err()
             .map(|e| e.to_string())
             .unwrap_or_default();

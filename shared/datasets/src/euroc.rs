@@ -465,17 +465,10 @@ mod tests {
     }
 
     fn parse_text(text: &str) -> Result<(PinholeCamera, Option<f64>), String> {
-        let dir =
-            std::env::temp_dir().join(format!("linetrack-sensor-yaml-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).map_err(|e| e.to_string())?;
-        let path = dir.join(format!(
-            "sensor-{:x}.yaml",
-            text.len() * 31 + text.bytes().map(usize::from).sum::<usize>()
-        ));
+        let dir = linetrack_test_data::Scratch::new("datasets", "sensor-yaml");
+        let path = dir.join("sensor.yaml");
         std::fs::write(&path, text).map_err(|e| e.to_string())?;
-        let result = read_sensor(&path).map_err(|e| e.to_string());
-        let _ = std::fs::remove_file(&path);
-        result
+        read_sensor(&path).map_err(|e| e.to_string())
     }
 
     #[test]

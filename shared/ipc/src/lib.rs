@@ -134,13 +134,15 @@ mod tests {
     use crate::scope::{SHM_DIR, lock_down_files};
     use linetrack_msgs::StageKind;
     use linetrack_msgs::{FrameHeader, SegmentRecord, SegmentsHeader};
+    use linetrack_test_data::Scratch;
     use std::os::unix::fs::{MetadataExt, PermissionsExt};
     use std::path::Path;
     use std::time::Duration;
 
     #[test]
     fn a_scope_leaves_nothing_that_other_users_can_write() {
-        let root = linetrack_test_data::scratch_path("ipc", "root").join("iceoryx2");
+        let scratch = Scratch::new("ipc", "root");
+        let root = scratch.join("iceoryx2");
         let scope = Scope {
             root: root.clone(),
             ..unique_scope("private")
@@ -187,8 +189,7 @@ mod tests {
 
     #[test]
     fn another_users_file_in_the_namespace_is_named_and_open_files_are_tightened() {
-        let dir =
-            linetrack_test_data::scratch_dir("ipc", "lockdown").unwrap_or_else(|e| panic!("{e}"));
+        let dir = Scratch::new("ipc", "lockdown");
         let open = dir.join("lt_x_node.global_mgmt");
         std::fs::write(&open, b"0123").unwrap_or_else(|e| panic!("{e}"));
         std::fs::set_permissions(&open, std::fs::Permissions::from_mode(0o666))
@@ -211,12 +212,11 @@ mod tests {
 
     #[test]
     fn a_root_folder_open_to_others_is_refused() {
-        let dir =
-            linetrack_test_data::scratch_dir("ipc", "openroot").unwrap_or_else(|e| panic!("{e}"));
+        let dir = Scratch::new("ipc", "openroot");
         std::fs::set_permissions(&dir, std::fs::Permissions::from_mode(0o777))
             .unwrap_or_else(|e| panic!("{e}"));
         let scope = Scope {
-            root: dir.clone(),
+            root: dir.to_path_buf(),
             ..unique_scope("openroot")
         };
         let err = scope
@@ -228,7 +228,9 @@ mod tests {
             err.contains(&dir.display().to_string()) && err.contains("other users"),
             "{err}"
         );
-        let link = linetrack_test_data::scratch_path("ipc", "linkroot");
+        // Beside the open folder, not in it: the link's own folder is private.
+        let links = Scratch::new("ipc", "linkroot");
+        let link = links.join("root");
         std::os::unix::fs::symlink(&dir, &link).unwrap_or_else(|e| panic!("{e}"));
         let err = Scope {
             root: link,
@@ -245,8 +247,7 @@ mod tests {
         );
         // Another user's folder above the root (a `/tmp/linetrack-<uid>` someone else made).
         if rustix::process::geteuid().as_raw() == 0 {
-            let theirs = linetrack_test_data::scratch_dir("ipc", "theirsroot")
-                .unwrap_or_else(|e| panic!("{e}"));
+            let theirs = Scratch::new("ipc", "theirsroot");
             std::os::unix::fs::chown(&theirs, Some(65534), Some(65534))
                 .unwrap_or_else(|e| panic!("{e}"));
             let err = Scope {

@@ -108,17 +108,12 @@ mod tests {
     use linetrack_msgs::{
         FrameHeader, PoseRecord, RigRecord, SegmentRecord, SegmentsHeader, TrackedLine,
     };
+    use linetrack_test_data::Scratch;
     use mcap::records::MessageHeader;
     use std::collections::BTreeMap;
     use std::fs::File;
     use std::io::BufWriter;
     use std::path::Path;
-
-    fn temp(name: &str) -> PathBuf {
-        let dir = std::env::temp_dir().join(format!("linetrack-mcap-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap_or_default();
-        dir.join(name)
-    }
 
     fn rig() -> RigRecord {
         RigRecord {
@@ -165,7 +160,8 @@ mod tests {
 
     #[test]
     fn a_recording_replays_its_frames_and_rig_exactly() {
-        let path = temp("round-trip.mcap");
+        let dir = Scratch::new("mcap", "round-trip");
+        let path = dir.join("round-trip.mcap");
         let counts = record(&path, 3);
         assert_eq!(counts.images, 3);
         assert_eq!(counts.poses, 3);
@@ -190,7 +186,8 @@ mod tests {
 
     #[test]
     fn a_truncated_recording_is_refused_as_such() {
-        let path = temp("truncated.mcap");
+        let dir = Scratch::new("mcap", "truncated");
+        let path = dir.join("truncated.mcap");
         record(&path, 2);
         let bytes = std::fs::read(&path).expect("read");
         std::fs::write(&path, &bytes[..bytes.len() * 2 / 3]).expect("write");
@@ -201,7 +198,8 @@ mod tests {
 
     #[test]
     fn a_file_that_is_no_mcap_is_refused_naming_it() {
-        let path = temp("garbage.mcap");
+        let dir = Scratch::new("mcap", "garbage");
+        let path = dir.join("garbage.mcap");
         std::fs::write(&path, b"P5\n4 3\n255\n").expect("write");
         let error = Replay::open(&path).err().expect("refused");
         assert!(error.to_string().contains("not an MCAP file"), "{error}");
@@ -209,7 +207,8 @@ mod tests {
 
     #[test]
     fn images_under_another_schema_are_refused_naming_the_channel() {
-        let path = temp("wrong-schema.mcap");
+        let dir = Scratch::new("mcap", "wrong-schema");
+        let path = dir.join("wrong-schema.mcap");
         {
             let file = File::create(&path).expect("create");
             let mut w = mcap::Writer::new(BufWriter::new(file)).expect("writer");

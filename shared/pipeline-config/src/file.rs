@@ -129,14 +129,6 @@ fn cut(text: &str, chars: usize) -> String {
 mod tests {
     use super::*;
 
-    fn scratch(name: &str) -> std::path::PathBuf {
-        let dir =
-            std::env::temp_dir().join(format!("linetrack-config-{name}-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
-        std::fs::create_dir_all(&dir).unwrap_or_else(|e| panic!("{e}"));
-        dir
-    }
-
     fn refusal(path: &Path) -> String {
         read_bounded(path)
             .err()
@@ -146,7 +138,8 @@ mod tests {
 
     #[test]
     fn only_a_regular_file_of_bounded_size_is_read() {
-        let dir = scratch("input");
+        let scratch = linetrack_test_data::Scratch::new("pipeline-config", "input");
+        let dir = scratch.path();
         // A FIFO with no writer: reading it would block forever; it is refused unread.
         let fifo = dir.join("fifo.toml");
         let made = std::process::Command::new("mkfifo")
@@ -161,7 +154,7 @@ mod tests {
             err.contains("/dev/zero") && err.contains("character device"),
             "{err}"
         );
-        assert!(refusal(&dir).contains("a folder"));
+        assert!(refusal(dir).contains("a folder"));
         let big = dir.join("big.toml");
         std::fs::write(&big, vec![b'#'; MAX_CONFIG_BYTES as usize + 1])
             .unwrap_or_else(|e| panic!("{e}"));
@@ -176,7 +169,6 @@ mod tests {
             read_bounded(&fine).ok().as_deref(),
             Some("detector = \"fld\"\n")
         );
-        let _ = std::fs::remove_dir_all(&dir);
     }
 
     #[test]

@@ -1,12 +1,7 @@
 use super::*;
 use crate::canvas::{HEIGHT, LEGEND_WIDTH, ROW_HEIGHT, WIDTH, value_text};
+use linetrack_test_data::Scratch;
 use std::path::Path;
-
-fn scratch(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("linetrack-plot-{}", std::process::id()));
-    let _ = std::fs::create_dir_all(&dir);
-    dir.join(name)
-}
 
 fn read(path: &Path) -> image::RgbImage {
     image::open(path)
@@ -24,7 +19,8 @@ fn dark_pixels(img: &image::RgbImage, y0: u32, y1: u32) -> usize {
 
 #[test]
 fn a_chart_is_written_with_its_title_set_in_the_embedded_font() {
-    let path = scratch("lines.png");
+    let dir = Scratch::new("plot", "lines");
+    let path = dir.join("lines.png");
     let series = vec![
         ("a".to_string(), vec![(0.0, 1.0), (1.0, 2.0), (2.0, 1.5)]),
         (
@@ -61,7 +57,8 @@ fn empty_nan_and_single_point_data_still_give_a_picture() {
         vec![("flat".to_string(), vec![(0.0, 2.0), (1.0, 2.0)])],
     ];
     for (k, series) in cases.iter().enumerate() {
-        let path = scratch(&format!("degenerate-{k}.png"));
+        let dir = Scratch::new("plot", &format!("degenerate-{k}"));
+        let path = dir.join("degenerate.png");
         lines(&path, "degenerate", "x [m]", "z [m]", series, &[], true)
             .unwrap_or_else(|e| panic!("case {k}: {e}"));
         scatter(&path, "degenerate", "x", "y", series).unwrap_or_else(|e| panic!("case {k}: {e}"));
@@ -72,7 +69,8 @@ fn empty_nan_and_single_point_data_still_give_a_picture() {
 #[test]
 fn equal_axes_give_one_unit_the_same_length_both_ways() {
     // A square path must be drawn square: its red extent is as wide as it is tall.
-    let path = scratch("square.png");
+    let dir = Scratch::new("plot", "square");
+    let path = dir.join("square.png");
     let square = vec![(0.0, 0.0), (1.0, 0.0), (1.0, 1.0), (0.0, 1.0), (0.0, 0.0)];
     let mut chart = Chart::new("square", "x [m]", "z [m]");
     chart.series = vec![Series::line("square", square).coloured((255, 0, 0))];
@@ -94,7 +92,8 @@ fn equal_axes_give_one_unit_the_same_length_both_ways() {
 
 #[test]
 fn a_rug_and_a_reference_line_are_drawn_where_asked() {
-    let path = scratch("timeline.png");
+    let dir = Scratch::new("plot", "timeline");
+    let path = dir.join("timeline.png");
     let mut chart = Chart::new("timeline", "frame", "latency [ms]");
     chart.series = vec![
         Series::line("e2e", (0..50).map(|k| (k as f64, 70.0)).collect()),
@@ -118,7 +117,8 @@ fn a_rug_and_a_reference_line_are_drawn_where_asked() {
 
 #[test]
 fn distributions_handle_zero_values_on_a_log_axis_and_empty_rows() {
-    let path = scratch("distributions.png");
+    let dir = Scratch::new("plot", "distributions");
+    let path = dir.join("distributions.png");
     let rows = vec![
         Distribution {
             name: "frame-source".to_string(),
@@ -164,7 +164,8 @@ fn values_are_written_with_three_significant_digits() {
 
 #[test]
 fn an_unwritable_path_is_a_clear_error() {
-    let path = scratch("no-such-dir").join("x.png");
+    let dir = Scratch::new("plot", "unwritable");
+    let path = dir.join("no-such-dir/x.png");
     let err = lines(&path, "t", "x", "y", &[], &[], false)
         .err()
         .unwrap_or_else(|| panic!("wrote into a missing folder"));
@@ -173,7 +174,8 @@ fn an_unwritable_path_is_a_clear_error() {
 
 #[test]
 fn tracks_join_a_group_across_tracks() {
-    let path = scratch("tracks.png");
+    let dir = Scratch::new("plot", "tracks");
+    let path = dir.join("tracks.png");
     let bar = |track, start, end, group, nested| Bar {
         track,
         start,

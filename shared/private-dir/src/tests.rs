@@ -2,20 +2,16 @@
 //! needs root (CI runs the suite as root, as the two-user end-to-end test does).
 
 use super::*;
+use linetrack_test_data::Scratch;
 use std::os::unix::fs::{PermissionsExt as _, lchown, symlink};
 
 const NOBODY: u32 = 65534;
 
-fn scratch(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!(
-        "linetrack-private-dir-{name}-{}",
-        std::process::id()
-    ));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap_or_else(|e| panic!("{e}"));
-    std::fs::set_permissions(&dir, std::fs::Permissions::from_mode(0o755))
-        .unwrap_or_else(|e| panic!("{e}"));
-    dir
+/// A scratch folder, removed when dropped, with the usual mode 755 (not tempfile's 700).
+fn scratch(name: &str) -> Scratch {
+    let scratch = Scratch::new("private-dir", name);
+    chmod(scratch.path(), 0o755);
+    scratch
 }
 
 fn as_root() {
@@ -44,7 +40,8 @@ fn refusal(path: &Path, create: Create) -> String {
 
 #[test]
 fn missing_folders_are_made_owner_only_and_own_links_are_resolved() {
-    let dir = scratch("made");
+    let scratch = scratch("made");
+    let dir = scratch.path();
     let target = dir.join("a/b/runs");
     assert_eq!(
         private_dir(&target, Create::Missing).ok(),
@@ -66,13 +63,13 @@ fn missing_folders_are_made_owner_only_and_own_links_are_resolved() {
     assert!(refusal(&dir.join("absent"), Create::No).contains("absent"));
     std::fs::write(dir.join("file"), "").unwrap_or_else(|e| panic!("{e}"));
     assert!(refusal(&dir.join("file"), Create::Missing).contains("not a folder"));
-    let _ = std::fs::remove_dir_all(&dir);
 }
 
 #[test]
 fn another_users_link_or_folder_on_the_way_is_refused_naming_it_and_nothing_is_made_beyond() {
     as_root();
-    let dir = scratch("foreign");
+    let scratch = scratch("foreign");
+    let dir = scratch.path();
     // A link another user planted (as /tmp/out was), pointing at a folder of theirs.
     let theirs = dir.join("theirs");
     std::fs::create_dir(&theirs).unwrap_or_else(|e| panic!("{e}"));
@@ -99,12 +96,12 @@ fn another_users_link_or_folder_on_the_way_is_refused_naming_it_and_nothing_is_m
     symlink(&ours, &lure).unwrap_or_else(|e| panic!("{e}"));
     give_to_nobody(&lure);
     assert!(refusal(&lure, Create::No).contains("lure"));
-    let _ = std::fs::remove_dir_all(&dir);
 }
 
 #[test]
 fn a_folder_others_can_write_is_refused_unless_it_is_a_sticky_one_above() {
-    let dir = scratch("open");
+    let scratch = scratch("open");
+    let dir = scratch.path();
     let target = dir.join("run");
     std::fs::create_dir(&target).unwrap_or_else(|e| panic!("{e}"));
     chmod(&target, 0o777);
@@ -117,23 +114,23 @@ fn a_folder_others_can_write_is_refused_unless_it_is_a_sticky_one_above() {
     assert!(refusal(&target, Create::No).contains("mode 770"));
     // Above the target: refused when others could move what is below it...
     chmod(&target, 0o700);
-    chmod(&dir, 0o777);
+    chmod(dir, 0o777);
     let err = refusal(&target, Create::No);
     assert!(err.contains("not sticky"), "{err}");
     // ... and accepted when they cannot (/tmp's 1777).
-    chmod(&dir, 0o1777);
+    chmod(dir, 0o1777);
     assert_eq!(private_dir(&target, Create::No).ok(), Some(target.clone()));
-    chmod(&dir, 0o755);
-    let _ = std::fs::remove_dir_all(&dir);
+    chmod(dir, 0o755);
 }
 
 #[test]
 fn the_errors_name_the_path_for_any_user() {
-    let dir = scratch("owner");
+    let scratch = scratch("owner");
+    let dir = scratch.path();
     // Seen from another uid, a folder of this user is another user's.
     let me = rustix::process::geteuid().as_raw();
     let other = Owner { me: me + 1 };
-    let err = private_dir_for(&dir, Create::No, other)
+    let err = private_dir_for(dir, Create::No, other)
         .err()
         .map(|e| e.to_string())
         .unwrap_or_default();
@@ -141,5 +138,4 @@ fn the_errors_name_the_path_for_any_user() {
         err.contains(&dir.display().to_string()) && err.contains(&format!("user {me}")),
         "{err}"
     );
-    let _ = std::fs::remove_dir_all(&dir);
 }

@@ -161,21 +161,13 @@ impl Drop for SpaceReserve {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use linetrack_test_data::Scratch;
     use std::os::unix::fs::PermissionsExt as _;
-
-    fn scratch(name: &str) -> PathBuf {
-        let dir = std::env::temp_dir().join(format!(
-            "linetrack-run-record-{name}-{}",
-            std::process::id()
-        ));
-        let _ = std::fs::remove_dir_all(&dir);
-        std::fs::create_dir_all(&dir).unwrap_or_else(|e| panic!("{e}"));
-        dir
-    }
 
     #[test]
     fn a_link_planted_where_a_record_goes_is_refused_and_its_target_kept() {
-        let dir = scratch("planted");
+        let scratch = Scratch::new("run-record", "planted");
+        let dir = scratch.path();
         let target = dir.join("elsewhere");
         std::fs::write(&target, "theirs").unwrap_or_else(|e| panic!("{e}"));
         let planted = dir.join("frames.csv");
@@ -204,12 +196,12 @@ mod tests {
             .map(|m| m.permissions().mode() & 0o777)
             .unwrap_or(0);
         assert_eq!(mode, FILE_MODE);
-        let _ = std::fs::remove_dir_all(&dir);
     }
 
     #[test]
     fn a_failed_whole_write_leaves_neither_a_torn_file_nor_its_temporary() {
-        let dir = scratch("whole");
+        let scratch = Scratch::new("run-record", "whole");
+        let dir = scratch.path();
         let path = dir.join("summary.json");
         write_whole(&path, b"{\"a\":1}", true).unwrap_or_else(|e| panic!("{e}"));
         // The temporary's place taken by a folder: the write fails, the old file stays.
@@ -223,19 +215,18 @@ mod tests {
             std::fs::read_to_string(&path).ok().as_deref(),
             Some("{\"a\":1}")
         );
-        let _ = std::fs::remove_dir_all(&dir);
     }
 
     #[test]
     fn the_reserve_is_held_and_given_back_once() {
-        let dir = scratch("reserve");
-        let mut reserve = SpaceReserve::hold(&dir, 4096).unwrap_or_else(|e| panic!("{e}"));
+        let scratch = Scratch::new("run-record", "reserve");
+        let dir = scratch.path();
+        let mut reserve = SpaceReserve::hold(dir, 4096).unwrap_or_else(|e| panic!("{e}"));
         let file = dir.join(SpaceReserve::FILE);
         assert_eq!(std::fs::metadata(&file).map(|m| m.len()).ok(), Some(4096));
         reserve.release();
         assert!(!file.exists());
         reserve.release();
         drop(reserve);
-        let _ = std::fs::remove_dir_all(&dir);
     }
 }

@@ -111,8 +111,8 @@ mod tests {
 
     #[test]
     fn the_summary_says_how_the_run_ended() {
-        let dir = std::env::temp_dir().join(format!("linetrack-summary-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap_or_else(|e| panic!("{e}"));
+        let scratch = linetrack_test_data::Scratch::new("run-record", "summary");
+        let dir = scratch.path();
         let summary = Summary {
             end: RunEnd::Failed,
             reason: Some("matcher died 2 times (restart limit 1): giving up".into()),
@@ -131,13 +131,12 @@ mod tests {
             Summary::read(&path).unwrap_or_else(|e| panic!("{e}")),
             summary
         );
-        let _ = std::fs::remove_dir_all(&dir);
     }
 
     #[test]
     fn records_round_trip_through_csv_and_add_up() {
-        let dir = std::env::temp_dir().join(format!("linetrack-run-record-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap_or_else(|e| panic!("{e}"));
+        let scratch = linetrack_test_data::Scratch::new("run-record", "records");
+        let dir = scratch.path();
         let mut late = frame(2, "dropped-late", f64::NAN);
         late.dropped_by = "matcher".into();
         late.deadline_miss = true;
@@ -160,7 +159,7 @@ mod tests {
         }];
         {
             // Appended as frames complete: the missing frame 3 comes in before frame 2.
-            let mut writer = RecordWriter::create(&dir).unwrap_or_else(|e| panic!("{e}"));
+            let mut writer = RecordWriter::create(dir).unwrap_or_else(|e| panic!("{e}"));
             for f in [&frames[0], &frames[1], &frames[3], &frames[4], &frames[2]] {
                 writer.frame(f).unwrap_or_else(|e| panic!("{e}"));
             }
@@ -236,16 +235,15 @@ mod tests {
             .map(|e| e.to_string())
             .unwrap_or_default();
         assert!(err.contains("bad.csv:1: expected the header"), "{err}");
-        let _ = std::fs::remove_dir_all(&dir);
     }
 
     #[test]
     fn a_cut_record_file_is_read_up_to_its_last_whole_row_and_says_what_is_missing() {
-        let dir = std::env::temp_dir().join(format!("linetrack-run-cut-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap_or_else(|e| panic!("{e}"));
+        let scratch = linetrack_test_data::Scratch::new("run-record", "cut");
+        let dir = scratch.path();
         let path = dir.join("frames.csv");
         {
-            let mut writer = RecordWriter::create(&dir).unwrap_or_else(|e| panic!("{e}"));
+            let mut writer = RecordWriter::create(dir).unwrap_or_else(|e| panic!("{e}"));
             for id in [0, 1, 2, 4] {
                 writer
                     .frame(&frame(id, "pose", 40.0))
@@ -305,15 +303,13 @@ mod tests {
             vec![std::ops::Range { start: 3, end: 4 }]
         );
         assert_eq!(unrecorded(&frames, 3), []);
-        let _ = std::fs::remove_dir_all(&dir);
     }
 
     #[test]
     fn a_run_with_ground_truth_is_scored_under_the_metric_names_of_linetrack_vo() {
         use nalgebra::{Isometry3, Translation3};
-        let dir =
-            std::env::temp_dir().join(format!("linetrack-run-metrics-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap_or_else(|e| panic!("{e}"));
+        let scratch = linetrack_test_data::Scratch::new("run-record", "metrics");
+        let dir = scratch.path();
         // Ground truth moves 10 cm a frame along x, every 50 ms from a Unix-epoch stamp;
         // the run's poses 11 cm a frame, and frame 2 never got a pose.
         let start_ns = 1_403_715_273_262_142_976u64;
@@ -328,7 +324,7 @@ mod tests {
             })
             .collect();
         {
-            let mut writer = RecordWriter::create(&dir).unwrap_or_else(|e| panic!("{e}"));
+            let mut writer = RecordWriter::create(dir).unwrap_or_else(|e| panic!("{e}"));
             for k in (0..20u64).filter(|&k| k != 2) {
                 writer
                     .pose(
@@ -387,6 +383,5 @@ mod tests {
             .map(|e| e.to_string())
             .unwrap_or_default();
         assert!(err.contains("poses.tum:1"), "{err}");
-        let _ = std::fs::remove_dir_all(&dir);
     }
 }

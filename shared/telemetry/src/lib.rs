@@ -441,9 +441,9 @@ mod tests {
 
     #[test]
     fn spans_are_recorded_with_their_frame_and_merged_into_a_chrome_trace() {
-        let dir = std::env::temp_dir().join(format!("linetrack-telemetry-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
-        let path = span_file(&dir, "matcher", std::process::id());
+        let scratch = linetrack_test_data::Scratch::new("telemetry", "spans");
+        let dir = scratch.path();
+        let path = span_file(dir, "matcher", std::process::id());
         let recorder = SpanRecorder::create(&path, "matcher").unwrap_or_else(|e| panic!("{e}"));
         let guard = recorder.flush_guard();
         let subscriber = tracing_subscriber::registry().with(recorder);
@@ -461,7 +461,7 @@ mod tests {
             .open(&path)
             .and_then(|mut f| f.write_all(b"{\"name\":\"tru"))
             .unwrap_or_else(|e| panic!("{e}"));
-        let (events, skipped) = read_spans(&dir).unwrap_or_else(|e| panic!("{e}"));
+        let (events, skipped) = read_spans(dir).unwrap_or_else(|e| panic!("{e}"));
         assert_eq!(skipped, 1);
         assert_eq!(events.len(), 2);
         let describe = events
@@ -481,7 +481,7 @@ mod tests {
             .unwrap_or_else(|| panic!("no match span"));
         assert!(outer.ts_us <= describe.ts_us && outer.dur_us >= describe.dur_us);
         assert_eq!(outer.frame_depth, 0, "the frame's span in this process");
-        assert_eq!(merge_traces(&dir).unwrap_or_else(|e| panic!("{e}")), 2);
+        assert_eq!(merge_traces(dir).unwrap_or_else(|e| panic!("{e}")), 2);
         let trace: serde_json::Value = serde_json::from_str(
             &std::fs::read_to_string(dir.join("trace.json")).unwrap_or_default(),
         )
@@ -497,7 +497,6 @@ mod tests {
                 .iter()
                 .any(|e| e["ph"] == "X" && e["name"] == "describe" && e["args"]["frame_id"] == 17)
         );
-        let _ = std::fs::remove_dir_all(&dir);
     }
 
     fn span_file_lines(path: &Path) -> usize {
@@ -509,10 +508,10 @@ mod tests {
 
     #[test]
     fn spans_are_buffered_until_due_and_flushed_by_the_guard() {
-        let dir = std::env::temp_dir().join(format!("linetrack-flush-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
+        let scratch = linetrack_test_data::Scratch::new("telemetry", "flush");
+        let dir = scratch.path();
         for (every, written_at_once) in [(Duration::MAX, 0), (Duration::ZERO, 1)] {
-            let path = span_file(&dir, "detector", every.as_secs() as u32);
+            let path = span_file(dir, "detector", every.as_secs() as u32);
             let recorder = SpanRecorder::create(&path, "detector")
                 .unwrap_or_else(|e| panic!("{e}"))
                 .with_flush_every(every);
@@ -533,7 +532,6 @@ mod tests {
                 assert_eq!(span_file_lines(&path), 2, "flushed when the guard drops");
             });
         }
-        let _ = std::fs::remove_dir_all(&dir);
     }
 
     fn span(process: &str, pid: u32, name: &str, ts_us: u64, dur_us: u64) -> SpanEvent {
@@ -565,8 +563,8 @@ mod tests {
 
     #[test]
     fn a_frame_is_one_flow_through_the_processes_on_tracks_named_by_stage() {
-        let dir = std::env::temp_dir().join(format!("linetrack-flow-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
+        let scratch = linetrack_test_data::Scratch::new("telemetry", "flow");
+        let dir = scratch.path();
         let mut describe = span("matcher", 300, "describe", 2_100, 50);
         describe.frame_depth = 1;
         let mut other_frame = span("frame-source", 100, "publish_frame", 3_000, 10);
@@ -594,7 +592,7 @@ mod tests {
             ),
         ];
         for (process, pid, events) in &files {
-            let path = span_file(&dir, process, *pid);
+            let path = span_file(dir, process, *pid);
             let _ = std::fs::create_dir_all(dir.join("spans"));
             let lines: Vec<String> = events
                 .iter()
@@ -602,7 +600,7 @@ mod tests {
                 .collect();
             std::fs::write(&path, lines.join("\n")).unwrap_or_else(|e| panic!("{e}"));
         }
-        assert_eq!(merge_traces(&dir).unwrap_or_else(|e| panic!("{e}")), 6);
+        assert_eq!(merge_traces(dir).unwrap_or_else(|e| panic!("{e}")), 6);
         let trace: serde_json::Value = serde_json::from_str(
             &std::fs::read_to_string(dir.join("trace.json")).unwrap_or_default(),
         )
@@ -671,6 +669,5 @@ mod tests {
         within(flows[2], 2_000, 400);
         assert_eq!(flows[1]["bp"], "e");
         assert_eq!(flows[2]["bp"], "e");
-        let _ = std::fs::remove_dir_all(&dir);
     }
 }

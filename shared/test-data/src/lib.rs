@@ -7,6 +7,8 @@
 //! says so, on machines without the folder. The Middlebury pairs and the KITTI raw drive
 //! are found the same way ([`middlebury_dir`], [`kitti_raw_dir`]). [`CountingAllocator`]
 //! counts heap allocations for the tests that check a hot path allocates nothing.
+//! [`Scratch`] is a test's folder under the system temp folder, named for the test and
+//! removed when the test ends.
 #![warn(missing_docs)]
 
 use std::path::{Path, PathBuf};
@@ -190,20 +192,118 @@ pub fn shift_left(pixels: &[u8], width: usize, shift: usize) -> Vec<u8> {
     out
 }
 
-/// A per-process path under the system temp folder for a test's files,
-/// `linetrack-<owner>-<pid>-<name>`, with anything left there by an earlier run removed.
-/// Nothing is created: the code under test may want to create it itself.
-pub fn scratch_path(owner: &str, name: &str) -> PathBuf {
-    let path =
-        std::env::temp_dir().join(format!("linetrack-{owner}-{}-{name}", std::process::id()));
-    // An earlier run's leftovers: a folder, or a file where a test put one.
-    let _ = std::fs::remove_dir_all(&path).or_else(|_| std::fs::remove_file(&path));
-    path
+/// A test's scratch folder under the system temp folder, removed with everything in it
+/// when the guard is dropped (a passing test or a panicking one alike: the panic unwinds
+/// through the drop).
+///
+/// Its name is `linetrack-<owner>-<name>-<random>`, so a folder left behind (a test
+/// killed, or one that [`Scratch::keep`]s it) still says whose it is. Where the code under
+/// test must create a path itself, give it one inside: `scratch.join("out")`. Where the
+/// test starts processes that write into the folder, keep the guard until they are joined.
+#[derive(Debug)]
+pub struct Scratch {
+    dir: tempfile::TempDir,
 }
 
-/// [`scratch_path`], created as an empty folder.
-pub fn scratch_dir(owner: &str, name: &str) -> std::io::Result<PathBuf> {
-    let path = scratch_path(owner, name);
-    std::fs::create_dir_all(&path)?;
-    Ok(path)
+impl Scratch {
+    /// An empty new folder for `owner`'s (the crate's) test `name`.
+    ///
+    /// # Panics
+    /// When the folder cannot be created, naming the temp folder and the reason: a test
+    /// cannot go on without it.
+    #[track_caller]
+    pub fn new(owner: &str, name: &str) -> Self {
+        let prefix = format!("linetrack-{owner}-{name}-");
+        match tempfile::Builder::new().prefix(&prefix).tempdir() {
+            Ok(dir) => Self { dir },
+            Err(e) => panic!(
+                "creating a scratch folder {prefix}* in {}: {e}",
+                std::env::temp_dir().display()
+            ),
+        }
+    }
+
+    /// The folder.
+    pub fn path(&self) -> &Path {
+        self.dir.path()
+    }
+
+    /// `relative` inside the folder (not created).
+    pub fn join(&self, relative: impl AsRef<Path>) -> PathBuf {
+        self.dir.path().join(relative)
+    }
+
+    /// Keeps the folder past the guard (for looking at after a test), returning its path.
+    pub fn keep(self) -> PathBuf {
+        self.dir.keep()
+    }
+}
+
+impl AsRef<Path> for Scratch {
+    fn as_ref(&self) -> &Path {
+        self.path()
+    }
+}
+
+/// For `Command::arg` and `env`, as a `PathBuf`.
+impl AsRef<std::ffi::OsStr> for Scratch {
+    fn as_ref(&self) -> &std::ffi::OsStr {
+        self.path().as_os_str()
+    }
+}
+
+/// The folder's path, as a `PathBuf` gives its own: `&scratch` goes where a `&Path` does.
+impl std::ops::Deref for Scratch {
+    type Target = Path;
+
+    fn deref(&self) -> &Path {
+        self.path()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::Scratch;
+
+    #[test]
+    fn a_scratch_folder_is_named_for_its_test_and_removed_on_drop() {
+        let scratch = Scratch::new("test-data", "drop");
+        let path = scratch.path().to_path_buf();
+        let name = path.file_name().and_then(|n| n.to_str()).unwrap_or("");
+        assert!(name.starts_with("linetrack-test-data-drop-"), "{name}");
+        assert!(path.is_dir());
+        std::fs::create_dir_all(scratch.join("a/b")).unwrap();
+        std::fs::write(scratch.join("a/b/c.txt"), "x").unwrap();
+        drop(scratch);
+        assert!(!path.exists(), "{} is still there", path.display());
+    }
+
+    #[test]
+    fn two_guards_of_one_name_get_two_folders() {
+        let (a, b) = (
+            Scratch::new("test-data", "twice"),
+            Scratch::new("test-data", "twice"),
+        );
+        assert_ne!(a.path(), b.path());
+        assert!(!a.join("out").exists(), "join only names a path");
+    }
+
+    #[test]
+    fn a_panicking_test_still_removes_its_folder() {
+        let scratch = Scratch::new("test-data", "panic");
+        let path = scratch.path().to_path_buf();
+        let unwound = std::panic::catch_unwind(move || {
+            let _scratch = scratch;
+            panic!("the test failed");
+        });
+        assert!(unwound.is_err());
+        assert!(!path.exists(), "{} is still there", path.display());
+    }
+
+    #[test]
+    fn a_kept_folder_outlives_its_guard() {
+        let kept = Scratch::new("test-data", "keep").keep();
+        assert!(kept.is_dir());
+        std::fs::remove_dir(&kept).unwrap();
+    }
 }

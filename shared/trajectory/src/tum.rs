@@ -114,8 +114,7 @@ mod tests {
 
     #[test]
     fn tum_round_trip_and_malformed_lines() {
-        let dir = std::env::temp_dir().join(format!("linetrack-tum-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
+        let dir = linetrack_test_data::Scratch::new("trajectory", "tum");
         let path = dir.join("trajectory.txt");
         let poses = [
             StampedPose {
@@ -155,6 +154,5 @@ mod tests {
             read(&dir.join("absent.txt")),
             Err(TrajectoryError::Io { .. })
         ));
-        let _ = std::fs::remove_dir_all(dir);
     }
 }

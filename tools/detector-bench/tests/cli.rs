@@ -5,6 +5,7 @@
 #![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failure here is a test failure
 
 use linetrack_scene_render::Preset;
+use linetrack_test_data::Scratch;
 use std::process::{Command, Output};
 
 fn bench(args: &[&str]) -> Output {
@@ -16,7 +17,7 @@ fn bench(args: &[&str]) -> Output {
 
 #[test]
 fn every_detector_is_scored_on_a_generated_sequence() {
-    let out = linetrack_test_data::scratch_path("detector-bench", "normal");
+    let out = Scratch::new("detector-bench", "normal");
     linetrack_synth::generate(Preset::Normal, 0, 2, &out, true).unwrap();
     let result = bench(&[out.to_str().unwrap()]);
     let stdout = String::from_utf8_lossy(&result.stdout);
@@ -37,14 +38,12 @@ fn every_detector_is_scored_on_a_generated_sequence() {
         assert!((0.4..=1.0).contains(&repeatability), "{row}");
         assert!((0.5..=1.0).contains(&frame_to_frame), "{row}");
     }
-    let _ = std::fs::remove_dir_all(&out);
 }
 
 #[test]
 fn a_folder_without_a_sequence_is_refused() {
-    let out = linetrack_test_data::scratch_dir("detector-bench", "empty").unwrap();
+    let out = Scratch::new("detector-bench", "empty");
     let result = bench(&[out.to_str().unwrap()]);
     assert!(!result.status.success());
     assert!(String::from_utf8_lossy(&result.stderr).contains("Error"));
-    let _ = std::fs::remove_dir_all(&out);
 }

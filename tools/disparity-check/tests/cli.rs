@@ -3,6 +3,7 @@
 
 #![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failure here is a test failure
 
+use linetrack_test_data::Scratch;
 use std::process::{Command, Output};
 
 fn check(args: &[&str]) -> Output {
@@ -14,7 +15,7 @@ fn check(args: &[&str]) -> Output {
 
 #[test]
 fn real_data_correct_point_disparities_are_unbiased_on_the_2001_2003_scenes() {
-    let out = linetrack_test_data::scratch_path("disparity-check", "three-scenes");
+    let out = Scratch::new("disparity-check", "three-scenes");
     let result = check(&[
         "--pair",
         "Tsukuba",
@@ -66,12 +67,11 @@ fn real_data_correct_point_disparities_are_unbiased_on_the_2001_2003_scenes() {
         first["sample"]["true_px"].as_f64().unwrap(),
     );
     assert!((first["error_px"].as_f64().unwrap() - (measured - truth)).abs() < 1e-9);
-    let _ = std::fs::remove_dir_all(&out);
 }
 
 #[test]
 fn an_unknown_scene_and_bad_limits_are_refused_by_name() {
-    let data = linetrack_test_data::scratch_dir("disparity-check", "empty").unwrap();
+    let data = Scratch::new("disparity-check", "empty");
     let result = check(&["--data", data.to_str().unwrap(), "--quiet"]);
     assert!(!result.status.success());
     let stderr = String::from_utf8_lossy(&result.stderr);
@@ -91,12 +91,11 @@ fn an_unknown_scene_and_bad_limits_are_refused_by_name() {
     assert!(!result.status.success());
     let stderr = String::from_utf8_lossy(&result.stderr);
     assert!(stderr.contains("--frames 0"), "{stderr}");
-    let _ = std::fs::remove_dir_all(&data);
 }
 
 #[test]
 fn generated_highway_point_disparities_are_unbiased_against_the_exact_depth() {
-    let out = linetrack_test_data::scratch_path("disparity-check", "highway");
+    let out = Scratch::new("disparity-check", "highway");
     let result = check(&[
         "--generated",
         "highway",
@@ -134,5 +133,4 @@ fn generated_highway_point_disparities_are_unbiased_against_the_exact_depth() {
     );
     let bias = far["correct"]["mean_px"].as_f64().unwrap();
     assert!(bias.abs() <= 0.03, "a bias of {bias} px: {far}");
-    let _ = std::fs::remove_dir_all(&out);
 }

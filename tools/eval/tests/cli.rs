@@ -12,6 +12,7 @@
 
 #![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failure here is a test failure
 
+use linetrack_test_data::Scratch;
 use std::path::Path;
 use std::process::Command;
 
@@ -152,7 +153,7 @@ fn overall_step_ratio(cell: &str) -> f64 {
 
 #[test]
 fn quick_report_has_every_table_row_and_plot() {
-    let dir = linetrack_test_data::scratch_path("eval", "quick");
+    let dir = Scratch::new("eval", "quick");
     let report = run_report(&dir, &["--no-euroc", "--no-kitti-raw", "--seeds", "2"]);
     for heading in [
         "## Table I",
@@ -208,7 +209,6 @@ fn quick_report_has_every_table_row_and_plot() {
         6,
         "Table III rows"
     );
-    let _ = std::fs::remove_dir_all(dir);
 }
 
 /// The real sequences only: the generated presets and the Middlebury section are
@@ -216,7 +216,7 @@ fn quick_report_has_every_table_row_and_plot() {
 #[test]
 fn real_data_quick_report_includes_the_euroc_excerpt() {
     let euroc = linetrack_test_data::euroc_dir().unwrap_or_else(|e| panic!("{e}"));
-    let dir = linetrack_test_data::scratch_path("eval", "euroc");
+    let dir = Scratch::new("eval", "euroc");
     let report = run_report(
         &dir,
         &[
@@ -270,5 +270,4 @@ fn real_data_quick_report_includes_the_euroc_excerpt() {
             "zero-motion baseline of {name}"
         );
     }
-    let _ = std::fs::remove_dir_all(dir);
 }

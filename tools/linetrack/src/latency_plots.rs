@@ -362,17 +362,16 @@ mod tests {
 
     #[test]
     fn pictures_are_written_for_an_empty_run_and_a_single_frame() {
-        let dir = std::env::temp_dir().join(format!("linetrack-latency-{}", std::process::id()));
-        let _ = std::fs::create_dir_all(&dir);
+        let scratch = linetrack_test_data::Scratch::new("linetrack", "latency-plots");
+        let dir = scratch.path();
         for frames in [
             vec![],
             vec![frame(0, "pose", [0.0, 30.0, 20.0, 9.0], false)],
         ] {
-            let written = write(&dir, &frames, &[], None).unwrap_or_else(|e| panic!("{e}"));
+            let written = write(dir, &frames, &[], None).unwrap_or_else(|e| panic!("{e}"));
             for path in written {
                 assert!(image::open(&path).is_ok(), "{} unreadable", path.display());
             }
         }
-        let _ = std::fs::remove_dir_all(&dir);
     }
 }

@@ -2,6 +2,7 @@
 //! and writes, and how it fails on bad input.
 
 #![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failure here is a test failure
+use linetrack_test_data::Scratch;
 use std::process::{Command, Output};
 
 fn demo(args: &[&str]) -> Output {
@@ -17,7 +18,7 @@ fn workspace_file(relative: &str) -> String {
 
 #[test]
 fn default_run_prints_both_cases_and_writes_pictures_and_json() {
-    let out = linetrack_test_data::scratch_path("match-demo", "default");
+    let out = Scratch::new("match-demo", "default");
     let result = demo(&["--no-images", "--output", out.to_str().unwrap()]);
     let stdout = String::from_utf8_lossy(&result.stdout);
     assert!(
@@ -58,12 +59,11 @@ fn default_run_prints_both_cases_and_writes_pictures_and_json() {
             matches.len()
         );
     }
-    let _ = std::fs::remove_dir_all(out);
 }
 
 #[test]
 fn list_prints_one_line_per_match_and_the_paper_config_loads() {
-    let out = linetrack_test_data::scratch_path("match-demo", "list");
+    let out = Scratch::new("match-demo", "list");
     let config = workspace_file("configs/l1-matcher-paper.toml");
     let result = demo(&[
         "--no-images",
@@ -96,24 +96,21 @@ fn list_prints_one_line_per_match_and_the_paper_config_loads() {
     assert_eq!(listed, printed);
     assert!(stdout.contains("l1-matcher-paper.toml"));
     assert!(!out.join("frame-to-frame.png").exists());
-    let _ = std::fs::remove_dir_all(out);
 }
 
 #[test]
 fn missing_and_malformed_configs_fail_naming_the_culprit() {
+    let missing_out = Scratch::new("match-demo", "missing");
     let missing = demo(&[
         "--config",
         "/nonexistent/matcher.toml",
         "--output",
-        linetrack_test_data::scratch_path("match-demo", "missing")
-            .to_str()
-            .unwrap(),
+        missing_out.join("out").to_str().unwrap(),
     ]);
     assert!(!missing.status.success());
     assert!(String::from_utf8_lossy(&missing.stderr).contains("/nonexistent/matcher.toml"));
 
-    let dir = linetrack_test_data::scratch_path("match-demo", "malformed");
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = Scratch::new("match-demo", "malformed");
     let bad = dir.join("bad.toml");
     std::fs::write(&bad, "lambda = 0.1\n[gates]\nmax_angle_deg = 120\n").unwrap();
     let result = demo(&[
@@ -125,7 +122,6 @@ fn missing_and_malformed_configs_fail_naming_the_culprit() {
     assert!(!result.status.success());
     let stderr = String::from_utf8_lossy(&result.stderr);
     assert!(stderr.contains("gates.max_angle_deg"), "{stderr}");
-    let _ = std::fs::remove_dir_all(dir);
 }
 
 /// The count of matches on the image-part line of `case` and `pair` (e.g. "lsd+l1").
@@ -150,7 +146,7 @@ fn image_matches(stdout: &str, case: &str, pair: &str) -> usize {
 
 #[test]
 fn image_part_runs_lbd_and_l1_on_a_generated_sequence() {
-    let dir = linetrack_test_data::scratch_path("match-demo", "images");
+    let dir = Scratch::new("match-demo", "images");
     let sequence = dir.join("sequence");
     linetrack_synth::generate(
         linetrack_scene_render::Preset::Normal,
@@ -204,13 +200,12 @@ fn image_part_runs_lbd_and_l1_on_a_generated_sequence() {
         !last.status.success()
             && String::from_utf8_lossy(&last.stderr).contains("the sequence has 3 frames")
     );
-    let _ = std::fs::remove_dir_all(dir);
 }
 
 #[test]
 fn real_data_image_part_on_the_euroc_excerpt() {
     let euroc = linetrack_test_data::euroc_dir().unwrap_or_else(|e| panic!("{e}"));
-    let out = linetrack_test_data::scratch_path("match-demo", "euroc");
+    let out = Scratch::new("match-demo", "euroc");
     let result = demo(&[
         "--dataset",
         euroc.to_str().unwrap(),
@@ -232,13 +227,11 @@ fn real_data_image_part_on_the_euroc_excerpt() {
             && image_matches(&stdout, "frame-to-frame", "fld+l1") >= 50,
         "{stdout}"
     );
-    let _ = std::fs::remove_dir_all(out);
 }
 
 #[test]
 fn a_folder_that_is_not_a_dataset_is_named() {
-    let dir = linetrack_test_data::scratch_path("match-demo", "not-a-dataset");
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = Scratch::new("match-demo", "not-a-dataset");
     let result = demo(&[
         "--dataset",
         dir.to_str().unwrap(),
@@ -251,7 +244,6 @@ fn a_folder_that_is_not_a_dataset_is_named() {
         stderr.contains(dir.to_str().unwrap()) && stderr.contains("not a dataset folder"),
         "{stderr}"
     );
-    let _ = std::fs::remove_dir_all(dir);
 }
 
 #[test]

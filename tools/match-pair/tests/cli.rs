@@ -3,6 +3,7 @@
 
 #![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failure here is a test failure
 
+use linetrack_test_data::Scratch;
 use std::path::Path;
 use std::process::{Command, Output};
 
@@ -60,7 +61,7 @@ fn count_before(summary: &str, word: &str) -> usize {
 
 #[test]
 fn generated_pair_gives_picture_json_csv_and_summary_with_the_true_disparity() {
-    let dir = linetrack_test_data::scratch_dir("match-pair", "generated").unwrap();
+    let dir = Scratch::new("match-pair", "generated");
     let (left, right) = card_pair(&dir, 10);
     let out = dir.join("out");
     for (detector, matcher) in [("lsd", "lbd"), ("fld", "l1")] {
@@ -117,14 +118,13 @@ fn generated_pair_gives_picture_json_csv_and_summary_with_the_true_disparity() {
         let picture = image::open(out.join("matches.png")).unwrap();
         assert_eq!((picture.width(), picture.height()), (2 * 752 + 8, 480));
     }
-    let _ = std::fs::remove_dir_all(dir);
 }
 
 #[test]
 fn real_data_euroc_pairs_with_and_without_perturbation() {
     let (left, right) = linetrack_test_data::euroc_stereo_pair(0).unwrap_or_else(|e| panic!("{e}"));
     let (next, _) = linetrack_test_data::euroc_stereo_pair(1).unwrap_or_else(|e| panic!("{e}"));
-    let dir = linetrack_test_data::scratch_dir("match-pair", "euroc").unwrap();
+    let dir = Scratch::new("match-pair", "euroc");
     let out = dir.to_str().unwrap();
     let stereo = stdout(&run(&[
         left.to_str().unwrap(),
@@ -155,12 +155,11 @@ fn real_data_euroc_pairs_with_and_without_perturbation() {
         "{f2f}"
     );
     assert!(count_before(&f2f, "matches") >= 10, "{f2f}");
-    let _ = std::fs::remove_dir_all(dir);
 }
 
 #[test]
 fn bad_inputs_fail_naming_the_culprit() {
-    let dir = linetrack_test_data::scratch_dir("match-pair", "bad").unwrap();
+    let dir = Scratch::new("match-pair", "bad");
     let (good, _) = card_pair(&dir, 4);
     let out = dir.join("out").display().to_string();
 
@@ -221,7 +220,6 @@ fn bad_inputs_fail_naming_the_culprit() {
         text.contains("bad.toml") && text.contains("max_segmnets"),
         "{text}"
     );
-    let _ = std::fs::remove_dir_all(dir);
 }
 
 #[test]

@@ -3,6 +3,7 @@
 
 #![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failure here is a test failure
 
+use linetrack_test_data::Scratch;
 use std::process::{Command, Output};
 
 fn bench(args: &[&str]) -> Output {
@@ -14,7 +15,7 @@ fn bench(args: &[&str]) -> Output {
 
 #[test]
 fn real_data_two_pairs_give_tables_csv_plot_and_goals() {
-    let out = linetrack_test_data::scratch_path("stereo-bench", "two-pairs");
+    let out = Scratch::new("stereo-bench", "two-pairs");
     let result = bench(&[
         "--pair",
         "Cones",

@@ -7,6 +7,7 @@
 use linetrack_datasets::StereoSequence;
 use linetrack_datasets::depth::read_depth_png;
 use linetrack_scene_render::{Preset, SequenceRenderer};
+use linetrack_test_data::Scratch;
 use std::process::{Command, Output};
 
 fn synth(args: &[&str]) -> Output {
@@ -18,7 +19,7 @@ fn synth(args: &[&str]) -> Output {
 
 #[test]
 fn a_generated_sequence_loads_back_with_its_exact_ground_truth() {
-    let out = linetrack_test_data::scratch_path("synth", "mismatch");
+    let out = Scratch::new("synth", "mismatch");
     let result = synth(&[
         "--preset",
         "left-right-mismatch",
@@ -90,7 +91,7 @@ fn a_generated_sequence_loads_back_with_its_exact_ground_truth() {
     assert_eq!(sheet.width(), 3 * 376 + 2 * 4);
 
     // The same seed again, quiet: the same bytes, and nothing on stderr.
-    let again = linetrack_test_data::scratch_path("synth", "mismatch-again");
+    let again = Scratch::new("synth", "mismatch-again");
     let quiet = synth(&[
         "--preset",
         "left-right-mismatch",
@@ -113,9 +114,6 @@ fn a_generated_sequence_loads_back_with_its_exact_ground_truth() {
         std::fs::read(out.join(&name)).unwrap(),
         std::fs::read(again.join(&name)).unwrap()
     );
-    for dir in [out, again] {
-        let _ = std::fs::remove_dir_all(dir);
-    }
 }
 
 #[test]
@@ -123,19 +121,18 @@ fn bad_options_fail_with_a_clear_message() {
     let unknown = synth(&["--preset", "disco"]);
     assert!(!unknown.status.success());
     assert!(String::from_utf8_lossy(&unknown.stderr).contains("expected one of normal"));
+    let zero = Scratch::new("synth", "zero");
     let none = synth(&[
         "--frames",
         "0",
         "--output",
-        linetrack_test_data::scratch_path("synth", "zero")
-            .to_str()
-            .unwrap(),
+        zero.join("out").to_str().unwrap(),
     ]);
     assert!(!none.status.success() && String::from_utf8_lossy(&none.stderr).contains("--frames"));
-    let blocked = linetrack_test_data::scratch_path("synth", "blocked");
+    let dir = Scratch::new("synth", "blocked");
+    let blocked = dir.join("output");
     std::fs::write(&blocked, b"a file where the folder should go").unwrap();
     let result = synth(&["--frames", "1", "--output", blocked.to_str().unwrap()]);
     assert!(!result.status.success());
     assert!(String::from_utf8_lossy(&result.stderr).contains(blocked.to_str().unwrap()));
-    let _ = std::fs::remove_file(blocked);
 }

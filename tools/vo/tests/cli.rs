@@ -3,8 +3,8 @@
 
 #![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failure here is a test failure
 
+use linetrack_test_data::Scratch;
 use linetrack_trajectory::tum;
-use std::path::PathBuf;
 use std::process::{Command, Output};
 
 fn vo(args: &[&str]) -> Output {
@@ -16,7 +16,7 @@ fn vo(args: &[&str]) -> Output {
 
 #[test]
 fn a_generated_sequence_gives_trajectory_ground_truth_stats_and_metrics() {
-    let dir = linetrack_test_data::scratch_path("vo", "generated");
+    let dir = Scratch::new("vo", "generated");
     let sequence = dir.join("sequence");
     linetrack_synth::generate(
         linetrack_scene_render::Preset::HandheldGainJumps,
@@ -97,7 +97,6 @@ fn a_generated_sequence_gives_trajectory_ground_truth_stats_and_metrics() {
     assert!((statistic("overall") - 1.0).abs() < 0.05, "{ratio}");
     assert!(statistic("p10") <= statistic("median") && statistic("median") <= statistic("p90"));
     assert!(stdout.contains(", step ratio "), "{stdout}");
-    let _ = std::fs::remove_dir_all(dir);
 }
 
 /// The real moving drive: 108 frames, 107 m. Measured (LSD, points and lines): LBD ATE
@@ -108,13 +107,12 @@ fn a_generated_sequence_gives_trajectory_ground_truth_stats_and_metrics() {
 fn real_data_kitti_raw_drive_drifts_under_one_percent() {
     let drive = linetrack_test_data::kitti_raw_dir().unwrap_or_else(|e| panic!("{e}"));
     let drive = drive.to_str().unwrap();
-    let runs: Vec<(&str, PathBuf, Output)> = std::thread::scope(|scope| {
+    let runs: Vec<(&str, Scratch, Output)> = std::thread::scope(|scope| {
         let started: Vec<_> = ["lbd", "l1"]
             .into_iter()
             .map(|matcher| {
                 scope.spawn(move || {
-                    let out =
-                        linetrack_test_data::scratch_path("vo", &format!("kitti-raw-{matcher}"));
+                    let out = Scratch::new("vo", &format!("kitti-raw-{matcher}"));
                     let result = vo(&[
                         drive,
                         "--matcher",
@@ -169,7 +167,6 @@ fn real_data_kitti_raw_drive_drifts_under_one_percent() {
             "{matcher}: {ratio}"
         );
         assert!(String::from_utf8_lossy(&result.stdout).contains("step ratio "));
-        let _ = std::fs::remove_dir_all(out);
     }
 }
 
@@ -180,8 +177,7 @@ fn real_data_kitti_raw_drive_drifts_under_one_percent() {
 #[test]
 fn re_matching_the_first_frame_where_its_motion_puts_it_finds_the_full_first_step() {
     let drive = linetrack_test_data::kitti_raw_dir().unwrap_or_else(|e| panic!("{e}"));
-    let dir = linetrack_test_data::scratch_path("vo", "kitti-raw-rematch");
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = Scratch::new("vo", "kitti-raw-rematch");
     let first_step = |rematch_passes: usize| {
         let config = dir.join(format!("rematch-{rematch_passes}.toml"));
         std::fs::write(&config, format!("rematch_passes = {rematch_passes}\n")).unwrap();
@@ -214,13 +210,11 @@ fn re_matching_the_first_frame_where_its_motion_puts_it_finds_the_full_first_ste
         (again - 1.0).abs() < 0.05,
         "matched again: first step {again} of the truth"
     );
-    let _ = std::fs::remove_dir_all(dir);
 }
 
 #[test]
 fn a_malformed_config_fails_naming_the_file_and_field() {
-    let dir = linetrack_test_data::scratch_path("vo", "bad-config");
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = Scratch::new("vo", "bad-config");
     for (name, text, culprit) in [
         (
             "typo.toml",
@@ -265,13 +259,12 @@ fn a_malformed_config_fails_naming_the_file_and_field() {
             "{stderr}"
         );
     }
-    let _ = std::fs::remove_dir_all(dir);
 }
 
 #[test]
 fn real_data_euroc_excerpt_is_tracked_without_losing_a_frame() {
     let euroc = linetrack_test_data::euroc_dir().unwrap_or_else(|e| panic!("{e}"));
-    let out = linetrack_test_data::scratch_path("vo", "euroc");
+    let out = Scratch::new("vo", "euroc");
     let result = vo(&[euroc.to_str().unwrap(), "--output", out.to_str().unwrap()]);
     let stdout = String::from_utf8_lossy(&result.stdout);
     assert!(
@@ -296,13 +289,11 @@ fn real_data_euroc_excerpt_is_tracked_without_losing_a_frame() {
         .parse()
         .unwrap();
     assert!(ate < 0.01, "{stdout}");
-    let _ = std::fs::remove_dir_all(out);
 }
 
 #[test]
 fn a_folder_that_is_not_a_dataset_fails_naming_it() {
-    let dir = linetrack_test_data::scratch_path("vo", "nothing");
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = Scratch::new("vo", "nothing");
     let result = vo(&[
         dir.to_str().unwrap(),
         "--output",
@@ -310,5 +301,4 @@ fn a_folder_that_is_not_a_dataset_fails_naming_it() {
     ]);
     assert!(!result.status.success());
     assert!(String::from_utf8_lossy(&result.stderr).contains(dir.to_str().unwrap()));
-    let _ = std::fs::remove_dir_all(dir);
 }

@@ -208,8 +208,7 @@ mod tests {
 
     #[test]
     fn files_are_read_and_named_in_errors() {
-        let dir = std::env::temp_dir().join(format!("xtask-pose-diff-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
+        let dir = linetrack_test_data::Scratch::new("xtask", "pose-diff");
         let (ra, rb) = (dir.join("a.tum"), dir.join("b.tum"));
         tum::write(&ra, &[pose(0.0, 0.0, 0.0), pose(0.05, 0.1, 3.0)]).unwrap();
         tum::write(&rb, &[pose(0.0, 0.0, 0.0), pose(0.05, 0.1, 3.0)]).unwrap();
@@ -219,6 +218,5 @@ mod tests {
         let missing = dir.join("missing.tum");
         let error = format!("{:#}", compare_files(&ra, &missing).unwrap_err());
         assert!(error.contains("missing.tum"), "{error}");
-        std::fs::remove_dir_all(&dir).unwrap();
     }
 }

@@ -22,7 +22,6 @@ fn euroc_fixture_opens_with_its_calibration_and_ground_truth() {
         (frame.left.width(), frame.left.height()),
         (W as i32, H as i32)
     );
-    let _ = std::fs::remove_dir_all(dir);
 }
 
 #[test]
@@ -43,7 +42,6 @@ fn a_distorted_fixture_is_rectified_on_load() {
     assert!(
         frame.left.origin().contains("rectified") && frame.right.origin().contains("rectified")
     );
-    let _ = std::fs::remove_dir_all(dir);
 }
 
 #[test]
@@ -82,7 +80,6 @@ fn malformed_image_lists_name_file_and_line() {
             text.contains(place) && text.contains(what),
             "{name}: {text}"
         );
-        let _ = std::fs::remove_dir_all(dir);
     }
 }
 
@@ -125,9 +122,8 @@ fn malformed_calibration_and_ground_truth_are_refused() {
         write(&dir.join(file), &text);
         let message = open_error(&dir);
         assert!(message.contains(what), "{name}: {message}");
-        let _ = std::fs::remove_dir_all(dir);
     }
-    let missing = linetrack_test_data::scratch_dir("datasets", "not-a-dataset").unwrap();
+    let missing = Scratch::new("datasets", "not-a-dataset");
     assert!(open_error(&missing).contains("expected mav0/"));
 }
 
@@ -152,7 +148,6 @@ fn missing_and_corrupt_frames_are_skipped_counted_and_named() {
         "{third}"
     );
     assert_eq!(stream.skipped(), 2);
-    let _ = std::fs::remove_dir_all(dir);
 }
 
 #[test]
@@ -167,5 +162,4 @@ fn a_wrongly_sized_frame_is_skipped_naming_it() {
         "{error}"
     );
     assert!(seq.load_frame(0).is_ok() && seq.load_frame(2).is_ok());
-    let _ = std::fs::remove_dir_all(dir);
 }

@@ -2,8 +2,8 @@
 
 use super::*;
 
-fn kitti_fixture(name: &str) -> PathBuf {
-    let root = linetrack_test_data::scratch_dir("datasets", name).unwrap();
+fn kitti_fixture(name: &str) -> Scratch {
+    let root = Scratch::new("datasets", name);
     let dir = root.join("sequences/07");
     let p0 = "P0: 700 0 600 0 0 700 180 0 0 0 1 0\n";
     let p1 = "P1: 700 0 600 -378 0 700 180 0 0 0 1 0\n";
@@ -35,7 +35,6 @@ fn kitti_fixture_opens_with_rig_times_and_poses() {
     assert_eq!(seq.frames[1].timestamp_ns, 100_000_000);
     assert!((seq.frames[2].pose.unwrap().translation.z - 1.0).abs() < 1e-12);
     assert!((seq.rate_hz - 10.0).abs() < 1e-9);
-    let _ = std::fs::remove_dir_all(root);
 }
 
 #[test]
@@ -67,6 +66,5 @@ fn malformed_kitti_files_are_refused_naming_them() {
         write(&root.join(file), text);
         let message = open_error(&root.join("sequences/07"));
         assert!(message.contains(what), "{file}: {message}");
-        let _ = std::fs::remove_dir_all(root);
     }
 }

@@ -128,10 +128,10 @@ fn oxts_line(lon_deg: f64) -> String {
 
 /// A three-frame KITTI raw drive under `<scratch>/2011_09_26/`: identity rotations, the
 /// IMU at the camera, the car moving east (its x) by 1e-5° of longitude a frame.
-fn kitti_raw_fixture(name: &str) -> PathBuf {
-    let date = linetrack_test_data::scratch_dir("datasets", name)
-        .unwrap()
-        .join("2011_09_26");
+/// Returns the fixture's folder (removed when dropped) and the drive folder in it.
+fn kitti_raw_fixture(name: &str) -> (Scratch, PathBuf) {
+    let root = Scratch::new("datasets", name);
+    let date = root.join("2011_09_26");
     let identity = "1 0 0 0 1 0 0 0 1";
     write(
         &date.join("calib_cam_to_cam.txt"),
@@ -162,12 +162,12 @@ fn kitti_raw_fixture(name: &str) -> PathBuf {
             &oxts_line(8.0 + 1e-5 * k as f64),
         );
     }
-    drive
+    (root, drive)
 }
 
 #[test]
 fn kitti_raw_fixture_opens_with_rig_times_and_oxts_poses() {
-    let drive = kitti_raw_fixture("kitti-raw");
+    let (_fixture, drive) = kitti_raw_fixture("kitti-raw");
     let seq = StereoSequence::open(&drive).unwrap();
     assert_eq!(seq.name, RAW_DRIVE);
     assert_eq!(seq.frames.len(), 3);
@@ -192,7 +192,6 @@ fn kitti_raw_fixture_opens_with_rig_times_and_oxts_poses() {
     std::fs::remove_dir_all(drive.join("oxts")).unwrap();
     let seq = StereoSequence::open_kitti_raw(&drive).unwrap();
     assert!(seq.frames.iter().all(|f| f.pose.is_none()));
-    let _ = std::fs::remove_dir_all(drive.parent().unwrap().parent().unwrap());
 }
 
 #[test]
@@ -247,11 +246,10 @@ fn malformed_kitti_raw_files_are_refused_naming_them() {
         ),
     ];
     for (k, (file, text, what)) in cases.into_iter().enumerate() {
-        let drive = kitti_raw_fixture(&format!("kitti-raw-bad-{k}"));
+        let (_fixture, drive) = kitti_raw_fixture(&format!("kitti-raw-bad-{k}"));
         write(&drive.parent().unwrap().join(&file), &text);
         let message = open_error(&drive);
         assert!(message.contains(what), "{file}: {message}");
-        let _ = std::fs::remove_dir_all(drive.parent().unwrap().parent().unwrap());
     }
 
     // A frame's image or OXTS file gone: the counts disagree, naming the folder.
@@ -268,10 +266,9 @@ fn malformed_kitti_raw_files_are_refused_naming_them() {
     .into_iter()
     .enumerate()
     {
-        let drive = kitti_raw_fixture(&format!("kitti-raw-missing-{k}"));
+        let (_fixture, drive) = kitti_raw_fixture(&format!("kitti-raw-missing-{k}"));
         std::fs::remove_file(drive.join(file)).unwrap();
         let message = open_error(&drive);
         assert!(message.contains(what), "{file}: {message}");
-        let _ = std::fs::remove_dir_all(drive.parent().unwrap().parent().unwrap());
     }
 }

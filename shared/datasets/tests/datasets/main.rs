@@ -6,6 +6,7 @@
 
 use linetrack_datasets::{Next, StereoSequence};
 use linetrack_geometry::MatchCase;
+use linetrack_test_data::Scratch;
 use linetrack_vision::{
     AppearanceGates, GrayImage, OrbExtractor, OrbOptions, PointFeatures, PointMatcher,
 };
@@ -138,7 +139,9 @@ fn the_reading_threads_set_up_runs_on_it_first() {
 #[test]
 fn a_frame_the_reader_does_not_have_yet_is_not_waited_for_past_the_wait() {
     let (release, held) = crossbeam_channel::bounded::<()>(0);
-    let sequence = StereoSequence::open(&euroc_fixture("next-within")).unwrap();
+    // Bound here, not a temporary: the reading thread reads from it after `open`.
+    let fixture = euroc_fixture("next-within");
+    let sequence = StereoSequence::open(&fixture).unwrap();
     let mut stream = sequence.into_stream_with(0, 1, move || {
         let _ = held.recv();
     });
@@ -189,8 +192,8 @@ fn sensor_yaml(x_m: f64) -> String {
 }
 
 /// A three-frame EuRoC sequence: 10 cm baseline, identity ground truth moving along x.
-fn euroc_fixture(name: &str) -> PathBuf {
-    let dir = linetrack_test_data::scratch_dir("datasets", name).unwrap();
+fn euroc_fixture(name: &str) -> Scratch {
+    let dir = Scratch::new("datasets", name);
     let mav0 = dir.join("mav0");
     let stamps = [1_000_000_000u64, 1_050_000_000, 1_100_000_000];
     for (cam, x) in [("cam0", 0.0), ("cam1", 0.1)] {

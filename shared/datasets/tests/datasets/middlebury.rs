@@ -65,8 +65,8 @@ fn real_data_middlebury_lists_every_pair_with_its_disparity_scale() {
 }
 
 /// A third-size 2005/2006 scene folder with a disparity map `disp1.png` of `map_size`.
-fn middlebury_fixture(name: &str, map_size: (u32, u32)) -> PathBuf {
-    let dir = linetrack_test_data::scratch_dir("datasets", name).unwrap();
+fn middlebury_fixture(name: &str, map_size: (u32, u32)) -> Scratch {
+    let dir = Scratch::new("datasets", name);
     let scene = dir.join("Scene");
     let colour = image::RgbImage::from_fn(420, 30, |x, y| image::Rgb([x as u8, y as u8, 9]));
     std::fs::create_dir_all(&scene).unwrap();
@@ -112,7 +112,7 @@ fn malformed_middlebury_folders_are_refused_naming_the_file() {
         .to_string();
     assert!(error.contains("disp1.png"), "{error}");
 
-    let empty = linetrack_test_data::scratch_dir("datasets", "middlebury-empty").unwrap();
+    let empty = Scratch::new("datasets", "middlebury-empty");
     let error = linetrack_datasets::list_middlebury(&empty)
         .unwrap_err()
         .to_string();

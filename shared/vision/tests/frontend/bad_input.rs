@@ -2,6 +2,7 @@
 //! blank and tiny images survived, segments outside the image skipped.
 
 use super::*;
+use linetrack_test_data::Scratch;
 
 fn error_text(result: Result<GrayImage, VisionError>) -> String {
     result.expect_err("bad input must be refused").to_string()
@@ -9,14 +10,15 @@ fn error_text(result: Result<GrayImage, VisionError>) -> String {
 
 #[test]
 fn bad_image_files_are_refused_naming_the_file() {
-    let missing = linetrack_test_data::scratch_path("vision", "missing.png");
+    let dir = Scratch::new("vision", "bad-files");
+    let missing = dir.join("missing.png");
     let text = error_text(GrayImage::load(&missing));
     assert!(
         text.contains(missing.to_str().unwrap()) && text.contains("cannot read"),
         "{text}"
     );
 
-    let empty = linetrack_test_data::scratch_path("vision", "empty.png");
+    let empty = dir.join("empty.png");
     std::fs::write(&empty, b"").unwrap();
     let text = error_text(GrayImage::load(&empty));
     assert!(
@@ -24,7 +26,7 @@ fn bad_image_files_are_refused_naming_the_file() {
         "{text}"
     );
 
-    let corrupt = linetrack_test_data::scratch_path("vision", "corrupt.png");
+    let corrupt = dir.join("corrupt.png");
     std::fs::write(&corrupt, b"\x89PNG\r\n\x1a\nthis is not really a png").unwrap();
     let text = error_text(GrayImage::load(&corrupt));
     assert!(
@@ -39,20 +41,16 @@ fn bad_image_files_are_refused_naming_the_file() {
             imgcodecs::imencode(".png", card(0).mat(), &mut buffer, &Vector::new()).unwrap();
             buffer.as_slice().to_vec()
         });
-    let truncated = linetrack_test_data::scratch_path("vision", "truncated.png");
+    let truncated = dir.join("truncated.png");
     std::fs::write(&truncated, &whole[..whole.len() / 3]).unwrap();
     let text = error_text(GrayImage::load(&truncated));
     assert!(text.contains(truncated.to_str().unwrap()), "{text}");
-
-    for path in [empty, corrupt, truncated] {
-        let _ = std::fs::remove_file(path);
-    }
 }
 
 #[test]
 fn only_regular_files_of_a_sane_size_are_read() {
     // A folder and a FIFO (which would block a plain read forever) are refused unread.
-    let folder = linetrack_test_data::scratch_dir("vision", "not-a-file").unwrap();
+    let folder = Scratch::new("vision", "not-a-file");
     let text = error_text(GrayImage::load(&folder));
     assert!(
         text.contains(folder.to_str().unwrap()) && text.contains("not a regular file"),
@@ -84,7 +82,6 @@ fn only_regular_files_of_a_sane_size_are_read() {
             && text.contains("too large"),
         "{text}"
     );
-    let _ = std::fs::remove_dir_all(folder);
 }
 
 #[test]
@@ -120,7 +117,8 @@ fn colour_and_sixteen_bit_images_are_converted_to_grey_once() {
         let mat = Mat::new_rows_cols_with_default(20, 30, mat_type, value).unwrap();
         let mut bytes = Vector::<u8>::new();
         imgcodecs::imencode(".png", &mat, &mut bytes, &Vector::new()).unwrap();
-        let path = linetrack_test_data::scratch_path("vision", name);
+        let dir = Scratch::new("vision", "grey-once");
+        let path = dir.join(name);
         std::fs::write(&path, bytes.as_slice()).unwrap();
         let image = GrayImage::load(&path).unwrap();
         assert_eq!((image.width(), image.height()), (30, 20), "{name}");
@@ -130,7 +128,6 @@ fn colour_and_sixteen_bit_images_are_converted_to_grey_once() {
             "{name}: {:?}",
             &pixels[..4]
         );
-        let _ = std::fs::remove_file(path);
     }
 }
 
@@ -140,14 +137,14 @@ fn float_images_are_refused_with_what_was_found() {
         Mat::new_rows_cols_with_default(20, 30, opencv::core::CV_32FC1, Scalar::all(0.5)).unwrap();
     let mut bytes = Vector::<u8>::new();
     imgcodecs::imencode(".tiff", &mat, &mut bytes, &Vector::new()).unwrap();
-    let path = linetrack_test_data::scratch_path("vision", "float.tiff");
+    let dir = Scratch::new("vision", "float");
+    let path = dir.join("float.tiff");
     std::fs::write(&path, bytes.as_slice()).unwrap();
     let text = error_text(GrayImage::load(&path));
     assert!(
         text.contains(path.to_str().unwrap()) && text.contains("CV_32F"),
         "{text}"
     );
-    let _ = std::fs::remove_file(path);
 }
 
 #[test]

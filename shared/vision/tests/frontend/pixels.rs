@@ -1,6 +1,7 @@
 //! Borrowed pixels read in place, and a PGM scaled by its own maxval.
 
 use super::*;
+use linetrack_test_data::Scratch;
 
 #[test]
 fn borrowed_pixels_are_read_in_place_and_detect_like_owned_ones() {
@@ -43,8 +44,8 @@ fn a_pgm_is_scaled_by_its_own_maxval() {
                 bytes.push(u8::try_from(value).unwrap());
             }
         }
-        let path =
-            linetrack_test_data::scratch_path("vision", &format!("maxval-{maxval}-{value}.pgm"));
+        let dir = Scratch::new("vision", &format!("maxval-{maxval}-{value}"));
+        let path = dir.join("image.pgm");
         std::fs::write(&path, &bytes).unwrap();
         let image = GrayImage::load(&path).unwrap();
         assert_eq!((image.width(), image.height()), (4, 2));
@@ -53,6 +54,5 @@ fn a_pgm_is_scaled_by_its_own_maxval() {
             "maxval {maxval}, value {value}: {:?}",
             image.pixels()
         );
-        let _ = std::fs::remove_file(path);
     }
 }
