@@ -136,28 +136,18 @@ mod tests {
     fn newest_drops_every_frame_with_a_newer_one_behind() {
         let budget = budget(BehindRule::Newest);
         let fast = timed(1.0);
-        assert_eq!(
+        let drop = |newer_waiting| {
             late_drop(
                 &aged(1),
-                true,
+                newer_waiting,
                 &budget,
                 StageKind::PoseEstimator,
                 &fast,
-                NOW_NS
-            ),
-            Some(FrameStatus::DroppedBehind)
-        );
-        assert_eq!(
-            late_drop(
-                &aged(1),
-                false,
-                &budget,
-                StageKind::PoseEstimator,
-                &fast,
-                NOW_NS
-            ),
-            None
-        );
+                NOW_NS,
+            )
+        };
+        assert_eq!(drop(true), Some(FrameStatus::DroppedBehind));
+        assert_eq!(drop(false), None);
     }
 
     /// Deadline: the older frame is kept while its age plus the stage's time for each stage
