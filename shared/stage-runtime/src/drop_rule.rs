@@ -41,6 +41,40 @@ impl WorkTime {
     }
 }
 
+/// A stage's recent time a frame kept apart for the two kinds of frame a stage that prepares
+/// ahead ([`Stage::prepare`](crate::Stage::prepare)) takes: those whose images it prepared
+/// while it waited (the pose estimator's corners found: a few milliseconds left) and those
+/// it did not (the whole work). One mean of both would overestimate what a prepared frame
+/// still needs, and drop it behind when it could make the budget, and underestimate an
+/// unprepared one. A stage that does not prepare has only the second kind.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct WorkTimes {
+    prepared: WorkTime,
+    unprepared: WorkTime,
+}
+
+impl WorkTimes {
+    /// Takes the time of one more processed frame of its kind, milliseconds.
+    pub fn observe(&mut self, prepared: bool, ms: f64) {
+        if prepared {
+            self.prepared.observe(ms);
+        } else {
+            self.unprepared.observe(ms);
+        }
+    }
+
+    /// What to expect for a frame of this kind: its kind's mean. Before a prepared frame was
+    /// timed, the unprepared frames' mean (the whole work: never less than the frame needs);
+    /// before an unprepared one was, no estimate (newest wins, as before any frame).
+    pub fn expected(&self, prepared: bool) -> &WorkTime {
+        if prepared && self.prepared.mean_ms().is_some() {
+            &self.prepared
+        } else {
+            &self.unprepared
+        }
+    }
+}
+
 /// The processing stages from `stage` to the end of the pipeline, `stage` included (1 for a
 /// node that is not a processing stage).
 pub fn stages_left(stage: StageKind) -> usize {
@@ -102,6 +136,30 @@ mod tests {
         let mut work = WorkTime::default();
         work.observe(ms);
         work
+    }
+
+    #[test]
+    fn prepared_and_unprepared_frames_are_timed_apart() {
+        let mut times = WorkTimes::default();
+        assert_eq!(times.expected(false).mean_ms(), None);
+        assert_eq!(times.expected(true).mean_ms(), None);
+        times.observe(false, 40.0);
+        assert_eq!(
+            times.expected(true).mean_ms(),
+            Some(40.0),
+            "no prepared frame timed yet: the whole work"
+        );
+        times.observe(true, 2.0);
+        times.observe(false, 48.0);
+        assert_eq!(times.expected(true).mean_ms(), Some(2.0));
+        assert_eq!(times.expected(false).mean_ms(), Some(41.0));
+        let mut only_prepared = WorkTimes::default();
+        only_prepared.observe(true, 2.0);
+        assert_eq!(
+            only_prepared.expected(false).mean_ms(),
+            None,
+            "a prepared frame's time says nothing of the whole work"
+        );
     }
 
     #[test]

@@ -24,7 +24,7 @@ mod side;
 mod sink;
 mod source;
 pub mod time;
-pub use drop_rule::{WorkTime, late_drop, stages_left};
+pub use drop_rule::{WorkTime, WorkTimes, late_drop, stages_left};
 #[cfg(feature = "images")]
 pub use images::{stereo_frame, stereo_views};
 use linetrack_msgs::{Command, Control, RigRecord, SegmentRecord, topics};
@@ -226,7 +226,8 @@ pub struct FramePolicy<'a> {
     pub budget: &'a BudgetConfig,
     /// The stage's clock.
     pub clock: &'a Clock,
-    /// The stage's recent time a frame.
+    /// The stage's recent time for a frame of this one's kind (prepared ahead or not,
+    /// [`WorkTimes::expected`]).
     pub work: &'a WorkTime,
 }
 

@@ -11,7 +11,9 @@
 //! `HandedOver(F)` and exits; the standby, told F, publishes from F on. Frames below F come
 //! only from the old instance and frames from F on only from the new one.
 
-use crate::{FramePolicy, GapWatch, Held, Images, Reporter, StageContext, WorkTime, process_frame};
+use crate::{
+    FramePolicy, GapWatch, Held, Images, Reporter, StageContext, WorkTimes, process_frame,
+};
 use linetrack_ipc::{Bus, Inlet, Outlet, Received, Record, Shutdown, Wake};
 use linetrack_msgs::{
     Command, Control, FrameHeader, FrameMessage, StageKind, StatusKind, Topic, TopicOf, topics,
@@ -135,8 +137,8 @@ struct Runner<'a, S: Stage> {
     /// Frames below this were prepared (or processed) already.
     next_unprepared: u64,
     processed: u64,
-    /// The stage's recent time a frame, for the drop rule.
-    work: WorkTime,
+    /// The stage's recent time a frame, prepared frames apart, for the drop rule.
+    work: WorkTimes,
     /// The records of the frame being published, kept from frame to frame.
     records: Vec<S::Output>,
 }
@@ -182,7 +184,7 @@ pub fn run_stage<S: Stage>(
         next_unpublished: 0,
         next_unprepared: 0,
         processed: 0,
-        work: WorkTime::default(),
+        work: WorkTimes::default(),
         records: Vec::with_capacity(S::OUTPUT_LEN),
     };
     let mut ready_sent = false;
@@ -385,12 +387,14 @@ impl<S: Stage> Runner<'_, S> {
         } else {
             None
         };
+        // Its images were prepared while the stage waited (or their preparation was tried).
+        let prepared = self.stage.prepares() && frame_id < self.next_unprepared;
         let stage = &mut self.stage;
         let policy = FramePolicy {
             stage: S::KIND,
             budget: &self.ctx.config.budget,
             clock: &self.ctx.clock,
-            work: &self.work,
+            work: self.work.expected(prepared),
         };
         let took = process_frame(
             policy,
@@ -403,7 +407,7 @@ impl<S: Stage> Runner<'_, S> {
             |stage, out| stage.placeholder(out),
         )?;
         if let Some(ms) = took {
-            self.work.observe(ms);
+            self.work.observe(prepared, ms);
         }
         self.next_unpublished = frame_id + 1;
         self.processed += 1;
@@ -811,6 +815,61 @@ mod tests {
         }
     }
 
+    /// The ports and runner of an active `stage` on `bus`, for a test that drives the loop's
+    /// steps by hand (no thread, no timing luck).
+    fn by_hand<'a, S: Stage>(
+        ctx: &'a StageContext,
+        bus: &Bus,
+        stage: S,
+    ) -> (Ports<S>, Runner<'a, S>) {
+        let ports = Ports::<S> {
+            input: bus.inlet(S::INPUT).unwrap_or_else(|e| panic!("{e}")),
+            output: bus
+                .outlet(S::OUTPUT, S::OUTPUT_LEN)
+                .unwrap_or_else(|e| panic!("{e}")),
+            frames: stage
+                .joins_images()
+                .then(|| bus.inlet(topics::FRAMES).unwrap_or_else(|e| panic!("{e}"))),
+            control: bus.inlet(topics::CONTROL).unwrap_or_else(|e| panic!("{e}")),
+            wake: bus.wake(S::KIND).unwrap_or_else(|e| panic!("{e}")),
+            reporter: Reporter::new(bus, ctx, 0).unwrap_or_else(|e| panic!("{e}")),
+        };
+        let runner = Runner {
+            ctx,
+            stage,
+            role: Role::Active,
+            waiting: Held::new(S::INPUT.topic()),
+            images: Held::new(Topic::Frames),
+            gaps: GapWatch::default(),
+            next_unpublished: 0,
+            next_unprepared: 0,
+            processed: 0,
+            work: WorkTimes::default(),
+            records: Vec::new(),
+        };
+        (ports, runner)
+    }
+
+    /// The frames a test's stage published, with their status.
+    fn statuses<O: Record, H: Record + FrameMessage>(
+        out: &mut linetrack_ipc::Inlet<O, H>,
+    ) -> Vec<(u64, linetrack_msgs::FrameStatus)> {
+        out.receive_all()
+            .unwrap_or_else(|e| panic!("{e}"))
+            .iter()
+            .map(|m| {
+                let frame = m.header().frame();
+                (
+                    frame.frame_id,
+                    frame
+                        .status
+                        .get()
+                        .unwrap_or(linetrack_msgs::FrameStatus::Ok),
+                )
+            })
+            .collect()
+    }
+
     /// The runner times the frames its stage works on and the drop rule reads that time.
     /// A line detector at 10 ms a frame (3 stages left: 30 ms still needed) gets frame 0,
     /// then frames 1 (80 ms old), 2 (5 ms) and 3 (new) queued together, driven by hand (no
@@ -839,32 +898,14 @@ mod tests {
             let mut out = bus
                 .inlet::<SegmentRecord, SegmentsHeader>(topics::SEGMENTS)
                 .unwrap_or_else(|e| panic!("{e}"));
-            let mut ports = Ports::<Timed> {
-                input: bus.inlet(Timed::INPUT).unwrap_or_else(|e| panic!("{e}")),
-                output: bus
-                    .outlet(Timed::OUTPUT, 1)
-                    .unwrap_or_else(|e| panic!("{e}")),
-                frames: None,
-                control: bus.inlet(topics::CONTROL).unwrap_or_else(|e| panic!("{e}")),
-                wake: bus.wake(Timed::KIND).unwrap_or_else(|e| panic!("{e}")),
-                reporter: Reporter::new(&bus, &ctx, 0).unwrap_or_else(|e| panic!("{e}")),
-            };
-            let mut runner = Runner {
-                ctx: &ctx,
-                stage: Timed {
+            let (mut ports, mut runner) = by_hand(
+                &ctx,
+                &bus,
+                Timed {
                     clock: clock.clone(),
                     ms: 10,
                 },
-                role: Role::Active,
-                waiting: Held::new(Timed::INPUT.topic()),
-                images: Held::new(Topic::Frames),
-                gaps: GapWatch::default(),
-                next_unpublished: 0,
-                next_unprepared: 0,
-                processed: 0,
-                work: WorkTime::default(),
-                records: Vec::new(),
-            };
+            );
             let mut publish = |id: u64, age_ms: u64| {
                 let captured = clock.now_ns() - age_ms * 1_000_000;
                 frames
@@ -881,18 +922,143 @@ mod tests {
             runner
                 .process_waiting(&mut ports)
                 .unwrap_or_else(|e| panic!("{e}"));
-            let got: Vec<(u64, FrameStatus)> = out
-                .receive_all()
-                .unwrap_or_else(|e| panic!("{e}"))
-                .iter()
-                .map(|m| {
-                    let frame = m.header().frame;
-                    (frame.frame_id, frame.status.get().unwrap_or(Done))
-                })
-                .collect();
             let want: Vec<(u64, FrameStatus)> = (0..4).zip(expected).collect();
-            assert_eq!(got, want, "{rule:?}");
-            assert_eq!(runner.work.mean_ms(), Some(10.0), "{rule:?}");
+            assert_eq!(statuses(&mut out), want, "{rule:?}");
+            assert_eq!(
+                runner.work.expected(false).mean_ms(),
+                Some(10.0),
+                "{rule:?}"
+            );
         }
+    }
+
+    /// A pose estimator-like stage that prepares ahead, on a manual clock: a frame takes
+    /// 2 ms when its images were prepared while it waited, 40 ms when not.
+    struct Preparing {
+        clock: crate::Clock,
+        prepared: Vec<u64>,
+    }
+
+    impl Stage for Preparing {
+        type Input = SegmentRecord;
+        type InputHeader = SegmentsHeader;
+        type Output = linetrack_msgs::TrackedLine;
+        type OutputHeader = TracksHeader;
+        const KIND: StageKind = StageKind::Matcher;
+        const INPUT: TopicOf<Self::Input, Self::InputHeader> = topics::SEGMENTS;
+        const OUTPUT: TopicOf<Self::Output, Self::OutputHeader> = topics::TRACKS;
+        const OUTPUT_LEN: usize = 1;
+
+        fn joins_images(&self) -> bool {
+            true
+        }
+
+        fn prepares(&self) -> bool {
+            true
+        }
+
+        fn prepare(&mut self, header: &FrameHeader, _images: &Images) -> anyhow::Result<()> {
+            self.prepared.push(header.frame_id);
+            Ok(())
+        }
+
+        fn process(
+            &mut self,
+            header: &mut TracksHeader,
+            _input: &Received<SegmentRecord, SegmentsHeader>,
+            _images: Option<&Images>,
+            _out: &mut Vec<linetrack_msgs::TrackedLine>,
+        ) -> anyhow::Result<()> {
+            let ms = if self.prepared.contains(&header.frame.frame_id) {
+                2
+            } else {
+                40
+            };
+            self.clock.advance(Duration::from_millis(ms));
+            Ok(())
+        }
+    }
+
+    /// A stage that prepares ahead is timed per kind of frame. Frames 0 and 2 unprepared
+    /// (40 ms each) and 1 prepared (2 ms), one at a time; then frame 3, 60 ms old and
+    /// prepared while the stage waited, queued with frame 4. Prepared frames take 2 ms,
+    /// 2 stages left: 60 + 4 ms fits the 100 ms budget, so frame 3 is kept. One mean of both
+    /// kinds (35.8 ms after 40, 2, 40) would have dropped it behind (60 + 71.7 ms).
+    #[test]
+    fn a_prepared_frame_is_judged_by_the_time_prepared_frames_take() {
+        use linetrack_msgs::FrameStatus::Ok as Done;
+        let bus = Bus::local();
+        let mut ctx = context(1, false);
+        ctx.stage = StageKind::Matcher;
+        ctx.config.budget.drop_late = true;
+        ctx.config.budget.behind = linetrack_pipeline_config::BehindRule::Deadline;
+        ctx.config.budget.end_to_end_ms = 100.0;
+        let clock = ctx.clock.clone();
+        clock.advance(Duration::from_secs(10));
+        let mut images = bus
+            .outlet::<u8, FrameHeader>(topics::FRAMES, 4)
+            .unwrap_or_else(|e| panic!("{e}"));
+        let mut segments = bus
+            .outlet::<SegmentRecord, SegmentsHeader>(topics::SEGMENTS, 4)
+            .unwrap_or_else(|e| panic!("{e}"));
+        let mut out = bus
+            .inlet::<linetrack_msgs::TrackedLine, TracksHeader>(topics::TRACKS)
+            .unwrap_or_else(|e| panic!("{e}"));
+        let stage = Preparing {
+            clock: clock.clone(),
+            prepared: Vec::new(),
+        };
+        let (mut ports, mut runner) = by_hand(&ctx, &bus, stage);
+        let frame =
+            |id: u64, age_ms: u64| FrameHeader::new(id, 0, clock.now_ns() - age_ms * 1_000_000);
+        // A frame's images arrive (and are prepared if `prepare`) before its segments.
+        let mut arrive = |runner: &mut Runner<'_, Preparing>,
+                          ports: &mut Ports<Preparing>,
+                          header: FrameHeader,
+                          prepare: bool| {
+            images
+                .publish(&header, &[&[1]])
+                .unwrap_or_else(|e| panic!("{e}"));
+            if let Some(frames) = &mut ports.frames {
+                runner
+                    .images
+                    .receive(frames)
+                    .unwrap_or_else(|e| panic!("{e}"));
+            }
+            if prepare {
+                runner.prepare_held();
+            }
+        };
+        let mut segments_of = |header: FrameHeader| {
+            segments
+                .publish(
+                    &SegmentsHeader::from(header),
+                    &[&[SegmentRecord::default()]],
+                )
+                .unwrap_or_else(|e| panic!("{e}"));
+        };
+        for id in 0..3 {
+            let header = frame(id, 0);
+            arrive(&mut runner, &mut ports, header, id == 1);
+            segments_of(header);
+            runner
+                .process_waiting(&mut ports)
+                .unwrap_or_else(|e| panic!("{e}"));
+        }
+        let (third, fourth) = (frame(3, 60), frame(4, 0));
+        arrive(&mut runner, &mut ports, third, true);
+        arrive(&mut runner, &mut ports, fourth, false);
+        segments_of(third);
+        segments_of(fourth);
+        runner
+            .process_waiting(&mut ports)
+            .unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(runner.stage.prepared, vec![1, 3]);
+        assert_eq!(
+            statuses(&mut out),
+            (0..5).map(|id| (id, Done)).collect::<Vec<_>>()
+        );
+        assert_eq!(runner.work.expected(true).mean_ms(), Some(2.0));
+        assert_eq!(runner.work.expected(false).mean_ms(), Some(40.0));
     }
 }
