@@ -174,19 +174,7 @@ pub fn run_stage<S: Stage>(
     } else {
         Role::Active
     };
-    let mut runner = Runner {
-        ctx,
-        stage,
-        role,
-        waiting: Held::new(S::INPUT.topic()),
-        images: Held::new(Topic::Frames),
-        gaps: GapWatch::default(),
-        next_unpublished: 0,
-        next_unprepared: 0,
-        processed: 0,
-        work: WorkTimes::default(),
-        records: Vec::with_capacity(S::OUTPUT_LEN),
-    };
+    let mut runner = Runner::new(ctx, stage, role);
     let mut ready_sent = false;
     if role == Role::Active {
         ports.reporter.report(StatusKind::Ready, 0, 0);
@@ -243,7 +231,24 @@ pub fn run_stage<S: Stage>(
     Ok(())
 }
 
-impl<S: Stage> Runner<'_, S> {
+impl<'a, S: Stage> Runner<'a, S> {
+    /// A runner in `role` that has seen no frame yet.
+    fn new(ctx: &'a StageContext, stage: S, role: Role) -> Self {
+        Runner {
+            ctx,
+            stage,
+            role,
+            waiting: Held::new(S::INPUT.topic()),
+            images: Held::new(Topic::Frames),
+            gaps: GapWatch::default(),
+            next_unpublished: 0,
+            next_unprepared: 0,
+            processed: 0,
+            work: WorkTimes::default(),
+            records: Vec::with_capacity(S::OUTPUT_LEN),
+        }
+    }
+
     /// Answers the commands for this process.
     fn commands(&mut self, ports: &mut Ports<S>) -> anyhow::Result<Turn> {
         for message in ports.control.receive_all()? {
@@ -624,9 +629,12 @@ mod tests {
     }
 
     /// A stage joining images that prepares them ahead: it notes which frames it prepared
-    /// and answers each frame with whether it had been prepared.
+    /// and answers each frame with whether it had been prepared. With a manual `clock`, a
+    /// frame's work takes 2 ms of it when the frame was prepared, 40 ms when not (the pose
+    /// estimator's two kinds of frame).
     struct Ahead {
         prepared: std::sync::Arc<std::sync::Mutex<Vec<u64>>>,
+        clock: Option<crate::Clock>,
     }
 
     impl Stage for Ahead {
@@ -668,6 +676,9 @@ mod tests {
                 .lock()
                 .map_err(|_| anyhow::anyhow!("poisoned"))?
                 .contains(&header.frame.frame_id);
+            if let Some(clock) = &self.clock {
+                clock.advance(Duration::from_millis(if prepared { 2 } else { 40 }));
+            }
             out.push(linetrack_msgs::TrackedLine {
                 has_stereo: u32::from(prepared),
                 previous: i32::from(images.is_some()),
@@ -699,6 +710,7 @@ mod tests {
         let prepared = std::sync::Arc::new(std::sync::Mutex::new(Vec::new()));
         let stage = Ahead {
             prepared: prepared.clone(),
+            clock: None,
         };
         let runner = {
             let hub = hub.clone();
@@ -834,20 +846,7 @@ mod tests {
             wake: bus.wake(S::KIND).unwrap_or_else(|e| panic!("{e}")),
             reporter: Reporter::new(bus, ctx, 0).unwrap_or_else(|e| panic!("{e}")),
         };
-        let runner = Runner {
-            ctx,
-            stage,
-            role: Role::Active,
-            waiting: Held::new(S::INPUT.topic()),
-            images: Held::new(Topic::Frames),
-            gaps: GapWatch::default(),
-            next_unpublished: 0,
-            next_unprepared: 0,
-            processed: 0,
-            work: WorkTimes::default(),
-            records: Vec::new(),
-        };
-        (ports, runner)
+        (ports, Runner::new(ctx, stage, Role::Active))
     }
 
     /// The frames a test's stage published, with their status.
@@ -932,53 +931,6 @@ mod tests {
         }
     }
 
-    /// A pose estimator-like stage that prepares ahead, on a manual clock: a frame takes
-    /// 2 ms when its images were prepared while it waited, 40 ms when not.
-    struct Preparing {
-        clock: crate::Clock,
-        prepared: Vec<u64>,
-    }
-
-    impl Stage for Preparing {
-        type Input = SegmentRecord;
-        type InputHeader = SegmentsHeader;
-        type Output = linetrack_msgs::TrackedLine;
-        type OutputHeader = TracksHeader;
-        const KIND: StageKind = StageKind::Matcher;
-        const INPUT: TopicOf<Self::Input, Self::InputHeader> = topics::SEGMENTS;
-        const OUTPUT: TopicOf<Self::Output, Self::OutputHeader> = topics::TRACKS;
-        const OUTPUT_LEN: usize = 1;
-
-        fn joins_images(&self) -> bool {
-            true
-        }
-
-        fn prepares(&self) -> bool {
-            true
-        }
-
-        fn prepare(&mut self, header: &FrameHeader, _images: &Images) -> anyhow::Result<()> {
-            self.prepared.push(header.frame_id);
-            Ok(())
-        }
-
-        fn process(
-            &mut self,
-            header: &mut TracksHeader,
-            _input: &Received<SegmentRecord, SegmentsHeader>,
-            _images: Option<&Images>,
-            _out: &mut Vec<linetrack_msgs::TrackedLine>,
-        ) -> anyhow::Result<()> {
-            let ms = if self.prepared.contains(&header.frame.frame_id) {
-                2
-            } else {
-                40
-            };
-            self.clock.advance(Duration::from_millis(ms));
-            Ok(())
-        }
-    }
-
     /// A stage that prepares ahead is timed per kind of frame. Frames 0 and 2 unprepared
     /// (40 ms each) and 1 prepared (2 ms), one at a time; then frame 3, 60 ms old and
     /// prepared while the stage waited, queued with frame 4. Prepared frames take 2 ms,
@@ -1004,16 +956,17 @@ mod tests {
         let mut out = bus
             .inlet::<linetrack_msgs::TrackedLine, TracksHeader>(topics::TRACKS)
             .unwrap_or_else(|e| panic!("{e}"));
-        let stage = Preparing {
-            clock: clock.clone(),
-            prepared: Vec::new(),
+        let prepared = std::sync::Arc::new(std::sync::Mutex::new(Vec::new()));
+        let stage = Ahead {
+            prepared: prepared.clone(),
+            clock: Some(clock.clone()),
         };
         let (mut ports, mut runner) = by_hand(&ctx, &bus, stage);
         let frame =
             |id: u64, age_ms: u64| FrameHeader::new(id, 0, clock.now_ns() - age_ms * 1_000_000);
         // A frame's images arrive (and are prepared if `prepare`) before its segments.
-        let mut arrive = |runner: &mut Runner<'_, Preparing>,
-                          ports: &mut Ports<Preparing>,
+        let mut arrive = |runner: &mut Runner<'_, Ahead>,
+                          ports: &mut Ports<Ahead>,
                           header: FrameHeader,
                           prepare: bool| {
             images
@@ -1053,7 +1006,7 @@ mod tests {
         runner
             .process_waiting(&mut ports)
             .unwrap_or_else(|e| panic!("{e}"));
-        assert_eq!(runner.stage.prepared, vec![1, 3]);
+        assert_eq!(prepared.lock().map(|p| p.clone()).ok(), Some(vec![1, 3]));
         assert_eq!(
             statuses(&mut out),
             (0..5).map(|id| (id, Done)).collect::<Vec<_>>()
