@@ -4,8 +4,10 @@
 //! While the line detector runs LSD, `bad_frames` frames in a row over
 //! `budget.line_detector_ms` ask for a hot swap to `to` (FLD by default); while that one
 //! runs after such a swap, `recover_frames` frames in a row within `recover_budget_fraction`
-//! of the budget ask for LSD back; no swap of the policy comes within `min_interval_frames`
-//! frames of its last. The streaks are the matcher fallback's ([`Hysteresis`]). The
+//! of the budget ask for LSD back. The way back comes no sooner than `min_interval_frames`
+//! after the policy's last swap, twice as long after each recovery that gave way again
+//! within that many frames; the way to the faster detector never waits (it can only help
+//! the deadline). The streaks are the matcher fallback's ([`Hysteresis`]). The
 //! detector's time is read from each frame's stamps, never from a clock, so tests inject
 //! it; a frame the detector did not process says nothing.
 
@@ -276,32 +278,53 @@ mod tests {
         );
     }
 
-    #[test]
-    fn a_load_around_the_budget_swaps_at_most_once_per_interval() {
-        // LSD alternating around its budget in runs of 3 over, FLD always fast: without an
-        // interval it would swap back and forth every few frames.
-        let load = |p: &mut DetectorPolicy| {
-            let mut detector = LSD;
-            let mut switches = Vec::new();
-            for id in 0..400u64 {
-                let ms = match detector {
-                    LSD if id % 4 == 3 => 40.0,
-                    LSD => 60.0,
-                    _ => 5.0,
-                };
-                if let Some(s) = p.observe(&frame(id, detector, ms), detector) {
-                    detector = s.to;
-                    switches.push(id);
-                }
+    /// LSD over its budget 3 frames of every 8 (`bad_frames` 3), FLD always fast, for
+    /// `frames` frames; the frames that switched, with the detector switched to.
+    fn load_around_the_budget(p: &mut DetectorPolicy, frames: u64) -> Vec<(u64, DetectorKind)> {
+        let mut detector = LSD;
+        let mut switches = Vec::new();
+        for id in 0..frames {
+            let ms = match detector {
+                LSD if id % 8 < 3 => 60.0,
+                LSD => 40.0,
+                _ => 5.0,
+            };
+            if let Some(s) = p.observe(&frame(id, detector, ms), detector) {
+                detector = s.to;
+                switches.push((id, s.to));
             }
-            switches
-        };
-        let free = load(&mut policy(0));
+        }
+        switches
+    }
+
+    #[test]
+    fn lsd_gives_way_at_once_and_comes_back_after_a_gap_that_doubles_while_it_fails() {
+        // Without an interval it swaps back and forth every few frames.
+        let free = load_around_the_budget(&mut policy(0), 400);
         assert!(free.len() > 50, "{free:?}");
-        let spaced = load(&mut policy(100));
-        assert!(!spaced.is_empty());
-        assert!(spaced.windows(2).all(|w| w[1] - w[0] >= 100), "{spaced:?}");
-        assert!(spaced.len() <= 4, "{spaced:?}");
+        // With 100 frames: each way back waits 100, 200, 400, 800 frames after the swap
+        // before it (every recovery gives way again within 8 frames: it failed); each way
+        // to FLD comes on the third LSD frame over the budget.
+        let spaced = load_around_the_budget(&mut policy(100), 2000);
+        let waits: Vec<u64> = spaced
+            .windows(2)
+            .filter(|w| w[1].1 == LSD)
+            .map(|w| w[1].0 - w[0].0)
+            .collect();
+        assert_eq!(waits.len(), 4, "{spaced:?}");
+        for (k, wait) in waits.iter().enumerate() {
+            assert!(
+                (100 << k..(100 << k) + 8).contains(wait),
+                "recovery {k} after {wait} frames: {spaced:?}"
+            );
+        }
+        assert!(
+            spaced
+                .windows(2)
+                .filter(|w| w[1].1 == FLD)
+                .all(|w| w[1].0 - w[0].0 <= 8),
+            "{spaced:?}"
+        );
     }
 
     #[test]

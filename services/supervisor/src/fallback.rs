@@ -32,8 +32,11 @@ pub fn end_to_end_miss(header: &FrameHeader, budget_ms: f64) -> Option<String> {
 /// Two states, normal and fallen back, and the streaks that move between them: `trip`
 /// failing frames in a row in the normal state switch to the fallback, `recover` passing
 /// frames in a row in the fallback switch back (the bars for failing and passing are the
-/// caller's, apart: the hysteresis), and no switch comes within `min_gap` frames of the
-/// last one. A frame that says nothing is not observed.
+/// caller's, apart: the hysteresis). The way back comes no sooner than `min_gap` frames
+/// after the last switch; a recovery that trips again within `min_gap` frames failed, and
+/// each failure in a row doubles the gap before the next way back (up to
+/// 2^[`MAX_BACKOFF`] times `min_gap`). The way to the fallback is never held back: it is
+/// the cheaper state. A frame that says nothing is not observed.
 #[derive(Debug, Clone)]
 pub struct Hysteresis {
     trip: u32,
@@ -42,7 +45,14 @@ pub struct Hysteresis {
     fallen_back: bool,
     streak: u32,
     last_switch: Option<u64>,
+    /// The frame of the last way back, while in the normal state since.
+    recovered_at: Option<u64>,
+    /// Recoveries in a row that tripped again within `min_gap` frames.
+    failed_recoveries: u32,
 }
+
+/// The most doublings of [`Hysteresis`]'s gap after failed recoveries.
+pub const MAX_BACKOFF: u32 = 6;
 
 impl Hysteresis {
     /// In the normal state.
@@ -54,6 +64,8 @@ impl Hysteresis {
             fallen_back: false,
             streak: 0,
             last_switch: None,
+            recovered_at: None,
+            failed_recoveries: 0,
         }
     }
 
@@ -71,6 +83,13 @@ impl Hysteresis {
         }
     }
 
+    /// Frames the way back waits after the last switch: `min_gap`, doubled for each failed
+    /// recovery in a row.
+    pub fn gap(&self) -> u64 {
+        self.min_gap
+            .saturating_mul(1 << self.failed_recoveries.min(MAX_BACKOFF))
+    }
+
     /// Takes frame `frame_id`: in the normal state `counts` says it failed, in the fallback
     /// state that it passed the bar for the way back. Returns whether the state switched
     /// (then the streak starts again).
@@ -80,11 +99,24 @@ impl Hysteresis {
         } else {
             0
         };
-        let allowed = self
-            .last_switch
-            .is_none_or(|last| frame_id >= last.saturating_add(self.min_gap));
-        if self.streak < self.needed() || !allowed {
+        if self.streak < self.needed() {
             return false;
+        }
+        if self.fallen_back {
+            let gap = self.gap();
+            if self
+                .last_switch
+                .is_some_and(|last| frame_id < last.saturating_add(gap))
+            {
+                return false;
+            }
+            self.recovered_at = Some(frame_id);
+        } else if let Some(recovered) = self.recovered_at.take() {
+            self.failed_recoveries = if frame_id < recovered.saturating_add(self.min_gap) {
+                self.failed_recoveries.saturating_add(1)
+            } else {
+                0
+            };
         }
         self.fallen_back = !self.fallen_back;
         self.streak = 0;
@@ -96,6 +128,7 @@ impl Hysteresis {
     pub fn reset(&mut self) {
         self.fallen_back = false;
         self.streak = 0;
+        self.recovered_at = None;
     }
 }
 
@@ -418,7 +451,7 @@ mod tests {
     }
 
     #[test]
-    fn hysteresis_needs_whole_streaks_and_keeps_its_minimum_gap() {
+    fn hysteresis_needs_whole_streaks_and_keeps_its_minimum_gap_on_the_way_back() {
         let mut h = Hysteresis::new(3, 2, 10);
         let mut frame = 0..;
         let mut feed = |h: &mut Hysteresis, counts: &[bool]| -> Vec<bool> {
@@ -435,9 +468,47 @@ mod tests {
         assert!(h.fallen_back());
         assert_eq!(feed(&mut h, &[true]), [true], "frame 15, streak 10 >= 2");
         assert!(!h.fallen_back());
+        // The way to the fallback is not held back by the gap: frames 16-18 trip it.
+        assert_eq!(feed(&mut h, &[true; 3]), [false, false, true], "frame 18");
+        assert!(h.fallen_back());
         h.reset();
         assert!(!h.fallen_back());
         assert_eq!(h.needed(), 3);
+    }
+
+    #[test]
+    fn each_recovery_that_trips_again_within_the_gap_doubles_the_gap_and_one_that_holds_ends_it() {
+        let mut h = Hysteresis::new(1, 1, 10);
+        // Trip at 0; back at 10; tripped again at 11 (within 10 of the way back): failed.
+        assert!(h.observe(0, true));
+        assert!(!h.observe(9, true));
+        assert!(h.observe(10, true));
+        assert!(h.observe(11, true));
+        assert_eq!(h.gap(), 20);
+        assert!(!h.observe(30, true), "11 + 20 = 31");
+        assert!(h.observe(31, true));
+        // Failed again (32 < 31 + 10): 40 frames.
+        assert!(h.observe(32, true));
+        assert_eq!(h.gap(), 40);
+        assert!(!h.observe(71, true));
+        assert!(h.observe(72, true));
+        // This one holds 10 frames: the next failure starts from the plain gap.
+        assert!(!h.observe(81, false));
+        assert!(h.observe(82, true));
+        assert_eq!(h.gap(), 10);
+        // The doubling stops at 2^MAX_BACKOFF.
+        let mut h = Hysteresis::new(1, 1, 10);
+        let mut at = 0;
+        for _ in 0..20 {
+            assert!(h.observe(at, true));
+            at += h.gap();
+            assert!(h.observe(at, true));
+            at += 1;
+        }
+        assert_eq!(h.gap(), 10 << MAX_BACKOFF);
+        // No gap (the matcher's policy): nothing waits.
+        let mut h = Hysteresis::new(1, 1, 0);
+        assert!((0..6).all(|id| h.observe(id, true)));
     }
 
     #[test]

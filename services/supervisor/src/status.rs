@@ -113,6 +113,15 @@ pub(crate) fn prepare_run_dir(
         }
         .with_context(|| format!("clearing {}", path.display()))?;
     }
+    if config.output.trace {
+        // Made once here, before any stage starts: a stage then only creates its own file
+        // in it (`linetrack_telemetry::span_file`), never a folder in the run folder,
+        // whose lock the status writer's renames hold while the disk is slow.
+        let spans = run_dir.join("spans");
+        std::os::unix::fs::DirBuilderExt::mode(&mut std::fs::DirBuilder::new(), 0o700)
+            .create(&spans)
+            .with_context(|| format!("creating {}", spans.display()))?;
+    }
     let config_path = run_dir.join("pipeline.toml");
     linetrack_run_record::files::write_whole(
         &config_path,
@@ -155,4 +164,29 @@ pub(crate) fn final_status(
             linetrack_run_record::full_message(&e)
         );
     });
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use linetrack_test_data::Scratch;
+    use std::os::unix::fs::PermissionsExt;
+
+    #[test]
+    fn the_run_folder_gets_an_empty_owner_only_spans_folder_when_spans_are_recorded() {
+        let dir = Scratch::new("supervisor", "prepare-run-dir");
+        let spans = dir.join("spans");
+        std::fs::create_dir_all(&spans).unwrap_or_else(|e| panic!("{e}"));
+        std::fs::write(spans.join("matcher-1.jsonl"), "{}\n").unwrap_or_else(|e| panic!("{e}"));
+        let mut config = PipelineConfig::default();
+        config.output.trace = true;
+        prepare_run_dir(&config, &dir).unwrap_or_else(|e| panic!("{e:#}"));
+        let meta = std::fs::symlink_metadata(&spans).unwrap_or_else(|e| panic!("{e}"));
+        assert!(meta.is_dir());
+        assert_eq!(meta.permissions().mode() & 0o777, 0o700);
+        assert_eq!(std::fs::read_dir(&spans).map(|d| d.count()).ok(), Some(0));
+        config.output.trace = false;
+        prepare_run_dir(&config, &dir).unwrap_or_else(|e| panic!("{e:#}"));
+        assert!(!spans.exists(), "no spans folder without spans");
+    }
 }

@@ -245,7 +245,7 @@ mod tests {
             err.contains(&dir.display().to_string()) && err.contains("other users"),
             "{err}"
         );
-        // Another user's folder above the root (a `/tmp/linetrack-<uid>` someone else made).
+        // Another user's folder above the root (a `linetrack-<uid>` folder someone else made).
         if rustix::process::geteuid().as_raw() == 0 {
             let theirs = Scratch::new("ipc", "theirsroot");
             std::os::unix::fs::chown(&theirs, Some(65534), Some(65534))

@@ -14,7 +14,7 @@ use std::path::{Path, PathBuf};
 /// service with `run_id`, so runs (and tests) side by side never meet, and a run's leftovers
 /// are found by prefix. Both the prefix and the root folder of iceoryx2's bookkeeping
 /// belong to the user who runs the pipeline (`linetrack_u<uid>_`, `$XDG_RUNTIME_DIR` or
-/// `/tmp/linetrack-<uid>`), so runs of different users never block each other, and
+/// `/dev/shm/linetrack-<uid>`), so runs of different users never block each other, and
 /// [`Scope::lock_down`] keeps every file of the scope readable and writable by its owner
 /// only.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -25,7 +25,8 @@ pub struct Scope {
     /// The run.
     pub run_id: String,
     /// The folder of iceoryx2's node and service descriptions (`LINETRACK_IPC_ROOT`, else
-    /// `$XDG_RUNTIME_DIR/linetrack-iceoryx2`, else `/tmp/linetrack-<uid>/iceoryx2`).
+    /// `$XDG_RUNTIME_DIR/linetrack-iceoryx2`, else `/dev/shm/linetrack-<uid>/iceoryx2`, or
+    /// `/tmp/…` without `/dev/shm`).
     pub root: PathBuf,
 }
 
@@ -80,7 +81,8 @@ impl Scope {
     }
 
     /// The root folder: `LINETRACK_IPC_ROOT`, else `configured` (the config's `ipc.root`),
-    /// else `$XDG_RUNTIME_DIR/linetrack-iceoryx2`, else `/tmp/linetrack-<uid>/iceoryx2`.
+    /// else `$XDG_RUNTIME_DIR/linetrack-iceoryx2`, else `/dev/shm/linetrack-<uid>/iceoryx2`
+    /// (in memory), or `/tmp/linetrack-<uid>/iceoryx2` on a system without `/dev/shm`.
     pub fn root_from(configured: Option<&Path>) -> PathBuf {
         let from_env = |var: &str| {
             std::env::var_os(var)
@@ -95,11 +97,18 @@ impl Scope {
                     .map(|dir| dir.join("linetrack-iceoryx2"))
             })
             .unwrap_or_else(|| {
-                PathBuf::from(format!(
-                    "/tmp/linetrack-{}",
-                    rustix::process::getuid().as_raw()
-                ))
-                .join("iceoryx2")
+                // In memory when it can be: iceoryx2 syncs each node's and service's
+                // description to its file as it creates it, and on a busy disk one such
+                // sync held a starting stage for 5 to 25 s (a hot swap's standby, while
+                // LSD missed every frame); on tmpfs a sync costs nothing.
+                let memory = Path::new(SHM_DIR);
+                let base = if memory.is_dir() {
+                    memory
+                } else {
+                    Path::new("/tmp")
+                };
+                base.join(format!("linetrack-{}", rustix::process::getuid().as_raw()))
+                    .join("iceoryx2")
             })
     }
 

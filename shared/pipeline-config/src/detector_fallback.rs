@@ -31,7 +31,9 @@ pub struct DetectorFallbackConfig {
     /// for FLD. With 0.25 and edgelines, LSD came back beside two CPU hogs and missed its
     /// budget again (docs/pipeline.md).
     pub recover_budget_fraction: f64,
-    /// Frames between two swaps of this policy, at least.
+    /// Frames after the policy's last swap before a swap back to LSD, at least; doubled
+    /// after each swap back that gave way again within that many frames (up to 64 times),
+    /// back to this after one that held. The swap away from LSD never waits.
     pub min_interval_frames: u64,
     /// An LSD frame that misses `budget.end_to_end_ms` (processed late, or dropped late by
     /// any stage) counts as over budget too: the pipeline's deadline, not only LSD's own.

@@ -435,6 +435,8 @@ mod tests {
         /// Keeps the last frame it processed (as the matcher keeps the previous frame).
         remembers: bool,
         last: Option<u64>,
+        /// With a manual clock: each frame's work takes this much of it.
+        work: Option<(crate::Clock, Duration)>,
     }
 
     impl Stage for Tag {
@@ -459,6 +461,9 @@ mod tests {
             out: &mut Vec<SegmentRecord>,
         ) -> anyhow::Result<()> {
             anyhow::ensure!(input.payload().first() != Some(&0), "a blank frame");
+            if let Some((clock, took)) = &self.work {
+                clock.advance(*took);
+            }
             let last = self.last.replace(header.frame.frame_id);
             out.push(SegmentRecord {
                 endpoints: [
@@ -531,6 +536,7 @@ mod tests {
                     instance,
                     remembers,
                     last: None,
+                    work: None,
                 };
                 run_stage(
                     &context(pid, standby),
@@ -795,38 +801,6 @@ mod tests {
         assert_eq!(seen, vec![(0, 1, 1), (1, 0, 1), (2, 1, 1), (3, three, 1)]);
     }
 
-    /// A line detector whose work takes `ms` of a manual clock a frame.
-    struct Timed {
-        clock: crate::Clock,
-        ms: u64,
-    }
-
-    impl Stage for Timed {
-        type Input = u8;
-        type InputHeader = FrameHeader;
-        type Output = SegmentRecord;
-        type OutputHeader = SegmentsHeader;
-        const KIND: StageKind = StageKind::LineDetector;
-        const INPUT: TopicOf<Self::Input, Self::InputHeader> = topics::FRAMES;
-        const OUTPUT: TopicOf<Self::Output, Self::OutputHeader> = topics::SEGMENTS;
-        const OUTPUT_LEN: usize = 1;
-
-        fn joins_images(&self) -> bool {
-            false
-        }
-
-        fn process(
-            &mut self,
-            _header: &mut SegmentsHeader,
-            _input: &Images,
-            _images: Option<&Images>,
-            _out: &mut Vec<SegmentRecord>,
-        ) -> anyhow::Result<()> {
-            self.clock.advance(Duration::from_millis(self.ms));
-            Ok(())
-        }
-    }
-
     /// The ports and runner of an active `stage` on `bus`, for a test that drives the loop's
     /// steps by hand (no thread, no timing luck).
     fn by_hand<'a, S: Stage>(
@@ -900,9 +874,11 @@ mod tests {
             let (mut ports, mut runner) = by_hand(
                 &ctx,
                 &bus,
-                Timed {
-                    clock: clock.clone(),
-                    ms: 10,
+                Tag {
+                    instance: 0.0,
+                    remembers: false,
+                    last: None,
+                    work: Some((clock.clone(), Duration::from_millis(10))),
                 },
             );
             let mut publish = |id: u64, age_ms: u64| {

@@ -157,7 +157,12 @@ impl SpanRecorder {
     /// Records the spans of process `process` into `path` (created or truncated), flushed
     /// every [`FLUSH_EVERY`].
     pub fn create(path: &Path, process: &str) -> Result<Self, TelemetryError> {
-        if let Some(dir) = path.parent() {
+        // A folder that exists is not made again: mkdir locks the folder above even then,
+        // and waits while another process holds that lock (a stage starting beside the
+        // supervisor's status writer waited 12 s so in `mkdir`, under load).
+        if let Some(dir) = path.parent()
+            && !dir.is_dir()
+        {
             std::fs::create_dir_all(dir).map_err(|source| TelemetryError::Io {
                 path: dir.to_path_buf(),
                 source,
