@@ -164,7 +164,7 @@ fn another_users_run_beside_ours_completes_and_cannot_write_into_ours() {
     );
     assert!(!nobody_can_write(&our_root.join("intruder"), &home));
     // Their default root (no XDG_RUNTIME_DIR for them), in memory as ours.
-    let their_root = PathBuf::from(format!("/dev/shm/linetrack-{NOBODY}/iceoryx2"));
+    let their_root = PathBuf::from(format!("/dev/shm/linetrack-{NOBODY}"));
     let their_root_meta = std::fs::metadata(&their_root)
         .unwrap_or_else(|e| panic!("their root folder {}: {e}", their_root.display()));
     assert_eq!(

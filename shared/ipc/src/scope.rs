@@ -25,7 +25,7 @@ pub struct Scope {
     /// The run.
     pub run_id: String,
     /// The folder of iceoryx2's node and service descriptions (`LINETRACK_IPC_ROOT`, else
-    /// `$XDG_RUNTIME_DIR/linetrack-iceoryx2`, else `/dev/shm/linetrack-<uid>/iceoryx2`, or
+    /// `$XDG_RUNTIME_DIR/linetrack-iceoryx2`, else `/dev/shm/linetrack-<uid>`, or
     /// `/tmp/…` without `/dev/shm`).
     pub root: PathBuf,
 }
@@ -81,7 +81,7 @@ impl Scope {
     }
 
     /// The root folder: `LINETRACK_IPC_ROOT`, else `configured` (the config's `ipc.root`),
-    /// else `$XDG_RUNTIME_DIR/linetrack-iceoryx2`, else `/dev/shm/linetrack-<uid>/iceoryx2`
+    /// else `$XDG_RUNTIME_DIR/linetrack-iceoryx2`, else `/dev/shm/linetrack-<uid>`
     /// (in memory), or `/tmp/linetrack-<uid>/iceoryx2` on a system without `/dev/shm`.
     pub fn root_from(configured: Option<&Path>) -> PathBuf {
         let from_env = |var: &str| {
@@ -101,14 +101,15 @@ impl Scope {
                 // description to its file as it creates it, and on a busy disk one such
                 // sync held a starting stage for 5 to 25 s (a hot swap's standby, while
                 // LSD missed every frame); on tmpfs a sync costs nothing.
+                // There the folder is the root itself (no `iceoryx2` below it): the root's
+                // length comes out of the room iceoryx2's socket paths have.
+                let uid = rustix::process::getuid().as_raw();
                 let memory = Path::new(SHM_DIR);
-                let base = if memory.is_dir() {
-                    memory
+                if memory.is_dir() {
+                    memory.join(format!("linetrack-{uid}"))
                 } else {
-                    Path::new("/tmp")
-                };
-                base.join(format!("linetrack-{}", rustix::process::getuid().as_raw()))
-                    .join("iceoryx2")
+                    PathBuf::from(format!("/tmp/linetrack-{uid}/iceoryx2"))
+                }
             })
     }
 

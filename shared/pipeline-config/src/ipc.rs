@@ -9,7 +9,7 @@ use std::path::PathBuf;
 #[serde(deny_unknown_fields, default)]
 pub struct IpcConfig {
     /// The folder of iceoryx2's node and service descriptions (created owner-only). Unset:
-    /// `$XDG_RUNTIME_DIR/linetrack-iceoryx2`, else `/dev/shm/linetrack-<uid>/iceoryx2` (in
+    /// `$XDG_RUNTIME_DIR/linetrack-iceoryx2`, else `/dev/shm/linetrack-<uid>` (in
     /// memory: iceoryx2 syncs these files as it writes them, which a busy disk makes slow),
     /// else `/tmp/linetrack-<uid>/iceoryx2`. The environment variable `LINETRACK_IPC_ROOT`
     /// overrides it.
