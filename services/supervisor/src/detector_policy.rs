@@ -2,7 +2,7 @@
 //! detector when it misses its budget, and comes back with hysteresis.
 //!
 //! While the line detector runs LSD, `bad_frames` frames in a row over
-//! `budget.line_detector_ms` ask for a hot swap to `to` (FLD by default); while that one
+//! `budget.line_detector_ms` ask for a hot swap to `to` (edgelines by default); while that one
 //! runs after such a swap, `recover_frames` frames in a row within `recover_budget_fraction`
 //! of the budget ask for LSD back. The way back comes no sooner than `min_interval_frames`
 //! after the policy's last swap, twice as long after each recovery that gave way again

@@ -116,11 +116,12 @@ pub(crate) fn prepare_run_dir(
     if config.output.trace {
         // Made once here, before any stage starts: a stage then only creates its own file
         // in it (`linetrack_telemetry::span_file`), never a folder in the run folder,
-        // whose lock the status writer's renames hold while the disk is slow.
-        let spans = run_dir.join("spans");
-        std::os::unix::fs::DirBuilderExt::mode(&mut std::fs::DirBuilder::new(), 0o700)
-            .create(&spans)
-            .with_context(|| format!("creating {}", spans.display()))?;
+        // whose lock a stage's mkdir waited for while the disk was slow.
+        linetrack_private_dir::private_dir(
+            &run_dir.join("spans"),
+            linetrack_private_dir::Create::Missing,
+        )
+        .context("the run folder's spans folder")?;
     }
     let config_path = run_dir.join("pipeline.toml");
     linetrack_run_record::files::write_whole(

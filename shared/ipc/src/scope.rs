@@ -98,9 +98,9 @@ impl Scope {
             })
             .unwrap_or_else(|| {
                 // In memory when it can be: iceoryx2 syncs each node's and service's
-                // description to its file as it creates it, and on a busy disk one such
-                // sync held a starting stage for 5 to 25 s (a hot swap's standby, while
-                // LSD missed every frame); on tmpfs a sync costs nothing.
+                // description to its file as it creates it, and on a busy disk such a
+                // sync held a starting stage for seconds (a hot swap's standby, while LSD
+                // missed every frame); on tmpfs a sync costs nothing.
                 // There the folder is the root itself (no `iceoryx2` below it): the root's
                 // length comes out of the room iceoryx2's socket paths have.
                 let uid = rustix::process::getuid().as_raw();

@@ -158,8 +158,8 @@ impl SpanRecorder {
     /// every [`FLUSH_EVERY`].
     pub fn create(path: &Path, process: &str) -> Result<Self, TelemetryError> {
         // A folder that exists is not made again: mkdir locks the folder above even then,
-        // and waits while another process holds that lock (a stage starting beside the
-        // supervisor's status writer waited 12 s so in `mkdir`, under load).
+        // and waits while another process holds that lock (a standby detector waited
+        // seconds so in `mkdir`, under load, while LSD missed every frame).
         if let Some(dir) = path.parent()
             && !dir.is_dir()
         {
