@@ -220,7 +220,10 @@ impl PoseTracker {
             buffers: FrameBuffers::default(),
             covariance: PoseCovariance::default(),
             relink: Relink {
-                l1: create_segment_matcher(MatcherKind::L1, &ctx.config.odometry.frontend)?,
+                l1: create_segment_matcher(
+                    MatcherKind::L1,
+                    &ctx.config.odometry.tracking_frontend(),
+                )?,
                 segments: SegmentTracking::default(),
                 previous: None,
                 current: LineFeatures::default(),

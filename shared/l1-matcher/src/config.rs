@@ -64,6 +64,19 @@ pub struct PredictedSettings {
     pub max_displacement_px: f64,
     /// Whether the flow-direction outlier filter also runs on predicted queries' matches.
     pub flow_filter: bool,
+    /// The gate narrowed to the frame's own prediction error (0: off). After matching
+    /// with [`PredictedSettings::max_displacement_px`], the median distance of the
+    /// predicted queries' partners from their queries' lines measures how far off this
+    /// frame's prediction is; the predicted queries are then matched again with their gate
+    /// at this many times that median, within [`PredictedSettings::narrow_min_px`] and
+    /// `max_displacement_px`. A good prediction leaves a parallel edge a few pixels away
+    /// (the other side of a kerb, a window frame) outside the gate; a poor one keeps the
+    /// wide gate.
+    pub narrow_factor: f64,
+    /// The narrowed gate's smallest width, pixels.
+    pub narrow_min_px: f64,
+    /// Fewest predicted matches whose median may narrow the gate.
+    pub narrow_min_matches: usize,
 }
 
 impl Default for PredictedSettings {
@@ -71,6 +84,9 @@ impl Default for PredictedSettings {
         Self {
             max_displacement_px: 15.0,
             flow_filter: false,
+            narrow_factor: 3.0,
+            narrow_min_px: 4.0,
+            narrow_min_matches: 6,
         }
     }
 }
@@ -414,7 +430,7 @@ impl MatcherConfig {
         let f = &self.outlier_filter;
         let p = &self.photometric;
         let c = &self.consistency;
-        let checks: [(&'static str, f64, bool, &'static str); 29] = [
+        let checks: [(&'static str, f64, bool, &'static str); 31] = [
             (
                 "lambda",
                 self.lambda,
@@ -510,6 +526,18 @@ impl MatcherConfig {
                 self.predicted.max_displacement_px,
                 self.predicted.max_displacement_px >= 0.0,
                 "a number >= 0 (inf for no gate)",
+            ),
+            (
+                "predicted.narrow_factor",
+                self.predicted.narrow_factor,
+                finite_nonneg(self.predicted.narrow_factor),
+                "a finite number >= 0 (0: off)",
+            ),
+            (
+                "predicted.narrow_min_px",
+                self.predicted.narrow_min_px,
+                finite_nonneg(self.predicted.narrow_min_px),
+                "a finite number >= 0",
             ),
             (
                 "outlier_filter.sigmas",

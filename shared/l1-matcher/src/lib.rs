@@ -247,7 +247,48 @@ impl L1Matcher {
         second: &[Segment],
         out: &mut Vec<Match>,
     ) -> MatchStats {
-        self.run(MatchCase::FrameToFrame, first, second, None, predicted, out)
+        let stats = self.run(MatchCase::FrameToFrame, first, second, None, predicted, out);
+        let Some(width) = self.narrowed_gate(predicted, out) else {
+            return stats;
+        };
+        let wide = self.predicted_limits;
+        self.predicted_limits = GateLimits::new(&Gates {
+            max_displacement_px: width,
+            ..self.config.gates
+        });
+        let stats = self.run(MatchCase::FrameToFrame, first, second, None, predicted, out);
+        self.predicted_limits = wide;
+        stats
+    }
+
+    /// The gate for predicted queries narrowed to this frame's prediction error
+    /// ([`PredictedSettings::narrow_factor`]), from the matches `out` of the last run;
+    /// `None` when narrowing is off, too few predicted queries were matched, or it would
+    /// not narrow.
+    fn narrowed_gate(&self, predicted: &[bool], out: &[Match]) -> Option<f64> {
+        let settings = self.config.predicted;
+        if !(settings.narrow_factor > 0.0) {
+            return None;
+        }
+        let mut offsets: Vec<f64> = out
+            .iter()
+            .filter(|m| predicted.get(m.query).copied().unwrap_or(false))
+            .filter_map(|m| {
+                let (query, partner) = (
+                    self.first.get(m.query)?.as_ref()?,
+                    self.second.get(m.train)?.as_ref()?,
+                );
+                let from = partner.mid - query.mid;
+                Some((query.dir.x * from.y - query.dir.y * from.x).abs())
+            })
+            .collect();
+        if offsets.len() < settings.narrow_min_matches.max(1) {
+            return None;
+        }
+        let middle = offsets.len() / 2;
+        let (_, median, _) = offsets.select_nth_unstable_by(middle, f64::total_cmp);
+        let width = (settings.narrow_factor * *median).max(settings.narrow_min_px);
+        (width < settings.max_displacement_px).then_some(width)
     }
 
     fn run(

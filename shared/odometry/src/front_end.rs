@@ -32,7 +32,7 @@ impl Odometry {
     pub fn new(config: OdometryConfig, rig: StereoRig) -> Result<Self, OdometryError> {
         Ok(Self {
             detector: create_detector(config.detector, &config.frontend)?,
-            matcher: create_segment_matcher(config.matcher, &config.frontend)?,
+            matcher: create_segment_matcher(config.matcher, &config.tracking_frontend())?,
             rescue_matcher: rescue_matcher(&config)?,
             previous_lines: None,
             segments: SegmentTracking::default(),
@@ -133,7 +133,7 @@ fn rescue_matcher(
     if window <= 0.0 || config.features != Features::LinesOnly {
         return Ok(None);
     }
-    let mut frontend = config.frontend.clone();
+    let mut frontend = config.tracking_frontend();
     frontend.l1.predicted.max_displacement_px = window;
     frontend.appearance_gates.max_displacement_px = window;
     Ok(Some(create_segment_matcher(config.matcher, &frontend)?))

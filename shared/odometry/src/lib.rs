@@ -28,7 +28,7 @@ mod tracker;
 pub use front_end::{Odometry, SegmentTracking};
 // The settings, OpenCV-free in their own crate, re-exported where they are run.
 pub use linetrack_odometry_config::{
-    Features, LinePrediction, LostLimits, OdometryConfig, StereoPhotometric,
+    Features, LinePrediction, LostLimits, OdometryConfig, PredictedNarrowing, StereoPhotometric,
 };
 pub use linetrack_stereo_vo::nees;
 pub use linetrack_trajectory::metrics;

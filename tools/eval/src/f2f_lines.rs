@@ -12,7 +12,10 @@
 //! twice ([`Positions`]): the segments of frame k − 1 where they were, and where a
 //! constant-velocity prediction puts them — the previous true step (k − 2 → k − 1) applied
 //! to their 3-D samples, as the odometry predicts with its last estimated step — through
-//! `SegmentMatcher::match_predicted` (segments without samples stay where they were).
+//! `SegmentMatcher::match_predicted` (segments without samples stay where they were),
+//! with the front end's matcher settings as configured: ℓ1 narrows its gate around
+//! predicted segments to the pair's own prediction error, as the lines-only odometry does
+//! (`predicted_narrowing`).
 
 use crate::line_truth::{self, Verdict};
 use crate::tracking::{Illumination, left_depth, load_frame};

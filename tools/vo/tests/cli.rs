@@ -242,6 +242,16 @@ fn a_malformed_config_fails_naming_the_file_and_field() {
             "[motion]\nmin_inliers_with_prior = 2\n",
             "motion.min_inliers_with_prior",
         ),
+        (
+            "narrowing.toml",
+            "predicted_narrowing = \"sometimes\"\n",
+            "predicted_narrowing",
+        ),
+        (
+            "narrow.toml",
+            "[frontend.l1.predicted]\nnarrow_factor = -1.0\n",
+            "predicted.narrow_factor",
+        ),
     ] {
         let config = dir.join(name);
         std::fs::write(&config, text).unwrap();

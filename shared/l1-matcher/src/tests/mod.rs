@@ -209,6 +209,49 @@ fn predicted_queries_have_their_own_displacement_gate() {
     assert_eq!(pairs(&predicted), vec![(0, 0)]);
 }
 
+/// Ten vertical predicted queries 60 px apart; the partners of the first nine lie
+/// `offset(k)` px to the side of their queries. The last one's partner was not detected:
+/// only a parallel edge 8 px beside it is there.
+fn a_frame_with_a_distractor(offset: impl Fn(usize) -> f64) -> (Vec<Segment>, Vec<Segment>) {
+    let x = |k: usize| 100.0 + 60.0 * k as f64;
+    let first = (0..10).map(|k| seg(x(k), 100.0, x(k), 200.0)).collect();
+    let mut second: Vec<Segment> = (0..9)
+        .map(|k| seg(x(k) + offset(k), 101.0, x(k) + offset(k), 199.0))
+        .collect();
+    second.push(seg(x(9) + 8.0, 100.0, x(9) + 8.0, 200.0));
+    (first, second)
+}
+
+#[test]
+fn a_good_prediction_narrows_the_gate_and_leaves_a_parallel_edge_out() {
+    let config = MatcherConfig::default();
+    assert!(config.predicted.narrow_factor > 0.0);
+    // Partners within half a pixel: the gate narrows to its 4 px floor, and the edge
+    // 8 px beside the last query no longer passes.
+    let (first, second) = a_frame_with_a_distractor(|k| if k % 2 == 0 { 0.5 } else { -0.4 });
+    let (narrowed, _) = run_predicted(config.clone(), &first, &[true; 10], &second);
+    assert_eq!(pairs(&narrowed), (0..9).map(|k| (k, k)).collect::<Vec<_>>());
+    // Without narrowing it is taken for the query's partner.
+    let mut wide = config.clone();
+    wide.predicted.narrow_factor = 0.0;
+    let (plain, _) = run_predicted(wide, &first, &[true; 10], &second);
+    assert_eq!(pairs(&plain), (0..10).map(|k| (k, k)).collect::<Vec<_>>());
+    // Too few matches to measure the prediction by: nothing narrows.
+    let mut few = config;
+    few.predicted.narrow_min_matches = 11;
+    let (kept, _) = run_predicted(few, &first, &[true; 10], &second);
+    assert_eq!(kept.len(), 10);
+}
+
+#[test]
+fn a_poor_prediction_keeps_the_wide_gate() {
+    // Every partner 6–9 px off: the median says the prediction is off by that much, and
+    // three times it is wider than the configured gate, which stays.
+    let (first, second) = a_frame_with_a_distractor(|k| 6.0 + (k % 4) as f64);
+    let (matches, _) = run_predicted(MatcherConfig::default(), &first, &[true; 10], &second);
+    assert_eq!(pairs(&matches), (0..10).map(|k| (k, k)).collect::<Vec<_>>());
+}
+
 #[test]
 fn a_predicted_query_outranks_a_plain_one_for_a_candidate() {
     // Query 1 fits the candidate better (the same length), but query 0 was placed there
