@@ -192,7 +192,7 @@ impl Bus {
                 if let Some(last) = &local.last {
                     let _ = tx.try_send(Arc::clone(last));
                 }
-                local.subscribers.push(tx);
+                local.subscribers.push((tx, rx.clone()));
                 Ok(Inlet {
                     service_name: topic.name().to_string(),
                     limit: topic.queue_depth(),

@@ -341,6 +341,35 @@ mod tests {
         with_shared_memory_buses("rt", round_trip);
     }
 
+    /// Publishes three frames more than the frames topic's queue holds, none received: the
+    /// subscriber then reads the newest ones, in order.
+    fn a_full_queue_gives_up_its_oldest(publisher_bus: &Bus, subscriber_bus: &Bus) {
+        let topic = linetrack_msgs::topics::FRAMES;
+        let mut inlet = subscriber_bus
+            .inlet::<u8, FrameHeader>(topic)
+            .unwrap_or_else(|e| panic!("{e}"));
+        let mut outlet = publisher_bus
+            .outlet::<u8, FrameHeader>(topic, 1)
+            .unwrap_or_else(|e| panic!("{e}"));
+        let depth = linetrack_msgs::Topic::Frames.queue_depth() as u64;
+        for id in 0..depth + 3 {
+            outlet
+                .publish(&FrameHeader::new(id, 0, 1), &[&[0]])
+                .unwrap_or_else(|e| panic!("{e}"));
+        }
+        let mut seen = Vec::new();
+        while let Some(message) = inlet.receive().unwrap_or_else(|e| panic!("{e}")) {
+            seen.push(message.header().frame_id);
+        }
+        assert_eq!(seen, (3..depth + 3).collect::<Vec<_>>());
+    }
+
+    #[test]
+    fn a_full_local_queue_gives_up_its_oldest_message_as_shared_memory_does() {
+        with_local_buses(a_full_queue_gives_up_its_oldest);
+        with_shared_memory_buses("overflow", a_full_queue_gives_up_its_oldest);
+    }
+
     #[test]
     fn dropping_every_port_and_node_leaves_no_resources() {
         let scope = unique_scope("gone");

@@ -27,7 +27,9 @@ pub struct LocalPayload<P, H> {
 /// (handed to a subscriber that comes later, as iceoryx2's history does).
 #[derive(Default)]
 pub(crate) struct LocalTopic {
-    pub(crate) subscribers: Vec<Sender<LocalMessage>>,
+    /// Each subscriber's queue: its sending end, and a receiving end through which a full
+    /// queue gives up its oldest message to the newest (iceoryx2's safe overflow).
+    pub(crate) subscribers: Vec<(Sender<LocalMessage>, Receiver<LocalMessage>)>,
     pub(crate) last: Option<LocalMessage>,
 }
 
@@ -103,13 +105,17 @@ impl<P: Record, H: Record> Outlet<P, H> {
                     local.last = Some(Arc::clone(&message));
                 }
                 let mut delivered = 0;
-                for tx in local.subscribers.iter() {
-                    match tx.try_send(Arc::clone(&message)) {
-                        Ok(()) => delivered += 1,
-                        // A full queue loses the message for that subscriber, as a shared
-                        // memory subscriber's overflow would; the gap shows in the records.
-                        Err(TrySendError::Full(_)) | Err(TrySendError::Disconnected(_)) => {}
+                for (tx, oldest) in local.subscribers.iter() {
+                    // A full queue loses its oldest message to this one, as a shared memory
+                    // subscriber's safe overflow does; the gap shows in the records. (Should
+                    // the subscriber take one meanwhile, one more old message is lost: never
+                    // the newest.)
+                    let mut sent = tx.try_send(Arc::clone(&message));
+                    if let Err(TrySendError::Full(again)) = sent {
+                        let _ = oldest.try_recv();
+                        sent = tx.try_send(again);
                     }
+                    delivered += usize::from(sent.is_ok());
                 }
                 for wake in wakes {
                     let _ = wake.try_send(());
