@@ -77,6 +77,11 @@ pub struct PredictedSettings {
     pub narrow_min_px: f64,
     /// Fewest predicted matches whose median may narrow the gate.
     pub narrow_min_matches: usize,
+    /// In a predicted query's ratio test, a candidate lying on the best one's line (both
+    /// ends within this many pixels of it, nearly parallel) is another piece of the same
+    /// edge, which the detector split differently in this frame, not a rival (0: off,
+    /// every other candidate is a rival).
+    pub collinear_px: f64,
 }
 
 impl Default for PredictedSettings {
@@ -87,6 +92,7 @@ impl Default for PredictedSettings {
             narrow_factor: 3.0,
             narrow_min_px: 4.0,
             narrow_min_matches: 6,
+            collinear_px: 0.0,
         }
     }
 }
@@ -430,7 +436,7 @@ impl MatcherConfig {
         let f = &self.outlier_filter;
         let p = &self.photometric;
         let c = &self.consistency;
-        let checks: [(&'static str, f64, bool, &'static str); 31] = [
+        let checks: [(&'static str, f64, bool, &'static str); 32] = [
             (
                 "lambda",
                 self.lambda,
@@ -538,6 +544,12 @@ impl MatcherConfig {
                 self.predicted.narrow_min_px,
                 finite_nonneg(self.predicted.narrow_min_px),
                 "a finite number >= 0",
+            ),
+            (
+                "predicted.collinear_px",
+                self.predicted.collinear_px,
+                finite_nonneg(self.predicted.collinear_px),
+                "a finite number >= 0 (0: off)",
             ),
             (
                 "outlier_filter.sigmas",

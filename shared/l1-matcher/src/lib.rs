@@ -393,7 +393,12 @@ impl L1Matcher {
                 self.columns.push(column);
             }
             stats.candidate_pairs += self.candidates.len();
-            match self.choose(error_ratio) {
+            let collinear_px = if is_predicted(i) {
+                self.config.predicted.collinear_px
+            } else {
+                0.0
+            };
+            match self.choose(error_ratio, collinear_px) {
                 Ok(Some(m)) if self.misaligned(profiles, query_rows, i, m.train) => {
                     stats.misaligned += 1;
                 }
@@ -466,9 +471,10 @@ impl L1Matcher {
         }
     }
 
-    /// Solves the current query's lasso and applies the ratio test.
+    /// Solves the current query's lasso and applies the ratio test, in which a candidate
+    /// on the best one's line (within `collinear_px`; 0: none is) is no rival.
     /// `Ok(None)`: no candidate or ambiguous.
-    fn choose(&mut self, error_ratio: f64) -> Result<Option<Match>, Choice> {
+    fn choose(&mut self, error_ratio: f64, collinear_px: f64) -> Result<Option<Match>, Choice> {
         if self.candidates.is_empty() {
             return Ok(None);
         }
@@ -496,17 +502,18 @@ impl L1Matcher {
         }
         let best = best.ok_or(Unsupported)?;
         let best_error = self.candidates[best].error;
+        let rival = |k: usize| k != best && !self.on_line_of(best, k, collinear_px);
         let second_error = match self.config.second_best {
             SecondBest::LowestOtherError => self
                 .candidates
                 .iter()
                 .enumerate()
-                .filter(|(k, _)| *k != best)
+                .filter(|(k, _)| rival(*k))
                 .map(|(_, c)| c.error)
                 .fold(f64::INFINITY, f64::min),
-            SecondBest::SecondLassoWeight => {
-                runner_up.map_or(f64::INFINITY, |r| self.candidates[r].error)
-            }
+            SecondBest::SecondLassoWeight => runner_up
+                .filter(|r| rival(*r))
+                .map_or(f64::INFINITY, |r| self.candidates[r].error),
         };
         // Two candidates with zero error are ambiguous, not a pass.
         let distinct = second_error.is_infinite()
@@ -523,6 +530,31 @@ impl L1Matcher {
         }))
     }
 }
+
+impl L1Matcher {
+    /// Whether candidate `k` lies on candidate `best`'s line: within `collinear_px` of it
+    /// at both ends and within [`COLLINEAR_MAX_ANGLE_DEG`] of its direction (0 px: never).
+    fn on_line_of(&self, best: usize, k: usize, collinear_px: f64) -> bool {
+        if !(collinear_px > 0.0) {
+            return false;
+        }
+        let feature = |c: usize| self.second.get(self.candidates[c].index).copied().flatten();
+        let (Some(a), Some(b)) = (feature(best), feature(k)) else {
+            return false;
+        };
+        let off = |p: linetrack_geometry::Point| {
+            let r = p - a.start;
+            (r.x * a.dir.y - r.y * a.dir.x).abs()
+        };
+        let cos = (a.dir.x * b.dir.x + a.dir.y * b.dir.y).abs();
+        cos >= COLLINEAR_MAX_ANGLE_DEG.to_radians().cos()
+            && off(b.start) <= collinear_px
+            && off(b.end) <= collinear_px
+    }
+}
+
+/// The largest angle between two candidates on one line, degrees.
+const COLLINEAR_MAX_ANGLE_DEG: f64 = 2.0;
 
 /// Why a query got no match from its lasso.
 #[derive(Debug, Clone, Copy)]

@@ -253,6 +253,37 @@ fn a_poor_prediction_keeps_the_wide_gate() {
 }
 
 #[test]
+fn pieces_of_one_edge_are_no_rivals_with_collinear_px() {
+    // The predicted query's edge was detected in two pieces this frame, both on its line:
+    // equally good partners, so the ratio test finds the query ambiguous.
+    let first = [seg(100.0, 100.0, 100.0, 200.0)];
+    let second = [
+        seg(100.3, 100.0, 100.3, 148.0),
+        seg(100.2, 152.0, 100.2, 200.0),
+    ];
+    let config = MatcherConfig::default();
+    let (plain, stats) = run_predicted(config.clone(), &first, &[true], &second);
+    assert!(plain.is_empty());
+    assert_eq!(stats.ambiguous, 1);
+    // With `collinear_px` the two pieces are one edge: the query takes one of them.
+    let mut pieces = config.clone();
+    pieces.predicted.collinear_px = 1.0;
+    let (matched, _) = run_predicted(pieces.clone(), &first, &[true], &second);
+    assert_eq!(matched.len(), 1);
+    // A parallel edge 3 px off is still a rival.
+    let beside = [
+        seg(100.3, 100.0, 100.3, 148.0),
+        seg(103.2, 102.0, 103.2, 146.0),
+    ];
+    let (none, stats) = run_predicted(pieces.clone(), &first, &[true], &beside);
+    assert!(none.is_empty(), "{none:?}");
+    assert_eq!(stats.ambiguous, 1);
+    // A query matched where it was (not predicted) keeps the plain ratio test.
+    let (unpredicted, _) = run_predicted(pieces, &first, &[false], &second);
+    assert!(unpredicted.is_empty());
+}
+
+#[test]
 fn a_predicted_query_outranks_a_plain_one_for_a_candidate() {
     // Query 1 fits the candidate better (the same length), but query 0 was placed there
     // by the motion.
