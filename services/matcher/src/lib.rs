@@ -19,8 +19,8 @@ use linetrack_stage_runtime::{
     Images, RightImageWorker, Stage, StageContext, run_stage, stereo_views, to_segment,
 };
 use linetrack_vision::{
-    ContrastStretch, FeatureMatch, GrayImage, LineFeatures, MatcherKind, SegmentMatcher,
-    VisionError, create_segment_matcher,
+    FeatureMatch, GrayImage, LineFeatures, MatcherKind, SegmentMatcher, VisionError,
+    create_segment_matcher,
 };
 use tracing::info_span;
 
@@ -59,10 +59,6 @@ pub struct FrameMatcher {
     spare: [LineFeatures; 2],
     stereo: Vec<FeatureMatch>,
     tracked: Vec<FeatureMatch>,
-    /// The images stretched when dark, as the detector and the odometry see them, for
-    /// LBD and the ℓ1 matcher's photometric check: left, right.
-    stretch: [ContrastStretch; 2],
-    max_contrast_gain: f64,
 }
 
 impl FrameMatcher {
@@ -98,8 +94,6 @@ impl FrameMatcher {
             spare: Default::default(),
             stereo: Vec::new(),
             tracked: Vec::new(),
-            stretch: Default::default(),
-            max_contrast_gain: ctx.config.odometry.max_contrast_gain,
         })
     }
 
@@ -161,18 +155,7 @@ impl FrameMatcher {
         let probe = views.is_some() && self.probes_now(mode);
         let mut matching = Matching::default();
         let mut described = false;
-        // Described where the segments were found: in the images stretched when dark (on
-        // the raw ones, a darkened frame's ℓ1 stereo matches and LBD descriptors were not
-        // `linetrack-vo`'s).
-        let [stretch_left, stretch_right] = &mut self.stretch;
-        let seen = match &views {
-            Some((l, r)) => Some((
-                stretch_left.apply(l, self.max_contrast_gain)?,
-                stretch_right.apply(r, self.max_contrast_gain)?,
-            )),
-            None => None,
-        };
-        if let Some((l, r)) = seen {
+        if let Some((l, r)) = &views {
             let span = info_span!("describe");
             let _entered = span.enter();
             if mode == MatcherMode::Lbd || probe {
@@ -374,67 +357,6 @@ mod tests {
                 (header.matching, tracks)
             })
             .collect()
-    }
-
-    /// The tracks of EuRoC frame 0 darkened to a third, under `policy`: given the dark
-    /// frame, and given the frame already stretched as the detector stretched it to find
-    /// the segments.
-    fn dark_and_stretched_tracks(policy: MatcherPolicy) -> [(Matching, Vec<TrackedLine>); 2] {
-        let config = PipelineConfig::default();
-        let max_gain = config.odometry.max_contrast_gain;
-        let mut detector =
-            linetrack_vision::create_detector(DetectorKind::Lsd, &config.odometry.frontend)
-                .unwrap_or_else(|e| panic!("{e}"));
-        let (left, right) =
-            linetrack_test_data::euroc_stereo_pair(0).unwrap_or_else(|e| panic!("{e}"));
-        let dark = |p: &std::path::Path| {
-            let image = GrayImage::load(p).unwrap_or_else(|e| panic!("{e}"));
-            linetrack_vision::perturb(&image, 0.3, 0.0).unwrap_or_else(|e| panic!("{e}"))
-        };
-        let dark = [dark(&left), dark(&right)];
-        let stretched = dark.clone().map(|image| {
-            linetrack_vision::stretch_contrast(&image, max_gain)
-                .unwrap_or_else(|e| panic!("{e}"))
-                .unwrap_or_else(|| panic!("a dark image is stretched"))
-                .0
-        });
-        let mut records = Vec::new();
-        let mut segments = Vec::new();
-        for image in &stretched {
-            detector
-                .detect(image, &mut segments)
-                .unwrap_or_else(|e| panic!("{e}"));
-            records.push(to_records(&segments));
-        }
-        let left_count = records[0].len() as u32;
-        let records = records.concat();
-        [&dark, &stretched].map(|[left, right]| {
-            let frame = stereo_frame(0, left, right).unwrap_or_else(|e| panic!("{e}"));
-            let mut header = TracksHeader::from(*frame.header());
-            header.detection.left_count = left_count;
-            let mut tracks = Vec::new();
-            matcher(policy)
-                .match_frame(&mut header, &records, Some(&frame), &mut tracks)
-                .unwrap_or_else(|e| panic!("{e}"));
-            (header.matching, tracks)
-        })
-    }
-
-    #[test]
-    fn a_dark_frame_is_described_as_stretched_as_its_segments_were_found() {
-        // LBD's descriptors and the ℓ1 matcher's photometric check read the images the
-        // detector found the segments in, so a darkened frame matches as `linetrack-vo`
-        // matches it (described on the raw dark images, LBD made 43 stereo matches here
-        // against 45).
-        for policy in [MatcherPolicy::Lbd, MatcherPolicy::L1] {
-            let [dark, stretched] = dark_and_stretched_tracks(policy);
-            assert!(
-                stretched.0.stereo_matches > 20,
-                "{policy:?}: {:?}",
-                stretched.0
-            );
-            assert_eq!(dark, stretched, "{policy:?}");
-        }
     }
 
     #[test]
