@@ -178,7 +178,8 @@ fn received_poses_match_poses_tum(name: &str, single_process: bool) {
     let extra = format!(
         "[supervisor]\nstatus_every_ms = 0\n[budget]\ndrop_late = false\n\
          [ros2]\nenabled = true\ndomain_id = {domain}\nlocalhost_only = true\nframe_id = \"map\"\n\
-         convention = \"camera\"\nstamp = \"sequence\"\npublish_lost = true\ntf = true\n"
+         convention = \"camera\"\nstamp = \"sequence\"\npublish_lost = true\ntf = true\n\
+         wait_for_subscribers_ms = 20000\n"
     );
     let run = if single_process {
         start_single_process(&dir, &base_sequence(FRAMES), &extra)

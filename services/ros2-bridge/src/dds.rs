@@ -244,6 +244,13 @@ impl DdsSink {
             DIAGNOSTIC_ARRAY_TYPE,
             &pose_qos,
         )?;
+        let wait = Duration::from_millis(config.wait_for_subscribers_ms);
+        if !wait.is_zero() {
+            let mut topics = vec![config.pose_topic.as_str()];
+            topics.extend((!config.odom_topic.is_empty()).then_some(config.odom_topic.as_str()));
+            topics.extend(config.tf.then_some(TF_TOPIC));
+            wait_for_subscribers(&node, &topics, wait);
+        }
         tracing::info!(
             "ROS 2 node {} on domain {domain}{}: {} and {}",
             config.node_name,
@@ -267,6 +274,39 @@ impl DdsSink {
             diagnostics,
             _node: node,
         })
+    }
+}
+
+/// Waits until each of `topics` has a subscriber discovered on the domain, at most `wait`
+/// (then says which have none and goes on): a volatile topic's messages reach only the
+/// subscribers matched when they are written.
+fn wait_for_subscribers(node: &Node, topics: &[&str], wait: Duration) {
+    let deadline = std::time::Instant::now() + wait;
+    loop {
+        let missing: Vec<&str> = topics
+            .iter()
+            .copied()
+            .filter(|topic| {
+                let absolute = if topic.starts_with('/') {
+                    (*topic).to_string()
+                } else {
+                    format!("/{topic}")
+                };
+                node.subscription_count(&absolute) == 0
+            })
+            .collect();
+        if missing.is_empty() {
+            tracing::info!("a subscriber on each of {topics:?}");
+            return;
+        }
+        if std::time::Instant::now() >= deadline {
+            tracing::warn!(
+                "no subscriber on {missing:?} after {wait:?} (ros2.wait_for_subscribers_ms): \
+                 publishing anyway"
+            );
+            return;
+        }
+        std::thread::sleep(Duration::from_millis(20));
     }
 }
 

@@ -117,7 +117,16 @@ pub struct Ros2Config {
     /// second (stage latencies and budget misses, drops, matcher mode, tracking); empty =
     /// none.
     pub diagnostics_topic: String,
+    /// Before the bridge says it is ready (and the run's frames start), it waits up to this
+    /// long for a subscriber on each of the pose, odometry and `/tf` topics it publishes
+    /// (they are volatile: a subscriber matched late misses the first poses), then goes
+    /// on, warning of the topics without one; 0 = no wait. Keep it under
+    /// `supervisor.startup_timeout_ms`.
+    pub wait_for_subscribers_ms: u64,
 }
+
+/// The longest `wait_for_subscribers_ms` accepted (the supervisor's longest start-up).
+const MAX_WAIT_FOR_SUBSCRIBERS_MS: u64 = 600_000;
 
 impl Default for Ros2Config {
     fn default() -> Self {
@@ -138,6 +147,7 @@ impl Default for Ros2Config {
             tf: false,
             camera_in_base: CameraMount::default(),
             diagnostics_topic: "/diagnostics".to_string(),
+            wait_for_subscribers_ms: 0,
         }
     }
 }
@@ -152,6 +162,11 @@ impl Ros2Config {
             "ros2.path_max_poses",
             self.path_max_poses,
             1..=MAX_PATH_POSES,
+        )?;
+        crate::limits::in_range(
+            "ros2.wait_for_subscribers_ms",
+            self.wait_for_subscribers_ms,
+            0..=MAX_WAIT_FOR_SUBSCRIBERS_MS,
         )?;
         ros_name("ros2.node_name", &self.node_name, false)?;
         ros_name("ros2.pose_topic", &self.pose_topic, true)?;
