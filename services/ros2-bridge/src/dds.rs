@@ -157,13 +157,18 @@ fn name(
     })
 }
 
-/// Splits a topic `/a/b/c` into ros2-client's namespace `/a/b` and base name `c`.
-pub(crate) fn topic_name(key: &'static str, topic: &str) -> Result<Name, BridgeError> {
-    let absolute = if topic.starts_with('/') {
+/// `topic` with its leading `/` (a relative topic is taken from the root).
+fn absolute_topic(topic: &str) -> String {
+    if topic.starts_with('/') {
         topic.to_string()
     } else {
         format!("/{topic}")
-    };
+    }
+}
+
+/// Splits a topic `/a/b/c` into ros2-client's namespace `/a/b` and base name `c`.
+pub(crate) fn topic_name(key: &'static str, topic: &str) -> Result<Name, BridgeError> {
+    let absolute = absolute_topic(topic);
     let (namespace, base) = absolute.rsplit_once('/').unwrap_or(("", &absolute));
     let namespace = if namespace.is_empty() { "/" } else { namespace };
     name(key, topic, Name::new(namespace, base))
@@ -282,18 +287,13 @@ impl DdsSink {
 /// subscribers matched when they are written.
 fn wait_for_subscribers(node: &Node, topics: &[&str], wait: Duration) {
     let deadline = std::time::Instant::now() + wait;
+    let absolute: Vec<String> = topics.iter().map(|t| absolute_topic(t)).collect();
     loop {
         let missing: Vec<&str> = topics
             .iter()
-            .copied()
-            .filter(|topic| {
-                let absolute = if topic.starts_with('/') {
-                    (*topic).to_string()
-                } else {
-                    format!("/{topic}")
-                };
-                node.subscription_count(&absolute) == 0
-            })
+            .zip(&absolute)
+            .filter(|(_, a)| node.subscription_count(a) == 0)
+            .map(|(t, _)| *t)
             .collect();
         if missing.is_empty() {
             tracing::info!("a subscriber on each of {topics:?}");

@@ -111,6 +111,8 @@ pub struct L1Matcher {
     tentative: Vec<Match>,
     /// The tentative matches of predicted queries while the others are filtered.
     set_aside: Vec<Match>,
+    /// Scratch: predicted partners' distances from their queries' lines.
+    offsets: Vec<f64>,
     filter: outliers::FlowFilter,
     consistency: consistency::DisparityCheck,
 }
@@ -179,6 +181,7 @@ impl L1Matcher {
             owner: Vec::new(),
             tentative: Vec::new(),
             set_aside: Vec::new(),
+            offsets: Vec::new(),
         })
     }
 
@@ -265,23 +268,26 @@ impl L1Matcher {
     /// ([`PredictedSettings::narrow_factor`]), from the matches `out` of the last run;
     /// `None` when narrowing is off, too few predicted queries were matched, or it would
     /// not narrow.
-    fn narrowed_gate(&self, predicted: &[bool], out: &[Match]) -> Option<f64> {
+    fn narrowed_gate(&mut self, predicted: &[bool], out: &[Match]) -> Option<f64> {
         let settings = self.config.predicted;
         if !(settings.narrow_factor > 0.0) {
             return None;
         }
-        let mut offsets: Vec<f64> = out
-            .iter()
-            .filter(|m| predicted.get(m.query).copied().unwrap_or(false))
-            .filter_map(|m| {
-                let (query, partner) = (
-                    self.first.get(m.query)?.as_ref()?,
-                    self.second.get(m.train)?.as_ref()?,
-                );
-                let from = partner.mid - query.mid;
-                Some((query.dir.x * from.y - query.dir.y * from.x).abs())
-            })
-            .collect();
+        let (first, second) = (&self.first, &self.second);
+        let offsets = &mut self.offsets;
+        offsets.clear();
+        offsets.extend(
+            out.iter()
+                .filter(|m| predicted.get(m.query).copied().unwrap_or(false))
+                .filter_map(|m| {
+                    let (query, partner) = (
+                        first.get(m.query)?.as_ref()?,
+                        second.get(m.train)?.as_ref()?,
+                    );
+                    let from = partner.mid - query.mid;
+                    Some((query.dir.x * from.y - query.dir.y * from.x).abs())
+                }),
+        );
         if offsets.len() < settings.narrow_min_matches.max(1) {
             return None;
         }
@@ -529,9 +535,7 @@ impl L1Matcher {
             weight: self.weights[best] / l1,
         }))
     }
-}
 
-impl L1Matcher {
     /// Whether candidate `k` lies on candidate `best`'s line: within `collinear_px` of it
     /// at both ends and within [`COLLINEAR_MAX_ANGLE_DEG`] of its direction (0 px: never).
     fn on_line_of(&self, best: usize, k: usize, collinear_px: f64) -> bool {
