@@ -20,7 +20,7 @@ use linetrack_msgs::{
 };
 use linetrack_odometry::{
     Features, FrameStats, LinePrediction, MatchedLines, MotionTracker, OdometryConfig,
-    PoseCovariance, Preparation, PreparedImages, SegmentTracking,
+    PoseCovariance, Preparation, PreparedImages, SegmentTracking, rescue_matcher,
 };
 use linetrack_stage_runtime::{
     Images, Stage, StageContext, held_capacity, rig_from_record, run_stage, stereo_views,
@@ -140,6 +140,9 @@ pub struct PoseTracker {
 /// What matching ℓ1 frames again at their predicted positions keeps between frames.
 struct Relink {
     l1: Box<dyn SegmentMatcher>,
+    /// The ℓ1 matcher of `[lost] rescue_*` for frames that would be lost (lines only;
+    /// `None`: off), as the odometry's own front end rescues them.
+    rescue: Option<Box<dyn SegmentMatcher>>,
     segments: SegmentTracking,
     /// The last tracked frame's left segments (as the tracker was given them) with the ℓ1
     /// matcher's description of its left image, and that frame's id.
@@ -176,12 +179,20 @@ impl Relink {
             && l1_frame
             && continues
             && *id == matching.previous_frame_id
-            && !self
+        {
+            if !self
                 .segments
                 .match_predicted(self.l1.as_mut(), tracker, previous, current, tracked)
-        {
-            self.segments
-                .rematch(self.l1.as_mut(), tracker, previous, current, tracked);
+            {
+                self.segments
+                    .rematch(self.l1.as_mut(), tracker, previous, current, tracked);
+            } else if let Some(rescue) = self.rescue.as_mut()
+                && self
+                    .segments
+                    .rescue(Some(rescue.as_mut()), tracker, previous, current, tracked)
+            {
+                tracing::debug!(frame_id, "a frame that would be lost was matched again");
+            }
         }
         let done = self.previous.take().map(|(_, p)| p).unwrap_or_default();
         let kept = std::mem::replace(&mut self.current, done);
@@ -224,6 +235,7 @@ impl PoseTracker {
                     MatcherKind::L1,
                     &ctx.config.odometry.tracking_frontend(),
                 )?,
+                rescue: rescue_matcher(&ctx.config.odometry, MatcherKind::L1)?,
                 segments: SegmentTracking::default(),
                 previous: None,
                 current: LineFeatures::default(),

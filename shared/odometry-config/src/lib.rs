@@ -336,6 +336,12 @@ impl OdometryConfig {
                 rescue.rescue_window_px
             ));
         }
+        if !(rescue.rescue_collinear_px.is_finite() && rescue.rescue_collinear_px >= 0.0) {
+            return Err(format!(
+                "field `lost.rescue_collinear_px` = {}: expected a finite number ≥ 0 (0: off)",
+                rescue.rescue_collinear_px
+            ));
+        }
         if rescue.rescue_min_inliers != 0
             && !(3..=m.min_inliers).contains(&rescue.rescue_min_inliers)
         {
@@ -382,6 +388,13 @@ pub struct LostLimits {
     /// those matches are kept if they give a believed estimate. 0: never. A frame that
     /// would not be lost is tracked exactly as without it.
     pub rescue_window_px: f64,
+    /// Lines only (ℓ1), a frame matched around the prediction whose segments would be lost
+    /// is also matched again with `[frontend.l1.predicted] collinear_px` at this many pixels
+    /// (with the window above if that is on): a candidate on the best one's line, a piece of
+    /// the same edge cut elsewhere by the detector, is then no rival in the ratio test.
+    /// Kept if that gives a believed estimate. 0: never. A frame that would not be lost is
+    /// tracked exactly as without it.
+    pub rescue_collinear_px: f64,
     /// Lines only, a frame still lost after the rescue above is accepted with this many
     /// inlying segments under the constant-velocity prior (3 to `motion.min_inliers`; 0:
     /// never). Unlike `motion.min_inliers_with_prior` it acts on such frames alone.
@@ -396,6 +409,7 @@ impl Default for LostLimits {
             departure_deg: 5.0,
             coast_frames: 0,
             rescue_window_px: 0.0,
+            rescue_collinear_px: 1.0,
             rescue_min_inliers: 0,
         }
     }
@@ -460,6 +474,12 @@ mod tests {
         ] {
             let error = with(window, inliers).unwrap_err();
             assert!(error.contains(field), "{error}");
+        }
+        for collinear_px in [-0.5, f64::NAN, f64::INFINITY] {
+            let mut config = OdometryConfig::default();
+            config.lost.rescue_collinear_px = collinear_px;
+            let error = config.validate().unwrap_err();
+            assert!(error.contains("rescue_collinear_px"), "{error}");
         }
     }
 }

@@ -9,8 +9,8 @@ use crate::{
 };
 use linetrack_geometry::{MatchCase, Segment, StereoRig};
 use linetrack_vision::{
-    FeatureMatch, GrayImage, LineDetector, LineFeatures, SegmentMatcher, create_detector,
-    create_segment_matcher,
+    FeatureMatch, GrayImage, LineDetector, LineFeatures, MatcherKind, SegmentMatcher,
+    create_detector, create_segment_matcher,
 };
 use nalgebra::Isometry3;
 use std::time::Instant;
@@ -20,7 +20,8 @@ pub struct Odometry {
     detector: Box<dyn LineDetector>,
     matcher: Box<dyn SegmentMatcher>,
     /// The same matcher with the frame-to-frame gate around predicted segments widened to
-    /// `lost.rescue_window_px`, for frames that would be lost (lines only; `None`: off).
+    /// `lost.rescue_window_px` and collinear pieces no rivals (`lost.rescue_collinear_px`),
+    /// for frames that would be lost (lines only; `None`: both off).
     rescue_matcher: Option<Box<dyn SegmentMatcher>>,
     previous_lines: Option<LineFeatures>,
     segments: SegmentTracking,
@@ -33,7 +34,7 @@ impl Odometry {
         Ok(Self {
             detector: create_detector(config.detector, &config.frontend)?,
             matcher: create_segment_matcher(config.matcher, &config.tracking_frontend())?,
-            rescue_matcher: rescue_matcher(&config)?,
+            rescue_matcher: rescue_matcher(&config, config.matcher)?,
             previous_lines: None,
             segments: SegmentTracking::default(),
             tracker: MotionTracker::new(config, rig)?,
@@ -94,13 +95,11 @@ impl Odometry {
                 .segments
                 .match_predicted(matcher, tracker, previous, &lines_l, &mut tracked)
             {
-                if tracker.config().features == Features::LinesOnly {
-                    let wider = (self.rescue_matcher.as_mut())
-                        .map(|m| -> &mut dyn SegmentMatcher { m.as_mut() });
-                    stats.rescued =
-                        self.segments
-                            .rescue(wider, tracker, previous, &lines_l, &mut tracked);
-                }
+                let wider = (self.rescue_matcher.as_mut())
+                    .map(|m| -> &mut dyn SegmentMatcher { m.as_mut() });
+                stats.rescued =
+                    self.segments
+                        .rescue(wider, tracker, previous, &lines_l, &mut tracked);
             } else {
                 matcher.match_lines(MatchCase::FrameToFrame, previous, &lines_l, &mut tracked);
                 self.segments
@@ -124,19 +123,28 @@ impl Odometry {
     }
 }
 
-/// The matcher of `lost.rescue_window_px` (lines only), if it is on: `config`'s, its
-/// frame-to-frame gate around a predicted segment widened to that many pixels.
-fn rescue_matcher(
+/// The `kind` matcher of `lost.rescue_window_px` and `lost.rescue_collinear_px` for
+/// [`SegmentTracking::rescue`] (lines only), if either is on for it: the one `config`
+/// tracks with, its frame-to-frame gate around a predicted segment widened to the window
+/// and (ℓ1) pieces of one edge no rivals.
+pub fn rescue_matcher(
     config: &OdometryConfig,
+    kind: MatcherKind,
 ) -> Result<Option<Box<dyn SegmentMatcher>>, OdometryError> {
-    let window = config.lost.rescue_window_px;
-    if window <= 0.0 || config.features != Features::LinesOnly {
+    let lost = &config.lost;
+    let collinear = lost.rescue_collinear_px > 0.0 && kind == MatcherKind::L1;
+    if (lost.rescue_window_px <= 0.0 && !collinear) || config.features != Features::LinesOnly {
         return Ok(None);
     }
     let mut frontend = config.tracking_frontend();
-    frontend.l1.predicted.max_displacement_px = window;
-    frontend.appearance_gates.max_displacement_px = window;
-    Ok(Some(create_segment_matcher(config.matcher, &frontend)?))
+    if lost.rescue_window_px > 0.0 {
+        frontend.l1.predicted.max_displacement_px = lost.rescue_window_px;
+        frontend.appearance_gates.max_displacement_px = lost.rescue_window_px;
+    }
+    if collinear {
+        frontend.l1.predicted.collinear_px = lost.rescue_collinear_px;
+    }
+    Ok(Some(create_segment_matcher(kind, &frontend)?))
 }
 
 /// Frame-to-frame segment matching guided by the motion: the last frame's segments looked
@@ -176,7 +184,8 @@ impl SegmentTracking {
         predicting
     }
 
-    /// After [`SegmentTracking::match_predicted`] (lines only): when the frame would be lost
+    /// After [`SegmentTracking::match_predicted`], lines only (with points, it returns false
+    /// at once): when the frame would be lost
     /// with `tracked`, replaces it by `wider`'s matches at the same predicted positions if
     /// those give a believed estimate; failing that, with `lost.rescue_min_inliers`, by
     /// the first of the two match sets (`wider`'s, then `tracked`) believed with that many
@@ -191,7 +200,8 @@ impl SegmentTracking {
         tracked: &mut Vec<FeatureMatch>,
     ) -> bool {
         let min_inliers = tracker.config().lost.rescue_min_inliers;
-        if (wider.is_none() && min_inliers == 0)
+        if tracker.config().features != Features::LinesOnly
+            || (wider.is_none() && min_inliers == 0)
             || tracker
                 .loss_on_lines(&current.segments, tracked, None)
                 .is_none()

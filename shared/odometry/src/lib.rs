@@ -25,7 +25,7 @@ mod pose_covariance;
 mod stats;
 mod tracker;
 
-pub use front_end::{Odometry, SegmentTracking};
+pub use front_end::{Odometry, SegmentTracking, rescue_matcher};
 // The settings, OpenCV-free in their own crate, re-exported where they are run.
 pub use linetrack_odometry_config::{
     Features, LinePrediction, LostLimits, OdometryConfig, PredictedNarrowing, StereoPhotometric,

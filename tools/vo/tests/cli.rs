@@ -212,6 +212,77 @@ fn re_matching_the_first_frame_where_its_motion_puts_it_finds_the_full_first_ste
     );
 }
 
+/// Lines only, ℓ1, the paper's gain jumps (seed 3), the drive's first 99 frames. In frame 97
+/// (a jump) most of frame 96's landmark segments have their partner on their predicted line,
+/// but the detector cut that edge into two pieces and the ratio test called them ambiguous:
+/// measured 5 inlying segments where 6 are needed. Matched again with the pieces no rivals
+/// (`lost.rescue_collinear_px`, the default) the frame keeps 6; without it, it is lost.
+#[test]
+fn real_data_a_frame_whose_edges_the_detector_split_is_rescued_not_lost() {
+    let drive = linetrack_test_data::kitti_raw_dir().unwrap_or_else(|e| panic!("{e}"));
+    let drive = drive.to_str().unwrap();
+    let dir = Scratch::new("vo", "kitti-raw-collinear");
+    // (lost, rescued) frame indices of one run; the two runs go side by side, one per core.
+    let run = |collinear_px: f64| {
+        let config = dir.join(format!("collinear-{collinear_px}.toml"));
+        std::fs::write(
+            &config,
+            format!("[lost]\nrescue_collinear_px = {collinear_px:?}\n"),
+        )
+        .unwrap();
+        let out = dir.join(format!("out-{collinear_px}"));
+        let result = vo(&[
+            drive,
+            "--matcher",
+            "l1",
+            "--lines-only",
+            "--gain-jumps",
+            "0.5",
+            "--seed",
+            "3",
+            "--frames",
+            "99",
+            "--config",
+            config.to_str().unwrap(),
+            "--quiet",
+            "--output",
+            out.to_str().unwrap(),
+        ]);
+        assert!(
+            result.status.success(),
+            "{}",
+            String::from_utf8_lossy(&result.stderr)
+        );
+        let mut frames = csv::Reader::from_path(out.join("frames.csv")).unwrap();
+        let header = frames.headers().unwrap().clone();
+        let column = |name: &str| header.iter().position(|h| h == name).unwrap();
+        let (index, lost, rescued) = (column("index"), column("lost"), column("rescued"));
+        let (mut lost_frames, mut rescued_frames) = (Vec::new(), Vec::new());
+        for row in frames.records() {
+            let row = row.unwrap();
+            let frame: usize = row[index].parse().unwrap();
+            if &row[lost] == "1" {
+                lost_frames.push(frame);
+            }
+            if &row[rescued] == "1" {
+                rescued_frames.push(frame);
+            }
+        }
+        (lost_frames, rescued_frames)
+    };
+    let (without, with) = std::thread::scope(|scope| {
+        let without = scope.spawn(|| run(0.0));
+        let with = run(1.0);
+        (without.join().unwrap(), with)
+    });
+    assert_eq!(
+        without,
+        (vec![97], vec![]),
+        "(lost, rescued) without the option"
+    );
+    assert_eq!(with, (vec![], vec![97]), "(lost, rescued) with it");
+}
+
 #[test]
 fn a_malformed_config_fails_naming_the_file_and_field() {
     let dir = Scratch::new("vo", "bad-config");
