@@ -22,6 +22,7 @@ use linetrack_odometry::{
     Features, FrameStats, LinePrediction, MatchedLines, MotionTracker, OdometryConfig,
     PoseCovariance, Preparation, PreparedImages, SegmentTracking, rescue_matcher,
 };
+use linetrack_pipeline_config::MatcherPolicy;
 use linetrack_stage_runtime::{
     Images, Stage, StageContext, held_capacity, rig_from_record, run_stage, stereo_views,
     to_segment,
@@ -143,6 +144,9 @@ struct Relink {
     /// The ℓ1 matcher of `[lost] rescue_*` for frames that would be lost (lines only;
     /// `None`: off), as the odometry's own front end rescues them.
     rescue: Option<Box<dyn SegmentMatcher>>,
+    /// LBD frames that would be lost are matched again with ℓ1 (`[matcher.fallback]
+    /// rescue_lost_frames` with the `auto` policy).
+    rescue_lbd: bool,
     segments: SegmentTracking,
     /// The last tracked frame's left segments (as the tracker was given them) with the ℓ1
     /// matcher's description of its left image, and that frame's id.
@@ -156,8 +160,10 @@ impl Relink {
     /// with this frame's, made around their old positions) by ℓ1 matches at the positions
     /// the tracker predicts for them, or where the frame's own segment motion puts them
     /// (`rematch_passes`), when this frame was matched with ℓ1, `previous_frame_id` is the
-    /// frame described last, and the config matches predicted positions. Then keeps this
-    /// frame's left segments, described from `left`, for the next frame.
+    /// frame described last, and the config matches predicted positions; an LBD frame's
+    /// when they would lose it and ℓ1 at the predicted positions does not (`rescue_lbd`),
+    /// returning true then. Then keeps this frame's left segments, described from `left`,
+    /// for the next frame.
     fn relink(
         &mut self,
         tracker: &mut MotionTracker,
@@ -165,17 +171,36 @@ impl Relink {
         left_segments: &[Segment],
         left: Option<&linetrack_vision::GrayImage>,
         tracked: &mut Vec<FeatureMatch>,
-    ) -> anyhow::Result<()> {
+    ) -> anyhow::Result<bool> {
         let current = &mut self.current;
         current.clear();
         current.segments.extend_from_slice(left_segments);
         let Some(left) = left else {
             self.previous = None;
-            return Ok(());
+            return Ok(false);
         };
         self.l1.describe(left, current)?;
         let l1_frame = matching.mode.is(MatcherMode::L1);
+        let mut fell_back = false;
         if let Some((id, previous)) = &mut self.previous
+            && !l1_frame
+            && self.rescue_lbd
+            && continues
+            && *id == matching.previous_frame_id
+        {
+            let rescue = self
+                .rescue
+                .as_mut()
+                .map(|m| -> &mut dyn SegmentMatcher { m.as_mut() });
+            fell_back = self.segments.fall_back_to_l1(
+                self.l1.as_mut(),
+                rescue,
+                tracker,
+                previous,
+                current,
+                tracked,
+            );
+        } else if let Some((id, previous)) = &mut self.previous
             && l1_frame
             && continues
             && *id == matching.previous_frame_id
@@ -197,7 +222,7 @@ impl Relink {
         let done = self.previous.take().map(|(_, p)| p).unwrap_or_default();
         let kept = std::mem::replace(&mut self.current, done);
         self.previous = Some((frame_id, kept));
-        Ok(())
+        Ok(fell_back)
     }
 }
 
@@ -236,6 +261,8 @@ impl PoseTracker {
                     &ctx.config.odometry.tracking_frontend(),
                 )?,
                 rescue: rescue_matcher(&ctx.config.odometry, MatcherKind::L1)?,
+                rescue_lbd: ctx.config.matcher.mode == MatcherPolicy::Auto
+                    && ctx.config.matcher.fallback.rescue_lost_frames,
                 segments: SegmentTracking::default(),
                 previous: None,
                 current: LineFeatures::default(),
@@ -399,7 +426,7 @@ impl PoseTracker {
             tracker.predict_from_points(prepared);
         }
         let matching = (header.frame_id, &tracks_matching, continues);
-        self.relink.relink(
+        let fell_back = self.relink.relink(
             tracker,
             matching,
             &self.buffers.left,
@@ -433,6 +460,7 @@ impl PoseTracker {
         record.observations = result.stats.observations.map(|n| n as u32);
         record.rms_px = result.stats.rms_px;
         record.conditioning = result.stats.conditioning;
+        record.rescued = u32::from(fell_back && !result.lost);
         if let Some(reason) = &result.reason {
             tracing::debug!("frame {} lost: {reason}", header.frame_id);
         }

@@ -321,6 +321,14 @@ impl Monitor {
         if status != FrameStatus::Ok {
             return true;
         }
+        if pose.rescued == 1 {
+            self.event(
+                "l1-rescue",
+                "pose-estimator",
+                Some(header.frame_id),
+                "LBD's segment matches would have lost the frame: tracked with l1 at the predicted positions".into(),
+            );
+        }
         if self
             .last_pose
             .is_none_or(|(frame, _)| header.frame_id > frame)

@@ -330,7 +330,7 @@ pub struct TrackedLine {
 /// another build refuses to connect instead of misreading the record.
 #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
 #[repr(C)]
-#[type_name("linetrack::PoseRecord/2")]
+#[type_name("linetrack::PoseRecord/3")]
 #[derive(serde::Serialize, serde::Deserialize)]
 pub struct PoseRecord {
     /// Position of the left camera in the first frame's world, metres.
@@ -343,6 +343,10 @@ pub struct PoseRecord {
     pub inliers: [u32; 2],
     /// Frame-to-frame observations used: points, lines.
     pub observations: [u32; 2],
+    /// 1 when the matcher stage matched the frame with LBD, those matches would have lost
+    /// it, and the pose estimator tracked it with ℓ1 matches at the predicted positions
+    /// instead (`[matcher.fallback] rescue_lost_frames`).
+    pub rescued: u32,
     /// RMS residual of the inliers, pixels.
     pub rms_px: f64,
     /// Conditioning of the motion estimate's normal matrix: its smallest eigenvalue over

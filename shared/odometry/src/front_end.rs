@@ -238,6 +238,43 @@ impl SegmentTracking {
         true
     }
 
+    /// Lines only: when `tracked` (another matcher's matches of `previous`'s segments with
+    /// `current`'s, made around their old positions) would lose the frame, matches them
+    /// again with `l1` where the motion predicts them, and with `rescue` (the matcher of
+    /// [`rescue_matcher`]) if that would lose it too, and replaces `tracked` by the first
+    /// of those that gives a believed estimate; returns whether it did. `previous` and
+    /// `current` are described for `l1`. Leaves `tracked` alone otherwise (with points, a
+    /// frame that would not be lost, no motion known yet, or no believed estimate).
+    pub fn fall_back_to_l1(
+        &mut self,
+        l1: &mut dyn SegmentMatcher,
+        rescue: Option<&mut dyn SegmentMatcher>,
+        tracker: &mut MotionTracker,
+        previous: &mut LineFeatures,
+        current: &LineFeatures,
+        tracked: &mut Vec<FeatureMatch>,
+    ) -> bool {
+        if tracker.config().features != Features::LinesOnly
+            || tracker
+                .loss_on_lines(&current.segments, tracked, None)
+                .is_none()
+        {
+            return false;
+        }
+        let mut matches = Vec::new();
+        if !self.match_predicted(l1, tracker, previous, current, &mut matches) {
+            return false;
+        }
+        let believed = tracker
+            .loss_on_lines(&current.segments, &matches, None)
+            .is_none()
+            || self.rescue(rescue, tracker, previous, current, &mut matches);
+        if believed {
+            *tracked = matches;
+        }
+        believed
+    }
+
     /// Replaces `tracked` (`previous` → `current` matches made around the old positions)
     /// by the pass whose motion has the most inlying segments, and predicts the frame's
     /// segments with that motion; leaves both as they were when no pass gives a motion,

@@ -46,6 +46,13 @@ pub struct FallbackConfig {
     /// probe together) took at most this fraction of its budget: below the failing bar
     /// (the budget itself), the latency's hysteresis band.
     pub recover_budget_fraction: f64,
+    /// Lines only: while LBD matches, a frame whose LBD segment matches would be lost is
+    /// matched again by the pose estimator with ℓ1 where the motion predicts the last
+    /// frame's segments (and, failing that, as `[odometry.lost] rescue_*` rescue an ℓ1
+    /// frame), and tracked with those if they give a believed estimate: the fallback for
+    /// the one frame, which the switch above only makes after `bad_frames`. Each such frame
+    /// is an `l1-rescue` event. With points it does nothing.
+    pub rescue_lost_frames: bool,
 }
 
 impl Default for FallbackConfig {
@@ -61,6 +68,7 @@ impl Default for FallbackConfig {
             recover_stereo_matches: 24,
             recover_probes: 2,
             recover_budget_fraction: 0.8,
+            rescue_lost_frames: true,
         }
     }
 }

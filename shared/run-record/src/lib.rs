@@ -110,6 +110,33 @@ mod tests {
     }
 
     #[test]
+    fn l1_rescues_are_counted_and_an_older_summary_without_them_reads_as_none() {
+        let rescue = |frame_id: u64| EventRecord {
+            time_s: 0.1 * frame_id as f64,
+            kind: "l1-rescue".into(),
+            stage: "pose-estimator".into(),
+            frame_id: Some(frame_id),
+            detail: String::new(),
+        };
+        let report = Report::new(&[frame(0, "pose", 40.0)], &[rescue(20), rescue(78)]);
+        assert_eq!((report.l1_rescues, report.fallbacks), (2, 0));
+        assert!(
+            report.to_text().contains("l1 rescues 2"),
+            "{}",
+            report.to_text()
+        );
+        let quiet = Report::new(&[frame(0, "pose", 40.0)], &[]);
+        assert!(!quiet.to_text().contains("rescue"), "{}", quiet.to_text());
+        // A summary.json written before the count existed has no `l1_rescues`.
+        let mut old = serde_json::to_value(&report).unwrap_or_else(|e| panic!("{e}"));
+        if let Some(fields) = old.as_object_mut() {
+            fields.remove("l1_rescues");
+        }
+        let back: Report = serde_json::from_value(old).unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(back.l1_rescues, 0);
+    }
+
+    #[test]
     fn the_summary_says_how_the_run_ended() {
         let scratch = linetrack_test_data::Scratch::new("run-record", "summary");
         let dir = scratch.path();

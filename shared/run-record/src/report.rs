@@ -98,6 +98,7 @@ impl Tally {
             restarts: self.events_of("restart"),
             swaps: self.events_of("swap"),
             camera_losses: self.events_of("camera-lost"),
+            l1_rescues: self.events_of("l1-rescue"),
         }
     }
 }
@@ -132,6 +133,10 @@ pub struct Report {
     /// Times the live camera failed and was reopened (`camera-lost` events).
     #[serde(default)]
     pub camera_losses: usize,
+    /// Frames LBD's matches would have lost that the pose estimator tracked with ℓ1
+    /// (`l1-rescue` events, `[matcher.fallback] rescue_lost_frames`).
+    #[serde(default)]
+    pub l1_rescues: usize,
 }
 
 impl Report {
@@ -191,6 +196,13 @@ impl Report {
             self.restarts,
             self.swaps
         );
+        if self.l1_rescues > 0 {
+            let _ = writeln!(
+                out,
+                "l1 rescues {} (frames LBD's matches would have lost, tracked with l1; events.csv)",
+                self.l1_rescues
+            );
+        }
         if self.camera_losses > 0 {
             let _ = writeln!(
                 out,

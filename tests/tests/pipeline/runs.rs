@@ -273,3 +273,51 @@ fn l1_lines_only_at_road_speed_tracks_every_frame_as_the_odometry_does() {
     assert!(outcomes.iter().all(|o| *o == "pose"), "{outcomes:?}");
     assert!(records.frames.iter().all(|f| f.matcher == "l1"));
 }
+
+#[test]
+fn with_auto_a_frame_lbd_would_lose_is_tracked_with_l1_and_counted() {
+    // Lines only with LBD, the paper's gain jumps (seed 3): the matcher stage matches
+    // around the segments' old positions, and frame 54's matches lose it (measured: the
+    // only frame lost in the drive's 108). With `rescue_lost_frames` the pose estimator
+    // matches it again with ℓ1 where the motion puts the last frame's segments, tracks it,
+    // and the run counts an `l1-rescue`. Nothing depends on time: every frame is processed
+    // (`drop_late = false`), and neither fallback acts on latency.
+    let drive = linetrack_test_data::kitti_raw_dir().unwrap_or_else(|e| panic!("{e}"));
+    let run = |rescue: bool| {
+        let dir = scratch(&format!("lbd-rescue-{rescue}"));
+        let extra = format!(
+            "{}[odometry]\nfeatures = \"lines-only\"\n[detector_fallback]\nenabled = false\n\
+             [matcher.fallback]\nover_budget = false\nend_to_end = false\nrescue_lost_frames = {rescue}\n",
+            quick()
+        );
+        let args = [
+            "--pacing",
+            "fastest",
+            "--matcher",
+            "auto",
+            "--detector",
+            "lsd",
+            "--gain-jumps",
+            "0.5",
+            "--gain-jumps-seed",
+            "3",
+            "--frames",
+            "56",
+        ];
+        let (status, out, records) =
+            start_with_args(&dir, &drive, &extra, &args).finish(RUN_TIMEOUT);
+        assert!(status.success(), "{status}\n{out}");
+        assert_ids_accounted(&records, 56, &[]);
+        assert!(records.frames.iter().all(|f| f.matcher == "lbd"));
+        let lost: Vec<u64> = (records.frames.iter())
+            .filter(|f| f.outcome == "lost")
+            .map(|f| f.frame_id)
+            .collect();
+        let rescued: Vec<Option<u64>> = (records.events_of("l1-rescue").iter())
+            .map(|e| e.frame_id)
+            .collect();
+        (lost, rescued)
+    };
+    assert_eq!(run(false), (vec![54], vec![]), "(lost, rescued) without");
+    assert_eq!(run(true), (vec![], vec![Some(54)]), "(lost, rescued) with");
+}
