@@ -161,6 +161,20 @@ pub struct SegmentTracking {
 }
 
 impl SegmentTracking {
+    /// `matcher`'s matches of `previous`'s segments, at the positions last predicted for
+    /// them, with `current`'s, into `out` (`previous` is left as it was).
+    fn match_at_predicted(
+        &mut self,
+        matcher: &mut dyn SegmentMatcher,
+        previous: &mut LineFeatures,
+        current: &LineFeatures,
+        out: &mut Vec<FeatureMatch>,
+    ) {
+        std::mem::swap(&mut previous.segments, &mut self.predicted);
+        matcher.match_predicted(previous, &self.moved, current, out);
+        std::mem::swap(&mut previous.segments, &mut self.predicted);
+    }
+
     /// Replaces `tracked` by the matches of `previous`'s segments (the frame the tracker
     /// tracked last) to `current`'s at the positions the predicted motion gives them, and
     /// returns true; returns false, leaving `tracked` alone, when the config or the
@@ -177,17 +191,14 @@ impl SegmentTracking {
             && matcher.matches_predicted_positions()
             && tracker.predict_segments(&previous.segments, &mut self.predicted, &mut self.moved);
         if predicting {
-            std::mem::swap(&mut previous.segments, &mut self.predicted);
-            matcher.match_predicted(previous, &self.moved, current, tracked);
-            std::mem::swap(&mut previous.segments, &mut self.predicted);
+            self.match_at_predicted(matcher, previous, current, tracked);
         }
         predicting
     }
 
-    /// After [`SegmentTracking::match_predicted`], lines only (with points, it returns false
-    /// at once): when the frame would be lost
-    /// with `tracked`, replaces it by `wider`'s matches at the same predicted positions if
-    /// those give a believed estimate; failing that, with `lost.rescue_min_inliers`, by
+    /// After [`SegmentTracking::match_predicted`], lines only (with points it returns false
+    /// at once): when the frame would be lost with `tracked`, replaces it by `wider`'s
+    /// matches at the same predicted positions if those give a believed estimate; failing that, with `lost.rescue_min_inliers`, by
     /// the first of the two match sets (`wider`'s, then `tracked`) believed with that many
     /// inliers, and lets the update accept it so. Leaves `tracked` and the tracker alone
     /// when the frame would not be lost or nothing rescues it; returns whether it rescued.
@@ -210,9 +221,7 @@ impl SegmentTracking {
         }
         let mut widened = Vec::new();
         if let Some(matcher) = wider {
-            std::mem::swap(&mut previous.segments, &mut self.predicted);
-            matcher.match_predicted(previous, &self.moved, current, &mut widened);
-            std::mem::swap(&mut previous.segments, &mut self.predicted);
+            self.match_at_predicted(matcher, previous, current, &mut widened);
             if tracker
                 .loss_on_lines(&current.segments, &widened, None)
                 .is_none()
@@ -314,10 +323,8 @@ impl SegmentTracking {
             {
                 break;
             }
-            std::mem::swap(&mut previous.segments, &mut self.predicted);
             pass.clear();
-            matcher.match_predicted(previous, &self.moved, current, &mut pass);
-            std::mem::swap(&mut previous.segments, &mut self.predicted);
+            self.match_at_predicted(matcher, previous, current, &mut pass);
         }
         if let Some((_, motion, matches)) = best {
             tracker.predict_segments_with(motion);

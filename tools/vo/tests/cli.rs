@@ -14,6 +14,17 @@ fn vo(args: &[&str]) -> Output {
         .expect("the binary starts")
 }
 
+/// [`vo`], which must succeed (its stderr in the failure).
+fn vo_succeeds(args: &[&str]) -> Output {
+    let result = vo(args);
+    assert!(
+        result.status.success(),
+        "{}",
+        String::from_utf8_lossy(&result.stderr)
+    );
+    result
+}
+
 #[test]
 fn a_generated_sequence_gives_trajectory_ground_truth_stats_and_metrics() {
     let dir = Scratch::new("vo", "generated");
@@ -182,7 +193,7 @@ fn re_matching_the_first_frame_where_its_motion_puts_it_finds_the_full_first_ste
         let config = dir.join(format!("rematch-{rematch_passes}.toml"));
         std::fs::write(&config, format!("rematch_passes = {rematch_passes}\n")).unwrap();
         let out = dir.join(format!("out-{rematch_passes}"));
-        let result = vo(&[
+        vo_succeeds(&[
             drive.to_str().unwrap(),
             "--lines-only",
             "--frames",
@@ -193,11 +204,6 @@ fn re_matching_the_first_frame_where_its_motion_puts_it_finds_the_full_first_ste
             "--output",
             out.to_str().unwrap(),
         ]);
-        assert!(
-            result.status.success(),
-            "{}",
-            String::from_utf8_lossy(&result.stderr)
-        );
         let step = |file: &str| {
             let poses = tum::read(&out.join(file)).unwrap();
             (poses[1].pose.translation.vector - poses[0].pose.translation.vector).norm()
@@ -231,7 +237,7 @@ fn real_data_a_frame_whose_edges_the_detector_split_is_rescued_not_lost() {
         )
         .unwrap();
         let out = dir.join(format!("out-{collinear_px}"));
-        let result = vo(&[
+        vo_succeeds(&[
             drive,
             "--matcher",
             "l1",
@@ -248,11 +254,6 @@ fn real_data_a_frame_whose_edges_the_detector_split_is_rescued_not_lost() {
             "--output",
             out.to_str().unwrap(),
         ]);
-        assert!(
-            result.status.success(),
-            "{}",
-            String::from_utf8_lossy(&result.stderr)
-        );
         let mut frames = csv::Reader::from_path(out.join("frames.csv")).unwrap();
         let header = frames.headers().unwrap().clone();
         let column = |name: &str| header.iter().position(|h| h == name).unwrap();
