@@ -12,11 +12,12 @@
 //!    then two such rows vertically.
 //! 2. **FAST-9** (`fast.rs`): a pixel is a corner when 9 contiguous pixels of the 16 on the
 //!    circle of radius 3 around it are all brighter than it by more than `fast_threshold`,
-//!    or all darker. Rows are worked 32 centres at a time in loops the compiler
-//!    vectorises: the 4 compass positions first (a block with no centre passing is done),
-//!    then the 8 even ones; a block with a centre left is scored whole, every centre on its
-//!    whole circle in byte lanes. The score of a corner is the largest threshold at which it
-//!    still is one.
+//!    or all darker. Rows are worked 32 centres at a time (with AVX2 intrinsics where the
+//!    CPU has them, else in loops the compiler vectorises): the 4 compass positions first
+//!    (a block with no centre passing is done), then the 8 even ones and the 8 odd ones,
+//!    each way; a block with a centre left is scored whole, every centre on its whole
+//!    circle in byte lanes, the ways that passed only. The score of a corner is the
+//!    largest threshold at which it still is one.
 //! 3. **Selection** (`select.rs`): 3×3 non-maximum suppression of the score, a counting
 //!    sort on the 8-bit score (best first, raster order within a score); then each
 //!    level's share of `max_corners` (shares proportional to the levels' widths, as OpenCV's
@@ -26,7 +27,8 @@
 //! 4. **Orientation and descriptor** (`describe.rs`, `patch.rs`): the angle from the
 //!    patch's centre to its intensity centroid (radius 15), quantised to 32 steps; 256
 //!    intensity comparisons of pixel pairs of the smoothed level image (read from the
-//!    corner's 32 × 32 patch, copied out), the pairs rotated by that angle. The pairs are
+//!    corner's 32 × 32 patch, copied out; the level is smoothed only over the bands of
+//!    rows and columns the kept corners' patches cover), the pairs rotated by that angle. The pairs are
 //!    drawn once from a fixed-seed generator (isotropic Gaussian, BRIEF's G II), so every
 //!    build compares the same pixels. Bit `j` of byte `i` is pair `8i + j`: "first darker
 //!    than second", the layout of OpenCV's 32-byte ORB descriptors, so the same Hamming
@@ -279,6 +281,7 @@ impl CornerExtractor {
                 params.edge_px,
                 &mut self.scores,
                 &mut self.candidates,
+                avx2,
             );
 
             select::suppress_and_sort(plane, &self.scores, &mut self.candidates, &mut self.sorted);
@@ -289,7 +292,7 @@ impl CornerExtractor {
             if kept == 0 {
                 continue;
             }
-            let Some(smooth) = self.smoother.smooth(plane) else {
+            let Some(smooth) = self.smoother.smooth(plane, &self.candidates[..kept]) else {
                 continue;
             };
             let scale = self.pyramid.scale(level);

@@ -139,6 +139,18 @@ fn the_fast_test_is_exact_on_hand_made_circles() {
     assert_eq!(fast::corner_score(view(&pixels, 7, 7), 3, 3, 20), None);
 }
 
+/// [`fast::detect`] with its AVX2 row loop, compiled for AVX2.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn detect_with_avx2(
+    image: GrayView<'_>,
+    threshold: u8,
+    scores: &mut Vec<u8>,
+    found: &mut Vec<select::Candidate>,
+) {
+    fast::detect(image, threshold, 0, scores, found, true);
+}
+
 #[test]
 fn the_screened_detector_finds_exactly_the_corners_of_the_whole_circle_test() {
     // Every pixel tested on its whole circle, against the row detector with its two
@@ -146,7 +158,9 @@ fn the_screened_detector_finds_exactly_the_corners_of_the_whole_circle_test() {
     // thresholds saturate at 0 and 255), on smooth texture, across widths that leave a
     // partial block at the end of a row.
     let mut state = 99;
-    for (width, height) in [(133, 77), (96, 60), (201, 50)] {
+    // (Widths whose rows of centres are a whole number of 32-centre blocks, not, and
+    // shorter than one: 133 − 32 = 101, 96 − 32 = 64, 201 − 32 = 169, 60 − 32 = 28.)
+    for (width, height) in [(133, 77), (96, 60), (201, 50), (60, 40)] {
         let noise: Vec<u8> = (0..width * height)
             .map(|_| (describe::tests_support::uniform(&mut state) * 256.0) as u8)
             .collect();
@@ -154,7 +168,25 @@ fn the_screened_detector_finds_exactly_the_corners_of_the_whole_circle_test() {
             for threshold in [1, 5, 20, 60, 200] {
                 let image = view(&pixels, width, height);
                 let (mut scores, mut found) = (Vec::new(), Vec::new());
-                fast::detect(image, threshold, 0, &mut scores, &mut found);
+                fast::detect(image, threshold, 0, &mut scores, &mut found, false);
+                // The AVX2 row loop where the CPU has it: the same corners and score map.
+                #[cfg(target_arch = "x86_64")]
+                if std::arch::is_x86_feature_detected!("avx2") {
+                    let (mut avx2_scores, mut avx2_found) = (Vec::new(), Vec::new());
+                    // SAFETY: the CPU has AVX2, as just checked.
+                    #[allow(unsafe_code)]
+                    unsafe {
+                        detect_with_avx2(image, threshold, &mut avx2_scores, &mut avx2_found);
+                    }
+                    assert_eq!(
+                        avx2_found, found,
+                        "AVX2, {kind} {width}×{height}, threshold {threshold}"
+                    );
+                    assert!(
+                        avx2_scores == scores,
+                        "AVX2 score map, {kind} {width}×{height}"
+                    );
+                }
                 let mut expected = Vec::new();
                 for y in BORDER_PX..height - BORDER_PX {
                     for x in BORDER_PX..width - BORDER_PX {
@@ -524,6 +556,92 @@ fn the_orientation_is_the_discs_intensity_centroid_summed_pixel_by_pixel() {
                 }
                 let expected = (m01 as f64).atan2(m10 as f64) as f32;
                 assert_eq!(pattern.orientation(image, x, y), expected, "at ({x}, {y})");
+            }
+        }
+    }
+}
+
+#[test]
+fn the_smoothing_around_the_corners_is_the_whole_images_at_their_patches() {
+    // The reference: the 7-tap kernel (sum 64) down the columns and then along the rows,
+    // each pass rounded, edges clamped, written out pixel by pixel over the whole image;
+    // the smoother works only band by band where patches lie, and must give the same
+    // pixels over every patch: corners few and many, at the border and in clusters.
+    const TAPS: [u32; 7] = [4, 9, 12, 14, 12, 9, 4];
+    let mut state = 13;
+    for (width, height) in [(120, 90), (61, 40), (300, 33)] {
+        let noise: Vec<u8> = (0..width * height)
+            .map(|_| (describe::tests_support::uniform(&mut state) * 256.0) as u8)
+            .collect();
+        let clamp = |v: isize, len: usize| v.clamp(0, len as isize - 1) as usize;
+        let columns: Vec<u32> = (0..width * height)
+            .map(|at| {
+                let (x, y) = (at % width, at / width);
+                let s: u32 = (0..7)
+                    .map(|k| {
+                        TAPS[k]
+                            * u32::from(
+                                noise[clamp(y as isize + k as isize - 3, height) * width + x],
+                            )
+                    })
+                    .sum();
+                (s + 32) >> 6
+            })
+            .collect();
+        let smooth: Vec<u8> = (0..width * height)
+            .map(|at| {
+                let (x, y) = (at % width, at / width);
+                let s: u32 = (0..7)
+                    .map(|k| {
+                        TAPS[k] * columns[y * width + clamp(x as isize + k as isize - 3, width)]
+                    })
+                    .sum();
+                ((s + 32) >> 6) as u8
+            })
+            .collect();
+        let inside = |n: usize, len: usize| BORDER_PX + n % (len - 2 * BORDER_PX);
+        for count in [1, 5, 40] {
+            let corners: Vec<select::Candidate> = (0..count)
+                .map(|_| {
+                    let r = describe::tests_support::uniform(&mut state);
+                    let s = describe::tests_support::uniform(&mut state);
+                    select::Candidate {
+                        x: inside((r * 1e6) as usize, width) as u32,
+                        y: inside((s * 1e6) as usize, height) as u32,
+                        score: 1,
+                    }
+                })
+                .chain(
+                    [
+                        (BORDER_PX, BORDER_PX),
+                        (width - BORDER_PX - 1, height - BORDER_PX - 1),
+                    ]
+                    .map(|(x, y)| select::Candidate {
+                        x: x as u32,
+                        y: y as u32,
+                        score: 1,
+                    }),
+                )
+                .collect();
+            let mut smoother = pyramid::Smoother::default();
+            // Twice, with a larger image before: the buffers reused.
+            let large = vec![7u8; 400 * 100];
+            smoother.smooth(view(&large, 400, 100), &corners[..1]);
+            let got = smoother
+                .smooth(view(&noise, width, height), &corners)
+                .unwrap();
+            for c in &corners {
+                let (x, y) = (c.x as usize, c.y as usize);
+                let patch = patch::patch(got, x, y).unwrap();
+                for r in 0..patch::PATCH {
+                    let top = y - patch::CENTRE + r;
+                    let left = x - patch::CENTRE;
+                    assert_eq!(
+                        patch[r * patch::PATCH..][..patch::PATCH],
+                        smooth[top * width + left..][..patch::PATCH],
+                        "{width}×{height}, {count} corners, ({x}, {y}), patch row {r}"
+                    );
+                }
             }
         }
     }
