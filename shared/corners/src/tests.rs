@@ -646,3 +646,66 @@ fn the_smoothing_around_the_corners_is_the_whole_images_at_their_patches() {
         }
     }
 }
+
+#[cfg(target_arch = "x86_64")]
+#[test]
+fn the_suppression_16_columns_at_a_time_is_the_one_at_a_time() {
+    // Scores with ties and plateaus (few distinct values), at every group of 16 columns
+    // inside the border: the SSE2 maxima against the 3 × 3 test written out.
+    let (width, height) = (90, 40);
+    let mut state = 21;
+    for levels in [2.0, 4.0, 256.0] {
+        let scores: Vec<u8> = (0..width * height)
+            .map(|_| (describe::tests_support::uniform(&mut state) * levels) as u8)
+            .collect();
+        for y in 1..height - 1 {
+            for first in (16..width - 17).step_by(16) {
+                let maxima = select::sse2::maxima(&scores, y * width + first, width);
+                for lane in 0..16 {
+                    let at = y * width + first + lane;
+                    assert_eq!(
+                        (maxima >> lane) & 1 == 1,
+                        select::is_maximum(&scores, at, width),
+                        "({}, {y}), {levels} levels",
+                        first + lane
+                    );
+                }
+            }
+        }
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+#[test]
+fn the_descriptor_with_byte_permutes_is_the_one_read_point_by_point() {
+    // Where the CPU has AVX-512 VBMI: random patches (and flat and saturated ones, whose
+    // comparisons all tie), at every one of the pattern's orientations.
+    if !(std::arch::is_x86_feature_detected!("avx512f")
+        && std::arch::is_x86_feature_detected!("avx512bw")
+        && std::arch::is_x86_feature_detected!("avx512vbmi"))
+    {
+        return;
+    }
+    let pattern = describe::Pattern::new();
+    let mut state = 17;
+    let mut patches: Vec<[u8; patch::PATCH * patch::PATCH]> = (0..20)
+        .map(|_| {
+            std::array::from_fn(|_| (describe::tests_support::uniform(&mut state) * 256.0) as u8)
+        })
+        .collect();
+    patches.push([0; patch::PATCH * patch::PATCH]);
+    patches.push([255; patch::PATCH * patch::PATCH]);
+    for (k, patch) in patches.iter().enumerate() {
+        for step in 0..describe::ANGLE_STEPS {
+            let angle_rad = step as f32 * std::f32::consts::TAU / describe::ANGLE_STEPS as f32;
+            // SAFETY: the CPU has AVX-512 F, BW and VBMI, as checked above.
+            #[allow(unsafe_code)]
+            let permuted = unsafe { pattern.describe_vbmi(patch, angle_rad) };
+            assert_eq!(
+                permuted,
+                pattern.describe(patch, angle_rad),
+                "patch {k}, step {step}"
+            );
+        }
+    }
+}
