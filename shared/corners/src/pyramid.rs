@@ -153,7 +153,8 @@ impl Smoother {
                 }
                 let sums = &mut self.column_sums[..span.len()];
                 vertical(taps, sums);
-                smooth_row(sums, &mut self.pixels[y * width..][span.clone()]);
+                let edges = (first == 0, last == width - 1);
+                smooth_row(sums, &mut self.pixels[y * width..][span.clone()], edges);
             }
         }
         GrayView::packed(&self.pixels[..width * height], width, height).ok()
@@ -215,9 +216,11 @@ fn vertical(rows: [&[u8]; 7], sums: &mut [u16]) {
     }
 }
 
-/// One row smoothed horizontally: `out[x]` from `sums[x − 3 ..= x + 3]`, edges clamped.
+/// One row smoothed horizontally: `out[x]` from `sums[x − 3 ..= x + 3]`, edges clamped;
+/// the 3 values at the row's start (end) only where `edges.0` (`edges.1`) says the row
+/// starts (ends) where the image does: elsewhere no patch reads them.
 #[inline(always)]
-fn smooth_row(sums: &[u16], out: &mut [u8]) {
+fn smooth_row(sums: &[u16], out: &mut [u8], edges: (bool, bool)) {
     let width = sums.len();
     let tap_sum = |x: usize| {
         let mut s = 0;
@@ -245,7 +248,11 @@ fn smooth_row(sums: &[u16], out: &mut [u8]) {
             out[i] = ((s + (1 << (TAP_BITS - 1))) >> TAP_BITS) as u8;
         }
     }
-    for x in (0..3).chain(width - 3..width) {
+    let (starts, ends) = edges;
+    let clamped = (0..3)
+        .filter(|_| starts)
+        .chain((width - 3..width).filter(|_| ends));
+    for x in clamped {
         out[x] = tap_sum(x);
     }
 }

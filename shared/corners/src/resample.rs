@@ -109,12 +109,18 @@ impl Resampler {
                 tables.blend_row(source.row(bottom), &mut self.rows[1], avx2);
                 self.tags[1] = bottom;
             }
-            let w_top = u32::from(WEIGHT_ONE - w_bottom);
-            let w_bottom = u32::from(w_bottom);
+            let w_top = WEIGHT_ONE - w_bottom;
             let [upper, lower] = &self.rows;
+            // (sum + 2¹⁵) >> 16 for sum = u·w_top + l·w_bottom, in 16-bit lanes (twice as
+            // many a vector as 32-bit ones): with u = 256·u_high + u_low (likewise l),
+            // sum = 256·high + low, high and low each at most 255 · 256 (the weights add up
+            // to 256), and (sum + 2¹⁵) >> 16 = (high + (low >> 8) + 128) >> 8, whose
+            // parts stay below 2¹⁶ (high + (low >> 8) = sum >> 8 ≤ 65 280).
             for ((o, &u), &l) in row_out.iter_mut().zip(upper).zip(lower) {
-                let sum = u32::from(u) * w_top + u32::from(l) * w_bottom;
-                *o = ((sum + (1 << (2 * WEIGHT_BITS - 1))) >> (2 * WEIGHT_BITS)) as u8;
+                let high = (u >> WEIGHT_BITS) * w_top + (l >> WEIGHT_BITS) * w_bottom;
+                let low = (u & 0xFF) * w_top + (l & 0xFF) * w_bottom;
+                let half = 1 << (WEIGHT_BITS - 1);
+                *o = ((high + (low >> WEIGHT_BITS) + half) >> WEIGHT_BITS) as u8;
             }
         }
     }
