@@ -137,9 +137,9 @@ impl Pattern {
         out
     }
 
-    /// [`Pattern::describe`] with AVX-512 VBMI's byte permutes: the patch held in 16
-    /// registers, 64 points looked up at a time, the 256 comparisons in four (their mask
-    /// is the descriptor's bit layout).
+    /// [`Pattern::describe`] with AVX-512 VBMI's byte permutes, the patch read in place
+    /// (`rows`, [`crate::patch::rows`]) into 16 registers, 64 points looked up at a time,
+    /// the 256 comparisons in four (their mask is the descriptor's bit layout).
     ///
     /// # Safety
     /// The CPU has AVX-512 F, BW and VBMI.
@@ -148,24 +148,27 @@ impl Pattern {
     #[allow(unsafe_code)]
     pub(crate) unsafe fn describe_vbmi(
         &self,
-        patch: &[u8; PATCH * PATCH],
+        rows: &[&[u8; PATCH]; PATCH],
         angle_rad: f32,
     ) -> [u8; DESCRIPTOR_BYTES] {
         use std::arch::x86_64::*;
         let cells = &self.permuted[angle_step(angle_rad)];
-        let load = |bytes: &[u8], at: usize| {
-            let bytes = &bytes[at..at + 64];
-            // SAFETY: reads the 64 bytes of `bytes`; the CPU has AVX-512 F (the
-            // caller's word).
-            unsafe { _mm512_loadu_si512(bytes.as_ptr().cast()) }
-        };
         let mut table = [_mm512_setzero_si512(); 16];
         for (k, t) in table.iter_mut().enumerate() {
-            *t = load(patch, 64 * k);
+            let (upper, lower) = (rows[2 * k], rows[2 * k + 1]);
+            // SAFETY: each load reads the 32 bytes of a patch row; the CPU has AVX-512 F
+            // (the caller's word).
+            *t = unsafe {
+                let upper = _mm256_loadu_si256(upper.as_ptr().cast());
+                let lower = _mm256_loadu_si256(lower.as_ptr().cast());
+                _mm512_inserti64x4::<1>(_mm512_castsi256_si512(upper), lower)
+            };
         }
         let mut points = [_mm512_setzero_si512(); 8];
         for (v, p) in points.iter_mut().enumerate() {
-            let low = load(&cells.low[v], 0);
+            // SAFETY: reads the 64 bytes of the array; the CPU has AVX-512 F (the caller's
+            // word).
+            let low = unsafe { _mm512_loadu_si512(cells.low[v].as_ptr().cast()) };
             for t in 0..8 {
                 let part = _mm512_maskz_permutex2var_epi8(
                     cells.tables[v][t],

@@ -308,21 +308,29 @@ impl CornerExtractor {
             for candidate in &self.candidates[..kept] {
                 let (x, y) = (candidate.x as usize, candidate.y as usize);
                 let angle_rad = self.pattern.orientation(plane, x, y);
-                let Some(patch) = patch::patch(smooth, x, y) else {
-                    continue;
-                };
                 #[cfg(target_arch = "x86_64")]
                 let descriptor = if vbmi {
+                    let Some(rows) = patch::rows(smooth, x, y) else {
+                        continue;
+                    };
                     // SAFETY: the CPU has AVX-512 F, BW and VBMI (the caller's word).
                     #[allow(unsafe_code)]
                     unsafe {
-                        self.pattern.describe_vbmi(&patch, angle_rad)
+                        self.pattern.describe_vbmi(&rows, angle_rad)
                     }
                 } else {
+                    let Some(patch) = patch::patch(smooth, x, y) else {
+                        continue;
+                    };
                     self.pattern.describe(&patch, angle_rad)
                 };
                 #[cfg(not(target_arch = "x86_64"))]
-                let descriptor = self.pattern.describe(&patch, angle_rad);
+                let descriptor = {
+                    let Some(patch) = patch::patch(smooth, x, y) else {
+                        continue;
+                    };
+                    self.pattern.describe(&patch, angle_rad)
+                };
                 out.descriptors.push(descriptor);
                 out.corners.push(Corner {
                     x: candidate.x as f32 * scale,

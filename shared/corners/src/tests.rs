@@ -698,9 +698,14 @@ fn the_descriptor_with_byte_permutes_is_the_one_read_point_by_point() {
     for (k, patch) in patches.iter().enumerate() {
         for step in 0..describe::ANGLE_STEPS {
             let angle_rad = step as f32 * std::f32::consts::TAU / describe::ANGLE_STEPS as f32;
+            let rows: [&[u8; patch::PATCH]; patch::PATCH] = std::array::from_fn(|r| {
+                patch[r * patch::PATCH..][..patch::PATCH]
+                    .try_into()
+                    .unwrap()
+            });
             // SAFETY: the CPU has AVX-512 F, BW and VBMI, as checked above.
             #[allow(unsafe_code)]
-            let permuted = unsafe { pattern.describe_vbmi(patch, angle_rad) };
+            let permuted = unsafe { pattern.describe_vbmi(&rows, angle_rad) };
             assert_eq!(
                 permuted,
                 pattern.describe(patch, angle_rad),
