@@ -14,9 +14,9 @@
 //!    circle of radius 3 around it are all brighter than it by more than `fast_threshold`,
 //!    or all darker. Rows are worked 32 centres at a time (with AVX2 intrinsics where the
 //!    CPU has them, else in loops the compiler vectorises): the 4 compass positions first
-//!    (a block with no centre passing is done), then the 8 even ones and the 8 odd ones,
-//!    each way; a block with a centre left is scored whole, every centre on its whole
-//!    circle in byte lanes, the ways that passed only. The score of a corner is the
+//!    (a block with no centre passing is done), then the 8 even ones (and, in the
+//!    portable loops, the 8 odd ones, each way); a block with a centre left is scored
+//!    whole, every centre on its whole circle in byte lanes. The score of a corner is the
 //!    largest threshold at which it still is one.
 //! 3. **Selection** (`select.rs`): 3×3 non-maximum suppression of the score, a counting
 //!    sort on the 8-bit score (best first, raster order within a score); then each
