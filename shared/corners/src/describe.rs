@@ -31,9 +31,25 @@ pub(crate) struct Pattern {
     rotated: Vec<[(i8, i8); 2 * PAIRS]>,
     /// The rotated points as indices into the corner's smoothed patch (row by row).
     cells: Vec<[u16; 2 * PAIRS]>,
+    /// The points arranged for AVX-512 VBMI's byte permutes, per orientation.
+    #[cfg(target_arch = "x86_64")]
+    permuted: Vec<PermutedCells>,
     /// Per row of the orientation disc (−R..=R), per column of the 32 from −R: 1 inside
     /// the disc, else 0 (the last column is always out).
     inside: [[u16; WINDOW]; DISC_ROWS],
+}
+
+/// One orientation's points for AVX-512 VBMI: the patch as 8 tables of 128 bytes (two
+/// 512-bit registers each), every point looked up in all 8 by a byte permute and kept from
+/// the one it lies in.
+#[cfg(target_arch = "x86_64")]
+struct PermutedCells {
+    /// Per vector of 64 points (the first points of pairs 64v .. 64v + 63 for v < 4, the
+    /// second ones of pairs 64(v − 4) .. for v ≥ 4): each point's byte within its table.
+    low: [[u8; 64]; 8],
+    /// Per vector, per table t (patch bytes 128t .. 128t + 127): the lanes whose point lies
+    /// in it.
+    tables: [[u64; 8]; 8],
 }
 
 /// Rows of the orientation disc.
@@ -61,7 +77,7 @@ impl Pattern {
             let half = (r * r - dy * dy).sqrt().round() as i32;
             std::array::from_fn(|c| u16::from((c as i32 - ORIENTATION_RADIUS).abs() <= half))
         });
-        let cells = rotated
+        let cells: Vec<[u16; 2 * PAIRS]> = rotated
             .iter()
             .map(|points: &[(i8, i8); 2 * PAIRS]| {
                 points.map(|(dx, dy)| {
@@ -70,10 +86,31 @@ impl Pattern {
                 })
             })
             .collect();
+        #[cfg(target_arch = "x86_64")]
+        let permuted = cells
+            .iter()
+            .map(|cells: &[u16; 2 * PAIRS]| {
+                // Vector v's lane i: point 2(64v + i) (a first point) for v < 4, else
+                // point 2(64(v − 4) + i) + 1 (a second one).
+                let point = |v: usize, i: usize| usize::from(cells[2 * (64 * (v % 4) + i) + v / 4]);
+                PermutedCells {
+                    low: std::array::from_fn(|v| {
+                        std::array::from_fn(|i| (point(v, i) % 128) as u8)
+                    }),
+                    tables: std::array::from_fn(|v| {
+                        std::array::from_fn(|t| {
+                            (0..64).fold(0u64, |m, i| m | u64::from(point(v, i) / 128 == t) << i)
+                        })
+                    }),
+                }
+            })
+            .collect();
         Self {
             #[cfg(test)]
             rotated,
             cells,
+            #[cfg(target_arch = "x86_64")]
+            permuted,
             inside,
         }
     }
@@ -96,6 +133,56 @@ impl Pattern {
             for (bit, pair) in pairs.chunks_exact(2).enumerate() {
                 *byte |= u8::from(at(pair[0]) < at(pair[1])) << bit;
             }
+        }
+        out
+    }
+
+    /// [`Pattern::describe`] with AVX-512 VBMI's byte permutes, the patch read in place
+    /// (`rows`, [`crate::patch::rows`]) into 16 registers, 64 points looked up at a time,
+    /// the 256 comparisons in four (their mask is the descriptor's bit layout).
+    ///
+    /// # Safety
+    /// The CPU has AVX-512 F, BW and VBMI.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx512f,avx512bw,avx512vbmi")]
+    #[allow(unsafe_code)]
+    pub(crate) unsafe fn describe_vbmi(
+        &self,
+        rows: &[&[u8; PATCH]; PATCH],
+        angle_rad: f32,
+    ) -> [u8; DESCRIPTOR_BYTES] {
+        use std::arch::x86_64::*;
+        let cells = &self.permuted[angle_step(angle_rad)];
+        let mut table = [_mm512_setzero_si512(); 16];
+        for (k, t) in table.iter_mut().enumerate() {
+            let (upper, lower) = (rows[2 * k], rows[2 * k + 1]);
+            // SAFETY: each load reads the 32 bytes of a patch row; the CPU has AVX-512 F
+            // (the caller's word).
+            *t = unsafe {
+                let upper = _mm256_loadu_si256(upper.as_ptr().cast());
+                let lower = _mm256_loadu_si256(lower.as_ptr().cast());
+                _mm512_inserti64x4::<1>(_mm512_castsi256_si512(upper), lower)
+            };
+        }
+        let mut points = [_mm512_setzero_si512(); 8];
+        for (v, p) in points.iter_mut().enumerate() {
+            // SAFETY: reads the 64 bytes of the array; the CPU has AVX-512 F (the caller's
+            // word).
+            let low = unsafe { _mm512_loadu_si512(cells.low[v].as_ptr().cast()) };
+            for t in 0..8 {
+                let part = _mm512_maskz_permutex2var_epi8(
+                    cells.tables[v][t],
+                    table[2 * t],
+                    low,
+                    table[2 * t + 1],
+                );
+                *p = _mm512_or_si512(*p, part);
+            }
+        }
+        let mut out = [0u8; DESCRIPTOR_BYTES];
+        for (v, bytes) in out.chunks_exact_mut(8).enumerate() {
+            let darker = _mm512_cmplt_epu8_mask(points[v], points[v + 4]);
+            bytes.copy_from_slice(&darker.to_le_bytes());
         }
         out
     }

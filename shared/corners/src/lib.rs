@@ -12,11 +12,12 @@
 //!    then two such rows vertically.
 //! 2. **FAST-9** (`fast.rs`): a pixel is a corner when 9 contiguous pixels of the 16 on the
 //!    circle of radius 3 around it are all brighter than it by more than `fast_threshold`,
-//!    or all darker. Rows are worked 32 centres at a time in loops the compiler
-//!    vectorises: the 4 compass positions first (a block with no centre passing is done),
-//!    then the 8 even ones; a block with a centre left is scored whole, every centre on its
-//!    whole circle in byte lanes. The score of a corner is the largest threshold at which it
-//!    still is one.
+//!    or all darker. Rows are worked 32 centres at a time (with AVX2 intrinsics where the
+//!    CPU has them, else in loops the compiler vectorises): the 4 compass positions first
+//!    (a block with no centre passing is done), then the 8 even ones (and, in the
+//!    portable loops, the 8 odd ones, each way); a block with a centre left is scored
+//!    whole, every centre on its whole circle in byte lanes. The score of a corner is the
+//!    largest threshold at which it still is one.
 //! 3. **Selection** (`select.rs`): 3×3 non-maximum suppression of the score, a counting
 //!    sort on the 8-bit score (best first, raster order within a score); then each
 //!    level's share of `max_corners` (shares proportional to the levels' widths, as OpenCV's
@@ -26,14 +27,17 @@
 //! 4. **Orientation and descriptor** (`describe.rs`, `patch.rs`): the angle from the
 //!    patch's centre to its intensity centroid (radius 15), quantised to 32 steps; 256
 //!    intensity comparisons of pixel pairs of the smoothed level image (read from the
-//!    corner's 32 × 32 patch, copied out), the pairs rotated by that angle. The pairs are
+//!    corner's 32 × 32 patch, copied out; the level is smoothed only over the bands of
+//!    rows and columns the kept corners' patches cover), the pairs rotated by that angle. The pairs are
 //!    drawn once from a fixed-seed generator (isotropic Gaussian, BRIEF's G II), so every
 //!    build compares the same pixels. Bit `j` of byte `i` is pair `8i + j`: "first darker
 //!    than second", the layout of OpenCV's 32-byte ORB descriptors, so the same Hamming
 //!    matching serves both.
 //!
 //! On x86-64 CPUs with AVX2 all of it runs compiled for AVX2, the resampling with its byte
-//! shuffles (chosen at run time, so the binaries stay portable; the same results, tested).
+//! shuffles and FAST with intrinsics; where the CPU has AVX-512 VBMI too, the descriptor
+//! looks its points up 64 at a time with byte permutes (all chosen at run time, so the
+//! binaries stay portable; the same results, tested).
 //!
 //! Positions are in full-resolution pixels (pixel centres at integers); a corner found at
 //! level `l` sits on that level's pixel grid, `scale_factor^l` pixels apart. Corners stay
@@ -234,11 +238,14 @@ impl CornerExtractor {
     pub fn extract(&mut self, image: GrayView<'_>, out: &mut Corners) {
         #[cfg(target_arch = "x86_64")]
         if std::arch::is_x86_feature_detected!("avx2") {
+            let vbmi = std::arch::is_x86_feature_detected!("avx512f")
+                && std::arch::is_x86_feature_detected!("avx512bw")
+                && std::arch::is_x86_feature_detected!("avx512vbmi");
             // SAFETY: the CPU has the instructions the function is compiled for, as just
-            // checked.
+            // checked, and AVX-512 F, BW and VBMI when `vbmi` says so.
             #[allow(unsafe_code)]
             unsafe {
-                self.extract_with_avx2(image, out);
+                self.extract_with_avx2(image, out, vbmi);
             }
             return;
         }
@@ -247,21 +254,25 @@ impl CornerExtractor {
 
     /// [`CornerExtractor::extract_on_any_cpu`] compiled for AVX2 (everything it calls is
     /// `#[inline(always)]`, so inlined and compiled for it too).
+    /// `vbmi`: the CPU has AVX-512 F, BW and VBMI too (checked by the caller), and the
+    /// descriptor uses their byte permutes.
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
-    fn extract_with_avx2(&mut self, image: GrayView<'_>, out: &mut Corners) {
-        self.extract_for(image, out, true);
+    fn extract_with_avx2(&mut self, image: GrayView<'_>, out: &mut Corners, vbmi: bool) {
+        self.extract_for(image, out, true, vbmi);
     }
 
     /// [`CornerExtractor::extract`] for any CPU.
     fn extract_on_any_cpu(&mut self, image: GrayView<'_>, out: &mut Corners) {
-        self.extract_for(image, out, false);
+        self.extract_for(image, out, false, false);
     }
 
-    /// [`CornerExtractor::extract`], with AVX2's byte shuffles when `avx2` says the CPU has them
-    /// (the caller has checked).
+    /// [`CornerExtractor::extract`], with AVX2's byte shuffles when `avx2` says the CPU has them,
+    /// and AVX-512 VBMI's byte permutes when `vbmi` does (the caller has checked).
     #[inline(always)]
-    fn extract_for(&mut self, image: GrayView<'_>, out: &mut Corners, avx2: bool) {
+    fn extract_for(&mut self, image: GrayView<'_>, out: &mut Corners, avx2: bool, vbmi: bool) {
+        #[cfg(not(target_arch = "x86_64"))]
+        let _ = vbmi;
         out.clear();
         let params = self.params;
         let count = self.pyramid.build(image, &params, avx2);
@@ -279,6 +290,7 @@ impl CornerExtractor {
                 params.edge_px,
                 &mut self.scores,
                 &mut self.candidates,
+                avx2,
             );
 
             select::suppress_and_sort(plane, &self.scores, &mut self.candidates, &mut self.sorted);
@@ -289,18 +301,37 @@ impl CornerExtractor {
             if kept == 0 {
                 continue;
             }
-            let Some(smooth) = self.smoother.smooth(plane) else {
+            let Some(smooth) = self.smoother.smooth(plane, &self.candidates[..kept]) else {
                 continue;
             };
             let scale = self.pyramid.scale(level);
             for candidate in &self.candidates[..kept] {
                 let (x, y) = (candidate.x as usize, candidate.y as usize);
                 let angle_rad = self.pattern.orientation(plane, x, y);
-                let Some(patch) = patch::patch(smooth, x, y) else {
-                    continue;
+                #[cfg(target_arch = "x86_64")]
+                let descriptor = if vbmi {
+                    let Some(rows) = patch::rows(smooth, x, y) else {
+                        continue;
+                    };
+                    // SAFETY: the CPU has AVX-512 F, BW and VBMI (the caller's word).
+                    #[allow(unsafe_code)]
+                    unsafe {
+                        self.pattern.describe_vbmi(&rows, angle_rad)
+                    }
+                } else {
+                    let Some(patch) = patch::patch(smooth, x, y) else {
+                        continue;
+                    };
+                    self.pattern.describe(&patch, angle_rad)
                 };
-                out.descriptors
-                    .push(self.pattern.describe(&patch, angle_rad));
+                #[cfg(not(target_arch = "x86_64"))]
+                let descriptor = {
+                    let Some(patch) = patch::patch(smooth, x, y) else {
+                        continue;
+                    };
+                    self.pattern.describe(&patch, angle_rad)
+                };
+                out.descriptors.push(descriptor);
                 out.corners.push(Corner {
                     x: candidate.x as f32 * scale,
                     y: candidate.y as f32 * scale,

@@ -10,6 +10,22 @@ pub(crate) const PATCH: usize = 32;
 /// The corner's row and column inside the patch.
 pub(crate) const CENTRE: usize = 15;
 
+/// The rows of the patch around `(x, y)` of `smooth`, top to bottom, each its `PATCH`
+/// pixels in place (what [`patch`] copies out); `None` where the patch leaves `smooth`.
+#[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))] // read in place by AVX-512 only
+#[inline(always)]
+pub(crate) fn rows(smooth: GrayView<'_>, x: usize, y: usize) -> Option<[&[u8; PATCH]; PATCH]> {
+    let (left, top) = (x.checked_sub(CENTRE)?, y.checked_sub(CENTRE)?);
+    if top + PATCH > smooth.height() {
+        return None;
+    }
+    let mut rows: [&[u8; PATCH]; PATCH] = [&[0; PATCH]; PATCH];
+    for (r, row) in rows.iter_mut().enumerate() {
+        *row = smooth.row(top + r).get(left..)?.first_chunk()?;
+    }
+    Some(rows)
+}
+
 /// The patch around `(x, y)` of `smooth`, row by row (`PATCH` × `PATCH`); `(x, y)` is at
 /// least [`crate::BORDER_PX`] from the borders, so the patch lies inside (`None` if not).
 #[inline(always)]

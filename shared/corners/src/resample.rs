@@ -17,10 +17,17 @@ const WEIGHT_ONE: u16 = 1 << WEIGHT_BITS;
 /// Destination pixels a shuffle makes.
 const GROUP: usize = 8;
 
+/// Tables kept: one set per level of the deepest pyramid.
+const TABLES_KEPT: usize = crate::MAX_LEVELS;
+
 /// The resampling's tables and rows, kept from level to level and image to image.
 #[derive(Default)]
 pub(crate) struct Resampler {
-    tables: Tables,
+    /// The tables of the last levels resampled (an image of the same size next time
+    /// finds them made).
+    tables: Vec<Tables>,
+    /// The entry of `tables` made last.
+    newest: usize,
     /// Two source rows blended horizontally, and which source rows they are.
     rows: [Vec<u16>; 2],
     tags: [usize; 2],
@@ -29,6 +36,11 @@ pub(crate) struct Resampler {
 /// The horizontal blend's tables for one level.
 #[derive(Default)]
 struct Tables {
+    /// What they were made for: destination width, source pixels per destination pixel
+    /// (its bits), source width.
+    key: (usize, u32, usize),
+    /// The leading pairs of groups whose neighbours both fit the byte shuffle.
+    shuffled_pairs: usize,
     /// Per destination column: left source column and the right one's weight.
     columns: Vec<(u32, u16)>,
     /// Per group of [`GROUP`] destination columns: its first source byte, or `u32::MAX`
@@ -60,7 +72,22 @@ impl Resampler {
         }
         let sx = source.width() as f32 / width as f32;
         let sy = source.height() as f32 / height as f32;
-        self.tables.prepare(width, sx, source.width());
+        let key = (width, sx.to_bits(), source.width());
+        let found = self.tables.iter().position(|t| t.key == key);
+        let at = match found {
+            Some(at) => at,
+            None => {
+                if self.tables.len() < TABLES_KEPT {
+                    self.tables.push(Tables::default());
+                    self.newest = self.tables.len() - 1;
+                } else {
+                    self.newest = (self.newest + 1) % TABLES_KEPT;
+                }
+                self.tables[self.newest].prepare(width, sx, source.width());
+                self.newest
+            }
+        };
+        let tables = &self.tables[at];
         for row in &mut self.rows {
             row.resize(width, 0);
         }
@@ -74,22 +101,26 @@ impl Resampler {
                     self.rows.swap(0, 1);
                     self.tags.swap(0, 1);
                 } else {
-                    self.tables
-                        .blend_row(source.row(top), &mut self.rows[0], avx2);
+                    tables.blend_row(source.row(top), &mut self.rows[0], avx2);
                     self.tags[0] = top;
                 }
             }
             if self.tags[1] != bottom {
-                self.tables
-                    .blend_row(source.row(bottom), &mut self.rows[1], avx2);
+                tables.blend_row(source.row(bottom), &mut self.rows[1], avx2);
                 self.tags[1] = bottom;
             }
-            let w_top = u32::from(WEIGHT_ONE - w_bottom);
-            let w_bottom = u32::from(w_bottom);
+            let w_top = WEIGHT_ONE - w_bottom;
             let [upper, lower] = &self.rows;
+            // (sum + 2¹⁵) >> 16 for sum = u·w_top + l·w_bottom, in 16-bit lanes (twice as
+            // many a vector as 32-bit ones): with u = 256·u_high + u_low (likewise l),
+            // sum = 256·high + low, high and low each at most 255 · 256 (the weights add up
+            // to 256), and (sum + 2¹⁵) >> 16 = (high + (low >> 8) + 128) >> 8, whose
+            // parts stay below 2¹⁶ (high + (low >> 8) = sum >> 8 ≤ 65 280).
             for ((o, &u), &l) in row_out.iter_mut().zip(upper).zip(lower) {
-                let sum = u32::from(u) * w_top + u32::from(l) * w_bottom;
-                *o = ((sum + (1 << (2 * WEIGHT_BITS - 1))) >> (2 * WEIGHT_BITS)) as u8;
+                let high = (u >> WEIGHT_BITS) * w_top + (l >> WEIGHT_BITS) * w_bottom;
+                let low = (u & 0xFF) * w_top + (l & 0xFF) * w_bottom;
+                let half = 1 << (WEIGHT_BITS - 1);
+                *o = ((high + (low >> WEIGHT_BITS) + half) >> WEIGHT_BITS) as u8;
             }
         }
     }
@@ -99,6 +130,7 @@ impl Tables {
     /// The column table and the shuffle tables for `width` destination columns at `sx`
     /// source pixels each, from a source `source_width` wide.
     fn prepare(&mut self, width: usize, sx: f32, source_width: usize) {
+        self.key = (width, sx.to_bits(), source_width);
         self.columns.clear();
         self.columns
             .extend((0..width).map(|x| sample_at(x, sx, source_width)));
@@ -126,6 +158,8 @@ impl Tables {
                 .push(std::array::from_fn(|i| WEIGHT_ONE - group[i].1));
             self.right_weights.push(std::array::from_fn(|i| group[i].1));
         }
+        let fitting = self.bases.iter().take_while(|&&b| b != u32::MAX).count();
+        self.shuffled_pairs = fitting / 2;
     }
 
     /// Source `row` blended horizontally into `out` (one value per destination column).
@@ -134,25 +168,22 @@ impl Tables {
         let last = row.len() - 1;
         let groups = self.bases.len();
         let mut group = 0;
-        while group < groups {
-            #[cfg(target_arch = "x86_64")]
-            if avx2
-                && group + 1 < groups
-                && self.bases[group] != u32::MAX
-                && self.bases[group + 1] != u32::MAX
-            {
+        #[cfg(target_arch = "x86_64")]
+        if avx2 {
+            for pair in 0..self.shuffled_pairs {
                 // SAFETY: the CPU has AVX2 (the caller's word); both groups' 16 source
                 // bytes lie inside `row` (their bases were checked against its width) and
                 // their 16 destination values inside `out` (whole groups of columns).
                 #[allow(unsafe_code)]
                 unsafe {
-                    shuffle::two_groups(self, row, group, out);
+                    shuffle::two_groups(self, row, 2 * pair, out);
                 }
-                group += 2;
-                continue;
             }
-            #[cfg(not(target_arch = "x86_64"))]
-            let _ = avx2;
+            group = 2 * self.shuffled_pairs;
+        }
+        #[cfg(not(target_arch = "x86_64"))]
+        let _ = avx2;
+        while group < groups {
             let start = group * GROUP;
             let columns = &self.columns[start..start + GROUP];
             for (o, &column) in out[start..start + GROUP].iter_mut().zip(columns) {

@@ -139,6 +139,18 @@ fn the_fast_test_is_exact_on_hand_made_circles() {
     assert_eq!(fast::corner_score(view(&pixels, 7, 7), 3, 3, 20), None);
 }
 
+/// [`fast::detect`] with its AVX2 row loop, compiled for AVX2.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn detect_with_avx2(
+    image: GrayView<'_>,
+    threshold: u8,
+    scores: &mut Vec<u8>,
+    found: &mut Vec<select::Candidate>,
+) {
+    fast::detect(image, threshold, 0, scores, found, true);
+}
+
 #[test]
 fn the_screened_detector_finds_exactly_the_corners_of_the_whole_circle_test() {
     // Every pixel tested on its whole circle, against the row detector with its two
@@ -146,7 +158,9 @@ fn the_screened_detector_finds_exactly_the_corners_of_the_whole_circle_test() {
     // thresholds saturate at 0 and 255), on smooth texture, across widths that leave a
     // partial block at the end of a row.
     let mut state = 99;
-    for (width, height) in [(133, 77), (96, 60), (201, 50)] {
+    // (Widths whose rows of centres are a whole number of 32-centre blocks, not, and
+    // shorter than one: 133 − 32 = 101, 96 − 32 = 64, 201 − 32 = 169, 60 − 32 = 28.)
+    for (width, height) in [(133, 77), (96, 60), (201, 50), (60, 40)] {
         let noise: Vec<u8> = (0..width * height)
             .map(|_| (describe::tests_support::uniform(&mut state) * 256.0) as u8)
             .collect();
@@ -154,7 +168,25 @@ fn the_screened_detector_finds_exactly_the_corners_of_the_whole_circle_test() {
             for threshold in [1, 5, 20, 60, 200] {
                 let image = view(&pixels, width, height);
                 let (mut scores, mut found) = (Vec::new(), Vec::new());
-                fast::detect(image, threshold, 0, &mut scores, &mut found);
+                fast::detect(image, threshold, 0, &mut scores, &mut found, false);
+                // The AVX2 row loop where the CPU has it: the same corners and score map.
+                #[cfg(target_arch = "x86_64")]
+                if std::arch::is_x86_feature_detected!("avx2") {
+                    let (mut avx2_scores, mut avx2_found) = (Vec::new(), Vec::new());
+                    // SAFETY: the CPU has AVX2, as just checked.
+                    #[allow(unsafe_code)]
+                    unsafe {
+                        detect_with_avx2(image, threshold, &mut avx2_scores, &mut avx2_found);
+                    }
+                    assert_eq!(
+                        avx2_found, found,
+                        "AVX2, {kind} {width}×{height}, threshold {threshold}"
+                    );
+                    assert!(
+                        avx2_scores == scores,
+                        "AVX2 score map, {kind} {width}×{height}"
+                    );
+                }
                 let mut expected = Vec::new();
                 for y in BORDER_PX..height - BORDER_PX {
                     for x in BORDER_PX..width - BORDER_PX {
@@ -525,6 +557,160 @@ fn the_orientation_is_the_discs_intensity_centroid_summed_pixel_by_pixel() {
                 let expected = (m01 as f64).atan2(m10 as f64) as f32;
                 assert_eq!(pattern.orientation(image, x, y), expected, "at ({x}, {y})");
             }
+        }
+    }
+}
+
+#[test]
+fn the_smoothing_around_the_corners_is_the_whole_images_at_their_patches() {
+    // The reference: the 7-tap kernel (sum 64) down the columns and then along the rows,
+    // each pass rounded, edges clamped, written out pixel by pixel over the whole image;
+    // the smoother works only band by band where patches lie, and must give the same
+    // pixels over every patch: corners few and many, at the border and in clusters.
+    const TAPS: [u32; 7] = [4, 9, 12, 14, 12, 9, 4];
+    let mut state = 13;
+    for (width, height) in [(120, 90), (61, 40), (300, 33)] {
+        let noise: Vec<u8> = (0..width * height)
+            .map(|_| (describe::tests_support::uniform(&mut state) * 256.0) as u8)
+            .collect();
+        let clamp = |v: isize, len: usize| v.clamp(0, len as isize - 1) as usize;
+        let columns: Vec<u32> = (0..width * height)
+            .map(|at| {
+                let (x, y) = (at % width, at / width);
+                let s: u32 = (0..7)
+                    .map(|k| {
+                        TAPS[k]
+                            * u32::from(
+                                noise[clamp(y as isize + k as isize - 3, height) * width + x],
+                            )
+                    })
+                    .sum();
+                (s + 32) >> 6
+            })
+            .collect();
+        let smooth: Vec<u8> = (0..width * height)
+            .map(|at| {
+                let (x, y) = (at % width, at / width);
+                let s: u32 = (0..7)
+                    .map(|k| {
+                        TAPS[k] * columns[y * width + clamp(x as isize + k as isize - 3, width)]
+                    })
+                    .sum();
+                ((s + 32) >> 6) as u8
+            })
+            .collect();
+        let inside = |n: usize, len: usize| BORDER_PX + n % (len - 2 * BORDER_PX);
+        for count in [1, 5, 40] {
+            let corners: Vec<select::Candidate> = (0..count)
+                .map(|_| {
+                    let r = describe::tests_support::uniform(&mut state);
+                    let s = describe::tests_support::uniform(&mut state);
+                    select::Candidate {
+                        x: inside((r * 1e6) as usize, width) as u32,
+                        y: inside((s * 1e6) as usize, height) as u32,
+                        score: 1,
+                    }
+                })
+                .chain(
+                    [
+                        (BORDER_PX, BORDER_PX),
+                        (width - BORDER_PX - 1, height - BORDER_PX - 1),
+                    ]
+                    .map(|(x, y)| select::Candidate {
+                        x: x as u32,
+                        y: y as u32,
+                        score: 1,
+                    }),
+                )
+                .collect();
+            let mut smoother = pyramid::Smoother::default();
+            // Twice, with a larger image before: the buffers reused.
+            let large = vec![7u8; 400 * 100];
+            smoother.smooth(view(&large, 400, 100), &corners[..1]);
+            let got = smoother
+                .smooth(view(&noise, width, height), &corners)
+                .unwrap();
+            for c in &corners {
+                let (x, y) = (c.x as usize, c.y as usize);
+                let patch = patch::patch(got, x, y).unwrap();
+                for r in 0..patch::PATCH {
+                    let top = y - patch::CENTRE + r;
+                    let left = x - patch::CENTRE;
+                    assert_eq!(
+                        patch[r * patch::PATCH..][..patch::PATCH],
+                        smooth[top * width + left..][..patch::PATCH],
+                        "{width}×{height}, {count} corners, ({x}, {y}), patch row {r}"
+                    );
+                }
+            }
+        }
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+#[test]
+fn the_suppression_16_columns_at_a_time_is_the_one_at_a_time() {
+    // Scores with ties and plateaus (few distinct values), at every group of 16 columns
+    // inside the border: the SSE2 maxima against the 3 × 3 test written out.
+    let (width, height) = (90, 40);
+    let mut state = 21;
+    for levels in [2.0, 4.0, 256.0] {
+        let scores: Vec<u8> = (0..width * height)
+            .map(|_| (describe::tests_support::uniform(&mut state) * levels) as u8)
+            .collect();
+        for y in 1..height - 1 {
+            for first in (16..width - 17).step_by(16) {
+                let maxima = select::sse2::maxima(&scores, y * width + first, width);
+                for lane in 0..16 {
+                    let at = y * width + first + lane;
+                    assert_eq!(
+                        (maxima >> lane) & 1 == 1,
+                        select::is_maximum(&scores, at, width),
+                        "({}, {y}), {levels} levels",
+                        first + lane
+                    );
+                }
+            }
+        }
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+#[test]
+fn the_descriptor_with_byte_permutes_is_the_one_read_point_by_point() {
+    // Where the CPU has AVX-512 VBMI: random patches (and flat and saturated ones, whose
+    // comparisons all tie), at every one of the pattern's orientations.
+    if !(std::arch::is_x86_feature_detected!("avx512f")
+        && std::arch::is_x86_feature_detected!("avx512bw")
+        && std::arch::is_x86_feature_detected!("avx512vbmi"))
+    {
+        return;
+    }
+    let pattern = describe::Pattern::new();
+    let mut state = 17;
+    let mut patches: Vec<[u8; patch::PATCH * patch::PATCH]> = (0..20)
+        .map(|_| {
+            std::array::from_fn(|_| (describe::tests_support::uniform(&mut state) * 256.0) as u8)
+        })
+        .collect();
+    patches.push([0; patch::PATCH * patch::PATCH]);
+    patches.push([255; patch::PATCH * patch::PATCH]);
+    for (k, patch) in patches.iter().enumerate() {
+        for step in 0..describe::ANGLE_STEPS {
+            let angle_rad = step as f32 * std::f32::consts::TAU / describe::ANGLE_STEPS as f32;
+            let rows: [&[u8; patch::PATCH]; patch::PATCH] = std::array::from_fn(|r| {
+                patch[r * patch::PATCH..][..patch::PATCH]
+                    .try_into()
+                    .unwrap()
+            });
+            // SAFETY: the CPU has AVX-512 F, BW and VBMI, as checked above.
+            #[allow(unsafe_code)]
+            let permuted = unsafe { pattern.describe_vbmi(&rows, angle_rad) };
+            assert_eq!(
+                permuted,
+                pattern.describe(patch, angle_rad),
+                "patch {k}, step {step}"
+            );
         }
     }
 }
