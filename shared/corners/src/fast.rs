@@ -3,7 +3,7 @@
 //! difference per centre, in byte lanes), loops the compiler vectorises; no pixel is
 //! tested on its own.
 
-use crate::select::Candidate;
+use crate::Candidate;
 use crate::{BORDER_PX, GrayView};
 
 /// The circle of radius 3 (Bresenham), clockwise from the top, `(dx, dy)`.

@@ -61,8 +61,18 @@ mod tests;
 use describe::Pattern;
 pub use linetrack_edge_lines::{EdgeLinesError, GrayView};
 use pyramid::{Pyramid, Smoother};
-use select::Candidate;
 use thiserror::Error;
+
+/// A corner of one level before it is described, level pixels.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) struct Candidate {
+    /// Column.
+    pub(crate) x: u32,
+    /// Row.
+    pub(crate) y: u32,
+    /// FAST score.
+    pub(crate) score: u8,
+}
 
 /// Bytes of a descriptor (256 comparisons).
 pub const DESCRIPTOR_BYTES: usize = 32;

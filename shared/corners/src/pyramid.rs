@@ -3,9 +3,9 @@
 //! ORB, in both directions), its passes over whole rows in 16-bit integers, which the
 //! compiler vectorises.
 
+use crate::Candidate;
 use crate::patch::{CENTRE, PATCH};
 use crate::resample::Resampler;
-use crate::select::Candidate;
 use crate::{BORDER_PX, GrayView, MAX_LEVELS, Params};
 
 /// Levels 1.. of the pyramid (level 0 is the caller's image) and the resampling buffers.

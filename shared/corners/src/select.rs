@@ -2,18 +2,7 @@
 //! share of the wanted count, and a grid that spreads a level's share over the image.
 
 use crate::pyramid::Pyramid;
-use crate::{GrayView, MAX_LEVELS};
-
-/// A corner of one level before it is described, level pixels.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub(crate) struct Candidate {
-    /// Column.
-    pub(crate) x: u32,
-    /// Row.
-    pub(crate) y: u32,
-    /// FAST score.
-    pub(crate) score: u8,
-}
+use crate::{Candidate, GrayView, MAX_LEVELS};
 
 /// Each level's share of `wanted` corners, proportional to its width (a geometric series
 /// of ratio 1 / scale factor, as OpenCV's ORB divides its points: coarse levels get more

@@ -146,7 +146,7 @@ fn detect_with_avx2(
     image: GrayView<'_>,
     threshold: u8,
     scores: &mut Vec<u8>,
-    found: &mut Vec<select::Candidate>,
+    found: &mut Vec<crate::Candidate>,
 ) {
     fast::detect(image, threshold, 0, scores, found, true);
 }
@@ -191,7 +191,7 @@ fn the_screened_detector_finds_exactly_the_corners_of_the_whole_circle_test() {
                 for y in BORDER_PX..height - BORDER_PX {
                     for x in BORDER_PX..width - BORDER_PX {
                         if let Some(score) = fast::corner_score(image, x, y, threshold) {
-                            expected.push(select::Candidate {
+                            expected.push(crate::Candidate {
                                 x: x as u32,
                                 y: y as u32,
                                 score,
@@ -601,11 +601,11 @@ fn the_smoothing_around_the_corners_is_the_whole_images_at_their_patches() {
             .collect();
         let inside = |n: usize, len: usize| BORDER_PX + n % (len - 2 * BORDER_PX);
         for count in [1, 5, 40] {
-            let corners: Vec<select::Candidate> = (0..count)
+            let corners: Vec<crate::Candidate> = (0..count)
                 .map(|_| {
                     let r = describe::tests_support::uniform(&mut state);
                     let s = describe::tests_support::uniform(&mut state);
-                    select::Candidate {
+                    crate::Candidate {
                         x: inside((r * 1e6) as usize, width) as u32,
                         y: inside((s * 1e6) as usize, height) as u32,
                         score: 1,
@@ -616,7 +616,7 @@ fn the_smoothing_around_the_corners_is_the_whole_images_at_their_patches() {
                         (BORDER_PX, BORDER_PX),
                         (width - BORDER_PX - 1, height - BORDER_PX - 1),
                     ]
-                    .map(|(x, y)| select::Candidate {
+                    .map(|(x, y)| crate::Candidate {
                         x: x as u32,
                         y: y as u32,
                         score: 1,
