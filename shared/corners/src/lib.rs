@@ -50,6 +50,7 @@
 
 mod describe;
 mod fast;
+mod harris;
 mod patch;
 mod pyramid;
 mod resample;
@@ -116,6 +117,10 @@ pub struct Params {
     /// cost the odometry frame-to-frame matches, ATE 0.78 m with 32-pixel cells against
     /// 0.17 m without).
     pub cell_px: usize,
+    /// Rank each level's best FAST corners (twice its share) by the Harris measure of the
+    /// 7 × 7 block around them and keep the best of those, as OpenCV's ORB does by default;
+    /// false (the default): by the FAST score alone (docs/speed.md, "Ranked by Harris").
+    pub harris: bool,
     /// Corners are at least this many pixels of their level from the borders (at least
     /// [`BORDER_PX`] whatever this says); OpenCV's ORB calls it `edgeThreshold`. In forward
     /// motion, corners near the borders leave the view first.
@@ -124,7 +129,7 @@ pub struct Params {
 
 impl Default for Params {
     /// OpenCV ORB's defaults (500 points, 8 levels of 1.2, FAST threshold 20, 31 px from
-    /// the borders); no grid.
+    /// the borders), but ranked by the FAST score; no grid.
     fn default() -> Self {
         Self {
             max_corners: 500,
@@ -133,6 +138,7 @@ impl Default for Params {
             fast_threshold: 20,
             cell_px: 0,
             edge_px: 31,
+            harris: false,
         }
     }
 }
@@ -217,6 +223,8 @@ pub struct CornerExtractor {
     candidates: Vec<Candidate>,
     /// The candidates' sorting buffer.
     sorted: Vec<Candidate>,
+    /// The Harris measures of a level's best candidates, with their indices.
+    ranked: Vec<(i64, u32)>,
     grid: select::Grid,
 }
 
@@ -232,6 +240,7 @@ impl CornerExtractor {
             scores: Vec::new(),
             candidates: Vec::new(),
             sorted: Vec::new(),
+            ranked: Vec::new(),
             grid: select::Grid::default(),
         })
     }
@@ -304,6 +313,15 @@ impl CornerExtractor {
             );
 
             select::suppress_and_sort(plane, &self.scores, &mut self.candidates, &mut self.sorted);
+            if params.harris {
+                harris::rank(
+                    plane,
+                    wanted,
+                    &mut self.candidates,
+                    &mut self.ranked,
+                    &mut self.sorted,
+                );
+            }
             let kept = self
                 .grid
                 .select(plane, params.cell_px, wanted, &mut self.candidates);

@@ -176,6 +176,10 @@ pub struct OrbOptions {
     /// wide (at most an even share per cell first); 0, the default, for none (measured on
     /// the KITTI raw drive, the grid cost the odometry's frame-to-frame matches).
     pub grid_cell_px: usize,
+    /// `fast-brief` only: rank each level's best FAST corners (twice its share) by the
+    /// Harris measure and keep the best of those, as OpenCV's ORB does; false (the
+    /// default): by the FAST score alone (measured against each other in docs/speed.md).
+    pub harris_ranking: bool,
     /// How each left point finds its stereo partner: `descriptors` (the default: the
     /// right image's points are extracted too and matched by descriptor) or `row-search`
     /// (the right image is not extracted: each left point's window is searched for along
@@ -222,6 +226,7 @@ impl Default for OrbOptions {
             fast_threshold: 20,
             min_distance_ratio: 2.0,
             grid_cell_px: 0,
+            harris_ranking: false,
             stereo: PointStereo::Descriptors,
             row_search_min_correlation: 0.8,
             row_search_uniqueness: 0.3,
@@ -250,6 +255,7 @@ impl OrbOptions {
             edge_px: usize::try_from(self.edge_threshold)
                 .map_err(|_| out_of_range("edge_threshold", self.edge_threshold, "must be ≥ 0"))?,
             cell_px: self.grid_cell_px,
+            harris: self.harris_ranking,
         };
         params.validate()?;
         Ok(params)
