@@ -127,16 +127,23 @@ pub(crate) fn detect(
                 score_row[start..].copy_from_slice(&block[..count]);
                 found &= (1 << count) - 1;
             }
-            while found != 0 {
-                let i = found.trailing_zeros() as usize;
-                found &= found - 1;
-                candidates.push(Candidate {
-                    x: (edge + start + i) as u32,
-                    y: y as u32,
-                    score: block[i],
-                });
-            }
+            list_found(found, edge + start, y, &block, candidates);
         }
+    }
+}
+
+/// Lists a block's corners: for each bit `i` set in `found` (lowest first), the pixel
+/// (`x0 + i`, `y`) with score `scores[i]`.
+#[inline(always)]
+fn list_found(mut found: u32, x0: usize, y: usize, scores: &[u8; LANES], out: &mut Vec<Candidate>) {
+    while found != 0 {
+        let i = found.trailing_zeros() as usize;
+        found &= found - 1;
+        out.push(Candidate {
+            x: (x0 + i) as u32,
+            y: y as u32,
+            score: scores[i],
+        });
     }
 }
 
@@ -479,21 +486,13 @@ mod avx2 {
                 let none = _mm256_cmpeq_epi8(best, zero);
                 let scores = _mm256_andnot_si256(none, _mm256_add_epi8(best, t_less_one));
                 _mm256_storeu_si256(score_row.as_mut_ptr().add(at).cast(), scores);
-                let mut found = !(_mm256_movemask_epi8(none) as u32) >> first_new << first_new;
+                let found = !(_mm256_movemask_epi8(none) as u32) >> first_new << first_new;
                 if found == 0 {
                     continue;
                 }
                 let mut lanes = [0u8; LANES];
                 _mm256_storeu_si256(lanes.as_mut_ptr().cast(), scores);
-                while found != 0 {
-                    let i = found.trailing_zeros() as usize;
-                    found &= found - 1;
-                    candidates.push(Candidate {
-                        x: (edge + at + i) as u32,
-                        y: y as u32,
-                        score: lanes[i],
-                    });
-                }
+                super::list_found(found, edge + at, y, &lanes, candidates);
             }
         }
     }
