@@ -19,7 +19,7 @@ use linetrack_msgs::{
     TrackedLine, TracksHeader, topics,
 };
 use linetrack_odometry::{
-    Features, FrameStats, LinePrediction, MatchedLines, MotionTracker, OdometryConfig,
+    Features, FrameStats, LinePrediction, LostKind, MatchedLines, MotionTracker, OdometryConfig,
     PoseCovariance, Preparation, PreparedImages, SegmentTracking, rescue_matcher,
 };
 use linetrack_pipeline_config::MatcherPolicy;
@@ -461,6 +461,13 @@ impl PoseTracker {
         record.rms_px = result.stats.rms_px;
         record.conditioning = result.stats.conditioning;
         record.rescued = u32::from(fell_back && !result.lost);
+        record.lost_reason = match result.lost_kind {
+            Some(LostKind::TooFewInliers) => 1,
+            Some(LostKind::Degenerate) => 2,
+            Some(LostKind::Departed) => 3,
+            None if resumed.is_some() => 4,
+            None => 0,
+        };
         if let Some(reason) = &result.reason {
             tracing::debug!("frame {} lost: {reason}", header.frame_id);
         }

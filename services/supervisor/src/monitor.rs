@@ -310,6 +310,11 @@ impl Monitor {
             deadline_miss: over_stage
                 || end_to_end_ms > budget.end_to_end_ms
                 || status == FrameStatus::DroppedLate,
+            lost_reason: if outcome == "lost" {
+                pose.lost_reason_name().to_string()
+            } else {
+                String::new()
+            },
         };
         if !self.accounted.insert(header.frame_id) {
             self.duplicates += 1;

@@ -347,6 +347,10 @@ pub struct PoseRecord {
     /// it, and the pose estimator tracked it with ℓ1 matches at the predicted positions
     /// instead (`[matcher.fallback] rescue_lost_frames`).
     pub rescued: u32,
+    /// Why the frame was lost (0 when it was not): [`PoseRecord::LOST_REASONS`] names
+    /// each code (1 too few inliers, 2 degenerate geometry, 3 the estimate departed from
+    /// the prediction, 4 predicted across a restarted pose estimator's gap).
+    pub lost_reason: u32,
     /// RMS residual of the inliers, pixels.
     pub rms_px: f64,
     /// Conditioning of the motion estimate's normal matrix: its smallest eigenvalue over
@@ -364,6 +368,23 @@ pub struct PoseRecord {
 }
 
 impl PoseRecord {
+    /// The names of [`PoseRecord::lost_reason`]'s codes, code 1 first.
+    pub const LOST_REASONS: [&'static str; 4] =
+        ["too-few-inliers", "degenerate", "departed", "restart-gap"];
+
+    /// The name of its `lost_reason`: empty for 0, `unknown` for a code no build of
+    /// this one knows.
+    pub fn lost_reason_name(&self) -> &'static str {
+        match self.lost_reason {
+            0 => "",
+            code => (code as usize)
+                .checked_sub(1)
+                .and_then(|k| Self::LOST_REASONS.get(k))
+                .copied()
+                .unwrap_or("unknown"),
+        }
+    }
+
     /// The symmetric 6×6 matrix of a covariance sent as its upper triangle
     /// ([`PoseRecord::covariance`], [`PoseRecord::step_covariance`]).
     pub fn unpack_covariance(values: &[f64; 21]) -> [[f64; 6]; 6] {

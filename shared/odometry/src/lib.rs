@@ -33,7 +33,7 @@ pub use linetrack_odometry_config::{
 pub use linetrack_stereo_vo::nees;
 pub use linetrack_trajectory::metrics;
 pub use pose_covariance::PoseCovariance;
-pub use stats::{FrameResult, FrameStats};
+pub use stats::{FrameResult, FrameStats, LostKind};
 pub use tracker::{
     MatchedLines, MotionTracker, Preparation, PreparedImages, SightingKind, StereoSighting,
 };

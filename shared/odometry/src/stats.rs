@@ -56,6 +56,9 @@ pub struct FrameResult {
     pub lost: bool,
     /// Why, when lost.
     pub reason: Option<String>,
+    /// Which kind of reason, when lost.
+    #[serde(skip)]
+    pub lost_kind: Option<LostKind>,
     /// Counts and timings.
     pub stats: FrameStats,
     /// Covariance of this frame's motion estimate (see
@@ -65,6 +68,28 @@ pub struct FrameResult {
     /// one.
     #[serde(skip)]
     pub step_covariance: Option<Matrix6<f64>>,
+}
+
+/// Why a frame was lost.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum LostKind {
+    /// Too few observations agreed with the estimate.
+    TooFewInliers,
+    /// The observations left the motion undetermined (ill-conditioned).
+    Degenerate,
+    /// The estimate departed from the prediction by more than `[lost]` allows.
+    Departed,
+}
+
+impl LostKind {
+    /// Its name in records: `too-few-inliers`, `degenerate`, `departed`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::TooFewInliers => "too-few-inliers",
+            Self::Degenerate => "degenerate",
+            Self::Departed => "departed",
+        }
+    }
 }
 
 /// Milliseconds since `start`.

@@ -13,13 +13,13 @@ pub use prepare::{Preparation, PreparedImages};
 
 use crate::landmarks::{Geometry, Landmark, sighted};
 use crate::stats::since;
-use crate::{FrameResult, FrameStats, OdometryConfig, OdometryError};
+use crate::{FrameResult, FrameStats, LostKind, OdometryConfig, OdometryError};
 use linetrack_geometry::{Point, Segment, SegmentFeatures, StereoRig};
 use linetrack_l1_matcher::SegmentProfiles;
 use linetrack_stereo_vo::observation::{line_residual, normalised_line, point_residual};
 use linetrack_stereo_vo::{
-    LineObservation, MotionEstimate, PointObservation, TriangulationLimits, estimate_motion,
-    estimate_motion_near,
+    LineObservation, MotionError, MotionEstimate, PointObservation, TriangulationLimits,
+    estimate_motion, estimate_motion_near,
 };
 use linetrack_vision::{
     FeatureMatch, GrayImage, OrbWorker, PointExtractor, PointFeatures, PointMatcher, RowSearch,
@@ -489,7 +489,7 @@ impl MotionTracker {
         observations: &Observations,
         min_inliers: Option<usize>,
         stats: &mut FrameStats,
-    ) -> Result<MotionEstimate, String> {
+    ) -> Result<MotionEstimate, (LostKind, String)> {
         let started = Instant::now();
         let mut config = self.config.motion;
         if let Some(n) = min_inliers {
@@ -504,17 +504,23 @@ impl MotionTracker {
         };
         stats.motion_ms += since(started);
         let prediction = self.last_motion;
-        estimate.map_err(|why| why.to_string()).and_then(|e| {
-            stats.inliers = [e.inlier_points, e.inlier_lines];
-            stats.iterations = e.iterations;
-            stats.rms_px = e.rms_px;
-            stats.conditioning = e.relative_eigenvalue;
-            stats.departure = departure(&prediction, &e.motion);
-            match self.departs_sharply(&prediction, stats.departure) {
-                Some(why) if self.motion_known => Err(why),
-                _ => Ok(e),
-            }
-        })
+        let kind = |why: &MotionError| match why {
+            MotionError::TooFewInliers { .. } => LostKind::TooFewInliers,
+            MotionError::Degenerate { .. } => LostKind::Degenerate,
+        };
+        estimate
+            .map_err(|why| (kind(&why), why.to_string()))
+            .and_then(|e| {
+                stats.inliers = [e.inlier_points, e.inlier_lines];
+                stats.iterations = e.iterations;
+                stats.rms_px = e.rms_px;
+                stats.conditioning = e.relative_eigenvalue;
+                stats.departure = departure(&prediction, &e.motion);
+                match self.departs_sharply(&prediction, stats.departure) {
+                    Some(why) if self.motion_known => Err((LostKind::Departed, why)),
+                    _ => Ok(e),
+                }
+            })
     }
 
     /// Moves on by the `verdict`'s motion, the frame's features (`points_l` and the fresh
@@ -522,7 +528,7 @@ impl MotionTracker {
     /// they observed; or, when the estimate is not believed, reports the frame lost.
     fn conclude(
         &mut self,
-        verdict: Result<MotionEstimate, String>,
+        verdict: Result<MotionEstimate, (LostKind, String)>,
         previous: Reference,
         points_l: PointFeatures,
         lists: &FrameLists,
@@ -564,11 +570,13 @@ impl MotionTracker {
     }
 
     /// The frame's result at the current pose: lost when there is a `reason`.
-    fn result(&self, reason: Option<String>, stats: FrameStats) -> FrameResult {
+    fn result(&self, reason: Option<(LostKind, String)>, stats: FrameStats) -> FrameResult {
+        let (lost_kind, reason) = reason.unzip();
         FrameResult {
             pose: self.pose,
             lost: reason.is_some(),
             reason,
+            lost_kind,
             stats,
             step_covariance: None,
         }

@@ -61,7 +61,7 @@ pub enum RecordError {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::rows::FRAME_HEADER;
+    use crate::rows::FRAME_HEADER_WITHOUT_REASON;
     use linetrack_trajectory::metrics;
     use linetrack_trajectory::tum::StampedPose;
 
@@ -171,7 +171,10 @@ mod tests {
         odd.dropped_by = "line-detector, \"lsd\"\r\nsecond line".into();
         let frames = [
             frame(0, "pose", 40.0),
-            frame(1, "lost", 60.0),
+            FrameRecord {
+                lost_reason: "too-few-inliers".into(),
+                ..frame(1, "lost", 60.0)
+            },
             late,
             FrameRecord::missing(3),
             odd,
@@ -211,6 +214,7 @@ mod tests {
         );
         assert_eq!(back[4].dropped_by, frames[4].dropped_by);
         assert_eq!(back[2].dropped_by, "matcher");
+        assert_eq!(back[1].lost_reason, "too-few-inliers");
         assert!(back[3].end_to_end_ms.is_nan());
         assert_eq!(back[0].end_to_end_ms, 40.0);
         let events_back = read_events(&dir.join("events.csv")).unwrap_or_else(|e| panic!("{e}"));
@@ -248,14 +252,29 @@ mod tests {
             ),
             ("0,pose,,,,,,,,,0,0,0,,,\n", "bad.csv:2"),
         ] {
-            std::fs::write(dir.join("bad.csv"), format!("{FRAME_HEADER}\n{rows}"))
-                .unwrap_or_else(|e| panic!("{e}"));
+            std::fs::write(
+                dir.join("bad.csv"),
+                format!("{FRAME_HEADER_WITHOUT_REASON}\n{rows}"),
+            )
+            .unwrap_or_else(|e| panic!("{e}"));
             let err = read_frames(&dir.join("bad.csv"))
                 .err()
                 .map(|e| e.to_string())
                 .unwrap_or_default();
             assert!(err.contains(wants), "{wants}: {err}");
         }
+        // A run recorded before the `lost_reason` column reads, with empty reasons.
+        let old = dir.join("old.csv");
+        std::fs::write(
+            &old,
+            format!("{FRAME_HEADER_WITHOUT_REASON}\n0,lost,,,,,,,,,0,0,0,,,,\n"),
+        )
+        .unwrap_or_else(|e| panic!("{e}"));
+        let read = read_frames(&old).unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(
+            (read[0].outcome.as_str(), read[0].lost_reason.as_str()),
+            ("lost", "")
+        );
         std::fs::write(dir.join("bad.csv"), "frame,outcome\n").unwrap_or_else(|e| panic!("{e}"));
         let err = read_frames(&dir.join("bad.csv"))
             .err()

@@ -1,7 +1,9 @@
 //! Reading `frames.csv` and `events.csv` back, up to a last row a crash or a full disk cut.
 
 use crate::RecordError;
-use crate::rows::{EVENT_HEADER, EventRecord, FRAME_HEADER, FrameRecord, FrameRow};
+use crate::rows::{
+    EVENT_HEADER, EventRecord, FRAME_HEADER, FRAME_HEADER_WITHOUT_REASON, FrameRecord, FrameRow,
+};
 use std::path::{Path, PathBuf};
 
 /// The last row of a record file, cut (by a crash, a full disk, a power cut) and left out.
@@ -44,7 +46,7 @@ pub(crate) enum LastRow {
 /// with their lines; errors name the file, the line and the column.
 pub(crate) fn read_rows<T: serde::de::DeserializeOwned>(
     path: &Path,
-    header: &str,
+    headers: &[&str],
     last: LastRow,
 ) -> Result<ReadToCut<(usize, T)>, RecordError> {
     let bytes = std::fs::read(path).map_err(|source| RecordError::Io {
@@ -75,8 +77,8 @@ pub(crate) fn read_rows<T: serde::de::DeserializeOwned>(
     }
     let mut reader = csv::ReaderBuilder::new().from_reader(body);
     let columns = match reader.headers() {
-        Ok(found) if found.iter().eq(header.split(',')) => found.clone(),
-        _ => return Err(parse(1, format!("expected the header {header:?}"))),
+        Ok(found) if headers.iter().any(|h| found.iter().eq(h.split(','))) => found.clone(),
+        _ => return Err(parse(1, format!("expected the header {:?}", headers[0]))),
     };
     let mut rows = Vec::new();
     let mut record = csv::StringRecord::new();
@@ -127,7 +129,8 @@ pub(crate) fn read_rows<T: serde::de::DeserializeOwned>(
 
 /// The rows of `frames.csv` as records, in frame order.
 pub(crate) fn frames_of(path: &Path, last: LastRow) -> Result<ReadToCut<FrameRecord>, RecordError> {
-    let (rows, mut cut) = read_rows::<FrameRow>(path, FRAME_HEADER, last)?;
+    let (rows, mut cut) =
+        read_rows::<FrameRow>(path, &[FRAME_HEADER, FRAME_HEADER_WITHOUT_REASON], last)?;
     let count = rows.len();
     let mut frames = Vec::with_capacity(count);
     for (k, (line, row)) in rows.into_iter().enumerate() {
@@ -179,7 +182,7 @@ pub(crate) fn read_events_to_cut_as(
     path: &Path,
     last: LastRow,
 ) -> Result<ReadToCut<EventRecord>, RecordError> {
-    let (rows, cut) = read_rows::<EventRecord>(path, EVENT_HEADER, last)?;
+    let (rows, cut) = read_rows::<EventRecord>(path, &[EVENT_HEADER], last)?;
     Ok((rows.into_iter().map(|(_, event)| event).collect(), cut))
 }
 

@@ -32,6 +32,9 @@ pub struct FrameRecord {
     pub tracked_matches: u32,
     /// Whether any budget (a stage's or end to end) was exceeded.
     pub deadline_miss: bool,
+    /// Why a `lost` frame was lost (`too-few-inliers`, `degenerate`, `departed`,
+    /// `restart-gap`), else empty.
+    pub lost_reason: String,
 }
 
 impl FrameRecord {
@@ -49,6 +52,7 @@ impl FrameRecord {
             stereo_matches: 0,
             tracked_matches: 0,
             deadline_miss: false,
+            lost_reason: String::new(),
         }
     }
 
@@ -73,7 +77,9 @@ pub struct EventRecord {
     pub detail: String,
 }
 
-pub(crate) const FRAME_HEADER: &str = "frame_id,outcome,dropped_by,frame_source_ms,line_detector_ms,matcher_ms,pose_estimator_ms,end_to_end_ms,matcher,detector,stereo_matches,tracked_matches,deadline_miss,frame_source_wait_ms,line_detector_wait_ms,matcher_wait_ms,pose_estimator_wait_ms";
+pub(crate) const FRAME_HEADER: &str = "frame_id,outcome,dropped_by,frame_source_ms,line_detector_ms,matcher_ms,pose_estimator_ms,end_to_end_ms,matcher,detector,stereo_matches,tracked_matches,deadline_miss,frame_source_wait_ms,line_detector_wait_ms,matcher_wait_ms,pose_estimator_wait_ms,lost_reason";
+/// The header of runs recorded before `lost_reason` (read as empty reasons).
+pub(crate) const FRAME_HEADER_WITHOUT_REASON: &str = "frame_id,outcome,dropped_by,frame_source_ms,line_detector_ms,matcher_ms,pose_estimator_ms,end_to_end_ms,matcher,detector,stereo_matches,tracked_matches,deadline_miss,frame_source_wait_ms,line_detector_wait_ms,matcher_wait_ms,pose_estimator_wait_ms";
 pub(crate) const EVENT_HEADER: &str = "time_s,kind,stage,frame_id,detail";
 
 /// Milliseconds and seconds are written to the microsecond / millisecond: 3 decimals.
@@ -108,6 +114,8 @@ pub(crate) struct FrameRow {
     line_detector_wait_ms: Option<f64>,
     matcher_wait_ms: Option<f64>,
     pose_estimator_wait_ms: Option<f64>,
+    #[serde(default)]
+    lost_reason: String,
 }
 
 impl From<&FrameRecord> for FrameRow {
@@ -130,6 +138,7 @@ impl From<&FrameRecord> for FrameRow {
             line_detector_wait_ms: ms(f.wait_ms[1]),
             matcher_wait_ms: ms(f.wait_ms[2]),
             pose_estimator_wait_ms: ms(f.wait_ms[3]),
+            lost_reason: f.lost_reason.clone(),
         }
     }
 }
@@ -168,6 +177,7 @@ impl FrameRow {
                 1 => true,
                 v => return Err(format!("deadline_miss: {v} is neither 0 nor 1")),
             },
+            lost_reason: self.lost_reason,
         })
     }
 }

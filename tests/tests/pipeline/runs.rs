@@ -313,6 +313,10 @@ fn with_auto_a_frame_lbd_would_lose_is_tracked_with_l1_and_counted() {
             .filter(|f| f.outcome == "lost")
             .map(|f| f.frame_id)
             .collect();
+        // A lost frame says why in frames.csv.
+        for f in records.frames.iter().filter(|f| f.outcome == "lost") {
+            assert_eq!(f.lost_reason, "too-few-inliers", "frame {}", f.frame_id);
+        }
         let rescued: Vec<Option<u64>> = (records.events_of("l1-rescue").iter())
             .map(|e| e.frame_id)
             .collect();

@@ -245,6 +245,7 @@ mod tests {
             stereo_matches: 50,
             tracked_matches: 40,
             deadline_miss: miss,
+            lost_reason: String::new(),
         }
     }
 

@@ -95,6 +95,7 @@ impl MotionTracker {
         self.observe_lines(reference, left, tracked, &mut observations);
         self.estimate(&observations, min_inliers, &mut FrameStats::default())
             .err()
+            .map(|(_, why)| why)
     }
 
     /// This frame's estimate is believed with `min_inliers` inliers under the prior (a
