@@ -461,13 +461,7 @@ impl PoseTracker {
         record.rms_px = result.stats.rms_px;
         record.conditioning = result.stats.conditioning;
         record.rescued = u32::from(fell_back && !result.lost);
-        record.lost_reason = match result.lost_kind {
-            Some(LostKind::TooFewInliers) => 1,
-            Some(LostKind::Degenerate) => 2,
-            Some(LostKind::Departed) => 3,
-            None if resumed.is_some() => 4,
-            None => 0,
-        };
+        record.lost_reason = lost_reason(result.lost_kind, resumed.is_some());
         if let Some(reason) = &result.reason {
             tracing::debug!("frame {} lost: {reason}", header.frame_id);
         }
@@ -557,9 +551,45 @@ pub fn run(ctx: &StageContext, bus: &Bus, shutdown: &Shutdown) -> anyhow::Result
     run_stage(ctx, bus, PoseStage::new(ctx, bus)?, shutdown)
 }
 
+/// The [`PoseRecord::lost_reason`] code of a frame lost as `kind` (`None`: tracked), or
+/// predicted across a restart's gap (`resumed`).
+fn lost_reason(kind: Option<LostKind>, resumed: bool) -> u32 {
+    match kind {
+        Some(kind) => PoseRecord::lost_reason_code(kind.name()),
+        None if resumed => PoseRecord::lost_reason_code(RESTART_GAP),
+        None => 0,
+    }
+}
+
+/// [`PoseRecord::lost_reason`]'s name for a pose predicted across a restart's gap.
+const RESTART_GAP: &str = "restart-gap";
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn every_way_of_losing_a_frame_has_a_code_that_names_it() {
+        let mut codes = Vec::new();
+        let cases = LostKind::ALL.map(|k| (Some(k), false, k.name()));
+        for (kind, resumed, name) in cases.into_iter().chain([(None, true, RESTART_GAP)]) {
+            let record = PoseRecord {
+                lost_reason: lost_reason(kind, resumed),
+                ..PoseRecord::default()
+            };
+            assert_ne!(record.lost_reason, 0, "{name}");
+            assert_eq!(record.lost_reason_name(), name);
+            codes.push(record.lost_reason);
+        }
+        codes.sort_unstable();
+        codes.dedup();
+        assert_eq!(
+            codes.len(),
+            LostKind::ALL.len() + 1,
+            "codes differ: {codes:?}"
+        );
+        assert_eq!(lost_reason(None, false), 0);
+    }
 
     #[test]
     fn resume_pose_round_trips_and_rejects_garbage() {

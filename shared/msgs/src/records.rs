@@ -372,6 +372,15 @@ impl PoseRecord {
     pub const LOST_REASONS: [&'static str; 4] =
         ["too-few-inliers", "degenerate", "departed", "restart-gap"];
 
+    /// The `lost_reason` code of `name` (one of [`PoseRecord::LOST_REASONS`]); 0 for any
+    /// other name.
+    pub fn lost_reason_code(name: &str) -> u32 {
+        Self::LOST_REASONS
+            .iter()
+            .position(|known| *known == name)
+            .map_or(0, |k| k as u32 + 1)
+    }
+
     /// The name of its `lost_reason`: empty for 0, `unknown` for a code no build of
     /// this one knows.
     pub fn lost_reason_name(&self) -> &'static str {

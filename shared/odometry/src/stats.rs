@@ -82,6 +82,9 @@ pub enum LostKind {
 }
 
 impl LostKind {
+    /// Every kind.
+    pub const ALL: [Self; 3] = [Self::TooFewInliers, Self::Degenerate, Self::Departed];
+
     /// Its name in records: `too-few-inliers`, `degenerate`, `departed`.
     pub fn name(self) -> &'static str {
         match self {
