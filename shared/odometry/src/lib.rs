@@ -19,6 +19,7 @@
 //! ([`FrameResult::step_covariance`]); [`PoseCovariance`] chains them into the pose's.
 #![warn(missing_docs)]
 
+mod disparity_offset;
 mod front_end;
 mod landmarks;
 mod pose_covariance;

@@ -30,6 +30,11 @@ pub struct FrameStats {
     /// Whether the frame would have been lost and `lost.rescue_window_px` or
     /// `lost.rescue_min_inliers` rescued it (lines only).
     pub rescued: bool,
+    /// The disparity offset subtracted before this frame's features were triangulated,
+    /// pixels (`[disparity_offset]`: given, or estimated over the frames so far).
+    pub disparity_offset_px: f64,
+    /// The offset's running estimate after this frame, applied or not, pixels.
+    pub disparity_offset_estimate_px: f64,
     /// Milliseconds detecting: the images stretched, their corners found (less the point
     /// work done ahead, counted in `stereo_ms` and `frame_to_frame_ms`) and, by
     /// [`Odometry`](crate::Odometry), their segments.

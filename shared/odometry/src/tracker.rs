@@ -11,6 +11,7 @@ mod segments;
 
 pub use prepare::{Preparation, PreparedImages};
 
+use crate::disparity_offset::DisparityOffset;
 use crate::landmarks::{Geometry, Landmark, sighted};
 use crate::stats::since;
 use crate::{FrameResult, FrameStats, LostKind, OdometryConfig, OdometryError};
@@ -72,6 +73,8 @@ struct Reference {
     points: PointFeatures,
     point_landmarks: PointLandmarks,
     line_landmarks: LineLandmarks,
+    /// The disparity offset its fresh features were triangulated with, pixels.
+    disparity_offset_px: f64,
 }
 
 /// Gives each segment observation the line of its current left segment's stereo partner
@@ -253,6 +256,8 @@ pub struct MotionTracker {
     /// Each left point's stereo partner this frame (right keypoint, weight of the two
     /// keypoints' pyramid levels).
     stereo_partners: Vec<Option<(Point, f64)>>,
+    /// The rig's disparity offset, subtracted before triangulating.
+    disparity_offset: DisparityOffset,
     spares: Spares,
 }
 
@@ -276,6 +281,7 @@ impl MotionTracker {
             reference_image: None,
             points_ahead: None,
             stereo_partners: Vec::new(),
+            disparity_offset: DisparityOffset::new(config.disparity_offset),
             spares: Spares::default(),
             config,
             rig,
@@ -395,8 +401,10 @@ impl MotionTracker {
     ) -> Result<FrameResult, OdometryError> {
         let limits = TriangulationLimits {
             min_sin_from_horizontal: self.config.min_line_angle_deg.to_radians().sin(),
+            disparity_offset_px: self.disparity_offset.value_px(),
             ..TriangulationLimits::default()
         };
+        stats.disparity_offset_px = limits.disparity_offset_px;
         let stereo_images = images.as_ref().map(|seen| seen.images);
         let (images, [mut points_l, points_r]) =
             self.frame_points(lists, images, lines.tracked.is_some(), &mut stats);
@@ -538,6 +546,8 @@ impl MotionTracker {
         let step_covariance = verdict.as_ref().ok().and_then(|e| e.covariance);
         let reason = match verdict {
             Ok(e) => {
+                self.disparity_offset
+                    .update(previous.disparity_offset_px, e.disparity_offset);
                 self.last_motion = e.motion;
                 self.motion_known = true;
                 self.losses_in_row = 0;
@@ -570,7 +580,8 @@ impl MotionTracker {
     }
 
     /// The frame's result at the current pose: lost when there is a `reason`.
-    fn result(&self, reason: Option<(LostKind, String)>, stats: FrameStats) -> FrameResult {
+    fn result(&self, reason: Option<(LostKind, String)>, mut stats: FrameStats) -> FrameResult {
+        stats.disparity_offset_estimate_px = self.disparity_offset.estimate_px();
         let (lost_kind, reason) = reason.unzip();
         FrameResult {
             pose: self.pose,
@@ -590,6 +601,7 @@ impl MotionTracker {
         fresh: &Triangulations,
     ) -> Reference {
         Reference {
+            disparity_offset_px: self.disparity_offset.value_px(),
             pose,
             points,
             point_landmarks: sighted_all(self.spares.point_landmarks.pop(), &fresh.points, &pose),

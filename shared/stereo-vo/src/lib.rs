@@ -16,7 +16,8 @@ pub mod robust;
 pub mod triangulate;
 
 pub use motion::{
-    MotionConfig, MotionError, MotionEstimate, estimate_motion, estimate_motion_near,
+    MotionConfig, MotionError, MotionEstimate, OffsetEvidence, estimate_motion,
+    estimate_motion_near,
 };
 pub use observation::{LineObservation, PointObservation};
 pub use triangulate::{Triangulated, TriangulationLimits, triangulate_point, triangulate_segment};

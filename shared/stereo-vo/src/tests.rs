@@ -631,3 +631,116 @@ fn the_covariance_grows_with_the_residuals() {
     let ratio = trace(0.8) / trace(0.4);
     assert!((3.5..=4.5).contains(&ratio), "{ratio}");
 }
+
+/// A road scene on KITTI's rig, 1 m forward with a slight turn: points 5–80 m away (and
+/// segments among them) whose previous positions were triangulated from disparities off by
+/// `offset_px` (measured minus true), each seen now with 0.1 px of Gaussian noise. With
+/// `one_depth` every feature sits 30 m away.
+fn road_with_offset(
+    offset_px: f64,
+    one_depth: bool,
+) -> (Vec<PointObservation>, Vec<LineObservation>) {
+    let rig = kitti_rig();
+    let truth = pose(0.0, 0.01, 0.0, 0.02, 0.0, -1.0);
+    let mut rng = ChaCha8Rng::seed_from_u64(11);
+    let fb = rig.focal_px * rig.baseline_m;
+    let feature = |rng: &mut ChaCha8Rng| {
+        let z: f64 = if one_depth {
+            30.0
+        } else {
+            rng.random_range(5.0..80.0)
+        };
+        let x = Point3::new(
+            rng.random_range(-0.8..0.8) * z,
+            rng.random_range(-0.25..0.2) * z,
+            z,
+        );
+        let seen_at = Point3::from(x.coords * (fb / z) / (fb / z + offset_px));
+        (x, seen_at)
+    };
+    let project = |x: &Point3<f64>, rng: &mut ChaCha8Rng| {
+        let p = truth * x;
+        Point::new(
+            rig.focal_px * p.x / p.z + rig.cx_px + gaussian(rng, 0.1),
+            rig.focal_px * p.y / p.z + rig.cy_px + gaussian(rng, 0.1),
+        )
+    };
+    let points = (0..150)
+        .map(|_| {
+            let (x, position) = feature(&mut rng);
+            PointObservation {
+                position,
+                pixel: project(&x, &mut rng),
+                right_x: None,
+                weight: 1.0,
+            }
+        })
+        .collect();
+    let lines = (0..30)
+        .filter_map(|_| {
+            let (a, a_seen) = feature(&mut rng);
+            let b = Point3::new(a.x + 0.3, a.y - 2.0, a.z);
+            let b_seen = Point3::from(b.coords * (a_seen.z / a.z));
+            let seen = Segment::new(project(&a, &mut rng), project(&b, &mut rng));
+            LineObservation::new([a_seen, b_seen], &seen, 1.0)
+        })
+        .collect();
+    (points, lines)
+}
+
+#[test]
+fn a_disparity_offset_shows_in_the_estimate_and_a_scene_at_one_depth_hides_it() {
+    let rig = kitti_rig();
+    let evidence = |offset_px: f64, one_depth: bool| {
+        let (points, lines) = road_with_offset(offset_px, one_depth);
+        let e = estimate_motion(
+            &rig,
+            &points,
+            &lines,
+            &Isometry3::identity(),
+            &MotionConfig::default(),
+        )
+        .unwrap_or_else(|e| panic!("offset {offset_px}: {e}"));
+        e.disparity_offset
+    };
+    for offset_px in [-0.5, 0.0, 0.5] {
+        let e = evidence(offset_px, false).unwrap_or_else(|| panic!("offset {offset_px}: none"));
+        // One linearised step: within a tenth of the offset, and sure of it.
+        assert!(
+            (e.correction_px - offset_px).abs() <= 0.02 + 0.1 * offset_px.abs()
+                && e.variance_px2 < 0.01,
+            "offset {offset_px}: {e:?}"
+        );
+    }
+    // Every depth off by the same fraction looks like a longer step: no evidence.
+    let flat = evidence(0.5, true);
+    assert!(flat.is_none_or(|e| e.variance_px2 > 1.0), "{flat:?}");
+    // Segments alone bear no evidence (under the prior, which keeps their estimate defined),
+    // nor do they with too few points.
+    let (_, lines) = road_with_offset(0.5, false);
+    let e = estimate_motion_near(
+        &rig,
+        &[],
+        &lines,
+        &Isometry3::identity(),
+        &MotionConfig::default(),
+    );
+    assert_eq!(e.map(|e| e.disparity_offset), Ok(None));
+    let (points, _) = road_with_offset(0.5, false);
+    let e = estimate_motion_near(
+        &rig,
+        &points[..19],
+        &lines,
+        &Isometry3::identity(),
+        &MotionConfig::default(),
+    );
+    assert_eq!(e.map(|e| e.disparity_offset), Ok(None));
+    // With the right image's rows the evidence is not given (their own offset is not modelled).
+    let (points, lines) = road_with_offset(0.5, false);
+    let stereo = MotionConfig {
+        stereo_reprojection: true,
+        ..MotionConfig::default()
+    };
+    let e = estimate_motion(&rig, &points, &lines, &Isometry3::identity(), &stereo).unwrap();
+    assert_eq!(e.disparity_offset, None);
+}

@@ -21,6 +21,9 @@ pub struct TriangulationLimits {
     /// Segments closer than this to horizontal (sine of the angle) are not triangulated:
     /// their endpoints' disparity is ill-defined.
     pub min_sin_from_horizontal: f64,
+    /// Subtracted from every measured disparity before it gives a depth, pixels: the rig's
+    /// disparity offset (measured minus true disparity).
+    pub disparity_offset_px: f64,
 }
 
 impl Default for TriangulationLimits {
@@ -28,6 +31,7 @@ impl Default for TriangulationLimits {
         Self {
             min_disparity_px: 1.0,
             min_sin_from_horizontal: 10f64.to_radians().sin(),
+            disparity_offset_px: 0.0,
         }
     }
 }
@@ -48,7 +52,7 @@ pub fn triangulate_point(
     right: Point,
     limits: &TriangulationLimits,
 ) -> Option<Triangulated> {
-    let disparity = left.x - right.x;
+    let disparity = left.x - right.x - limits.disparity_offset_px;
     if !(disparity >= limits.min_disparity_px) || !disparity.is_finite() {
         return None;
     }

@@ -32,8 +32,9 @@ use std::time::Instant;
 OUTPUT (<output>/): trajectory.txt (TUM: t tx ty tz qx qy qz qw, left camera, world = first
 camera), groundtruth.txt (the same frame, when the dataset has ground truth), frames.csv (one
 row per frame: lost, features, matches, inliers, iterations, conditioning, departure from the
-prediction, milliseconds per step, whether `[lost] rescue_*` rescued it), metrics.json (the
-run's settings, lost frames and, with ground truth, under `metrics`: poses, path_m, rpe_m,
+prediction, milliseconds per step, whether `[lost] rescue_*` rescued it, the disparity offset
+subtracted and its running estimate), metrics.json (the run's settings, lost frames, disparity_offset_px (the rig's
+disparity offset at the end, given or self-calibrated: `[disparity_offset]`) and, with ground truth, under `metrics`: poses, path_m, rpe_m,
 ate_m, ate_aligned_m, drift_percent, step_ratio {steps, skipped, overall, median, p10, p90} (estimated over true step length, steps
 under 1 cm left out), zero_motion_ate_m — the names `linetrack run` writes to summary.json; and
 step_nees {steps, mean, median, ratio}: each tracked step's error against the truth in units of
@@ -105,6 +106,8 @@ struct FrameRow {
     f2f_ms: f64,
     motion_ms: f64,
     rescued: u8,
+    disparity_offset_px: f64,
+    disparity_offset_estimate_px: f64,
     reason: String,
 }
 
@@ -136,6 +139,8 @@ impl FrameRow {
             f2f_ms: s.frame_to_frame_ms,
             motion_ms: s.motion_ms,
             rescued: u8::from(s.rescued),
+            disparity_offset_px: s.disparity_offset_px,
+            disparity_offset_estimate_px: s.disparity_offset_estimate_px,
             reason: result.reason.clone().unwrap_or_default(),
         }
     }
@@ -154,6 +159,8 @@ struct RunRecord {
     skipped: usize,
     lost: usize,
     tracking_ms_per_frame: f64,
+    /// The disparity offset the last frame was triangulated with, pixels (`[disparity_offset]`).
+    disparity_offset_px: f64,
     metrics: Option<metrics::Summary>,
     /// With ground truth: how honest the per-frame motion covariance is.
     step_nees: Option<StepNees>,
@@ -242,6 +249,7 @@ pub fn run(args: &Args) -> anyhow::Result<String> {
     // Per frame: the covariance of its motion, when it was measured.
     let mut covariances: Vec<Option<Matrix6<f64>>> = Vec::new();
     let (mut lost, mut skipped, mut busy_ms) = (0usize, Vec::new(), 0.0);
+    let mut disparity_offset_px = 0.0;
     let started = Instant::now();
     let progress = Progress::new(&format!("{name} frames"), total as u64, args.quiet);
     let mut stream = sequence.into_stream(0, 4);
@@ -269,6 +277,7 @@ pub fn run(args: &Args) -> anyhow::Result<String> {
         let result = odometry.track(&left, &right)?;
         busy_ms += tick.elapsed().as_secs_f64() * 1e3;
         lost += usize::from(result.lost);
+        disparity_offset_px = result.stats.disparity_offset_px;
         csv.serialize(FrameRow::new(frame.index, frame.timestamp_ns, &result))
             .with_context(|| format!("cannot write {}", frames_path.display()))?;
         // The step from the last frame tracked (the estimate before this one).
@@ -305,6 +314,7 @@ pub fn run(args: &Args) -> anyhow::Result<String> {
         skipped: skipped.len(),
         lost,
         tracking_ms_per_frame: busy_ms / estimate.len().max(1) as f64,
+        disparity_offset_px,
         metrics: None,
         step_nees: None,
     };
@@ -315,6 +325,9 @@ pub fn run(args: &Args) -> anyhow::Result<String> {
         busy_ms / estimate.len().max(1) as f64,
         started.elapsed().as_secs_f64()
     );
+    if disparity_offset_px != 0.0 {
+        write!(summary, ", disparity offset {disparity_offset_px:+.3} px")?;
+    }
     if let Some(truth) = truth
         .iter()
         .copied()

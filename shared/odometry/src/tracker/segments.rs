@@ -360,6 +360,7 @@ mod tests {
             points: PointFeatures::default(),
             point_landmarks: Vec::new(),
             line_landmarks: vec![Some(sighted(&pose, &local, 1.0)), None],
+            disparity_offset_px: 0.0,
         });
         let previous = [seen, elsewhere];
         let (mut out, mut moved) = (Vec::new(), Vec::new());

@@ -1,0 +1,153 @@
+//! The rig's disparity offset as the frames go: a running, information-weighted mean of
+//! the frames' evidence ([`OffsetEvidence`]), which triangulation subtracts from every
+//! disparity (see [`DisparityOffsetConfig`]).
+
+use linetrack_odometry_config::DisparityOffsetConfig;
+use linetrack_stereo_vo::OffsetEvidence;
+
+/// The offset believed now, how sure of it, and the one applied.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct DisparityOffset {
+    config: DisparityOffsetConfig,
+    /// The running estimate: measured minus true disparity, pixels.
+    estimate_px: f64,
+    /// Inverse variance of `estimate_px`, 1/px².
+    information: f64,
+    /// What triangulation subtracts: `initial_px` until the estimate departs from it by
+    /// more than `departure_sigmas` of its standard deviation and more than `min_px`, then
+    /// the estimate.
+    applied_px: f64,
+}
+
+impl DisparityOffset {
+    pub(crate) fn new(config: DisparityOffsetConfig) -> Self {
+        Self {
+            estimate_px: config.initial_px,
+            information: config.initial_sigma_px.powi(-2),
+            applied_px: config.initial_px,
+            config,
+        }
+    }
+
+    /// The offset to subtract from a measured disparity, pixels.
+    pub(crate) fn value_px(&self) -> f64 {
+        self.applied_px
+    }
+
+    /// The running estimate, applied or not, pixels.
+    pub(crate) fn estimate_px(&self) -> f64 {
+        self.estimate_px
+    }
+
+    /// Takes in a frame's evidence (nothing when `estimate` is off): the features it was
+    /// fitted to had their disparities corrected by `applied`, and the evidence says by how
+    /// much more they should have been, so that frame puts the offset at `applied` plus
+    /// it. The estimate is the information-weighted running mean of those.
+    pub(crate) fn update(&mut self, applied: f64, evidence: Option<OffsetEvidence>) {
+        let Some(evidence) = evidence.filter(|_| self.config.estimate) else {
+            return;
+        };
+        let c = &self.config;
+        let variance = evidence.variance_px2 + c.frame_sigma_px * c.frame_sigma_px;
+        if !(variance.is_finite() && evidence.correction_px.is_finite()) {
+            return;
+        }
+        let frame_information = 1.0 / variance;
+        let seen = applied + evidence.correction_px.clamp(-1.0, 1.0);
+        let gain = frame_information / (self.information + frame_information);
+        self.estimate_px =
+            (self.estimate_px + gain * (seen - self.estimate_px)).clamp(-c.max_px, c.max_px);
+        self.information = (self.information + frame_information).min(c.floor_sigma_px.powi(-2));
+        let departure = (self.estimate_px - c.initial_px).abs();
+        let sure = departure * self.information.sqrt() > c.departure_sigmas;
+        self.applied_px = if sure && departure > c.min_px {
+            self.estimate_px
+        } else {
+            c.initial_px
+        };
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn evidence(correction_px: f64) -> Option<OffsetEvidence> {
+        Some(OffsetEvidence {
+            correction_px,
+            variance_px2: 0.01,
+        })
+    }
+
+    #[test]
+    fn steady_evidence_is_followed_and_noise_is_averaged() {
+        let mut offset = DisparityOffset::new(DisparityOffsetConfig::default());
+        // A rig one pixel off: each frame says "a bit more" until the estimate is there.
+        for _ in 0..200 {
+            let applied = offset.value_px();
+            offset.update(applied, evidence(-1.0 - applied));
+        }
+        assert!(
+            (offset.value_px() + 1.0).abs() < 0.01,
+            "{}",
+            offset.value_px()
+        );
+        // Alternating evidence of ±0.3 px around the truth moves it little.
+        for k in 0..200 {
+            let applied = offset.value_px();
+            offset.update(
+                applied,
+                evidence(-1.0 - applied + if k % 2 == 0 { 0.3 } else { -0.3 }),
+            );
+        }
+        assert!(
+            (offset.value_px() + 1.0).abs() < 0.05,
+            "{}",
+            offset.value_px()
+        );
+    }
+
+    #[test]
+    fn an_estimate_within_its_noise_of_the_start_is_not_applied() {
+        let mut offset = DisparityOffset::new(DisparityOffsetConfig::default());
+        // A steady 0.04 px: within three standard deviations however long it lasts.
+        for _ in 0..500 {
+            offset.update(offset.value_px(), evidence(0.04));
+        }
+        assert_eq!(offset.value_px(), 0.0);
+        // A steady 0.3 px is sure enough but under `min_px`.
+        for _ in 0..500 {
+            offset.update(offset.value_px(), evidence(0.3));
+        }
+        assert!(
+            (offset.estimate_px() - 0.3).abs() < 0.01,
+            "{}",
+            offset.estimate_px()
+        );
+        assert_eq!(offset.value_px(), 0.0);
+        // One frame saying 0.5 px is not enough either.
+        let mut offset = DisparityOffset::new(DisparityOffsetConfig::default());
+        offset.update(0.0, evidence(0.5));
+        assert_eq!(offset.value_px(), 0.0);
+    }
+
+    #[test]
+    fn off_it_keeps_the_given_offset_and_one_frame_is_bounded() {
+        let fixed = DisparityOffsetConfig {
+            estimate: false,
+            initial_px: 0.4,
+            ..DisparityOffsetConfig::default()
+        };
+        let mut offset = DisparityOffset::new(fixed);
+        offset.update(0.4, evidence(2.0));
+        assert_eq!(offset.value_px(), 0.4);
+        let mut offset = DisparityOffset::new(DisparityOffsetConfig {
+            initial_sigma_px: 100.0,
+            ..DisparityOffsetConfig::default()
+        });
+        offset.update(0.0, evidence(50.0));
+        assert!(offset.value_px() <= 1.0, "{}", offset.value_px());
+        offset.update(0.0, evidence(f64::NAN));
+        assert!(offset.value_px().is_finite());
+    }
+}
