@@ -461,6 +461,7 @@ impl PoseTracker {
         record.rms_px = result.stats.rms_px;
         record.conditioning = result.stats.conditioning;
         record.rescued = u32::from(fell_back && !result.lost);
+        record.disparity_offset_px = result.stats.disparity_offset_px;
         record.lost_reason = lost_reason(result.lost_kind, resumed.is_some());
         if let Some(reason) = &result.reason {
             tracing::debug!("frame {} lost: {reason}", header.frame_id);

@@ -315,6 +315,11 @@ impl Monitor {
             } else {
                 String::new()
             },
+            disparity_offset_px: if outcome == "pose" || outcome == "lost" {
+                pose.disparity_offset_px
+            } else {
+                f64::NAN
+            },
         };
         if !self.accounted.insert(header.frame_id) {
             self.duplicates += 1;

@@ -330,7 +330,7 @@ pub struct TrackedLine {
 /// another build refuses to connect instead of misreading the record.
 #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
 #[repr(C)]
-#[type_name("linetrack::PoseRecord/3")]
+#[type_name("linetrack::PoseRecord/4")]
 #[derive(serde::Serialize, serde::Deserialize)]
 pub struct PoseRecord {
     /// Position of the left camera in the first frame's world, metres.
@@ -351,6 +351,9 @@ pub struct PoseRecord {
     /// each code (1 too few inliers, 2 degenerate geometry, 3 the estimate departed from
     /// the prediction, 4 predicted across a restarted pose estimator's gap).
     pub lost_reason: u32,
+    /// The disparity offset subtracted before this frame's features were triangulated,
+    /// pixels (`[odometry.disparity_offset]`: given, or self-calibrated over the frames).
+    pub disparity_offset_px: f64,
     /// RMS residual of the inliers, pixels.
     pub rms_px: f64,
     /// Conditioning of the motion estimate's normal matrix: its smallest eigenvalue over

@@ -61,7 +61,7 @@ pub enum RecordError {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::rows::FRAME_HEADER_WITHOUT_REASON;
+    use crate::rows::{FRAME_HEADER_WITHOUT_OFFSET, FRAME_HEADER_WITHOUT_REASON};
     use linetrack_trajectory::metrics;
     use linetrack_trajectory::tum::StampedPose;
 
@@ -170,9 +170,13 @@ mod tests {
         let mut odd = frame(4, "stage-error", f64::NAN);
         odd.dropped_by = "line-detector, \"lsd\"\r\nsecond line".into();
         let frames = [
-            frame(0, "pose", 40.0),
+            FrameRecord {
+                disparity_offset_px: -1.04123,
+                ..frame(0, "pose", 40.0)
+            },
             FrameRecord {
                 lost_reason: "too-few-inliers".into(),
+                disparity_offset_px: -0.5,
                 ..frame(1, "lost", 60.0)
             },
             late,
@@ -215,6 +219,9 @@ mod tests {
         assert_eq!(back[4].dropped_by, frames[4].dropped_by);
         assert_eq!(back[2].dropped_by, "matcher");
         assert_eq!(back[1].lost_reason, "too-few-inliers");
+        // The offset to a ten-thousandth of a pixel; none for a frame without a pose.
+        assert_eq!(back[0].disparity_offset_px, -1.0412);
+        assert!(back[3].disparity_offset_px.is_nan());
         assert!(back[3].end_to_end_ms.is_nan());
         assert_eq!(back[0].end_to_end_ms, 40.0);
         let events_back = read_events(&dir.join("events.csv")).unwrap_or_else(|e| panic!("{e}"));
@@ -238,6 +245,13 @@ mod tests {
             "stage latency over the frames with a pose"
         );
         assert!(report.to_text().contains("dropped missing: 1"));
+        // The offset of the latest frame with a pose (frame 1), not the last one written.
+        assert_eq!(report.disparity_offset_px, Some(-0.5));
+        assert!(
+            report.to_text().contains("disparity offset -0.50 px"),
+            "{}",
+            report.to_text()
+        );
         // A damaged file names the line and the column.
         for (rows, wants) in [
             ("0,pose,,x,,,,,,,0,0,0,,,,\n", "bad.csv:2: frame_source_ms"),
@@ -275,6 +289,17 @@ mod tests {
             (read[0].outcome.as_str(), read[0].lost_reason.as_str()),
             ("lost", "")
         );
+        // …and one recorded before the `disparity_offset_px` column, with none.
+        std::fs::write(
+            &old,
+            format!("{FRAME_HEADER_WITHOUT_OFFSET}\n0,pose,,,,,,,,,0,0,0,,,,,\n"),
+        )
+        .unwrap_or_else(|e| panic!("{e}"));
+        let read = read_frames(&old).unwrap_or_else(|e| panic!("{e}"));
+        assert!(read[0].disparity_offset_px.is_nan());
+        let report = Report::new(&read, &[]);
+        assert_eq!(report.disparity_offset_px, None);
+        assert!(!report.to_text().contains("disparity offset"));
         std::fs::write(dir.join("bad.csv"), "frame,outcome\n").unwrap_or_else(|e| panic!("{e}"));
         let err = read_frames(&dir.join("bad.csv"))
             .err()

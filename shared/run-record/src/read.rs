@@ -2,7 +2,8 @@
 
 use crate::RecordError;
 use crate::rows::{
-    EVENT_HEADER, EventRecord, FRAME_HEADER, FRAME_HEADER_WITHOUT_REASON, FrameRecord, FrameRow,
+    EVENT_HEADER, EventRecord, FRAME_HEADER, FRAME_HEADER_WITHOUT_OFFSET,
+    FRAME_HEADER_WITHOUT_REASON, FrameRecord, FrameRow,
 };
 use std::path::{Path, PathBuf};
 
@@ -129,8 +130,15 @@ pub(crate) fn read_rows<T: serde::de::DeserializeOwned>(
 
 /// The rows of `frames.csv` as records, in frame order.
 pub(crate) fn frames_of(path: &Path, last: LastRow) -> Result<ReadToCut<FrameRecord>, RecordError> {
-    let (rows, mut cut) =
-        read_rows::<FrameRow>(path, &[FRAME_HEADER, FRAME_HEADER_WITHOUT_REASON], last)?;
+    let (rows, mut cut) = read_rows::<FrameRow>(
+        path,
+        &[
+            FRAME_HEADER,
+            FRAME_HEADER_WITHOUT_OFFSET,
+            FRAME_HEADER_WITHOUT_REASON,
+        ],
+        last,
+    )?;
     let count = rows.len();
     let mut frames = Vec::with_capacity(count);
     for (k, (line, row)) in rows.into_iter().enumerate() {

@@ -20,6 +20,8 @@ pub struct Tally {
     deadline_misses: usize,
     l1_frames: usize,
     events: BTreeMap<String, usize>,
+    /// The disparity offset of the latest frame (by number) with a pose: (frame, pixels).
+    disparity_offset: Option<(u64, f64)>,
 }
 
 impl Tally {
@@ -38,6 +40,11 @@ impl Tally {
                 h.record(ms);
             }
             self.end_to_end.record(f.end_to_end_ms);
+            if f.disparity_offset_px.is_finite()
+                && self.disparity_offset.is_none_or(|(k, _)| f.frame_id >= k)
+            {
+                self.disparity_offset = Some((f.frame_id, f.disparity_offset_px));
+            }
         }
         self.deadline_misses += usize::from(f.deadline_miss);
         self.l1_frames += usize::from(f.matcher == "l1");
@@ -99,6 +106,10 @@ impl Tally {
             swaps: self.events_of("swap"),
             camera_losses: self.events_of("camera-lost"),
             l1_rescues: self.events_of("l1-rescue"),
+            disparity_offset_px: self
+                .disparity_offset
+                .map(|(_, px)| px)
+                .filter(|px| *px != 0.0),
         }
     }
 }
@@ -137,6 +148,11 @@ pub struct Report {
     /// (`l1-rescue` events, `[matcher.fallback] rescue_lost_frames`).
     #[serde(default)]
     pub l1_rescues: usize,
+    /// The disparity offset the pose estimator subtracted at the last frame with a pose,
+    /// pixels, when it is not zero (`[odometry.disparity_offset]`: given, or
+    /// self-calibrated).
+    #[serde(default)]
+    pub disparity_offset_px: Option<f64>,
 }
 
 impl Report {
@@ -201,6 +217,13 @@ impl Report {
                 out,
                 "l1 rescues {} (frames LBD's matches would have lost, tracked with l1; events.csv)",
                 self.l1_rescues
+            );
+        }
+        if let Some(px) = self.disparity_offset_px {
+            let _ = writeln!(
+                out,
+                "disparity offset {px:+.2} px at the end (subtracted before triangulating: \
+                 [odometry.disparity_offset]; frames.csv has it per frame)"
             );
         }
         if self.camera_losses > 0 {

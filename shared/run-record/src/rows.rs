@@ -35,6 +35,9 @@ pub struct FrameRecord {
     /// Why a `lost` frame was lost (`too-few-inliers`, `degenerate`, `departed`,
     /// `restart-gap`), else empty.
     pub lost_reason: String,
+    /// The disparity offset the pose estimator subtracted for this frame, pixels
+    /// (`[odometry.disparity_offset]`); NaN for a frame without a pose.
+    pub disparity_offset_px: f64,
 }
 
 impl FrameRecord {
@@ -53,6 +56,7 @@ impl FrameRecord {
             tracked_matches: 0,
             deadline_miss: false,
             lost_reason: String::new(),
+            disparity_offset_px: f64::NAN,
         }
     }
 
@@ -77,7 +81,9 @@ pub struct EventRecord {
     pub detail: String,
 }
 
-pub(crate) const FRAME_HEADER: &str = "frame_id,outcome,dropped_by,frame_source_ms,line_detector_ms,matcher_ms,pose_estimator_ms,end_to_end_ms,matcher,detector,stereo_matches,tracked_matches,deadline_miss,frame_source_wait_ms,line_detector_wait_ms,matcher_wait_ms,pose_estimator_wait_ms,lost_reason";
+pub(crate) const FRAME_HEADER: &str = "frame_id,outcome,dropped_by,frame_source_ms,line_detector_ms,matcher_ms,pose_estimator_ms,end_to_end_ms,matcher,detector,stereo_matches,tracked_matches,deadline_miss,frame_source_wait_ms,line_detector_wait_ms,matcher_wait_ms,pose_estimator_wait_ms,lost_reason,disparity_offset_px";
+/// The header of runs recorded before `disparity_offset_px` (read as no offset known).
+pub(crate) const FRAME_HEADER_WITHOUT_OFFSET: &str = "frame_id,outcome,dropped_by,frame_source_ms,line_detector_ms,matcher_ms,pose_estimator_ms,end_to_end_ms,matcher,detector,stereo_matches,tracked_matches,deadline_miss,frame_source_wait_ms,line_detector_wait_ms,matcher_wait_ms,pose_estimator_wait_ms,lost_reason";
 /// The header of runs recorded before `lost_reason` (read as empty reasons).
 pub(crate) const FRAME_HEADER_WITHOUT_REASON: &str = "frame_id,outcome,dropped_by,frame_source_ms,line_detector_ms,matcher_ms,pose_estimator_ms,end_to_end_ms,matcher,detector,stereo_matches,tracked_matches,deadline_miss,frame_source_wait_ms,line_detector_wait_ms,matcher_wait_ms,pose_estimator_wait_ms";
 pub(crate) const EVENT_HEADER: &str = "time_s,kind,stage,frame_id,detail";
@@ -116,6 +122,8 @@ pub(crate) struct FrameRow {
     pose_estimator_wait_ms: Option<f64>,
     #[serde(default)]
     lost_reason: String,
+    #[serde(default)]
+    disparity_offset_px: Option<f64>,
 }
 
 impl From<&FrameRecord> for FrameRow {
@@ -139,6 +147,10 @@ impl From<&FrameRecord> for FrameRow {
             matcher_wait_ms: ms(f.wait_ms[2]),
             pose_estimator_wait_ms: ms(f.wait_ms[3]),
             lost_reason: f.lost_reason.clone(),
+            disparity_offset_px: f
+                .disparity_offset_px
+                .is_finite()
+                .then(|| (f.disparity_offset_px * 1e4).round() / 1e4),
         }
     }
 }
@@ -178,6 +190,7 @@ impl FrameRow {
                 v => return Err(format!("deadline_miss: {v} is neither 0 nor 1")),
             },
             lost_reason: self.lost_reason,
+            disparity_offset_px: latency(self.disparity_offset_px, "disparity_offset_px")?,
         })
     }
 }

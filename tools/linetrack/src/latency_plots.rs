@@ -246,6 +246,7 @@ mod tests {
             tracked_matches: 40,
             deadline_miss: miss,
             lost_reason: String::new(),
+            disparity_offset_px: 0.0,
         }
     }
 
