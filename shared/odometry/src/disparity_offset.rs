@@ -15,7 +15,7 @@ pub(crate) struct DisparityOffset {
     information: f64,
     /// What triangulation subtracts: `initial_px` until the estimate departs from it by
     /// more than `departure_sigmas` of its standard deviation and more than `min_px`, then
-    /// the estimate.
+    /// the estimate for as long as it stays more than half of `min_px` away.
     applied_px: f64,
 }
 
@@ -60,7 +60,14 @@ impl DisparityOffset {
         self.information = (self.information + frame_information).min(c.floor_sigma_px.powi(-2));
         let departure = (self.estimate_px - c.initial_px).abs();
         let sure = departure * self.information.sqrt() > c.departure_sigmas;
-        self.applied_px = if sure && departure > c.min_px {
+        // Once applied, it stays while the estimate keeps more than half of `min_px`: the
+        // landmarks fused before it was applied still hold the old depths for a few
+        // frames, and their evidence pulls the estimate back for as long (the KITTI raw
+        // drive moved by a pixel: applied at −0.77 px, the next frames said −0.74 … −0.70
+        // before it settled at −1.04, and without this it went off and on again).
+        let applied = self.applied_px != c.initial_px;
+        let needed = if applied { 0.5 * c.min_px } else { c.min_px };
+        self.applied_px = if sure && departure > needed {
             self.estimate_px
         } else {
             c.initial_px
@@ -129,6 +136,30 @@ mod tests {
         let mut offset = DisparityOffset::new(DisparityOffsetConfig::default());
         offset.update(0.0, evidence(0.5));
         assert_eq!(offset.value_px(), 0.0);
+    }
+
+    #[test]
+    fn once_applied_it_holds_down_to_half_the_floor() {
+        let mut offset = DisparityOffset::new(DisparityOffsetConfig::default());
+        let settle_at = |offset: &mut DisparityOffset, seen_px: f64| {
+            for _ in 0..500 {
+                let applied = offset.value_px();
+                offset.update(applied, evidence(seen_px - applied));
+            }
+        };
+        settle_at(&mut offset, -1.0);
+        assert!((offset.value_px() + 1.0).abs() < 0.01);
+        // 0.6 px: under the 0.75 px floor, over half of it: still applied.
+        settle_at(&mut offset, -0.6);
+        assert!(
+            (offset.value_px() + 0.6).abs() < 0.01,
+            "{}",
+            offset.value_px()
+        );
+        // 0.3 px: let go.
+        settle_at(&mut offset, -0.3);
+        assert_eq!(offset.value_px(), 0.0);
+        assert!((offset.estimate_px() + 0.3).abs() < 0.01);
     }
 
     #[test]

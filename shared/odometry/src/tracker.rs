@@ -546,8 +546,6 @@ impl MotionTracker {
         let step_covariance = verdict.as_ref().ok().and_then(|e| e.covariance);
         let reason = match verdict {
             Ok(e) => {
-                self.disparity_offset
-                    .update(previous.disparity_offset_px, e.disparity_offset);
                 self.last_motion = e.motion;
                 self.motion_known = true;
                 self.losses_in_row = 0;
@@ -557,6 +555,10 @@ impl MotionTracker {
                     self.carry_landmarks(&previous, &mut current, fresh, observations, &e.motion);
                 }
                 self.reference = Some(current);
+                // After this frame's reference took the offset its features were
+                // triangulated with.
+                self.disparity_offset
+                    .update(previous.disparity_offset_px, e.disparity_offset);
                 None
             }
             Err(why) => {
