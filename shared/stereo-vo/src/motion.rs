@@ -117,7 +117,8 @@ pub struct MotionEstimate {
     pub covariance: Option<Matrix6<f64>>,
     /// What this frame says of a constant error in the disparities the previous frame's
     /// features were triangulated from ([`disparity_offset_evidence`]); `None` with
-    /// `stereo_reprojection` or when the inliers leave it undetermined.
+    /// `stereo_reprojection`, with fewer than 20 inlying points, or when the inliers leave
+    /// it undetermined.
     pub disparity_offset: Option<OffsetEvidence>,
 }
 
@@ -608,6 +609,9 @@ fn disparity_offset_evidence(
     motion: &Isometry3<f64>,
 ) -> Option<OffsetEvidence> {
     let Settings { rig, prior, config } = *settings;
+    if active.points.iter().filter(|on| **on).count() < MIN_OFFSET_POINTS {
+        return None;
+    }
     let rotation = motion.rotation.to_rotation_matrix();
     let mut h = SMatrix::<f64, 7, 7>::zeros();
     let mut g = SVector::<f64, 7>::zeros();
@@ -636,18 +640,14 @@ fn disparity_offset_evidence(
             add(w, r[k], j.fixed_rows::<1>(k).into_owned(), j_offset[k]);
         }
     }
-    // Segments bear on it too, but only beside enough points: alone their evidence is not
-    // of one offset (an endpoint's disparity is read off the right segment's line at the
-    // endpoint's row, so the lines' angles and positions in each image weigh in). Lines
-    // only, on the KITTI raw drive with its disparities one pixel short it said −0.7 to
-    // −0.8 px, with them one pixel long +0.1 px, and −0.26 to −0.34 px on the drive as it
-    // is. Points and lines both bearing on it (points only in brackets), the drive's
-    // settled at −0.05 px (+0.04 to +0.12) and at −1.03 / +0.97 px with one pixel either
-    // way (−0.85 to −0.90 / +1.08 to +1.15).
-    let points_seen = active.points.iter().filter(|on| **on).count();
-    if points_seen < MIN_OFFSET_POINTS {
-        return None;
-    }
+    // Segments bear on it too, but only beside enough points (checked above): alone their
+    // evidence is not of one offset (an endpoint's disparity is read off the right
+    // segment's line at the endpoint's row, so the lines' angles and positions in each
+    // image weigh in). Lines only, on the KITTI raw drive with its disparities one pixel
+    // short it said −0.7 to −0.8 px, with them one pixel long +0.1 px, and −0.26 to
+    // −0.34 px on the drive as it is. Points and lines both bearing on it (points only in
+    // brackets), the drive's settled at −0.05 px (+0.04 to +0.12) and at −1.03 / +0.97 px
+    // with one pixel either way (−0.85 to −0.90 / +1.08 to +1.15).
     for (obs, _) in lines.iter().zip(active.lines).filter(|(_, on)| **on) {
         let Some((r, j)) = line_residual(rig, motion, obs) else {
             continue;
