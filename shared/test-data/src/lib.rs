@@ -192,6 +192,59 @@ pub fn shift_left(pixels: &[u8], width: usize, shift: usize) -> Vec<u8> {
     out
 }
 
+/// A copy of the KITTI raw drive, in `dir`, as a rig whose disparities all read one pixel
+/// short would see it: its right images moved one column to the right (whole pixels,
+/// nothing resampled; the first column repeated), everything else linked to the real
+/// drive's files. Returns the copy's drive folder.
+pub fn kitti_raw_with_right_images_moved(dir: &Path) -> Result<PathBuf, String> {
+    let real = kitti_raw_dir()?;
+    let named = |path: &Path| -> Result<PathBuf, String> {
+        path.file_name()
+            .map(PathBuf::from)
+            .ok_or_else(|| format!("{}: no file name", path.display()))
+    };
+    fn io(path: &Path) -> impl Fn(std::io::Error) -> String + '_ {
+        move |e| format!("{}: {e}", path.display())
+    }
+    let date = real
+        .parent()
+        .ok_or_else(|| format!("{}: no parent folder", real.display()))?;
+    let copy_date = dir.join(named(date)?);
+    let copy = copy_date.join(named(&real)?);
+    let right = copy.join("image_01/data");
+    std::fs::create_dir_all(&right).map_err(io(&right))?;
+    let link = |from: PathBuf, to: PathBuf| std::os::unix::fs::symlink(&from, &to).map_err(io(&to));
+    for entry in std::fs::read_dir(date).map_err(io(date))? {
+        let path = entry.map_err(io(date))?.path();
+        if path.is_file() {
+            link(path.clone(), copy_date.join(named(&path)?))?;
+        }
+    }
+    for name in [
+        "image_00",
+        "oxts",
+        "poses_cam0_rect_from_oxts.txt",
+        "image_01/timestamps.txt",
+    ] {
+        link(real.join(name), copy.join(name))?;
+    }
+    let source = real.join("image_01/data");
+    for entry in std::fs::read_dir(&source).map_err(io(&source))? {
+        let path = entry.map_err(io(&source))?.path();
+        let image = image::open(&path)
+            .map_err(|e| format!("{}: {e}", path.display()))?
+            .into_luma8();
+        let moved = image::GrayImage::from_fn(image.width(), image.height(), |x, y| {
+            *image.get_pixel(x.saturating_sub(1), y)
+        });
+        let out = right.join(named(&path)?);
+        moved
+            .save(&out)
+            .map_err(|e| format!("{}: {e}", out.display()))?;
+    }
+    Ok(copy)
+}
+
 /// A test's scratch folder under the system temp folder, removed with everything in it
 /// when the guard is dropped (a passing test or a panicking one alike: the panic unwinds
 /// through the drop).

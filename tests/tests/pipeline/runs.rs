@@ -325,3 +325,33 @@ fn with_auto_a_frame_lbd_would_lose_is_tracked_with_l1_and_counted() {
     assert_eq!(run(false), (vec![54], vec![]), "(lost, rescued) without");
     assert_eq!(run(true), (vec![], vec![Some(54)]), "(lost, rescued) with");
 }
+
+#[test]
+fn a_rig_whose_disparities_read_a_pixel_short_is_self_calibrated_and_reported() {
+    // The KITTI raw drive with its right images moved one pixel to the right: every
+    // disparity one pixel short, every step ~9 % long. The pose estimator estimates the
+    // offset from the frames (`[odometry.disparity_offset]`, the default) and subtracts it
+    // once it is sure (measured on the whole drive: from frame 7, −1.01 px at the end); each
+    // frame's offset is in frames.csv and the last one in the report.
+    let dir = scratch("disparity-offset");
+    let drive = linetrack_test_data::kitti_raw_with_right_images_moved(&dir.join("drive"))
+        .unwrap_or_else(|e| panic!("{e}"));
+    // Nothing depends on time: every frame is processed and no fallback acts on latency.
+    let extra = format!(
+        "{}[detector_fallback]\nenabled = false\n[matcher.fallback]\nover_budget = false\nend_to_end = false\n",
+        quick()
+    );
+    let args = ["--pacing", "fastest", "--frames", "30"];
+    let (status, out, records) = start_with_args(&dir, &drive, &extra, &args).finish(RUN_TIMEOUT);
+    assert!(status.success(), "{status}\n{out}");
+    assert_ids_accounted(&records, 30, &[]);
+    let offsets: Vec<f64> = records
+        .frames
+        .iter()
+        .map(|f| f.disparity_offset_px)
+        .collect();
+    assert_eq!(offsets[0], 0.0, "{offsets:?}");
+    let last = offsets[29];
+    assert!((-1.2..=-0.75).contains(&last), "{offsets:?}");
+    assert!(out.contains("disparity offset -"), "{out}");
+}

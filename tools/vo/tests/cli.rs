@@ -284,42 +284,6 @@ fn real_data_a_frame_whose_edges_the_detector_split_is_rescued_not_lost() {
     assert_eq!(with, (vec![], vec![97]), "(lost, rescued) with it");
 }
 
-/// The drive as a rig whose disparities all read one pixel short: its right images moved
-/// one pixel to the right (whole pixels, nothing resampled), the rest linked to the real
-/// drive's files. Returns the copy's drive folder.
-fn drive_with_right_images_moved(dir: &std::path::Path) -> std::path::PathBuf {
-    let real = linetrack_test_data::kitti_raw_dir().unwrap_or_else(|e| panic!("{e}"));
-    let date = real.parent().unwrap();
-    let copy_date = dir.join(date.file_name().unwrap());
-    let copy = copy_date.join(real.file_name().unwrap());
-    std::fs::create_dir_all(copy.join("image_01/data")).unwrap();
-    for entry in std::fs::read_dir(date).unwrap() {
-        let path = entry.unwrap().path();
-        if path.is_file() {
-            std::os::unix::fs::symlink(&path, copy_date.join(path.file_name().unwrap())).unwrap();
-        }
-    }
-    for name in ["image_00", "oxts", "poses_cam0_rect_from_oxts.txt"] {
-        std::os::unix::fs::symlink(real.join(name), copy.join(name)).unwrap();
-    }
-    std::os::unix::fs::symlink(
-        real.join("image_01/timestamps.txt"),
-        copy.join("image_01/timestamps.txt"),
-    )
-    .unwrap();
-    for entry in std::fs::read_dir(real.join("image_01/data")).unwrap() {
-        let path = entry.unwrap().path();
-        let image = image::open(&path).unwrap().into_luma8();
-        let moved = image::GrayImage::from_fn(image.width(), image.height(), |x, y| {
-            *image.get_pixel(x.saturating_sub(1), y)
-        });
-        moved
-            .save(copy.join("image_01/data").join(path.file_name().unwrap()))
-            .unwrap();
-    }
-    copy
-}
-
 /// A rig whose disparities read one pixel short puts far features too far, and every step
 /// comes out long: the drive's first 50 frames with its right images moved by a pixel,
 /// LBD, points and lines. Measured: with the offset not estimated, step ratio 1.104 and
@@ -329,7 +293,8 @@ fn drive_with_right_images_moved(dir: &std::path::Path) -> std::path::PathBuf {
 #[test]
 fn real_data_a_rig_whose_disparities_read_a_pixel_short_is_self_calibrated() {
     let dir = Scratch::new("vo", "kitti-raw-offset");
-    let drive = drive_with_right_images_moved(&dir);
+    let drive = linetrack_test_data::kitti_raw_with_right_images_moved(&dir)
+        .unwrap_or_else(|e| panic!("{e}"));
     let drive = drive.to_str().unwrap();
     // (step ratio overall, the offset at the end) of one run; the two go side by side.
     let run = |estimate: bool| {
