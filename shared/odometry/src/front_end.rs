@@ -160,6 +160,19 @@ pub struct SegmentTracking {
     moved: Vec<bool>,
 }
 
+/// Whether the odometry tracks lines only and `tracked` (matches of the last frame's
+/// segments with `current`'s) would lose the frame: when the rescues act.
+fn lines_only_and_lost(
+    tracker: &MotionTracker,
+    current: &LineFeatures,
+    tracked: &[FeatureMatch],
+) -> bool {
+    tracker.config().features == Features::LinesOnly
+        && tracker
+            .loss_on_lines(&current.segments, tracked, None)
+            .is_some()
+}
+
 impl SegmentTracking {
     /// `matcher`'s matches of `previous`'s segments, at the positions last predicted for
     /// them, with `current`'s, into `out` (`previous` is left as it was).
@@ -211,11 +224,7 @@ impl SegmentTracking {
         tracked: &mut Vec<FeatureMatch>,
     ) -> bool {
         let min_inliers = tracker.config().lost.rescue_min_inliers;
-        if tracker.config().features != Features::LinesOnly
-            || (wider.is_none() && min_inliers == 0)
-            || tracker
-                .loss_on_lines(&current.segments, tracked, None)
-                .is_none()
+        if (wider.is_none() && min_inliers == 0) || !lines_only_and_lost(tracker, current, tracked)
         {
             return false;
         }
@@ -263,11 +272,7 @@ impl SegmentTracking {
         current: &LineFeatures,
         tracked: &mut Vec<FeatureMatch>,
     ) -> bool {
-        if tracker.config().features != Features::LinesOnly
-            || tracker
-                .loss_on_lines(&current.segments, tracked, None)
-                .is_none()
-        {
+        if !lines_only_and_lost(tracker, current, tracked) {
             return false;
         }
         let mut matches = Vec::new();

@@ -10,7 +10,7 @@
 
 use crate::observation::{
     LineObservation, PointObservation, apply_update, line_residual, line_right_residual,
-    point_residual, point_right_residual, project,
+    point_residual, point_right_residual,
 };
 use crate::robust::robust_start;
 use linetrack_geometry::StereoRig;
@@ -588,6 +588,13 @@ fn offset_direction(rig: &StereoRig, p: &Point3<f64>) -> Vector3<f64> {
     p.coords * (p.z / (rig.focal_px * rig.baseline_m))
 }
 
+/// The Jacobian's columns of the update's translation: under `p' = exp(δ)·T·X` they are the
+/// residual's derivative by the transformed point `p'` itself (`∂p'/∂ρ = I`), so a move of
+/// the previous point by `v` changes the residual by these times `R·v`.
+fn translation_columns<const R: usize>(j: &SMatrix<f64, R, 6>) -> SMatrix<f64, R, 3> {
+    j.fixed_columns::<3>(0).into_owned()
+}
+
 /// The disparity offset seen from the final inliers at the solution `motion`: one
 /// Gauss–Newton step over the motion and the offset together (the left image's rows, the
 /// weights of the last pass, the prior when there is one), whose offset component is the
@@ -631,11 +638,8 @@ fn disparity_offset_evidence(
         let Some((r, j)) = point_residual(rig, motion, obs) else {
             continue;
         };
-        let Some((_, dpi)) = project(rig, &(motion * obs.position)) else {
-            continue;
-        };
         let w = obs.weight * robust_weight(r.norm(), config.huber_px);
-        let j_offset = dpi * (rotation * offset_direction(rig, &obs.position));
+        let j_offset = translation_columns(&j) * (rotation * offset_direction(rig, &obs.position));
         for k in 0..2 {
             add(w, r[k], j.fixed_rows::<1>(k).into_owned(), j_offset[k]);
         }
@@ -653,13 +657,10 @@ fn disparity_offset_evidence(
             continue;
         };
         let w = obs.weight * robust_weight(r.norm(), config.huber_px);
-        let normal = obs.line.xy().transpose();
         for (k, endpoint) in obs.endpoints.iter().enumerate() {
-            let Some((_, dpi)) = project(rig, &(motion * endpoint)) else {
-                continue;
-            };
-            let j_offset = normal * dpi * (rotation * offset_direction(rig, endpoint));
-            add(w, r[k], j.fixed_rows::<1>(k).into_owned(), j_offset[0]);
+            let row = j.fixed_rows::<1>(k).into_owned();
+            let j_offset = translation_columns(&row) * (rotation * offset_direction(rig, endpoint));
+            add(w, r[k], row, j_offset[0]);
         }
     }
     if let Some(prior) = prior {

@@ -61,7 +61,7 @@ pub fn normalised_line(segment: &Segment) -> Option<Vector3<f64>> {
 }
 
 /// `(π(p), ∂π/∂p)` for the left camera; `None` behind it.
-pub(crate) fn project(rig: &StereoRig, p: &Point3<f64>) -> Option<(Vector2<f64>, Matrix2x3<f64>)> {
+fn project(rig: &StereoRig, p: &Point3<f64>) -> Option<(Vector2<f64>, Matrix2x3<f64>)> {
     if p.z <= 1e-6 {
         return None;
     }

@@ -25,6 +25,33 @@ fn vo_succeeds(args: &[&str]) -> Output {
     result
 }
 
+/// [`vo_succeeds`] with `args`, the settings `toml` (written to `<dir>/<name>.toml`) and
+/// the output in `<dir>/out-<name>`, which it returns.
+fn vo_with_config(dir: &Scratch, name: &str, toml: &str, args: &[&str]) -> std::path::PathBuf {
+    let config = dir.join(format!("{name}.toml"));
+    std::fs::write(&config, toml).unwrap();
+    let out = dir.join(format!("out-{name}"));
+    let mut all = args.to_vec();
+    all.extend([
+        "--config",
+        config.to_str().unwrap(),
+        "--quiet",
+        "--output",
+        out.to_str().unwrap(),
+    ]);
+    vo_succeeds(&all);
+    out
+}
+
+/// `a` on a thread of its own and `b` on this one (one per core), their results.
+fn side_by_side<T: Send>(a: impl FnOnce() -> T + Send, b: impl FnOnce() -> T) -> (T, T) {
+    std::thread::scope(|scope| {
+        let a = scope.spawn(a);
+        let b = b();
+        (a.join().unwrap(), b)
+    })
+}
+
 #[test]
 fn a_generated_sequence_gives_trajectory_ground_truth_stats_and_metrics() {
     let dir = Scratch::new("vo", "generated");
@@ -230,30 +257,23 @@ fn real_data_a_frame_whose_edges_the_detector_split_is_rescued_not_lost() {
     let dir = Scratch::new("vo", "kitti-raw-collinear");
     // (lost, rescued) frame indices of one run; the two runs go side by side, one per core.
     let run = |collinear_px: f64| {
-        let config = dir.join(format!("collinear-{collinear_px}.toml"));
-        std::fs::write(
-            &config,
-            format!("[lost]\nrescue_collinear_px = {collinear_px:?}\n"),
-        )
-        .unwrap();
-        let out = dir.join(format!("out-{collinear_px}"));
-        vo_succeeds(&[
-            drive,
-            "--matcher",
-            "l1",
-            "--lines-only",
-            "--gain-jumps",
-            "0.5",
-            "--seed",
-            "3",
-            "--frames",
-            "99",
-            "--config",
-            config.to_str().unwrap(),
-            "--quiet",
-            "--output",
-            out.to_str().unwrap(),
-        ]);
+        let out = vo_with_config(
+            &dir,
+            &format!("collinear-{collinear_px}"),
+            &format!("[lost]\nrescue_collinear_px = {collinear_px:?}\n"),
+            &[
+                drive,
+                "--matcher",
+                "l1",
+                "--lines-only",
+                "--gain-jumps",
+                "0.5",
+                "--seed",
+                "3",
+                "--frames",
+                "99",
+            ],
+        );
         let mut frames = csv::Reader::from_path(out.join("frames.csv")).unwrap();
         let header = frames.headers().unwrap().clone();
         let column = |name: &str| header.iter().position(|h| h == name).unwrap();
@@ -271,11 +291,7 @@ fn real_data_a_frame_whose_edges_the_detector_split_is_rescued_not_lost() {
         }
         (lost_frames, rescued_frames)
     };
-    let (without, with) = std::thread::scope(|scope| {
-        let without = scope.spawn(|| run(0.0));
-        let with = run(1.0);
-        (without.join().unwrap(), with)
-    });
+    let (without, with) = side_by_side(|| run(0.0), || run(1.0));
     assert_eq!(
         without,
         (vec![97], vec![]),
@@ -298,34 +314,19 @@ fn real_data_a_rig_whose_disparities_read_a_pixel_short_is_self_calibrated() {
     let drive = drive.to_str().unwrap();
     // (step ratio overall, the offset at the end) of one run; the two go side by side.
     let run = |estimate: bool| {
-        let config = dir.join(format!("estimate-{estimate}.toml"));
-        std::fs::write(
-            &config,
-            format!("[disparity_offset]\nestimate = {estimate}\n"),
-        )
-        .unwrap();
-        let out = dir.join(format!("out-{estimate}"));
-        vo_succeeds(&[
-            drive,
-            "--frames",
-            "50",
-            "--config",
-            config.to_str().unwrap(),
-            "--quiet",
-            "--output",
-            out.to_str().unwrap(),
-        ]);
+        let out = vo_with_config(
+            &dir,
+            &format!("estimate-{estimate}"),
+            &format!("[disparity_offset]\nestimate = {estimate}\n"),
+            &[drive, "--frames", "50"],
+        );
         let json: serde_json::Value =
             serde_json::from_str(&std::fs::read_to_string(out.join("metrics.json")).unwrap())
                 .unwrap();
         let ratio = json["metrics"]["step_ratio"]["overall"].as_f64().unwrap();
         (ratio, json["disparity_offset_px"].as_f64().unwrap())
     };
-    let (off, on) = std::thread::scope(|scope| {
-        let off = scope.spawn(|| run(false));
-        let on = run(true);
-        (off.join().unwrap(), on)
-    });
+    let (off, on) = side_by_side(|| run(false), || run(true));
     assert!(off.0 > 1.05 && off.1 == 0.0, "not estimated: {off:?}");
     assert!(
         (0.98..1.035).contains(&on.0) && (-1.15..=-0.85).contains(&on.1),
