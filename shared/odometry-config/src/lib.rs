@@ -431,9 +431,10 @@ impl Default for LostLimits {
 /// (disparities one pixel short) drifts 9.5 % with every step 9 % too long.
 ///
 /// With `estimate` on, each frame's motion estimate also says how much the disparities of
-/// the features it was fitted to are off (near features fix the step; far ones whose
-/// depths are off by a common fraction then no longer fit it), and the offset is their
-/// running, information-weighted mean. Triangulation subtracts it from every disparity.
+/// the points it was fitted to are off (near points fix the step; far ones whose depths
+/// are off by a common fraction then no longer fit it), and the offset is their running,
+/// information-weighted mean. Triangulation subtracts it from every disparity, points and
+/// segments alike. Lines only gives no evidence.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct DisparityOffsetConfig {
@@ -445,9 +446,10 @@ pub struct DisparityOffsetConfig {
     /// How sure that start is, one standard deviation, pixels: the first frame's evidence
     /// moves the estimate by at most `initial_sigma_px² / (initial_sigma_px² +
     /// frame_sigma_px²)` of its own figure (0.39 with the defaults). With 0.2 a rig one
-    /// pixel off is corrected from frame 7 to 9 of the KITTI raw drive; with 0.3 from frame
-    /// 4 or 5, but the generated presets' nil offset then wandered as far as 0.63 px
-    /// (0.48 with 0.2; docs/odometry.md, "The rig's disparity offset").
+    /// pixel off is corrected from frame 3 of the KITTI raw drive, half a pixel from frame
+    /// 4–7. With 0.3, when segments still bore on the evidence, the generated presets' nil
+    /// offset wandered as far as 0.63 px (0.48 with 0.2; docs/odometry.md, "The rig's
+    /// disparity offset").
     pub initial_sigma_px: f64,
     /// A frame's evidence counts with at least this spread, pixels, however well its own
     /// fit pins it: a frame's residuals are not independent (a landmark's depth, a
@@ -464,8 +466,8 @@ pub struct DisparityOffsetConfig {
     pub departure_sigmas: f64,
     /// …and by more than this, pixels, however sure it is. The frames' evidence is not
     /// free of the scene: on the generated presets, whose offset is nil, it wandered as far
-    /// as ±0.48 px for tens of frames (24 sequences, points and lines, both matchers), well
-    /// outside the noise it reckons for itself; on the KITTI raw drive to 0.19 px.
+    /// as ±0.31 px for tens of frames (24 sequences, points and lines, both matchers), well
+    /// outside the noise it reckons for itself; on the KITTI raw drive to 0.18 px.
     pub min_px: f64,
     /// Largest offset believed, pixels, either sign; one frame moves the estimate by at
     /// most a pixel of evidence.
@@ -481,7 +483,7 @@ impl Default for DisparityOffsetConfig {
             frame_sigma_px: 0.25,
             floor_sigma_px: 0.03,
             departure_sigmas: 3.0,
-            min_px: 0.75,
+            min_px: 0.4,
             max_px: 3.0,
         }
     }

@@ -122,19 +122,20 @@ mod tests {
             offset.update(offset.value_px(), evidence(0.04));
         }
         assert_eq!(offset.value_px(), 0.0);
-        // A steady 0.3 px is sure enough but under `min_px`.
+        // A steady 0.9 of `min_px` is sure enough but under it.
+        let floor = DisparityOffsetConfig::default().min_px;
         for _ in 0..500 {
-            offset.update(offset.value_px(), evidence(0.3));
+            offset.update(offset.value_px(), evidence(0.9 * floor));
         }
         assert!(
-            (offset.estimate_px() - 0.3).abs() < 0.01,
+            (offset.estimate_px() - 0.9 * floor).abs() < 0.01,
             "{}",
             offset.estimate_px()
         );
         assert_eq!(offset.value_px(), 0.0);
-        // One frame saying 0.5 px is not enough either.
+        // One frame saying twice `min_px` is not enough either.
         let mut offset = DisparityOffset::new(DisparityOffsetConfig::default());
-        offset.update(0.0, evidence(0.5));
+        offset.update(0.0, evidence(2.0 * floor));
         assert_eq!(offset.value_px(), 0.0);
     }
 
@@ -147,19 +148,20 @@ mod tests {
                 offset.update(applied, evidence(seen_px - applied));
             }
         };
-        settle_at(&mut offset, -1.0);
-        assert!((offset.value_px() + 1.0).abs() < 0.01);
-        // 0.6 px: under the 0.75 px floor, over half of it: still applied.
-        settle_at(&mut offset, -0.6);
+        let floor = DisparityOffsetConfig::default().min_px;
+        settle_at(&mut offset, -2.0 * floor);
+        assert!((offset.value_px() + 2.0 * floor).abs() < 0.01);
+        // Under the floor, over half of it: still applied.
+        settle_at(&mut offset, -0.8 * floor);
         assert!(
-            (offset.value_px() + 0.6).abs() < 0.01,
+            (offset.value_px() + 0.8 * floor).abs() < 0.01,
             "{}",
             offset.value_px()
         );
-        // 0.3 px: let go.
-        settle_at(&mut offset, -0.3);
+        // Under half of it: let go.
+        settle_at(&mut offset, -0.4 * floor);
         assert_eq!(offset.value_px(), 0.0);
-        assert!((offset.estimate_px() + 0.3).abs() < 0.01);
+        assert!((offset.estimate_px() + 0.4 * floor).abs() < 0.01);
     }
 
     #[test]

@@ -461,7 +461,7 @@ fn estimate(
         relative_eigenvalue,
         covariance: motion_covariance(&settings, points, lines, &active, &motion),
         disparity_offset: (!stereo)
-            .then(|| disparity_offset_evidence(&settings, points, lines, &active, &motion))
+            .then(|| disparity_offset_evidence(&settings, points, &active, &motion))
             .flatten(),
     })
 }
@@ -595,13 +595,19 @@ fn translation_columns<const R: usize>(j: &SMatrix<f64, R, 6>) -> SMatrix<f64, R
     j.fixed_columns::<3>(0).into_owned()
 }
 
-/// The disparity offset seen from the final inliers at the solution `motion`: one
-/// Gauss–Newton step over the motion and the offset together (the left image's rows, the
-/// weights of the last pass, the prior when there is one), whose offset component is the
-/// correction; its variance from the normal matrix and the residual variance. Without
-/// enough points there is no evidence (see below). Without the prior
-/// in it, the KITTI raw drive's evidence (LBD) swung far enough to be applied where the
-/// truth is nil (measured before `min_px`: the drive's ATE went from 0.160 to 0.209 m).
+/// The disparity offset seen from the final inlying points at the solution `motion`: one
+/// Gauss–Newton step over the motion and the offset together (the points' rows in the left
+/// image, the weights of the last pass, the prior when there is one), whose offset
+/// component is the correction; its variance from the normal matrix and the residual
+/// variance. Without enough points there is no evidence. Without the prior in it, the KITTI
+/// raw drive's evidence (LBD) swung far enough to be applied where the truth is nil
+/// (measured before `min_px`: the drive's ATE went from 0.160 to 0.209 m).
+///
+/// Segments take no part. An endpoint's disparity is read off the right segment's line at
+/// the endpoint's row, so the lines' angles and the detector's cuts weigh in, and their
+/// evidence was not of one offset: lines only, on the KITTI raw drive as it is, it said
+/// −0.26 to −0.34 px, and beside the points it carried the generated presets' nil offset
+/// as far as 0.48 px (points alone: 0.31 px at most, 0.21 but for one sequence).
 ///
 /// Why this is observable: a constant error in disparity changes a feature's depth by a
 /// fraction `ε / d`, which is small for near features and large for far ones. Near
@@ -611,7 +617,6 @@ fn translation_columns<const R: usize>(j: &SMatrix<f64, R, 6>) -> SMatrix<f64, R
 fn disparity_offset_evidence(
     settings: &Settings<'_>,
     points: &[PointObservation],
-    lines: &[LineObservation],
     active: &Active<'_>,
     motion: &Isometry3<f64>,
 ) -> Option<OffsetEvidence> {
@@ -642,25 +647,6 @@ fn disparity_offset_evidence(
         let j_offset = translation_columns(&j) * (rotation * offset_direction(rig, &obs.position));
         for k in 0..2 {
             add(w, r[k], j.fixed_rows::<1>(k).into_owned(), j_offset[k]);
-        }
-    }
-    // Segments bear on it too, but only beside enough points (checked above): alone their
-    // evidence is not of one offset (an endpoint's disparity is read off the right
-    // segment's line at the endpoint's row, so the lines' angles and positions in each
-    // image weigh in). Lines only, on the KITTI raw drive with its disparities one pixel
-    // short it said −0.7 to −0.8 px, with them one pixel long +0.1 px, and −0.26 to
-    // −0.34 px on the drive as it is. Points and lines both bearing on it (points only in
-    // brackets), the drive's settled at −0.05 px (+0.04 to +0.12) and at −1.03 / +0.97 px
-    // with one pixel either way (−0.85 to −0.90 / +1.08 to +1.15).
-    for (obs, _) in lines.iter().zip(active.lines).filter(|(_, on)| **on) {
-        let Some((r, j)) = line_residual(rig, motion, obs) else {
-            continue;
-        };
-        let w = obs.weight * robust_weight(r.norm(), config.huber_px);
-        for (k, endpoint) in obs.endpoints.iter().enumerate() {
-            let row = j.fixed_rows::<1>(k).into_owned();
-            let j_offset = translation_columns(&row) * (rotation * offset_direction(rig, endpoint));
-            add(w, r[k], row, j_offset[0]);
         }
     }
     if let Some(prior) = prior {

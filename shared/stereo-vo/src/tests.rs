@@ -715,6 +715,21 @@ fn a_disparity_offset_shows_in_the_estimate_and_a_scene_at_one_depth_hides_it() 
     // Every depth off by the same fraction looks like a longer step: no evidence.
     let flat = evidence(0.5, true);
     assert!(flat.is_none_or(|e| e.variance_px2 > 1.0), "{flat:?}");
+    // The points alone bear on it: segments whose depths carry the opposite offset leave
+    // it where the points put it.
+    let (points, _) = road_with_offset(0.5, false);
+    let (_, opposite) = road_with_offset(-0.5, false);
+    let beside = estimate_motion(
+        &rig,
+        &points,
+        &opposite,
+        &Isometry3::identity(),
+        &MotionConfig::default(),
+    )
+    .unwrap()
+    .disparity_offset
+    .unwrap();
+    assert!((beside.correction_px - 0.5).abs() <= 0.07, "{beside:?}");
     // Segments alone bear no evidence (under the prior, which keeps their estimate defined),
     // nor do they with too few points.
     let (_, lines) = road_with_offset(0.5, false);

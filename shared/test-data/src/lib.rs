@@ -192,11 +192,17 @@ pub fn shift_left(pixels: &[u8], width: usize, shift: usize) -> Vec<u8> {
     out
 }
 
-/// A copy of the KITTI raw drive, in `dir`, as a rig whose disparities all read one pixel
-/// short would see it: its right images moved one column to the right (whole pixels,
-/// nothing resampled; the first column repeated), everything else linked to the real
-/// drive's files. Returns the copy's drive folder.
-pub fn kitti_raw_with_right_images_moved(dir: &Path) -> Result<PathBuf, String> {
+/// A copy of the KITTI raw drive, in `dir`, as a rig whose disparities all read `pixels`
+/// short would see it: its right images moved `pixels` columns to the right (a whole
+/// number moves them without resampling; a fraction interpolates linearly between the two
+/// columns around, rounding half to even; the first column repeated), everything else
+/// linked to the real drive's files. Returns the copy's drive folder.
+pub fn kitti_raw_with_right_images_moved(dir: &Path, pixels: f64) -> Result<PathBuf, String> {
+    if !(0.0..=64.0).contains(&pixels) {
+        return Err(format!(
+            "moving the right images by {pixels} px: 0 to 64 px only"
+        ));
+    }
     let real = kitti_raw_dir()?;
     let named = |path: &Path| -> Result<PathBuf, String> {
         path.file_name()
@@ -234,8 +240,11 @@ pub fn kitti_raw_with_right_images_moved(dir: &Path) -> Result<PathBuf, String> 
         let image = image::open(&path)
             .map_err(|e| format!("{}: {e}", path.display()))?
             .into_luma8();
+        let (whole, fraction) = (pixels.trunc() as u32, pixels.fract());
         let moved = image::GrayImage::from_fn(image.width(), image.height(), |x, y| {
-            *image.get_pixel(x.saturating_sub(1), y)
+            let near = f64::from(image.get_pixel(x.saturating_sub(whole), y)[0]);
+            let far = f64::from(image.get_pixel(x.saturating_sub(whole + 1), y)[0]);
+            image::Luma([((1.0 - fraction) * near + fraction * far).round_ties_even() as u8])
         });
         let out = right.join(named(&path)?);
         moved
