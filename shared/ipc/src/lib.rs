@@ -439,15 +439,39 @@ mod tests {
         with_shared_memory_buses("wake", each_topic_wakes_its_readers_only);
     }
 
-    #[test]
-    fn a_wait_without_messages_times_out() {
-        let bus = Bus::local();
-        let wake = bus
+    /// A wait with nothing to wake it lasts its timeout; one with a wake-up pending returns
+    /// long before its (very long) timeout and takes the wake-up.
+    fn a_wait_times_out_or_takes_its_wake_up(publisher_bus: &Bus, subscriber_bus: &Bus) {
+        let wake = subscriber_bus
             .wake(StageKind::Matcher)
             .unwrap_or_else(|e| panic!("{e}"));
         let started = std::time::Instant::now();
         wake.wait(Duration::from_millis(30))
             .unwrap_or_else(|e| panic!("{e}"));
         assert!(started.elapsed() >= Duration::from_millis(25));
+        let _inlet = subscriber_bus
+            .inlet::<SegmentRecord, SegmentsHeader>(linetrack_msgs::topics::SEGMENTS)
+            .unwrap_or_else(|e| panic!("{e}"));
+        let mut segments = publisher_bus
+            .outlet::<SegmentRecord, SegmentsHeader>(linetrack_msgs::topics::SEGMENTS, 4)
+            .unwrap_or_else(|e| panic!("{e}"));
+        segments
+            .publish(&SegmentsHeader::from(FrameHeader::new(3, 0, 0)), &[])
+            .unwrap_or_else(|e| panic!("{e}"));
+        let started = std::time::Instant::now();
+        wake.wait(Duration::from_secs(600))
+            .unwrap_or_else(|e| panic!("{e}"));
+        assert!(started.elapsed() < Duration::from_secs(300));
+        assert!(!woken(&wake), "the wait took the wake-up");
+    }
+
+    #[test]
+    fn a_local_wait_times_out_or_takes_its_wake_up() {
+        with_local_buses(a_wait_times_out_or_takes_its_wake_up);
+    }
+
+    #[test]
+    fn a_shared_memory_wait_times_out_or_takes_its_wake_up() {
+        with_shared_memory_buses("wait", a_wait_times_out_or_takes_its_wake_up);
     }
 }
