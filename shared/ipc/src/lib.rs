@@ -400,6 +400,15 @@ mod tests {
         }
     }
 
+    /// Publishes one (empty) segments message on `bus`.
+    fn publish_segments(bus: &Bus) {
+        bus.outlet::<SegmentRecord, SegmentsHeader>(linetrack_msgs::topics::SEGMENTS, 4)
+            .and_then(|mut segments| {
+                segments.publish(&SegmentsHeader::from(FrameHeader::new(3, 0, 0)), &[])
+            })
+            .unwrap_or_else(|e| panic!("{e}"));
+    }
+
     /// A frame wakes the stages that read it (the pose estimator, the detector, the
     /// matcher), and segments only theirs (the matcher).
     fn each_topic_wakes_its_readers_only(publisher_bus: &Bus, subscriber_bus: &Bus) {
@@ -419,12 +428,7 @@ mod tests {
             .publish(&FrameHeader::new(3, 0, 0), &[&[1, 2], &[3, 4]])
             .unwrap_or_else(|e| panic!("{e}"));
         assert!(woken(&pose) && woken(&detector) && woken(&matcher));
-        let mut segments = publisher_bus
-            .outlet::<SegmentRecord, SegmentsHeader>(linetrack_msgs::topics::SEGMENTS, 4)
-            .unwrap_or_else(|e| panic!("{e}"));
-        segments
-            .publish(&SegmentsHeader::from(FrameHeader::new(3, 0, 0)), &[])
-            .unwrap_or_else(|e| panic!("{e}"));
+        publish_segments(publisher_bus);
         assert!(woken(&matcher));
         assert!(!woken(&pose) && !woken(&detector));
     }
@@ -452,12 +456,7 @@ mod tests {
         let _inlet = subscriber_bus
             .inlet::<SegmentRecord, SegmentsHeader>(linetrack_msgs::topics::SEGMENTS)
             .unwrap_or_else(|e| panic!("{e}"));
-        let mut segments = publisher_bus
-            .outlet::<SegmentRecord, SegmentsHeader>(linetrack_msgs::topics::SEGMENTS, 4)
-            .unwrap_or_else(|e| panic!("{e}"));
-        segments
-            .publish(&SegmentsHeader::from(FrameHeader::new(3, 0, 0)), &[])
-            .unwrap_or_else(|e| panic!("{e}"));
+        publish_segments(publisher_bus);
         let started = std::time::Instant::now();
         wake.wait(Duration::from_secs(600))
             .unwrap_or_else(|e| panic!("{e}"));
