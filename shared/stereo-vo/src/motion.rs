@@ -591,7 +591,7 @@ fn offset_direction(rig: &StereoRig, p: &Point3<f64>) -> Vector3<f64> {
 /// The Jacobian's columns of the update's translation: under `p' = exp(δ)·T·X` they are the
 /// residual's derivative by the transformed point `p'` itself (`∂p'/∂ρ = I`), so a move of
 /// the previous point by `v` changes the residual by these times `R·v`.
-fn translation_columns<const R: usize>(j: &SMatrix<f64, R, 6>) -> SMatrix<f64, R, 3> {
+fn translation_columns(j: &SMatrix<f64, 2, 6>) -> SMatrix<f64, 2, 3> {
     j.fixed_columns::<3>(0).into_owned()
 }
 

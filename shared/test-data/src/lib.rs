@@ -235,12 +235,12 @@ pub fn kitti_raw_with_right_images_moved(dir: &Path, pixels: f64) -> Result<Path
         link(real.join(name), copy.join(name))?;
     }
     let source = real.join("image_01/data");
+    let (whole, fraction) = (pixels.trunc() as u32, pixels.fract());
     for entry in std::fs::read_dir(&source).map_err(io(&source))? {
         let path = entry.map_err(io(&source))?.path();
         let image = image::open(&path)
             .map_err(|e| format!("{}: {e}", path.display()))?
             .into_luma8();
-        let (whole, fraction) = (pixels.trunc() as u32, pixels.fract());
         let moved = image::GrayImage::from_fn(image.width(), image.height(), |x, y| {
             let near = f64::from(image.get_pixel(x.saturating_sub(whole), y)[0]);
             let far = f64::from(image.get_pixel(x.saturating_sub(whole + 1), y)[0]);

@@ -33,10 +33,12 @@ OUTPUT (<output>/): trajectory.txt (TUM: t tx ty tz qx qy qz qw, left camera, wo
 camera), groundtruth.txt (the same frame, when the dataset has ground truth), frames.csv (one
 row per frame: lost, features, matches, inliers, iterations, conditioning, departure from the
 prediction, milliseconds per step, whether `[lost] rescue_*` rescued it, the disparity offset
-subtracted and its running estimate), metrics.json (the run's settings, lost frames, disparity_offset_px (the rig's
-disparity offset at the end, given or self-calibrated: `[disparity_offset]`) and, with ground truth, under `metrics`: poses, path_m, rpe_m,
-ate_m, ate_aligned_m, drift_percent, step_ratio {steps, skipped, overall, median, p10, p90} (estimated over true step length, steps
-under 1 cm left out), zero_motion_ate_m — the names `linetrack run` writes to summary.json; and
+subtracted and its running estimate), metrics.json (the run's settings, lost frames,
+disparity_offset_px (the rig's disparity offset at the end, given or self-calibrated:
+`[disparity_offset]`) and, with ground truth, under `metrics`: poses, path_m, rpe_m, ate_m,
+ate_aligned_m, drift_percent, step_ratio {steps, skipped, overall, median, p10, p90}
+(estimated over true step length, steps under 1 cm left out), zero_motion_ate_m — the names
+`linetrack run` writes to summary.json; and
 step_nees {steps, mean, median, ratio}: each tracked step's error against the truth in units of
 its covariance (NEES; consistent: mean 6, ratio 1)).\n\n", linetrack_progress::progress_help!("frames"), "\n\n", linetrack_vision::images_help!())
 )]
