@@ -25,14 +25,16 @@
 //!    per cell on the first pass, then the best of the rest, so textured corners of the
 //!    image do not take every point (off by default: measured, it cost the odometry).
 //! 4. **Orientation and descriptor** (`describe.rs`, `patch.rs`): the angle from the
-//!    patch's centre to its intensity centroid (radius 15), quantised to 32 steps; 256
+//!    patch's centre to its intensity centroid (radius 15), quantised to 128 steps; 256
 //!    intensity comparisons of pixel pairs of the smoothed level image (read from the
 //!    corner's 32 × 32 patch, copied out; the level is smoothed only over the bands of
-//!    rows and columns the kept corners' patches cover), the pairs rotated by that angle. The pairs are
-//!    drawn once from a fixed-seed generator (isotropic Gaussian, BRIEF's G II), so every
-//!    build compares the same pixels. Bit `j` of byte `i` is pair `8i + j`: "first darker
-//!    than second", the layout of OpenCV's 32-byte ORB descriptors, so the same Hamming
-//!    matching serves both.
+//!    rows and columns the kept corners' patches cover), the pairs rotated by that angle.
+//!    The pairs are a table (`learned_pattern.rs`) learned once by ORB's greedy search
+//!    (`learn.rs`, [`learn_pattern`]) from the corners of the Middlebury stereo pairs: within
+//!    15 px of the corner, the two points at least 5 px apart, each comparison splitting
+//!    those corners about evenly and little correlated with the others. Bit `j` of byte `i`
+//!    is pair `8i + j`: "first darker than second", the layout of OpenCV's 32-byte ORB
+//!    descriptors, so the same Hamming matching serves both.
 //!
 //! On x86-64 CPUs with AVX2 all of it runs compiled for AVX2, the resampling with its byte
 //! shuffles and FAST with intrinsics; where the CPU has AVX-512 VBMI too, the descriptor
@@ -51,6 +53,8 @@
 mod describe;
 mod fast;
 mod harris;
+mod learn;
+mod learned_pattern;
 mod patch;
 mod pyramid;
 mod resample;
@@ -60,6 +64,7 @@ mod select;
 mod tests;
 
 use describe::Pattern;
+pub use learn::{LearnSettings, LearnedPattern, learn_pattern};
 pub use linetrack_edge_lines::{EdgeLinesError, GrayView};
 use pyramid::{Pyramid, Smoother};
 use thiserror::Error;
@@ -170,6 +175,21 @@ impl Params {
     }
 }
 
+/// Side of a corner's patch ([`Patch`]), level pixels.
+pub const PATCH_SIDE: usize = patch::PATCH;
+/// The corner's row and column inside its patch.
+pub const PATCH_CENTRE: usize = patch::CENTRE;
+
+/// What the descriptor of one corner reads: the smoothed level pixels around it and its
+/// orientation ([`CornerExtractor::patches`]). The sampling pattern is learned from these.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Patch {
+    /// Level pixels `c − 15 ..= c + 16` around the corner `c`, row by row.
+    pub pixels: [u8; PATCH_SIDE * PATCH_SIDE],
+    /// The corner's orientation, radians (as [`Corner::angle_rad`]).
+    pub angle_rad: f32,
+}
+
 /// A corner: position, level, orientation and score.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Corner {
@@ -271,6 +291,14 @@ impl CornerExtractor {
         self.extract_on_any_cpu(image, out);
     }
 
+    /// Appends to `out` the smoothed patch and the orientation of every corner
+    /// [`CornerExtractor::extract`] finds in `image` (plain code on any CPU; the corners are
+    /// the same): what the sampling pattern is learned from ([`learn_pattern`]).
+    pub fn patches(&mut self, image: GrayView<'_>, out: &mut Vec<Patch>) {
+        let mut corners = Corners::default();
+        self.extract_for(image, &mut corners, false, false, Some(out));
+    }
+
     /// [`CornerExtractor::extract_on_any_cpu`] compiled for AVX2 (everything it calls is
     /// `#[inline(always)]`, so inlined and compiled for it too).
     /// `vbmi`: the CPU has AVX-512 F, BW and VBMI too (checked by the caller), and the
@@ -278,18 +306,26 @@ impl CornerExtractor {
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
     fn extract_with_avx2(&mut self, image: GrayView<'_>, out: &mut Corners, vbmi: bool) {
-        self.extract_for(image, out, true, vbmi);
+        self.extract_for(image, out, true, vbmi, None);
     }
 
     /// [`CornerExtractor::extract`] for any CPU.
     fn extract_on_any_cpu(&mut self, image: GrayView<'_>, out: &mut Corners) {
-        self.extract_for(image, out, false, false);
+        self.extract_for(image, out, false, false, None);
     }
 
     /// [`CornerExtractor::extract`], with AVX2's byte shuffles when `avx2` says the CPU has them,
-    /// and AVX-512 VBMI's byte permutes when `vbmi` does (the caller has checked).
+    /// and AVX-512 VBMI's byte permutes when `vbmi` does (the caller has checked); each
+    /// corner's patch appended to `patches` when given.
     #[inline(always)]
-    fn extract_for(&mut self, image: GrayView<'_>, out: &mut Corners, avx2: bool, vbmi: bool) {
+    fn extract_for(
+        &mut self,
+        image: GrayView<'_>,
+        out: &mut Corners,
+        avx2: bool,
+        vbmi: bool,
+        mut patches: Option<&mut Vec<Patch>>,
+    ) {
         #[cfg(not(target_arch = "x86_64"))]
         let _ = vbmi;
         out.clear();
@@ -336,6 +372,11 @@ impl CornerExtractor {
             for candidate in &self.candidates[..kept] {
                 let (x, y) = (candidate.x as usize, candidate.y as usize);
                 let angle_rad = self.pattern.orientation(plane, x, y);
+                if let Some(patches) = patches.as_deref_mut()
+                    && let Some(pixels) = patch::patch(smooth, x, y)
+                {
+                    patches.push(Patch { pixels, angle_rad });
+                }
                 #[cfg(target_arch = "x86_64")]
                 let descriptor = if vbmi {
                     let Some(rows) = patch::rows(smooth, x, y) else {

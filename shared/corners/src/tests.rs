@@ -351,11 +351,31 @@ fn descriptors_survive_a_brightness_shift_and_a_quarter_turn() {
 }
 
 #[test]
-fn the_pattern_is_fixed_and_inside_the_border() {
+fn the_pattern_is_fixed_and_its_turned_points_inside_the_patch() {
     let a = describe::Pattern::new();
     let b = describe::Pattern::new();
     assert!(a == b);
-    assert!(a.max_offset() < BORDER_PX as i32 - 1);
+    // The patch reaches 15 pixels left of and above the corner (16 right and below).
+    assert!(a.max_offset() <= patch::CENTRE as i32);
+}
+
+#[test]
+fn the_learned_pairs_are_distinct_within_15_px_and_at_least_5_px_apart() {
+    let pairs = &crate::learned_pattern::LEARNED_PAIRS;
+    assert_eq!(pairs.len(), DESCRIPTOR_BYTES * 8);
+    for [(x1, y1), (x2, y2)] in pairs {
+        for (x, y) in [(x1, y1), (x2, y2)] {
+            assert!(i32::from(*x).pow(2) + i32::from(*y).pow(2) <= 15 * 15);
+        }
+        assert!(f64::from(x1 - x2).hypot(f64::from(y1 - y2)) >= 5.0);
+    }
+    let mut sorted: Vec<_> = pairs
+        .iter()
+        .map(|&[a, b]| if a < b { [a, b] } else { [b, a] })
+        .collect();
+    sorted.sort();
+    sorted.dedup();
+    assert_eq!(sorted.len(), pairs.len());
 }
 
 #[test]
