@@ -58,12 +58,8 @@ impl Pattern {
         let points = pattern_points();
         let rotated: Vec<[(i8, i8); 2 * PAIRS]> = (0..ANGLE_STEPS)
             .map(|step| {
-                let (sin, cos) = (step as f64 * TAU / ANGLE_STEPS as f64).sin_cos();
-                points.map(|(x, y)| {
-                    let rx = (cos * x - sin * y).round() as i8;
-                    let ry = (sin * x + cos * y).round() as i8;
-                    (rx, ry)
-                })
+                let turn = (step as f64 * TAU / ANGLE_STEPS as f64).sin_cos();
+                points.map(|point| turned(point, turn))
             })
             .collect();
         let r = f64::from(ORIENTATION_RADIUS);
@@ -254,14 +250,18 @@ fn angle_step(angle_rad: f32) -> usize {
 
 /// The pattern's 2 × 256 points, unturned: the learned table's pairs, first point of pair k
 /// at 2k, second at 2k + 1.
-fn pattern_points() -> [(f64, f64); 2 * PAIRS] {
-    let mut points = [(0.0, 0.0); 2 * PAIRS];
-    for (k, pair) in LEARNED_PAIRS.iter().enumerate() {
-        for (j, &(x, y)) in pair.iter().enumerate() {
-            points[2 * k + j] = (f64::from(x), f64::from(y));
-        }
-    }
-    points
+fn pattern_points() -> [(i8, i8); 2 * PAIRS] {
+    std::array::from_fn(|i| LEARNED_PAIRS[i / 2][i % 2])
+}
+
+/// Pattern point `(x, y)` turned by the angle whose sine and cosine `turn` holds, rounded to
+/// the pixel. The pattern's learning turns its patches the same way (`learn.rs`).
+pub(crate) fn turned((x, y): (i8, i8), (sin, cos): (f64, f64)) -> (i8, i8) {
+    let (x, y) = (f64::from(x), f64::from(y));
+    (
+        (cos * x - sin * y).round() as i8,
+        (sin * x + cos * y).round() as i8,
+    )
 }
 
 /// What the tests borrow: a generator of numbers.

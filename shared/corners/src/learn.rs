@@ -12,6 +12,7 @@
 //!
 //! `examples/learn_pattern.rs` runs it on images and writes `src/learned_pattern.rs`.
 
+use crate::describe::turned;
 use crate::{CornersError, PATCH_CENTRE, PATCH_SIDE, Patch};
 
 /// The search's settings.
@@ -122,11 +123,10 @@ fn turned_values(patches: &[Patch], positions: &[(i32, i32)]) -> Vec<Vec<u8>> {
     let centre = PATCH_CENTRE as i32;
     let last = PATCH_SIDE as i32 - 1;
     for patch in patches {
-        let (sin, cos) = f64::from(patch.angle_rad).sin_cos();
-        for (column, &(x, y)) in values.iter_mut().zip(positions) {
-            let (x, y) = (f64::from(x), f64::from(y));
-            let rx = (cos * x - sin * y).round() as i32;
-            let ry = (sin * x + cos * y).round() as i32;
+        let turn = f64::from(patch.angle_rad).sin_cos();
+        for (column, &position) in values.iter_mut().zip(positions) {
+            let (rx, ry) = turned(offset(position), turn);
+            let (rx, ry) = (i32::from(rx), i32::from(ry));
             let (px, py) = ((centre + rx).clamp(0, last), (centre + ry).clamp(0, last));
             column.push(patch.pixels[py as usize * PATCH_SIDE + px as usize]);
         }
