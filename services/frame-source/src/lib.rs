@@ -5,7 +5,10 @@
 //! Paced in real time, a frame is stamped with the time it was due, however late the
 //! source has it (`Capture`): a source that falls behind shows its delay in the
 //! end-to-end latency, and a frame already over the end-to-end budget leaves as a
-//! `capture-late` marker.
+//! `capture-late` marker. A sequence's frames are decoded ahead on a thread of their own;
+//! the schedule starts once that thread has filled its queue, and in real time it reads
+//! each next frame half a period after a frame is due, between the frames' processing
+//! rather than beside it.
 //! With `[camera]` set, it reads a live stereo camera instead ([`camera`]); with
 //! `source.replay`, an MCAP recording. Each of the three is a
 //! [`linetrack_stage_runtime::Source`]: the stage runtime publishes, stamps, beats, stops
@@ -160,6 +163,11 @@ struct SequenceSource {
     taken: usize,
     /// The frame taken and waiting for its time.
     pending: Option<<StereoStream as Iterator>::Item>,
+    /// The time between frames: the paced reader reads the next frame half of it after a
+    /// frame is due, while the stages are done with that frame.
+    period: Duration,
+    /// When the reader may read its next frame (monotonic; `None`: nothing to let).
+    read_at: Option<Duration>,
 }
 
 impl SequenceSource {
@@ -195,7 +203,13 @@ impl SequenceSource {
         let origin_ns = sequence.frames.first().map_or(0, |f| f.timestamp_ns);
         let gain_jumps =
             gain_jumps::GainJumps::new(source.gain_jumps_s, source.gain_jumps_seed, origin_ns);
-        let stream = sequence.into_stream_with(start, 4, on_start);
+        let rate_hz = if source.rate_hz > 0.0 {
+            source.rate_hz
+        } else {
+            sequence.rate_hz
+        };
+        let period = Duration::try_from_secs_f64(1.0 / rate_hz).unwrap_or(Duration::ZERO);
+        let stream = sequence.into_paced_stream(start, 4, on_start);
         Ok(Self {
             rig,
             rig_record,
@@ -208,6 +222,8 @@ impl SequenceSource {
             began: None,
             taken: 0,
             pending: None,
+            period,
+            read_at: None,
         })
     }
 }
@@ -222,6 +238,14 @@ impl Source for SequenceSource {
     }
 
     fn step(&mut self, out: &mut SourceOut, wait: Duration) -> anyhow::Result<Step> {
+        // The reader's next frame, once its time has come; no wait goes past that time.
+        let now = out.clock().monotonic();
+        if self.read_at.is_some_and(|at| now >= at) {
+            self.let_read();
+        }
+        let wait = self
+            .read_at
+            .map_or(wait, |at| wait.min(at.saturating_sub(now)));
         if self.pending.is_none() {
             if self.taken >= self.count {
                 return Ok(Step::Finished);
@@ -243,6 +267,11 @@ impl Source for SequenceSource {
             Ok(frame) => (frame.index, frame.timestamp_ns),
             Err(e) => (e.index, e.timestamp_ns),
         };
+        // The schedule starts once the frames read ahead are in: the first frames would
+        // otherwise be processed beside the reading's burst of decoding.
+        if self.began.is_none() && !self.stream.wait_primed(wait) {
+            return Ok(Step::Again);
+        }
         let began = *self.began.get_or_insert_with(|| out.clock().monotonic());
         let rate = self.source.rate_hz.max(0.0);
         let due = due_offset(
@@ -252,11 +281,19 @@ impl Source for SequenceSource {
             timestamp_ns,
             self.taken - 1,
         );
-        if let Some(wait) = not_yet(out, began, due) {
-            return Ok(Step::Idle(wait));
+        if let Some(until_due) = not_yet(out, began, due) {
+            return Ok(Step::Idle(until_due.min(wait)));
         }
         let capture = Capture::at(out.clock(), self.source.pacing, began, due);
         let capture_ns = capture.capture_ns;
+        // The reader reads its next frame once this one is through the stages (paced in
+        // real time: half a period after it is due), or at once (`fastest`). A leave still
+        // to give for the frame before is given now.
+        self.let_read();
+        match self.source.pacing {
+            Pacing::Realtime => self.read_at = Some(began + due + self.period / 2),
+            Pacing::Fastest => self.stream.let_read(),
+        }
         let (id, item) = (index as u64, self.pending.take());
         match item {
             Some(Ok(_)) if capture.too_late(&self.budget) => {
@@ -284,6 +321,15 @@ impl Source for SequenceSource {
 
     fn poll(&mut self) -> anyhow::Result<()> {
         self.rig.poll()
+    }
+}
+
+impl SequenceSource {
+    /// Lets the reader read its next frame, if that is still to be let.
+    fn let_read(&mut self) {
+        if self.read_at.take().is_some() {
+            self.stream.let_read();
+        }
     }
 }
 
@@ -506,6 +552,52 @@ mod tests {
         let ids: Vec<u64> = source.frames().iter().map(|h| h.frame_id).collect();
         assert_eq!(ids, [0]);
         source.stop();
+    }
+
+    /// A realtime source over more frames than it reads ahead publishes all of them, each
+    /// on its time: after each frame it lets its paced reader read the next one (without
+    /// that leave the reader stops once its queue is full, and so would the frames).
+    #[test]
+    fn a_realtime_source_paces_its_reader_and_publishes_every_frame_on_its_time() {
+        const FRAMES: usize = 12;
+        const PATIENCE: Duration = Duration::from_secs(60);
+        let mut source = Running::start(
+            |config| {
+                config.source.pacing = Pacing::Realtime;
+                config.source.rate_hz = 20.0;
+                config.source.max_frames = FRAMES;
+                // However far the test's clock runs ahead of the source, no frame is dropped.
+                config.budget.drop_late = false;
+            },
+            || {},
+        );
+        let wake = source
+            .bus
+            .wake(StageKind::Supervisor)
+            .unwrap_or_else(|e| panic!("{e}"));
+        let mut headers = Vec::new();
+        let began = std::time::Instant::now();
+        while headers.len() < FRAMES {
+            assert!(began.elapsed() < PATIENCE, "{} frames", headers.len());
+            headers.extend(source.frames());
+            // A quarter of a period a look: every frame's and every leave's time comes.
+            source.clock.advance(Duration::from_micros(12_500));
+            wake.wait(Duration::from_millis(2))
+                .unwrap_or_else(|e| panic!("{e}"));
+        }
+        source.stop();
+        let ids: Vec<u64> = headers.iter().map(|h| h.frame_id).collect();
+        assert_eq!(ids, (0..FRAMES as u64).collect::<Vec<_>>());
+        assert!(
+            headers
+                .windows(2)
+                .all(|w| w[1].capture_ns - w[0].capture_ns == 50_000_000)
+        );
+        assert!(
+            headers
+                .iter()
+                .all(|h| h.status.get() == Ok(FrameStatus::Ok) && h.width > 0)
+        );
     }
 
     /// Runs a 20 Hz realtime source over 3 frames; once it has published the first, its

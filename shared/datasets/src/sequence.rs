@@ -1,7 +1,7 @@
 //! A stereo sequence (frames, rig, rectification) and its read-ahead stream.
 
 use crate::{DatasetError, Rectifier};
-use crossbeam_channel::{Receiver, RecvTimeoutError, bounded};
+use crossbeam_channel::{Receiver, RecvTimeoutError, Sender, TrySendError, bounded, unbounded};
 use linetrack_geometry::StereoRig;
 use linetrack_vision::GrayImage;
 use nalgebra::Isometry3;
@@ -176,16 +176,62 @@ impl StereoSequence {
         read_ahead: usize,
         on_start: impl FnOnce() + Send + 'static,
     ) -> StereoStream {
+        self.stream(start, read_ahead, on_start, false)
+    }
+
+    /// [`StereoSequence::into_stream_with`], but once the frames read ahead have filled the
+    /// queue, the reading thread reads each next frame only when let
+    /// ([`StereoStream::let_read`]): a real-time source lets it read between frames, so
+    /// that the decoding does not share the processor with a frame in flight.
+    pub fn into_paced_stream(
+        self,
+        start: usize,
+        read_ahead: usize,
+        on_start: impl FnOnce() + Send + 'static,
+    ) -> StereoStream {
+        self.stream(start, read_ahead, on_start, true)
+    }
+
+    /// The stream of [`StereoSequence::into_stream_with`], paced by
+    /// [`StereoStream::let_read`] when `paced`.
+    fn stream(
+        self,
+        start: usize,
+        read_ahead: usize,
+        on_start: impl FnOnce() + Send + 'static,
+        paced: bool,
+    ) -> StereoStream {
         let (sender, receiver) = bounded(read_ahead.max(1));
+        // Said once, when the reading first finds the queue full (or ends, by being dropped).
+        let (primed_sender, primed) = bounded(1);
+        let (reads, let_reads) = unbounded::<()>();
+        let let_reads = paced.then_some(let_reads);
         let rig = self.rig;
         let total = self.frames.len();
         let worker = std::thread::Builder::new()
             .name("frame-reader".to_string())
             .spawn(move || {
                 on_start();
+                let mut primed = Some(primed_sender);
                 for index in start..self.frames.len() {
-                    // A closed receiver ends the reading.
-                    if sender.send(self.load_frame(index)).is_err() {
+                    // Paced, once primed: each frame waits to be let (the stream's end, when
+                    // dropped, ends the reading).
+                    if primed.is_none()
+                        && let Some(let_reads) = &let_reads
+                        && let_reads.recv().is_err()
+                    {
+                        break;
+                    }
+                    let item = match sender.try_send(self.load_frame(index)) {
+                        Ok(()) => continue,
+                        Err(TrySendError::Full(item)) => item,
+                        // A closed receiver ends the reading.
+                        Err(TrySendError::Disconnected(_)) => break,
+                    };
+                    if let Some(primed) = primed.take() {
+                        let _ = primed.send(());
+                    }
+                    if sender.send(item).is_err() {
                         break;
                     }
                 }
@@ -193,6 +239,8 @@ impl StereoSequence {
             .ok();
         StereoStream {
             receiver,
+            primed: Some(primed),
+            reads: paced.then_some(reads),
             worker,
             rig,
             total,
@@ -217,6 +265,11 @@ pub fn opencv_on_calling_threads() -> Result<(), DatasetError> {
 /// be loaded (counted in [`StereoStream::skipped`]) and goes on with the next.
 pub struct StereoStream {
     receiver: Receiver<Result<StereoFrame, FrameError>>,
+    /// Until [`StereoStream::wait_primed`] has seen it: the reading thread's word that its
+    /// queue is full or the reading is over.
+    primed: Option<Receiver<()>>,
+    /// A paced stream's leave to read a frame more ([`StereoStream::let_read`]).
+    reads: Option<Sender<()>>,
     worker: Option<JoinHandle<()>>,
     rig: StereoRig,
     total: usize,
@@ -242,6 +295,32 @@ impl StereoStream {
     /// Frames skipped so far.
     pub fn skipped(&self) -> usize {
         self.skipped
+    }
+
+    /// Whether the frames read ahead fill the queue (or the reading is over), waiting for
+    /// that at most `wait`. A real-time source starts its schedule only then: the first
+    /// frames' processing would otherwise share the processor with the reading thread's
+    /// burst of decoding (on 2 cores it made the first frame the slowest of a run).
+    pub fn wait_primed(&mut self, wait: Duration) -> bool {
+        let Some(primed) = &self.primed else {
+            return true;
+        };
+        match primed.recv_timeout(wait) {
+            Ok(()) | Err(RecvTimeoutError::Disconnected) => {
+                self.primed = None;
+                true
+            }
+            Err(RecvTimeoutError::Timeout) => false,
+        }
+    }
+
+    /// Lets the reading thread of a paced stream ([`StereoSequence::into_paced_stream`])
+    /// read one frame more once its queue has been full; nothing for another stream.
+    pub fn let_read(&self) {
+        if let Some(reads) = &self.reads {
+            // A reading thread that has ended needs no leave.
+            let _ = reads.send(());
+        }
     }
 
     /// The next frame if the reading thread has it within `wait`: a caller that must stay
@@ -285,6 +364,8 @@ impl Drop for StereoStream {
                 &mut self.receiver,
                 crossbeam_channel::never(),
             ));
+            // (A paced reading thread may be waiting for leave instead.)
+            self.reads = None;
             let _ = worker.join();
         }
     }

@@ -164,6 +164,79 @@ fn a_frame_the_reader_does_not_have_yet_is_not_waited_for_past_the_wait() {
     assert!(matches!(stream.next_within(Duration::ZERO), Next::End));
 }
 
+/// `wait_primed` says yes only once the frames read ahead fill the queue, or the reading is
+/// over: a frame is then there without waiting.
+#[test]
+fn the_stream_is_primed_once_its_queue_is_full_or_the_reading_is_over() {
+    let fixture = euroc_fixture("primed");
+    // Three frames, one read ahead: primed when the second is read and the queue is full.
+    let (release, held) = crossbeam_channel::bounded::<()>(0);
+    let mut stream = StereoSequence::open(&fixture)
+        .unwrap()
+        .into_stream_with(0, 1, move || {
+            let _ = held.recv();
+        });
+    assert!(
+        !stream.wait_primed(Duration::from_millis(1)),
+        "held before its first read"
+    );
+    release.send(()).unwrap();
+    // Long enough for a loaded machine: the test waits for the reader, never for time.
+    assert!(stream.wait_primed(Duration::from_secs(60)));
+    assert!(stream.wait_primed(Duration::ZERO), "primed stays primed");
+    assert!(matches!(stream.next_within(Duration::ZERO), Next::Frame(Ok(f)) if f.index == 0));
+
+    // Three frames, four read ahead: the queue never fills, the end of the reading primes it.
+    let mut stream = StereoSequence::open(&fixture).unwrap().into_stream(0, 4);
+    assert!(stream.wait_primed(Duration::from_secs(60)));
+    for index in 0..3 {
+        assert!(
+            matches!(stream.next_within(Duration::ZERO), Next::Frame(Ok(f)) if f.index == index)
+        );
+    }
+    assert!(matches!(stream.next_within(Duration::ZERO), Next::End));
+}
+
+/// A paced stream's reader, once primed, reads a frame more only when let.
+#[test]
+fn a_paced_stream_reads_past_its_full_queue_only_when_let() {
+    let fixture = euroc_fixture("paced");
+    let mut stream = StereoSequence::open(&fixture)
+        .unwrap()
+        .into_paced_stream(0, 1, || {});
+    // Long enough for a loaded machine: the test waits for the reader, never for time.
+    let patience = Duration::from_secs(60);
+    assert!(stream.wait_primed(patience));
+    // Frame 0 queued, frame 1 read and held: both come without leave.
+    for index in 0..2 {
+        assert!(matches!(stream.next_within(patience), Next::Frame(Ok(f)) if f.index == index));
+    }
+    // Frame 2 is not read until let (however long this waits, it cannot come).
+    assert!(matches!(
+        stream.next_within(Duration::from_millis(20)),
+        Next::NotYet
+    ));
+    stream.let_read();
+    assert!(matches!(stream.next_within(patience), Next::Frame(Ok(f)) if f.index == 2));
+    assert!(matches!(stream.next_within(patience), Next::End));
+}
+
+/// A paced stream dropped while its reader waits for leave ends that reader (the drop
+/// joins it: this test would hang otherwise).
+#[test]
+fn a_paced_stream_dropped_while_its_reader_waits_ends_it() {
+    let fixture = euroc_fixture("paced-drop");
+    let mut stream = StereoSequence::open(&fixture)
+        .unwrap()
+        .into_paced_stream(0, 1, || {});
+    assert!(stream.wait_primed(Duration::from_secs(60)));
+    assert!(matches!(
+        stream.next_within(Duration::from_secs(60)),
+        Next::Frame(Ok(_))
+    ));
+    drop(stream);
+}
+
 // ---------------------------------------------------------------- hand-made EuRoC fixture
 
 const W: usize = 64;
