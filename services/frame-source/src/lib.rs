@@ -463,6 +463,25 @@ mod tests {
             }
         }
 
+        /// A realtime source at 20 Hz over `frames` frames (`budget.drop_late` as given),
+        /// and the supervisor's wake-up to wait on between looks.
+        fn realtime_20_hz(frames: usize, drop_late: bool) -> (Self, linetrack_ipc::Wake) {
+            let source = Self::start(
+                |config| {
+                    config.source.pacing = Pacing::Realtime;
+                    config.source.rate_hz = 20.0;
+                    config.source.max_frames = frames;
+                    config.budget.drop_late = drop_late;
+                },
+                || {},
+            );
+            let wake = source
+                .bus
+                .wake(StageKind::Supervisor)
+                .unwrap_or_else(|e| panic!("{e}"));
+            (source, wake)
+        }
+
         /// Status reports until `count` of them hold `wanted` ([`reports`]).
         fn reports(
             &mut self,
@@ -561,20 +580,8 @@ mod tests {
     fn a_realtime_source_paces_its_reader_and_publishes_every_frame_on_its_time() {
         const FRAMES: usize = 12;
         const PATIENCE: Duration = Duration::from_secs(60);
-        let mut source = Running::start(
-            |config| {
-                config.source.pacing = Pacing::Realtime;
-                config.source.rate_hz = 20.0;
-                config.source.max_frames = FRAMES;
-                // However far the test's clock runs ahead of the source, no frame is dropped.
-                config.budget.drop_late = false;
-            },
-            || {},
-        );
-        let wake = source
-            .bus
-            .wake(StageKind::Supervisor)
-            .unwrap_or_else(|e| panic!("{e}"));
+        // However far the test's clock runs ahead of the source, no frame is dropped.
+        let (mut source, wake) = Running::realtime_20_hz(FRAMES, false);
         let mut headers = Vec::new();
         let began = std::time::Instant::now();
         while headers.len() < FRAMES {
@@ -604,19 +611,7 @@ mod tests {
     /// clock jumps 10 s (the source starved of CPU); returns the frames' headers.
     fn starved_realtime_frames(drop_late: bool) -> Vec<linetrack_msgs::FrameHeader> {
         const PATIENCE: Duration = Duration::from_secs(60);
-        let mut source = Running::start(
-            |config| {
-                config.source.pacing = Pacing::Realtime;
-                config.source.rate_hz = 20.0;
-                config.source.max_frames = 3;
-                config.budget.drop_late = drop_late;
-            },
-            || {},
-        );
-        let wake = source
-            .bus
-            .wake(StageKind::Supervisor)
-            .unwrap_or_else(|e| panic!("{e}"));
+        let (mut source, wake) = Running::realtime_20_hz(3, drop_late);
         // The first frame, on a clock that stands still: the next is not due yet.
         let mut headers = Vec::new();
         let waiting = std::time::Instant::now();
