@@ -182,7 +182,9 @@ impl StereoSequence {
     /// [`StereoSequence::into_stream_with`], but once the frames read ahead have filled the
     /// queue, the reading thread reads each next frame only when let
     /// ([`StereoStream::let_read`]): a real-time source lets it read between frames, so
-    /// that the decoding does not share the processor with a frame in flight.
+    /// that the decoding does not share the processor with a frame in flight. Its owner
+    /// lets one read for each frame it takes: a stream never let stops once its queue has
+    /// been full and taken.
     pub fn into_paced_stream(
         self,
         start: usize,
