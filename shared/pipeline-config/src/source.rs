@@ -31,7 +31,9 @@ pub struct SourceConfig {
     /// the stages leave instead of taking it from a frame in flight. 0 by default: a
     /// realtime source whose reader starves falls behind its schedule, and its frames then
     /// leave late (`capture-late`); beside two CPU hogs nice 10 starved it to 9.7 frames a
-    /// second and every frame of 1,200 left late (docs/pipeline.md).
+    /// second and every frame of 1,200 left late (docs/pipeline.md). Paced in real time,
+    /// the reader reads each next frame half a period after a frame is due, between the
+    /// frames' processing, whatever its nice value.
     pub reader_nice: i32,
     /// An MCAP recording (`[record]`, `linetrack replay FILE`) whose stereo frames and rig
     /// are published instead of `sequence`'s; empty: the sequence.
