@@ -221,20 +221,30 @@ fn a_paced_stream_reads_past_its_full_queue_only_when_let() {
     assert!(matches!(stream.next_within(patience), Next::End));
 }
 
-/// A paced stream dropped while its reader waits for leave ends that reader (the drop
-/// joins it: this test would hang otherwise).
+/// A paced stream dropped while its reader waits for leave ends that reader: the drop,
+/// which joins it, returns.
 #[test]
 fn a_paced_stream_dropped_while_its_reader_waits_ends_it() {
     let fixture = euroc_fixture("paced-drop");
     let mut stream = StereoSequence::open(&fixture)
         .unwrap()
         .into_paced_stream(0, 1, || {});
-    assert!(stream.wait_primed(Duration::from_secs(60)));
-    assert!(matches!(
-        stream.next_within(Duration::from_secs(60)),
-        Next::Frame(Ok(_))
-    ));
-    drop(stream);
+    // Long enough for a loaded machine: the test waits for the reader, never for time.
+    let patience = Duration::from_secs(60);
+    assert!(stream.wait_primed(patience));
+    // Two frames taken: the reader now waits for leave to read the third.
+    for _ in 0..2 {
+        assert!(matches!(stream.next_within(patience), Next::Frame(Ok(_))));
+    }
+    let (done, dropped) = crossbeam_channel::bounded(1);
+    std::thread::spawn(move || {
+        drop(stream);
+        let _ = done.send(());
+    });
+    assert!(
+        dropped.recv_timeout(patience).is_ok(),
+        "the drop did not return"
+    );
 }
 
 // ---------------------------------------------------------------- hand-made EuRoC fixture
