@@ -447,7 +447,8 @@ pub struct DisparityOffsetConfig {
     /// moves the estimate by at most `initial_sigma_px² / (initial_sigma_px² +
     /// frame_sigma_px²)` of its own figure (0.39 with the defaults). With 0.2 a rig one
     /// pixel off is corrected from frame 3 of the KITTI raw drive, half a pixel from frame
-    /// 4–7. With 0.3, when segments still bore on the evidence, the generated presets' nil
+    /// 4–7. The start only decides when the offset is applied: what is applied is the
+    /// frames' own mean, without it. With 0.3, when segments still bore on the evidence, the generated presets' nil
     /// offset wandered as far as 0.63 px (0.48 with 0.2; docs/odometry.md, "The rig's
     /// disparity offset").
     pub initial_sigma_px: f64,
