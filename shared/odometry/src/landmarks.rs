@@ -46,6 +46,21 @@ pub(crate) trait Geometry: Copy {
     /// same frame (for segments: `self`'s endpoints moved towards `other`'s line, so the
     /// extent stays that of the first sighting).
     fn fused(&self, w: f64, other: &Self, w_other: f64) -> Self;
+    /// The same geometry (camera frame) as triangulated from disparities `more_px` larger
+    /// (each point moved along its ray from the camera); `None` when a disparity would
+    /// no longer be positive.
+    fn with_disparities_grown(&self, more_px: f64, rig: &StereoRig) -> Option<Self>;
+}
+
+/// `p` (camera frame) as triangulated from a disparity `more_px` larger.
+fn point_with_disparity_grown(
+    p: &Point3<f64>,
+    more_px: f64,
+    rig: &StereoRig,
+) -> Option<Point3<f64>> {
+    let before = disparity(rig, p);
+    let after = before + more_px;
+    (before.is_finite() && after > 0.0).then(|| Point3::from(p.coords * (before / after)))
 }
 
 /// Disparity of `p`, pixels (infinite at or behind the camera).
@@ -68,6 +83,10 @@ impl Geometry for Point3<f64> {
 
     fn fused(&self, w: f64, other: &Self, w_other: f64) -> Self {
         Point3::from((self.coords * w + other.coords * w_other) / (w + w_other))
+    }
+
+    fn with_disparities_grown(&self, more_px: f64, rig: &StereoRig) -> Option<Self> {
+        point_with_disparity_grown(self, more_px, rig)
     }
 }
 
@@ -94,6 +113,13 @@ impl Geometry for [Point3<f64>; 2] {
 
     fn fused(&self, w: f64, other: &Self, w_other: f64) -> Self {
         self.map(|p| p.fused(w, &closest_on_line(other, &p), w_other))
+    }
+
+    fn with_disparities_grown(&self, more_px: f64, rig: &StereoRig) -> Option<Self> {
+        Some([
+            point_with_disparity_grown(&self[0], more_px, rig)?,
+            point_with_disparity_grown(&self[1], more_px, rig)?,
+        ])
     }
 }
 
@@ -126,6 +152,21 @@ impl<P: Geometry> Landmark<P> {
             weight: self.weight + weight,
             sightings: self.sightings + 1,
         }
+    }
+
+    /// The landmark as triangulated from disparities `more_px` larger, seen from `pose`
+    /// (camera to world): a disparity offset applied anew moves what was fused before it.
+    pub fn with_disparities_grown(
+        &self,
+        pose: &Isometry3<f64>,
+        more_px: f64,
+        rig: &StereoRig,
+    ) -> Option<Self> {
+        let local = self.local(pose).with_disparities_grown(more_px, rig)?;
+        Some(Landmark {
+            world: local.transformed(pose),
+            ..*self
+        })
     }
 
     /// The weight of an observation of this landmark: its best single sighting's share of
@@ -186,6 +227,40 @@ mod tests {
         let [a, b] = fused.local(&pose);
         assert!((a - Point3::new(0.0, -1.0, 4.02)).norm() < 1e-9);
         assert!((b - Point3::new(0.0, 1.0, 4.02)).norm() < 1e-9);
+    }
+
+    /// A disparity offset applied anew moves a landmark along its ray from the camera it
+    /// is expressed for, to the depth of its disparity so grown.
+    #[test]
+    fn a_landmark_moves_along_its_ray_to_its_grown_disparity() {
+        let (rig, pose) = (rig(), pose());
+        let local = Point3::new(2.0, -1.0, 20.0);
+        let point = sighted(&pose, &local, 1.0);
+        let d = rig.disparity_px(20.0);
+        let moved = point
+            .with_disparities_grown(&pose, 1.0, &rig)
+            .unwrap_or_else(|| panic!("a positive disparity"))
+            .local(&pose);
+        assert!((moved.z - rig.focal_px * rig.baseline_m / (d + 1.0)).abs() < 1e-9);
+        assert!(
+            (moved.x / moved.z - 0.1).abs() < 1e-12 && (moved.y / moved.z + 0.05).abs() < 1e-12
+        );
+        assert_eq!(
+            point
+                .with_disparities_grown(&pose, 1.0, &rig)
+                .map(|l| l.sightings),
+            Some(1)
+        );
+        // Shrunk to nothing or below: no depth.
+        assert!(point.with_disparities_grown(&pose, -d, &rig).is_none());
+        // A segment's endpoints move each along its own ray.
+        let segment = sighted(&pose, &[local, Point3::new(-1.0, 0.5, 10.0)], 1.0);
+        let [a, b] = segment
+            .with_disparities_grown(&pose, -0.5, &rig)
+            .unwrap_or_else(|| panic!("positive disparities"))
+            .local(&pose);
+        assert!((rig.disparity_px(a.z) - (d - 0.5)).abs() < 1e-9);
+        assert!((rig.disparity_px(b.z) - (rig.disparity_px(10.0) - 0.5)).abs() < 1e-9);
     }
 
     #[test]

@@ -559,6 +559,7 @@ impl MotionTracker {
                 // triangulated with.
                 self.disparity_offset
                     .update(previous.disparity_offset_px, e.disparity_offset);
+                self.reference_to_offset();
                 None
             }
             Err(why) => {
@@ -579,6 +580,29 @@ impl MotionTracker {
             step_covariance,
             ..self.result(reason, stats)
         }
+    }
+
+    /// Moves the reference's landmarks to the disparity offset now applied, when it
+    /// changed since they were triangulated (and fused): the next frame's evidence then
+    /// measures what is still missing from that offset, not again the change.
+    fn reference_to_offset(&mut self) {
+        let now = self.disparity_offset.value_px();
+        let Some(reference) = self.reference.as_mut() else {
+            return;
+        };
+        // Subtracting `now` instead of the old offset grows each disparity by the difference.
+        let more_px = reference.disparity_offset_px - now;
+        if more_px == 0.0 {
+            return;
+        }
+        let (pose, rig) = (reference.pose, &self.rig);
+        for landmark in reference.point_landmarks.iter_mut() {
+            *landmark = landmark.and_then(|l| l.with_disparities_grown(&pose, more_px, rig));
+        }
+        for landmark in reference.line_landmarks.iter_mut() {
+            *landmark = landmark.and_then(|l| l.with_disparities_grown(&pose, more_px, rig));
+        }
+        reference.disparity_offset_px = now;
     }
 
     /// The frame's result at the current pose: lost when there is a `reason`.

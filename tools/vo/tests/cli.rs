@@ -327,8 +327,9 @@ fn runs_with_disparities_short(name: &str, pixels: f64) -> ((f64, f64), (f64, f6
 /// A rig whose disparities read one pixel short puts far features too far, and every step
 /// comes out long. Measured: with the offset not estimated, step ratio 1.104 and drift
 /// 10.4 %; self-calibrated (the default), the offset is applied from frame 3 and ends at
-/// −1.004 px, the step ratio at 1.002 and the drift at 0.32 % (1.010 and 1.1 % while the
-/// offset applied was the estimate still held towards the start).
+/// −1.009 px, the step ratio at 0.999 and the drift at 0.22 % (1.010 and 1.1 % while the
+/// offset applied was the estimate still held towards the start and the landmarks kept
+/// their depths).
 #[test]
 fn real_data_a_rig_whose_disparities_read_a_pixel_short_is_self_calibrated() {
     let (off, on) = runs_with_disparities_short("kitti-raw-offset", 1.0);
@@ -341,9 +342,9 @@ fn real_data_a_rig_whose_disparities_read_a_pixel_short_is_self_calibrated() {
 
 /// Half a pixel short (the right images interpolated), under the floor the offset was first
 /// held back by (0.75 px). Measured: not estimated, step ratio 1.046 and drift 4.6 %;
-/// self-calibrated, applied from frame 4, the offset ends at −0.472 px, the step ratio at
-/// 1.000 and the drift at 0.24 % (1.004 and 0.46 % while the offset applied was the
-/// estimate still held towards the start).
+/// self-calibrated, applied from frame 4, the offset ends at −0.466 px, the step ratio at
+/// 0.999 and the drift at 0.26 % (1.004 and 0.46 % while the offset applied was the
+/// estimate still held towards the start and the landmarks kept their depths).
 #[test]
 fn real_data_a_rig_whose_disparities_read_half_a_pixel_short_is_self_calibrated() {
     let (off, on) = runs_with_disparities_short("kitti-raw-half-offset", 0.5);
