@@ -5,21 +5,37 @@
 use linetrack_odometry_config::DisparityOffsetConfig;
 use linetrack_stereo_vo::OffsetEvidence;
 
+/// An information-weighted running mean of the frames' offsets.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct RunningMean {
+    /// Measured minus true disparity, pixels.
+    px: f64,
+    /// Inverse variance of `px`, 1/px².
+    information: f64,
+}
+
+impl RunningMean {
+    /// Takes in a frame that puts the offset at `seen` with `information`; the mean stays
+    /// within `±max_px` and never surer than `most`.
+    fn take(&mut self, seen: f64, information: f64, max_px: f64, most: f64) {
+        let gain = information / (self.information + information);
+        self.px = (self.px + gain * (seen - self.px)).clamp(-max_px, max_px);
+        self.information = (self.information + information).min(most);
+    }
+}
+
 /// The offset believed now, how sure of it, and the one applied.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub(crate) struct DisparityOffset {
     config: DisparityOffsetConfig,
-    /// The running estimate: measured minus true disparity, pixels.
-    estimate_px: f64,
-    /// Inverse variance of `estimate_px`, 1/px².
-    information: f64,
-    /// The same running mean of the frames' evidence without the start (`initial_px` at
-    /// `initial_sigma_px`), and its information: the value applied once the estimate has
-    /// departed. The start holds the estimate back until the evidence outweighs it; past
-    /// that, it would only keep pulling the offset applied towards `initial_px` (a rig one
-    /// pixel off read −0.52 px when first applied and −0.93 px ten frames later).
-    frames_px: f64,
-    frames_information: f64,
+    /// The running estimate, starting at `initial_px` with `initial_sigma_px`: it decides
+    /// whether an offset is applied.
+    estimate: RunningMean,
+    /// The same mean of the frames without that start: the value applied. The start holds
+    /// the estimate back until the evidence outweighs it; past that, it would only keep
+    /// pulling the offset applied towards `initial_px` (a rig one pixel off read −0.52 px
+    /// when first applied and −0.93 px ten frames later).
+    frames: RunningMean,
     /// What triangulation subtracts: `initial_px` until the estimate departs from it by
     /// more than `departure_sigmas` of its standard deviation and more than `min_px`, then
     /// the estimate for as long as it stays more than half of `min_px` away.
@@ -29,10 +45,14 @@ pub(crate) struct DisparityOffset {
 impl DisparityOffset {
     pub(crate) fn new(config: DisparityOffsetConfig) -> Self {
         Self {
-            estimate_px: config.initial_px,
-            information: config.initial_sigma_px.powi(-2),
-            frames_px: config.initial_px,
-            frames_information: 0.0,
+            estimate: RunningMean {
+                px: config.initial_px,
+                information: config.initial_sigma_px.powi(-2),
+            },
+            frames: RunningMean {
+                px: config.initial_px,
+                information: 0.0,
+            },
             applied_px: config.initial_px,
             config,
         }
@@ -46,11 +66,16 @@ impl DisparityOffset {
     /// The running estimate, pixels: the frames' alone while applied, else held by the
     /// start.
     pub(crate) fn estimate_px(&self) -> f64 {
-        if self.applied_px != self.config.initial_px {
-            self.frames_px
+        if self.is_applied() {
+            self.frames.px
         } else {
-            self.estimate_px
+            self.estimate.px
         }
+    }
+
+    /// Whether an estimate is applied (the offset is not `initial_px`).
+    fn is_applied(&self) -> bool {
+        self.applied_px != self.config.initial_px
     }
 
     /// Takes in a frame's evidence (nothing when `estimate` is off): the features it was
@@ -69,24 +94,22 @@ impl DisparityOffset {
         let frame_information = 1.0 / variance;
         let seen = applied + evidence.correction_px.clamp(-1.0, 1.0);
         let most = c.floor_sigma_px.powi(-2);
-        let mean = |estimate: &mut f64, information: &mut f64| {
-            let gain = frame_information / (*information + frame_information);
-            *estimate = (*estimate + gain * (seen - *estimate)).clamp(-c.max_px, c.max_px);
-            *information = (*information + frame_information).min(most);
+        for mean in [&mut self.estimate, &mut self.frames] {
+            mean.take(seen, frame_information, c.max_px, most);
+        }
+        let departure = (self.estimate.px - c.initial_px).abs();
+        let sure = departure * self.estimate.information.sqrt() > c.departure_sigmas;
+        // Once applied, it stays while the estimate keeps more than half of `min_px` (the
+        // KITTI raw drive moved by a pixel, before the landmarks were moved with the
+        // offset: applied at −0.77 px, the next frames said −0.74 … −0.70 before it settled
+        // at −1.04, and without this it went off and on again).
+        let needed = if self.is_applied() {
+            0.5 * c.min_px
+        } else {
+            c.min_px
         };
-        mean(&mut self.estimate_px, &mut self.information);
-        mean(&mut self.frames_px, &mut self.frames_information);
-        let departure = (self.estimate_px - c.initial_px).abs();
-        let sure = departure * self.information.sqrt() > c.departure_sigmas;
-        // Once applied, it stays while the estimate keeps more than half of `min_px`: the
-        // landmarks fused before it was applied still hold the old depths for a few
-        // frames, and their evidence pulls the estimate back for as long (the KITTI raw
-        // drive moved by a pixel: applied at −0.77 px, the next frames said −0.74 … −0.70
-        // before it settled at −1.04, and without this it went off and on again).
-        let applied = self.applied_px != c.initial_px;
-        let needed = if applied { 0.5 * c.min_px } else { c.min_px };
         self.applied_px = if sure && departure > needed {
-            self.frames_px
+            self.frames.px
         } else {
             c.initial_px
         };
