@@ -366,6 +366,12 @@ impl OdometryConfig {
         if m.max_iterations == 0 {
             return Err("field `motion.max_iterations` = 0: expected at least 1".to_string());
         }
+        if !(0.0..=1.0).contains(&m.offset_evidence_prior) {
+            return Err(format!(
+                "field `motion.offset_evidence_prior` = {}: expected a number in [0, 1]",
+                m.offset_evidence_prior
+            ));
+        }
         Ok(())
     }
 }
@@ -575,6 +581,15 @@ mod tests {
             let error = with(window, inliers).unwrap_err();
             assert!(error.contains(field), "{error}");
         }
+        for share in [-0.1, 1.5, f64::NAN] {
+            let mut config = OdometryConfig::default();
+            config.motion.offset_evidence_prior = share;
+            let error = config.validate().unwrap_err();
+            assert!(error.contains("motion.offset_evidence_prior"), "{error}");
+        }
+        let mut none = OdometryConfig::default();
+        none.motion.offset_evidence_prior = 0.0;
+        assert_eq!(none.validate(), Ok(()));
         for collinear_px in [-0.5, f64::NAN, f64::INFINITY] {
             let mut config = OdometryConfig::default();
             config.lost.rescue_collinear_px = collinear_px;

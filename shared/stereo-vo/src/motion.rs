@@ -66,6 +66,17 @@ pub struct MotionConfig {
     /// an outlier, instead of stretching or shrinking the step to fit the left image
     /// alone.
     pub stereo_reprojection: bool,
+    /// The share of the constant-velocity prior's translation information that the
+    /// disparity offset's evidence ([`disparity_offset_evidence`]) keeps, 0 to 1. The
+    /// prediction is the last step, measured through the same disparities: under an offset
+    /// it is stretched (or shrunk) as this one is, so the prior pulls the evidence towards
+    /// the offset already applied. Where near features fix the step that pull is small;
+    /// where every feature is far, the prior holds the step's length and the evidence reads
+    /// a fraction of the offset (the generated `highway` with its rig a pixel off: −0.25
+    /// px for 35 frames). 1 keeps the whole prior (the default); 0 leaves the length to the
+    /// points alone, which finds a far-field offset in a few frames but wanders further
+    /// where the offset is nil (docs/odometry.md, "Far-field scenes").
+    pub offset_evidence_prior: f64,
 }
 
 impl Default for MotionConfig {
@@ -89,6 +100,7 @@ impl Default for MotionConfig {
             prior_translation_m: 0.1,
             prior_rotation_deg: 1.0,
             stereo_reprojection: false,
+            offset_evidence_prior: 1.0,
         }
     }
 }
@@ -210,14 +222,29 @@ impl Prior {
     /// Adds the prior's term at `t` to the normal equations (its Jacobian is close to the
     /// identity under the left-multiplied update).
     fn accumulate(&self, t: &Isometry3<f64>, h: &mut Matrix6<f64>, g: &mut Vector6<f64>) {
+        self.accumulate_share(t, 1.0, h, g);
+    }
+
+    /// The same with the translation's information scaled by `translation_share`.
+    fn accumulate_share(
+        &self,
+        t: &Isometry3<f64>,
+        translation_share: f64,
+        h: &mut Matrix6<f64>,
+        g: &mut Vector6<f64>,
+    ) {
+        let mut information = self.information;
+        information
+            .fixed_rows_mut::<3>(0)
+            .scale_mut(translation_share);
         let departure = t * self.prediction.inverse();
         let (p, phi) = (
             departure.translation.vector,
             departure.rotation.scaled_axis(),
         );
         let e = Vector6::new(p.x, p.y, p.z, phi.x, phi.y, phi.z);
-        *h += Matrix6::from_diagonal(&self.information);
-        *g += self.information.component_mul(&e);
+        *h += Matrix6::from_diagonal(&information);
+        *g += information.component_mul(&e);
     }
 }
 
@@ -597,11 +624,13 @@ fn translation_columns(j: &SMatrix<f64, 2, 6>) -> SMatrix<f64, 2, 3> {
 
 /// The disparity offset seen from the final inlying points at the solution `motion`: one
 /// Gauss–Newton step over the motion and the offset together (the points' rows in the left
-/// image, the weights of the last pass, the prior when there is one), whose offset
-/// component is the correction; its variance from the normal matrix and the residual
-/// variance. Without enough points there is no evidence. Without the prior in it, the KITTI
-/// raw drive's evidence (LBD) swung far enough to be applied where the truth is nil
-/// (measured before `min_px`: the drive's ATE went from 0.160 to 0.209 m).
+/// image, the weights of the last pass, the prior when there is one, its translation's
+/// share `offset_evidence_prior`), whose offset component is the correction; its variance
+/// from the normal matrix and the residual variance. Without enough points there is no
+/// evidence. Without the prior in it, the KITTI raw drive's evidence (LBD) swung far enough
+/// to be applied where the truth is nil (measured before `min_px`: the drive's ATE went
+/// from 0.160 to 0.209 m); since `min_px`, nothing is applied there without it, but the
+/// generated `highway`'s nil offset wanders to 0.38 px (0.23 with it).
 ///
 /// Segments take no part. An endpoint's disparity is read off the right segment's line at
 /// the endpoint's row, so the lines' angles and the detector's cuts weigh in, and their
@@ -652,7 +681,7 @@ fn disparity_offset_evidence(
     if let Some(prior) = prior {
         let mut h6 = Matrix6::zeros();
         let mut g6 = Vector6::zeros();
-        prior.accumulate(motion, &mut h6, &mut g6);
+        prior.accumulate_share(motion, config.offset_evidence_prior, &mut h6, &mut g6);
         h.fixed_view_mut::<6, 6>(0, 0).add_assign(&h6);
         g.fixed_rows_mut::<6>(0).add_assign(&g6);
     }
