@@ -19,8 +19,10 @@
 //! corners): how many left points come back in the right image where the truth puts them.
 
 mod repeat;
+mod truth_shift;
 
 pub use repeat::{RepeatCounts, RepeatRow, repeat_markdown, repeatability};
+pub use truth_shift::{TruthShift, truth_shift};
 
 use linetrack_datasets::{DisparityMap, LoadedPair};
 use linetrack_geometry::StereoRig;

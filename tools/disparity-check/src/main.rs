@@ -5,8 +5,8 @@ use anyhow::Context;
 use clap::Parser;
 use linetrack_datasets::LoadedPair;
 use linetrack_disparity_check::{
-    RepeatCounts, RepeatRow, Row, check_pair, markdown, rendered_pair, repeat_markdown,
-    repeatability, rows,
+    RepeatCounts, RepeatRow, Row, TruthShift, check_pair, markdown, rendered_pair, repeat_markdown,
+    repeatability, rows, truth_shift,
 };
 use linetrack_odometry::{OdometryConfig, SightingKind};
 use linetrack_scene_render::Preset;
@@ -28,6 +28,7 @@ use std::process::ExitCode;
                                                       # [frontend.orb] stereo = \"row-search\"
     linetrack-disparity-check --generated highway --generated normal --seed 2   # exact truth
     linetrack-disparity-check --repeatability --levels 1 --levels 8   # point extractors
+    linetrack-disparity-check --truth-shift           # does each truth fit its own images?
 
 The error is the odometry's disparity minus the ground truth under the left pixel
 (bilinear between pixel centres). A sighting off by more than --inlier-px is a wrong match:
@@ -43,6 +44,13 @@ left point with ground truth counts as repeated when a right point lies within -
 of its true position (x − d, y); the table gives the fraction and the mean distance of the
 repeated ones (repeatability.md and .json). Our extractor keeps, image by image, as many
 points as OpenCV's found there (more points would make a chance neighbour likelier).
+
+With --truth-shift, no odometry runs either: for each pair, the constant that, added to
+every disparity of the ground truth, best maps the right image onto the left (every pixel
+with a horizontal gradient of 4 grey levels or more, truth away from depth edges, the right
+row sampled with a cubic, residuals truncated at 16 grey levels; shifts of ±1 px searched
+in 0.01 px steps, the best refined by a parabola). A truth in its images' own convention
+gives about 0; one off by a constant gives that constant (truth-shift.md and .json).
 
 OUTPUT: <output>/disparity-check.md (the table), disparity-check.json (the rows) and, with
 --samples, samples.jsonl (every sighting: scene, matcher, kind, disparities, error).
@@ -93,6 +101,10 @@ struct Args {
     /// config's).
     #[arg(long = "levels")]
     levels: Vec<i32>,
+    /// Check the ground truth against its own images instead: the shift of the truth that
+    /// best maps the right image onto the left, per pair.
+    #[arg(long, conflicts_with = "repeatability")]
+    truth_shift: bool,
     /// Also write every sighting with its error (samples.jsonl).
     #[arg(long)]
     samples: bool,
@@ -131,6 +143,9 @@ fn run() -> anyhow::Result<String> {
     };
     if args.repeatability {
         return run_repeatability(&args, &pairs, &config.frontend.orb);
+    }
+    if args.truth_shift {
+        return run_truth_shift(&args, &pairs);
     }
     let matchers = if args.matchers.is_empty() {
         vec![MatcherKind::Lbd, MatcherKind::L1]
@@ -264,6 +279,59 @@ fn run_repeatability(args: &Args, pairs: &[Source], orb: &OrbOptions) -> anyhow:
     let md = args.output.join("repeatability.md");
     std::fs::write(&md, &text).with_context(|| format!("writing {}", md.display()))?;
     let json = args.output.join("repeatability.json");
+    std::fs::write(&json, serde_json::to_string_pretty(&rows)?)
+        .with_context(|| format!("writing {}", json.display()))?;
+    Ok(text)
+}
+
+/// The shift of each pair's truth that best maps its right image onto its left one.
+fn run_truth_shift(args: &Args, pairs: &[Source]) -> anyhow::Result<String> {
+    #[derive(serde::Serialize)]
+    struct ShiftRow {
+        pair: String,
+        #[serde(flatten)]
+        shift: TruthShift,
+    }
+    let progress = linetrack_progress::Progress::new("pairs", pairs.len() as u64, args.quiet);
+    let mut rows = Vec::new();
+    for (done, pair) in pairs.iter().enumerate() {
+        progress.step(pair.name.as_str());
+        let loaded = (pair.load)().with_context(|| format!("scene {}", pair.name))?;
+        if let Some(shift) = truth_shift(&loaded, &loaded.disparity, args.max_spread_px)
+            .with_context(|| format!("scene {}", pair.name))?
+        {
+            rows.push(ShiftRow {
+                pair: pair.name.clone(),
+                shift,
+            });
+        }
+        progress.set(done as u64 + 1);
+    }
+    progress.finish();
+    let mut text = String::from(
+        "| pair | truth shift (px) | pixels compared | rms residual (grey) |\n|---|---|---|---|\n",
+    );
+    for row in &rows {
+        text += &format!(
+            "| {} | {:+.3} | {} | {:.1} |\n",
+            row.pair, row.shift.shift_px, row.shift.pixels, row.shift.rms_grey
+        );
+    }
+    let mut shifts: Vec<f64> = rows.iter().map(|r| r.shift.shift_px).collect();
+    shifts.sort_by(f64::total_cmp);
+    if let (Some(first), Some(last)) = (shifts.first(), shifts.last()) {
+        text += &format!(
+            "\n{} pairs: mean {:+.3} px, median {:+.3} px, from {first:+.3} to {last:+.3}. Positive: the truth reads smaller than the disparity its images fit best.\n",
+            shifts.len(),
+            shifts.iter().sum::<f64>() / shifts.len() as f64,
+            shifts[shifts.len() / 2],
+        );
+    }
+    std::fs::create_dir_all(&args.output)
+        .with_context(|| format!("creating {}", args.output.display()))?;
+    let md = args.output.join("truth-shift.md");
+    std::fs::write(&md, &text).with_context(|| format!("writing {}", md.display()))?;
+    let json = args.output.join("truth-shift.json");
     std::fs::write(&json, serde_json::to_string_pretty(&rows)?)
         .with_context(|| format!("writing {}", json.display()))?;
     Ok(text)
