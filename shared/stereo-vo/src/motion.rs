@@ -72,10 +72,10 @@ pub struct MotionConfig {
     /// it is stretched (or shrunk) as this one is, so the prior pulls the evidence towards
     /// the offset already applied. Where near features fix the step that pull is small;
     /// where every feature is far, the prior holds the step's length and the evidence reads
-    /// a fraction of the offset (the generated `highway` with its rig a pixel off: −0.25
-    /// px for 35 frames). 1 keeps the whole prior (the default); 0 leaves the length to the
-    /// points alone, which finds a far-field offset in a few frames but wanders further
-    /// where the offset is nil (docs/odometry.md, "Far-field scenes").
+    /// a fraction of the offset (the generated `highway`, seed 3, its rig a pixel off:
+    /// −0.2 to −0.3 px until frame 40). 1 keeps the whole prior (the default); 0 leaves
+    /// the length to the points alone, which finds a far-field offset in a few frames but
+    /// wanders further where the offset is nil (docs/odometry.md, "Far-field scenes").
     pub offset_evidence_prior: f64,
 }
 
@@ -630,7 +630,7 @@ fn translation_columns(j: &SMatrix<f64, 2, 6>) -> SMatrix<f64, 2, 3> {
 /// evidence. Without the prior in it, the KITTI raw drive's evidence (LBD) swung far enough
 /// to be applied where the truth is nil (measured before `min_px`: the drive's ATE went
 /// from 0.160 to 0.209 m); since `min_px`, nothing is applied there without it, but the
-/// generated `highway`'s nil offset wanders to 0.38 px (0.23 with it).
+/// generated `highway`'s nil offset wanders to 0.38 px (0.21 at most with it).
 ///
 /// Segments take no part. An endpoint's disparity is read off the right segment's line at
 /// the endpoint's row, so the lines' angles and the detector's cuts weigh in, and their
